@@ -1,0 +1,101 @@
+# liverfem: every set-up step lives here. `make demo` and `make test` run `setup` themselves.
+# Two interpreters: Debian's /usr/bin/python3 with dolfinx 0.5.2 (numpy 1.24) for the solver,
+# and a separate virtualenv with JAX (numpy 2) for the trainer. See README.md.
+SHELL := /bin/bash
+.DEFAULT_GOAL := help
+
+SYS_PY      := /usr/bin/python3
+SOLVER_VENV := .venv-solver
+TRAIN_VENV  := .venv-train
+SPY         := $(SOLVER_VENV)/bin/python
+TPY         := $(TRAIN_VENV)/bin/python
+
+SCENE ?= data_spec/scenes/demo_scene1.toml
+NP    ?= 2
+R     ?= 1
+OUT   ?= runs/data/$(basename $(notdir $(SCENE)))
+DATA  ?= $(OUT)
+RUN   ?= runs/train/$(basename $(notdir $(SCENE)))
+TESTS ?=
+
+# mpirun refuses root unless told; BLAS threads would fight the MPI ranks for the 2 cores.
+export OMPI_ALLOW_RUN_AS_ROOT := 1
+export OMPI_ALLOW_RUN_AS_ROOT_CONFIRM := 1
+export OMPI_MCA_rmaps_base_oversubscribe := 1
+export OPENBLAS_NUM_THREADS ?= 1
+export OMP_NUM_THREADS ?= 1
+MPIRUN := mpirun -n $(NP)
+
+.PHONY: help setup setup-system setup-solver setup-trainer demo test test-solver test-trainer \
+        dataset train bench lint clean lock-trainer
+
+help:
+	@echo "make demo     set up, generate a small dataset on the embedded liver, train, report"
+	@echo "make test     set up and run the whole test suite"
+	@echo "make setup    install Debian packages (root) and create $(SOLVER_VENV), $(TRAIN_VENV)"
+	@echo "make dataset  SCENE=... NP=... R=... OUT=...   generate a dataset with mpirun"
+	@echo "make train    SCENE=... DATA=... RUN=...       train the surrogate on a dataset"
+	@echo "make bench    run the benchmarks in bench/ (long)"
+	@echo "make lint     ruff";  echo "make clean    remove environments and outputs"
+
+setup: setup-solver setup-trainer
+
+setup-system:
+	@bash scripts/setup_system.sh
+
+# The solver venv sees Debian's packages (dolfinx, petsc4py, numpy 1.24); pip is constrained so
+# that nothing installed into it can replace numpy.
+$(SOLVER_VENV)/.stamp: requirements/debian-packages.txt requirements/solver-extras.txt \
+                       requirements/solver-constraints.txt pyproject.toml
+	@bash scripts/setup_system.sh
+	$(SYS_PY) -m venv --system-site-packages $(SOLVER_VENV)
+	$(SPY) -m pip install -q --disable-pip-version-check -c requirements/solver-constraints.txt \
+	    -r requirements/solver-extras.txt
+	$(SPY) -m pip install -q --disable-pip-version-check --no-deps --no-build-isolation -e .
+	$(SPY) -c "import dolfinx, numpy; assert numpy.__version__.startswith('1.'), numpy.__version__"
+	@touch $@
+
+setup-solver: $(SOLVER_VENV)/.stamp
+
+$(TRAIN_VENV)/.stamp: requirements/trainer.lock pyproject.toml
+	@bash scripts/setup_system.sh
+	$(SYS_PY) -m venv $(TRAIN_VENV)
+	$(TPY) -m pip install -q --disable-pip-version-check -r requirements/trainer.lock
+	$(TPY) -m pip install -q --disable-pip-version-check --no-deps --no-build-isolation -e .
+	@touch $@
+
+setup-trainer: $(TRAIN_VENV)/.stamp
+
+# Re-pin the trainer environment from requirements/trainer.in (maintainers only).
+lock-trainer:
+	rm -rf /tmp/liverfem-lock && $(SYS_PY) -m venv /tmp/liverfem-lock
+	/tmp/liverfem-lock/bin/pip install -q -r requirements/trainer.in
+	{ head -2 requirements/trainer.lock; /tmp/liverfem-lock/bin/pip freeze; } > requirements/trainer.lock.new
+	mv requirements/trainer.lock.new requirements/trainer.lock
+
+demo: setup
+	@bash scripts/demo.sh "$(SPY)" "$(TPY)" "$(NP)"
+
+dataset: setup-solver
+	$(MPIRUN) $(SPY) -m fem_sim generate $(SCENE) --out $(OUT) --ranks-per-sim $(R)
+
+train: setup-trainer
+	$(TPY) -m surrogate train --data $(DATA) --run $(RUN)
+
+test: setup test-solver test-trainer
+
+test-solver: setup-solver
+	bash scripts/run_pytest.sh $(SPY) tests/common tests/data_spec tests/fem_sim -q $(TESTS)
+
+test-trainer: setup-trainer
+	bash scripts/run_pytest.sh $(TPY) tests/data_spec tests/surrogate -q $(TESTS)
+
+bench: setup
+	@bash scripts/bench.sh "$(SPY)" "$(TPY)"
+
+lint: setup-trainer
+	$(TRAIN_VENV)/bin/ruff check .
+
+clean:
+	rm -rf $(SOLVER_VENV) $(TRAIN_VENV) runs .pytest_cache .ruff_cache *.egg-info
+	find . -name __pycache__ -type d -prune -exec rm -rf {} +

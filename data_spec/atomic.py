@@ -1,0 +1,40 @@
+"""Atomic file creation: write under a temporary name in the same directory, then rename.
+
+A reader (or a resumed batch) therefore sees either no file or a complete one, never a
+half-written file, even if the writer is killed (SIGKILL) midway.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from pathlib import Path
+from typing import Iterator
+
+TMP_MARK = ".tmp-"
+
+
+@contextlib.contextmanager
+def atomic_path(final: str | Path) -> Iterator[Path]:
+    """Yield a temporary path next to ``final``; rename it to ``final`` if the block succeeds."""
+    final = Path(final)
+    final.parent.mkdir(parents=True, exist_ok=True)
+    tmp = final.with_name(f"{final.name}{TMP_MARK}{os.getpid()}")
+    try:
+        yield tmp
+        with open(tmp, "rb+") as fh:  # data on disk before the rename makes it visible
+            os.fsync(fh.fileno())
+        os.replace(tmp, final)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def write_text_atomic(final: str | Path, text: str) -> None:
+    with atomic_path(final) as tmp:
+        tmp.write_text(text)
+
+
+def leftover_temporaries(directory: str | Path) -> list[Path]:
+    """Temporary files left by killed writers (safe to delete when no writer is running)."""
+    return sorted(p for p in Path(directory).rglob(f"*{TMP_MARK}*") if p.is_file())

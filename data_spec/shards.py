@@ -1,0 +1,233 @@
+"""Shards: one HDF5 file (+ XDMF) per simulation; the writer, the reader and the layout.
+
+The writer takes plain numpy arrays (no MPI): ``fem_sim`` gathers one simulation to its group's
+first rank and calls :func:`write_shard`; the trainer's tests build synthetic shards with the same
+function. Files are written atomically (temporary name, then rename): XDMF first, HDF5 last, so a
+shard whose HDF5 file exists is complete. ``data_spec/README.md`` documents every field.
+
+Dataset directory layout::
+
+    DIR/scene.toml               copy of the scene that produced the dataset
+    DIR/geometry/<id>.h5         one file per mesh, shared by all shards that use it
+    DIR/sims/sim_000123.h5       one shard per simulation (index zero-padded to 6 digits)
+    DIR/sims/sim_000123.xdmf     its ParaView time series over load steps
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from data_spec.atomic import atomic_path, write_text_atomic
+from data_spec.xdmf import shard_xdmf
+
+SHARD_FORMAT = "liver-fem-shard"
+SHARD_SCHEMA_VERSION = 1
+UNITS = {"units_length": "mm", "units_force": "N", "units_stress": "MPa", "units_time": "s"}
+STATUSES = ("ok", "failed")
+
+
+def shard_path(directory: str | Path, index: int) -> Path:
+    return Path(directory) / "sims" / f"sim_{index:06d}.h5"
+
+
+def geometry_path(directory: str | Path, geometry_id: str) -> Path:
+    return Path(directory) / "geometry" / f"{geometry_id}.h5"
+
+
+def list_shards(directory: str | Path) -> list[Path]:
+    """Shard files of a dataset directory, sorted by simulation index."""
+    return sorted((Path(directory) / "sims").glob("sim_*.h5"))
+
+
+@dataclass
+class Material:
+    """Ogden parameters of one simulation: c_k (MPa), m_k, bulk modulus K (MPa)."""
+
+    c: np.ndarray
+    m: np.ndarray
+    K: float
+    law: str = "ogden"
+    volumetric: str = "log"
+
+    def __post_init__(self):
+        self.c = np.atleast_1d(np.asarray(self.c, dtype=np.float64))
+        self.m = np.atleast_1d(np.asarray(self.m, dtype=np.float64))
+        self.K = float(self.K)
+
+    @property
+    def mu(self) -> float:
+        """Small-strain shear modulus sum(c)/2, MPa."""
+        return 0.5 * float(self.c.sum())
+
+
+@dataclass
+class SolverStats:
+    """Per stored load step: Newton iterations, final residual, cut-backs, wall time and the
+    residual history (all Newton residual norms of the step, sub-steps included)."""
+
+    newton_iterations: np.ndarray
+    residual_norms: np.ndarray
+    cutbacks: np.ndarray
+    wall_time: np.ndarray
+    residual_history: list[np.ndarray] = field(default_factory=list)
+    info: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.newton_iterations = np.asarray(self.newton_iterations, dtype=np.int32)
+        self.residual_norms = np.asarray(self.residual_norms, dtype=np.float64)
+        self.cutbacks = np.asarray(self.cutbacks, dtype=np.int32)
+        self.wall_time = np.asarray(self.wall_time, dtype=np.float64)
+        self.residual_history = [np.asarray(h, dtype=np.float64) for h in self.residual_history]
+
+    @classmethod
+    def empty(cls) -> "SolverStats":
+        return cls(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), [])
+
+
+@dataclass
+class Shard:
+    """One simulation's results and provenance, as plain numpy arrays.
+
+    ``displacement`` holds only the converged output steps: shape (n_done, n_out, 3) with
+    n_done == len(load_fractions) when status == "ok", fewer when the simulation failed.
+    """
+
+    scene_name: str
+    scene_hash: str
+    sim_index: int
+    seed: int
+    geometry_id: str
+    load_kind: str
+    load_nodes: np.ndarray
+    forces: np.ndarray
+    material: Material
+    fixed_nodes: np.ndarray
+    load_fractions: np.ndarray
+    output_nodes: np.ndarray
+    displacement: np.ndarray
+    stats: SolverStats
+    status: str = "ok"
+    failure_reason: str = ""
+    patch_radius: float = 0.0
+    geometry_file: str = ""  # relative to the shard file; filled by write_shard/read_shard
+
+    def __post_init__(self):
+        self.load_nodes = np.asarray(self.load_nodes, dtype=np.int64)
+        self.forces = np.asarray(self.forces, dtype=np.float64).reshape(-1, 3)
+        self.fixed_nodes = np.asarray(self.fixed_nodes, dtype=np.int64)
+        self.load_fractions = np.asarray(self.load_fractions, dtype=np.float64)
+        self.output_nodes = np.asarray(self.output_nodes, dtype=np.int64)
+        self.displacement = np.asarray(self.displacement, dtype=np.float64)
+
+    @property
+    def n_done(self) -> int:
+        return int(self.displacement.shape[0])
+
+
+def write_shard(directory: str | Path, shard: Shard) -> Path:
+    """Write ``shard`` atomically into the dataset ``directory``; return the HDF5 path.
+
+    The geometry file ``DIR/geometry/<geometry_id>.h5`` must already exist (written once per
+    mesh by :func:`data_spec.geometry.write_geometry`); the shard references it by relative path.
+    """
+    directory = Path(directory)
+    h5_path = shard_path(directory, shard.sim_index)
+    geo = geometry_path(directory, shard.geometry_id)
+    if not geo.exists():
+        raise FileNotFoundError(f"{h5_path}: geometry file {geo} must be written before shards")
+    rel_geo = os.path.relpath(geo, h5_path.parent)
+    shard.geometry_file = rel_geo
+    with h5py.File(geo, "r") as g:
+        n_nodes, n_cells = g["points"].shape[0], g["cells"].shape[0]
+        points = g["points"][...]
+    n_out = shard.output_nodes.shape[0]
+    output_is_all = n_out == n_nodes and np.array_equal(shard.output_nodes, np.arange(n_nodes))
+
+    xdmf = shard_xdmf(shard_file=h5_path.name, geometry_file=rel_geo, n_nodes=n_nodes,
+                      n_cells=n_cells, n_out=n_out, output_is_all=output_is_all,
+                      fractions=[float(x) for x in shard.load_fractions[:shard.n_done]],
+                      name=f"{shard.scene_name}/sim_{shard.sim_index:06d}")
+    write_text_atomic(h5_path.with_suffix(".xdmf"), xdmf)
+
+    with atomic_path(h5_path) as tmp, h5py.File(tmp, "w") as f:
+        a = f.attrs
+        a["format"] = SHARD_FORMAT
+        a["schema_version"] = SHARD_SCHEMA_VERSION
+        for k, v in UNITS.items():
+            a[k] = v
+        a["scene_name"] = shard.scene_name
+        a["scene_hash"] = shard.scene_hash
+        a["sim_index"] = shard.sim_index
+        a["seed"] = shard.seed
+        a["geometry_id"] = shard.geometry_id
+        a["geometry_file"] = rel_geo
+        a["status"] = shard.status
+        a["failure_reason"] = shard.failure_reason
+        load = f.create_group("load")
+        load.attrs["kind"] = shard.load_kind
+        load.attrs["patch_radius"] = float(shard.patch_radius)
+        load["nodes"] = shard.load_nodes
+        load["forces"] = shard.forces
+        mat = f.create_group("material")
+        mat.attrs["law"] = shard.material.law
+        mat.attrs["volumetric"] = shard.material.volumetric
+        mat["c"] = shard.material.c
+        mat["m"] = shard.material.m
+        mat["K"] = shard.material.K
+        f["fixed_nodes"] = shard.fixed_nodes
+        f["load_fractions"] = shard.load_fractions
+        f["output_nodes"] = shard.output_nodes
+        # One chunk per load step: a reader of one step decompresses only that step.
+        packed = dict(chunks=(1, *shard.displacement.shape[1:]), compression="gzip",
+                      compression_opts=4, shuffle=True) if shard.n_done else {}
+        f.create_dataset("displacement", data=shard.displacement, **packed)
+        s = f.create_group("solver")
+        s["newton_iterations"] = shard.stats.newton_iterations
+        s["residual_norms"] = shard.stats.residual_norms
+        s["cutbacks"] = shard.stats.cutbacks
+        s["wall_time"] = shard.stats.wall_time
+        hist = shard.stats.residual_history
+        s["residual_history"] = np.concatenate(hist) if hist else np.zeros(0)
+        s["residual_offsets"] = np.cumsum([0] + [len(h) for h in hist]).astype(np.int64)
+        for k, v in shard.stats.info.items():
+            s.attrs[k] = v
+        if not output_is_all:
+            f["xdmf/points"] = points[shard.output_nodes]
+    return h5_path
+
+
+def read_shard(path: str | Path) -> Shard:
+    """Read one shard file into a :class:`Shard` (plain numpy arrays)."""
+    with h5py.File(path, "r") as f:
+        a = f.attrs
+        if a.get("format") != SHARD_FORMAT:
+            raise ValueError(f"{path}: not a {SHARD_FORMAT} file")
+        s = f["solver"]
+        offsets = s["residual_offsets"][...]
+        flat = s["residual_history"][...]
+        return Shard(
+            scene_name=str(a["scene_name"]), scene_hash=str(a["scene_hash"]),
+            sim_index=int(a["sim_index"]), seed=int(a["seed"]),
+            geometry_id=str(a["geometry_id"]), geometry_file=str(a["geometry_file"]),
+            load_kind=str(f["load"].attrs["kind"]),
+            patch_radius=float(f["load"].attrs["patch_radius"]),
+            load_nodes=f["load/nodes"][...], forces=f["load/forces"][...],
+            material=Material(c=f["material/c"][...], m=f["material/m"][...],
+                              K=float(f["material/K"][()]),
+                              law=str(f["material"].attrs["law"]),
+                              volumetric=str(f["material"].attrs["volumetric"])),
+            fixed_nodes=f["fixed_nodes"][...], load_fractions=f["load_fractions"][...],
+            output_nodes=f["output_nodes"][...], displacement=f["displacement"][...],
+            stats=SolverStats(
+                newton_iterations=s["newton_iterations"][...],
+                residual_norms=s["residual_norms"][...], cutbacks=s["cutbacks"][...],
+                wall_time=s["wall_time"][...],
+                residual_history=[flat[i:j] for i, j in zip(offsets[:-1], offsets[1:])],
+                info=dict(s.attrs)),
+            status=str(a["status"]), failure_reason=str(a["failure_reason"]),
+        )

@@ -1,0 +1,159 @@
+"""Dataset validator: reports *everything* wrong with a dataset directory as a list of strings.
+
+Each problem names the file, the field and what was expected. An empty list means every shard
+opens, has all fields with consistent shapes and finite values, references an existing geometry
+file that matches it, and has a coherent status.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from data_spec.atomic import leftover_temporaries
+from data_spec.geometry import GEOMETRY_FORMAT
+from data_spec.shards import SHARD_FORMAT, SHARD_SCHEMA_VERSION, STATUSES, UNITS, list_shards
+
+_ATTRS = ("format", "schema_version", "scene_name", "scene_hash", "sim_index", "seed",
+          "geometry_id", "geometry_file", "status", "failure_reason", *UNITS)
+_DATASETS = ("load/nodes", "load/forces", "material/c", "material/m", "material/K",
+             "fixed_nodes", "load_fractions", "output_nodes", "displacement",
+             "solver/newton_iterations", "solver/residual_norms", "solver/cutbacks",
+             "solver/wall_time", "solver/residual_history", "solver/residual_offsets")
+
+
+def _geometry_facts(path: Path, cache: dict) -> tuple[int, str] | str:
+    """(n_nodes, geometry_id) of a geometry file, or a problem string. Cached per path."""
+    if path not in cache:
+        if not path.exists():
+            cache[path] = f"geometry file {path} is missing"
+        else:
+            try:
+                with h5py.File(path, "r") as g:
+                    if g.attrs.get("format") != GEOMETRY_FORMAT:
+                        cache[path] = f"geometry file {path} is not a {GEOMETRY_FORMAT} file"
+                    else:
+                        cache[path] = (int(g["points"].shape[0]), str(g.attrs["geometry_id"]))
+            except (OSError, KeyError) as exc:
+                cache[path] = f"geometry file {path} cannot be read: {exc}"
+    return cache[path]
+
+
+def shard_problems(path: str | Path, geometry_cache: dict | None = None) -> list[str]:
+    """Everything wrong with one shard file."""
+    path = Path(path)
+    geometry_cache = {} if geometry_cache is None else geometry_cache
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        return [f"{path}: cannot open as HDF5 (truncated or corrupt?): {exc}"]
+    p: list[str] = []
+    with f:
+        if f.attrs.get("format") != SHARD_FORMAT:
+            return [f"{path}: attribute 'format' is {f.attrs.get('format')!r}, expected "
+                    f"{SHARD_FORMAT!r}"]
+        for name in _ATTRS:
+            if name not in f.attrs:
+                p.append(f"{path}: missing attribute '{name}'")
+        for name in _DATASETS:
+            if name not in f:
+                p.append(f"{path}: missing dataset '{name}'")
+        if p:
+            return p
+        if f.attrs["schema_version"] != SHARD_SCHEMA_VERSION:
+            p.append(f"{path}: schema_version {f.attrs['schema_version']}, expected "
+                     f"{SHARD_SCHEMA_VERSION}")
+        try:
+            arr = {name: f[name][()] for name in _DATASETS}
+        except OSError as exc:
+            return p + [f"{path}: data cannot be read (truncated or corrupt?): {exc}"]
+        status = str(f.attrs["status"])
+        reason = str(f.attrs["failure_reason"])
+        geo_rel = str(f.attrs["geometry_file"])
+        geo_id = str(f.attrs["geometry_id"])
+
+    def shape_is(name, expected):
+        got = np.shape(arr[name])
+        ok = len(got) == len(expected) and all(e is None or e == g
+                                                for e, g in zip(expected, got))
+        if not ok:
+            exp = "(" + ", ".join("n" if e is None else str(e) for e in expected) + ")"
+            p.append(f"{path}: '{name}' has shape {got}, expected {exp}")
+        return ok
+
+    n_loads = np.shape(arr["load/nodes"])[0] if np.ndim(arr["load/nodes"]) == 1 else None
+    shape_is("load/nodes", (None,))
+    shape_is("load/forces", (n_loads, 3))
+    shape_is("material/c", (None,))
+    shape_is("material/m", (np.shape(arr["material/c"])[0] if np.ndim(arr["material/c"]) == 1
+                            else None,))
+    shape_is("material/K", ())
+    shape_is("fixed_nodes", (None,))
+    shape_is("load_fractions", (None,))
+    shape_is("output_nodes", (None,))
+    n_steps = np.size(arr["load_fractions"])
+    n_out = np.size(arr["output_nodes"])
+    if shape_is("displacement", (None, n_out, 3)):
+        n_done = arr["displacement"].shape[0]
+        if n_done > n_steps:
+            p.append(f"{path}: 'displacement' has {n_done} steps but only {n_steps} load "
+                     "fractions")
+        for name in ("newton_iterations", "residual_norms", "cutbacks", "wall_time"):
+            shape_is(f"solver/{name}", (n_done,))
+        shape_is("solver/residual_offsets", (n_done + 1,))
+        if status == "ok" and n_done != n_steps:
+            p.append(f"{path}: status 'ok' but {n_done} of {n_steps} load steps stored")
+    for name in ("load/forces", "material/c", "material/m", "material/K", "load_fractions",
+                 "displacement", "solver/residual_norms", "solver/wall_time"):
+        bad = ~np.isfinite(np.asarray(arr[name], dtype=np.float64))
+        if bad.any():
+            p.append(f"{path}: '{name}' contains {int(bad.sum())} NaN/inf value(s)")
+    if status not in STATUSES:
+        p.append(f"{path}: status {status!r}, expected one of {STATUSES}")
+    if status == "failed" and not reason:
+        p.append(f"{path}: status 'failed' without a failure_reason")
+    if np.size(arr["fixed_nodes"]) == 0:
+        p.append(f"{path}: 'fixed_nodes' is empty (the problem has rigid-body modes)")
+
+    facts = _geometry_facts((path.parent / geo_rel).resolve(), geometry_cache)
+    if isinstance(facts, str):
+        p.append(f"{path}: {facts}")
+    else:
+        n_nodes, real_id = facts
+        if real_id != geo_id:
+            p.append(f"{path}: geometry_id {geo_id!r} but {geo_rel} holds {real_id!r}")
+        for name in ("load/nodes", "fixed_nodes", "output_nodes"):
+            ids = np.asarray(arr[name])
+            if ids.size and (ids.min() < 0 or ids.max() >= n_nodes):
+                p.append(f"{path}: '{name}' has node ids outside [0, {n_nodes})")
+    if not path.with_suffix(".xdmf").exists():
+        p.append(f"{path}: its XDMF file {path.with_suffix('.xdmf').name} is missing")
+    return p
+
+
+def validate_dataset(directory: str | Path) -> list[str]:
+    """Every problem of a dataset directory (empty list if valid)."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        return [f"{directory}: not a directory"]
+    shards = list_shards(directory)
+    if not shards:
+        return [f"{directory}: no shards found (expected {directory}/sims/sim_*.h5)"]
+    problems: list[str] = []
+    cache: dict = {}
+    hashes = set()
+    for path in shards:
+        problems.extend(shard_problems(path, cache))
+        try:
+            with h5py.File(path, "r") as f:
+                hashes.add(str(f.attrs.get("scene_hash")))
+        except OSError:
+            pass
+    if len(hashes) > 1:
+        problems.append(f"{directory}: shards come from {len(hashes)} different scenes "
+                        "(scene_hash differs)")
+    for tmp in leftover_temporaries(directory):
+        problems.append(f"{tmp}: leftover temporary file of an interrupted writer")
+    return problems

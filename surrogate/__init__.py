@@ -1,0 +1,1 @@
+"""surrogate: JAX/Flax node-wise displacement surrogate (never imports dolfinx)."""

@@ -1,0 +1,155 @@
+"""Scene schema: shipped scenes load, malformed scenes are rejected with every problem listed."""
+
+import copy
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from data_spec import SceneError, load_scene, parse_scene, write_geometry
+from data_spec.testing import box_mesh
+
+SCENES = sorted((Path(__file__).parents[2] / "data_spec" / "scenes").glob("*.toml"))
+
+
+def minimal() -> dict:
+    return {"scene": {"name": "t", "n_simulations": 2},
+            "geometry": {"source": "phantom"},
+            "loads": {"magnitude": 0.4}}
+
+
+@pytest.mark.parametrize("path", SCENES, ids=[p.stem for p in SCENES])
+def test_shipped_scenes_are_valid(path):
+    scene = load_scene(path)
+    assert scene.name == tomllib.loads(path.read_text())["scene"]["name"]
+    fr = scene.load_fractions
+    assert fr[-1] == 1.0 and all(a < b for a, b in zip(fr, fr[1:]))
+
+
+def test_paper_scene_sizes_and_what_varies():
+    by_name = {p.stem: load_scene(p) for p in SCENES}
+    sizes = {k: v.n_simulations for k, v in by_name.items() if k.startswith("scene")}
+    assert sizes == {"scene1_base": 400, "scene2_two_forces": 1500,
+                     "scene3_materials": 3000, "scene4_livers": 10200}
+    assert by_name["scene1_base"].varies == {"loads": True, "material": False,
+                                             "geometry": False}
+    assert by_name["scene2_two_forces"]["loads"]["count"] == 2
+    assert by_name["scene3_materials"].varies["material"]
+    assert by_name["scene4_livers"].varies["geometry"]
+
+
+def test_defaults_filled_and_hash_stable():
+    a = parse_scene(minimal())
+    assert a["material"]["c"] == [4.1e-3] and a["material"]["K_over_mu"] == 200.0
+    assert a.load_fractions == [(i + 1) / 10 for i in range(10)]
+    assert a["solver"]["quadrature_degree"] == 1
+    b = parse_scene(copy.deepcopy(minimal()))
+    assert a.hash == b.hash
+    raw = minimal()
+    raw["loads"]["magnitude"] = 0.5
+    assert parse_scene(raw).hash != a.hash
+
+
+def test_malformed_scene_lists_every_problem(tmp_path):
+    geo = box_mesh(2)  # 27 nodes
+    write_geometry(tmp_path / "liver.h5", geo)
+    text = """
+[scene]
+name = "bad"
+n_simulations = "many"
+colour = "red"
+
+[geometry]
+source = "file"
+path = "liver.h5"
+
+[fixed]
+kind = "nodes"
+nodes = [%s]
+
+[loads]
+magnitude = -0.4
+""" % ", ".join(str(i) for i in range(30))
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(SceneError) as err:
+        load_scene(path)
+    problems = err.value.problems
+    msg = str(err.value)
+    assert str(path) in msg
+    assert any("scene.colour: unknown key" in p for p in problems)
+    assert any(p.startswith("scene.n_simulations: expected an integer >= 1, got 'many'")
+               for p in problems)
+    assert any(p.startswith("loads.magnitude: expected a number > 0") and "-0.4" in p
+               for p in problems)
+    # 30 ids but the mesh has 27 nodes: both the count and the out-of-range ids are named.
+    assert any("fixed.nodes: 30 ids given but the mesh has only 27 nodes" in p for p in problems)
+    assert any("fixed.nodes: node ids [27, 28, 29] are out of range" in p for p in problems)
+    assert len(problems) == 5, problems
+
+
+@pytest.mark.parametrize("mutate, expected", [
+    (lambda r: r.update(extra={}), "extra: unknown top-level key"),
+    (lambda r: r["loads"].update(kind="patch"), "loads.patch_radius: missing"),
+    (lambda r: r["loads"].update(magnitude=[0.5, 0.1]), "loads.magnitude: expected"),
+    (lambda r: r["geometry"].update(source="file"), "geometry.path: missing"),
+    (lambda r: r.update(material={"c": [1e-3, 2e-3], "m": [3.0]}),
+     "material: c and m must have one entry per Ogden term"),
+    (lambda r: r.update(material={"K": 1.0, "K_over_mu": 3.0}), "give K or K_over_mu"),
+    (lambda r: r.update(steps={"fractions": [0.5, 0.2, 1.0]}), "steps.fractions: expected"),
+    (lambda r: r.update(fixed={"kind": "sphere", "radius": 3.0}), "fixed.center: missing"),
+    (lambda r: r.update(solver={"degree": 3}), "solver.degree: expected an integer in [1, 2]"),
+    (lambda r: r.update(loads={"magnitude": float("nan")}), "loads.magnitude: expected"),
+    (lambda r: r.update(cases=[{"load_nodes": [1, 2], "forces": [[0, 0, 1]]}]),
+     "cases[0]: 2 load_nodes but 1 forces"),
+    (lambda r: r.update(material={"sample": {"kind": "uniform", "c": [[1e-3, 2e-3]]}}),
+     "material.sample.m: missing"),
+])
+def test_single_problem_is_named(mutate, expected):
+    raw = minimal()
+    mutate(raw)
+    with pytest.raises(SceneError) as err:
+        parse_scene(raw, "x.toml")
+    assert any(expected in p for p in err.value.problems), err.value.problems
+
+
+def test_explicit_cases_set_simulation_count():
+    raw = minimal()
+    del raw["scene"]["n_simulations"]
+    raw["cases"] = [{"load_nodes": [5], "forces": [[0.0, 0.0, -0.4]]},
+                    {"load_nodes": [7], "forces": [[0.4, 0.0, 0.0]],
+                     "material": {"c": [3e-3], "m": [8.0], "K_over_mu": 100.0}}]
+    scene = parse_scene(raw)
+    assert scene.n_simulations == 2
+    assert scene.varies["material"]
+    with pytest.raises(SceneError, match="out of range"):
+        scene.check_mesh(6)
+    scene.check_mesh(8)
+
+
+def test_unreadable_and_invalid_toml(tmp_path):
+    with pytest.raises(SceneError, match="cannot read the file"):
+        load_scene(tmp_path / "missing.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[scene\nname=")
+    with pytest.raises(SceneError, match="not valid TOML"):
+        load_scene(bad)
+
+
+def test_box_mesh_is_exact():
+    g = box_mesh(3, (2.0, 1.0, 1.0))
+    p, c = g.points, g.cells
+    vol = np.linalg.det(p[c[:, 1:]] - p[c[:, :1]]) / 6
+    assert vol.min() > 0 and np.isclose(vol.sum(), 2.0)
+    t = g.surface_triangles  # outward: divergence theorem gives the volume back
+    assert np.isclose(np.einsum("ij,ij->", p[t[:, 0]], np.cross(p[t[:, 1]], p[t[:, 2]])) / 6,
+                      2.0)
+
+
+def test_every_schema_key_is_documented():
+    from data_spec.scene import schema_table
+
+    readme = (Path(__file__).parents[2] / "data_spec" / "README.md").read_text()
+    missing = [k for k, _, _ in schema_table() if f"`{k}`" not in readme]
+    assert missing == []

@@ -1,0 +1,164 @@
+"""Shard contract: round trip, atomic writes, XDMF, and a validator that names each problem."""
+
+import os
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+
+import h5py
+import numpy as np
+import pytest
+
+from data_spec import (
+    geometry_path,
+    read_geometry,
+    read_shard,
+    shard_path,
+    validate_dataset,
+    write_geometry,
+    write_shard,
+)
+from data_spec.atomic import atomic_path
+from data_spec.testing import box_mesh, synthetic_dataset, synthetic_shard
+
+
+@pytest.fixture
+def dataset(tmp_path):
+    return synthetic_dataset(tmp_path / "ds", n_sims=3)
+
+
+def test_round_trip(tmp_path):
+    geo = box_mesh(2)
+    write_geometry(geometry_path(tmp_path, geo.geometry_id), geo)
+    s = synthetic_shard(geo, 7)
+    write_shard(tmp_path, s)
+    r = read_shard(shard_path(tmp_path, 7))
+    for name in ("load_nodes", "forces", "fixed_nodes", "load_fractions", "output_nodes",
+                 "displacement"):
+        np.testing.assert_array_equal(getattr(r, name), getattr(s, name))
+    assert r.material.K == s.material.K and r.status == "ok" and r.sim_index == 7
+    assert [list(h) for h in r.stats.residual_history] == [list(h) for h in
+                                                           s.stats.residual_history]
+    g = read_geometry(geometry_path(tmp_path, geo.geometry_id))
+    np.testing.assert_array_equal(g.points, geo.points)
+    assert g.geometry_id == geo.geometry_id
+
+
+def test_valid_dataset_and_cli(dataset):
+    assert validate_dataset(dataset) == []
+    out = subprocess.run([sys.executable, "-m", "data_spec", "validate", str(dataset)],
+                         capture_output=True, text=True)
+    assert out.returncode == 0 and "valid" in out.stdout
+
+
+def test_xdmf_is_well_formed_and_points_at_existing_data(dataset):
+    xdmf = shard_path(dataset, 1).with_suffix(".xdmf")
+    root = ET.parse(xdmf).getroot()
+    grids = root.findall("./Domain/Grid/Grid")
+    assert len(grids) == 3
+    assert [float(g.find("Time").get("Value")) for g in grids] == pytest.approx([1/3, 2/3, 1])
+    for item in root.iter("DataItem"):
+        if item.get("Format") == "HDF":
+            fname, dset = item.text.split(":")
+            with h5py.File(xdmf.parent / fname, "r") as f:
+                dims = tuple(int(d) for d in item.get("Dimensions").split())
+                assert f[dset].shape == dims
+
+
+def _problems_after(dataset, edit):
+    edit(shard_path(dataset, 1))
+    problems = validate_dataset(dataset)
+    out = subprocess.run([sys.executable, "-m", "data_spec", "validate", str(dataset)],
+                         capture_output=True, text=True)
+    assert out.returncode == 1
+    return problems
+
+
+def test_missing_field(dataset):
+    def edit(p):
+        with h5py.File(p, "a") as f:
+            del f["load/forces"]
+    problems = _problems_after(dataset, edit)
+    assert problems == [f"{shard_path(dataset, 1)}: missing dataset 'load/forces'"]
+
+
+def test_wrong_shape(dataset):
+    def edit(p):
+        with h5py.File(p, "a") as f:
+            d = f["displacement"][...]
+            del f["displacement"]
+            f["displacement"] = d[:, :-1, :]
+    problems = _problems_after(dataset, edit)
+    assert len(problems) == 1
+    assert "'displacement' has shape (3, 63, 3), expected (n, 64, 3)" in problems[0]
+
+
+def test_nan_displacement(dataset):
+    def edit(p):
+        with h5py.File(p, "a") as f:
+            f["displacement"][1, 5, 2] = np.nan
+    problems = _problems_after(dataset, edit)
+    assert problems == [f"{shard_path(dataset, 1)}: 'displacement' contains 1 NaN/inf value(s)"]
+
+
+def test_missing_geometry_file(dataset):
+    geo = next((dataset / "geometry").glob("*.h5"))
+    geo.unlink()
+    problems = validate_dataset(dataset)
+    assert len(problems) == 3  # one per shard, each naming the missing file
+    assert all(f"geometry file {geo} is missing" in p for p in problems)
+
+
+def test_truncated_hdf5(dataset):
+    def edit(p):
+        data = p.read_bytes()
+        p.write_bytes(data[: len(data) // 2])
+    problems = _problems_after(dataset, edit)
+    assert len(problems) == 1
+    assert problems[0].startswith(f"{shard_path(dataset, 1)}: cannot open as HDF5 (truncated")
+
+
+def test_failed_status_needs_reason_and_ok_needs_all_steps(dataset):
+    def edit(p):
+        with h5py.File(p, "a") as f:
+            f.attrs["status"] = "failed"
+    problems = _problems_after(dataset, edit)
+    assert problems == [f"{shard_path(dataset, 1)}: status 'failed' without a failure_reason"]
+
+
+def test_failed_shard_with_partial_steps_is_valid(tmp_path):
+    geo = box_mesh(2)
+    write_geometry(geometry_path(tmp_path, geo.geometry_id), geo)
+    s = synthetic_shard(geo, 0, n_steps=4)
+    s.displacement = s.displacement[:2]
+    s.stats.newton_iterations = s.stats.newton_iterations[:2]
+    s.stats.residual_norms = s.stats.residual_norms[:2]
+    s.stats.cutbacks = s.stats.cutbacks[:2]
+    s.stats.wall_time = s.stats.wall_time[:2]
+    s.stats.residual_history = s.stats.residual_history[:2]
+    s.status, s.failure_reason = "failed", "det F <= 0 after 8 cut-backs at load 0.625"
+    write_shard(tmp_path, s)
+    assert validate_dataset(tmp_path) == []
+    s.status = "ok"
+    write_shard(tmp_path, s)
+    assert validate_dataset(tmp_path) == [
+        f"{shard_path(tmp_path, 0)}: status 'ok' but 2 of 4 load steps stored"]
+
+
+def test_atomic_write_leaves_nothing_on_error(tmp_path):
+    final = tmp_path / "x.h5"
+    with pytest.raises(RuntimeError):
+        with atomic_path(final) as tmp:
+            tmp.write_bytes(b"partial")
+            raise RuntimeError("killed")
+    assert os.listdir(tmp_path) == []
+
+
+def test_leftover_temporary_is_reported(dataset):
+    (dataset / "sims" / f"sim_000009.h5.tmp-{os.getpid()}").write_bytes(b"x")
+    problems = validate_dataset(dataset)
+    assert len(problems) == 1 and "leftover temporary file" in problems[0]
+
+
+def test_empty_directory(tmp_path):
+    assert "no shards found" in validate_dataset(tmp_path)[0]
