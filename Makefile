@@ -41,13 +41,14 @@ help:
 setup: setup-solver setup-trainer
 
 setup-system:
-	@bash scripts/setup_system.sh
+	@bash scripts/setup_system.sh requirements/debian-packages.txt
+	@bash scripts/setup_system.sh requirements/debian-packages-trainer.txt
 
 # The solver venv sees Debian's packages (dolfinx, petsc4py, numpy 1.24); pip is constrained so
 # that nothing installed into it can replace numpy.
 $(SOLVER_VENV)/.stamp: requirements/debian-packages.txt requirements/solver-extras.txt \
                        requirements/solver-constraints.txt pyproject.toml
-	@bash scripts/setup_system.sh
+	@bash scripts/setup_system.sh requirements/debian-packages.txt
 	$(SYS_PY) -m venv --system-site-packages $(SOLVER_VENV)
 	$(SPY) -m pip install -q --disable-pip-version-check -c requirements/solver-constraints.txt \
 	    -r requirements/solver-extras.txt
@@ -57,8 +58,8 @@ $(SOLVER_VENV)/.stamp: requirements/debian-packages.txt requirements/solver-extr
 
 setup-solver: $(SOLVER_VENV)/.stamp
 
-$(TRAIN_VENV)/.stamp: requirements/trainer.lock pyproject.toml
-	@bash scripts/setup_system.sh
+$(TRAIN_VENV)/.stamp: requirements/trainer.lock requirements/debian-packages-trainer.txt pyproject.toml
+	@bash scripts/setup_system.sh requirements/debian-packages-trainer.txt
 	$(SYS_PY) -m venv $(TRAIN_VENV)
 	$(TPY) -m pip install -q --disable-pip-version-check -r requirements/trainer.lock
 	$(TPY) -m pip install -q --disable-pip-version-check --no-deps --no-build-isolation -e .

@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
-# Install the Debian packages of requirements/debian-packages.txt if any is missing.
+# Install the Debian packages of a package list if any is missing.
+# Usage: scripts/setup_system.sh [LIST]   (default: requirements/debian-packages.txt, the solver's)
 # Idempotent: does nothing (and needs no root) when everything is installed.
-# Used by `make setup-system` and by docker/solver.Dockerfile.
+# Used by the Makefile and by the Dockerfiles in docker/, so all read the same lists.
 set -euo pipefail
 here="$(cd "$(dirname "$0")/.." && pwd)"
-list="$here/requirements/debian-packages.txt"
+list="${1:-$here/requirements/debian-packages.txt}"
 mapfile -t pkgs < <(sed -e 's/#.*//' -e 's/[[:space:]]//g' "$list" | grep -v '^$')
 
 missing=()
@@ -13,7 +14,7 @@ for p in "${pkgs[@]}"; do
     [[ "$status" == "install ok installed" ]] || missing+=("$p")
 done
 if [[ ${#missing[@]} -eq 0 ]]; then
-    echo "setup-system: all ${#pkgs[@]} Debian packages present"
+    echo "setup-system: all ${#pkgs[@]} Debian packages of $(basename "$list") present"
     exit 0
 fi
 
@@ -28,7 +29,7 @@ setup-system: these Debian packages are missing and installing them needs root:
     ${missing[*]}
 Run, as root or with sudo:
     apt-get update && apt-get install -y --no-install-recommends ${missing[*]}
-then run make again. (The list lives in requirements/debian-packages.txt.)
+then run make again. (The list lives in $list.)
 MSG
         exit 2
     fi

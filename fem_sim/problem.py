@@ -1,0 +1,535 @@
+"""Static Ogden problem on a tetrahedral mesh: Newton with line search and load stepping.
+
+Python API, usable without the batch machinery::
+
+    from fem_sim import OgdenProblem, OgdenMaterial, Constraint, NodalLoad
+    prob = OgdenProblem(comm, points, cells, degree=1)           # collective; mesh on rank 0
+    sol = prob.solve(OgdenMaterial((4.1e-3,), (10.06,), 0.82),
+                     [Constraint(fixed_nodes)], [NodalLoad([1234], [[0, 0, -0.4]])],
+                     fractions=[0.1, 0.2, ..., 1.0])
+    sol.displacement   # (n_done, n_nodes, 3) mm, source-mesh node order, on rank 0
+
+Design (measured choices; bench/ has the numbers):
+
+* Material stress and tangent are evaluated at quadrature points in numpy
+  (:mod:`fem_sim.ogden`, exact at coinciding stretches) and enter two compiled forms as
+  quadrature-space coefficients. Forms are compiled once per problem; materials and loads are
+  numpy data, so one problem serves every simulation on the same mesh.
+* Each Newton iteration assembles the exact Jacobian (cheap), but the linear system is solved
+  by GMRES preconditioned with a *lagged* symmetric (LDL^T) MUMPS factorisation, refreshed only
+  when GMRES needs many iterations. Factorisation dominates the textbook solver's time; here it
+  happens a few times per simulation instead of every iteration, and Newton keeps its
+  quadratic convergence because each linear solve is still accurate (relative 1e-10).
+* Load steps start from a secant/quadratic extrapolation of the previous converged states.
+* A step fails on: NaN/inf, det F <= 0 at any quadrature point, a linear-solver failure, a
+  line search that cannot reduce the residual, or too many iterations. It is then retried with
+  half the increment (up to ``max_cutbacks`` halvings per output step); successful small steps
+  let the increment grow again. Nothing is ever returned for a step that did not converge.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from fem_sim import dolfinx_compat as dc
+from fem_sim.ogden import OgdenMaterial, ogden_point_kernel
+
+log = logging.getLogger(__name__)
+
+DEFAULT_SETTINGS = {
+    "rtol": 1e-9,            # Newton: |R| <= max(atol, rtol * force scale)
+    "atol": 1e-10,           # N
+    "max_iterations": 25,    # Newton iterations per increment attempt
+    "max_cutbacks": 8,       # increment halvings per output step
+    "linear_solver": "mumps",  # "mumps" (lagged LDL^T + GMRES) or "gamg" (CG + GAMG)
+    "lag_factorization": True,  # False: factorise every Newton iteration (textbook)
+    "krylov_rtol": 1e-10,    # relative tolerance of each linear solve
+    "refactor_after": 12,    # refactorise when a solve needs more Krylov iterations
+    "max_krylov": 60,        # Krylov iterations before the solve counts as failed
+    "predictor": "extrapolate",  # or "previous" (start from the last converged state)
+    "line_search": True,
+    "petsc_options": {},     # overrides, without the prefix
+}
+
+
+@dataclass
+class Constraint:
+    """Prescribed displacement of source nodes: ``values`` (mm, at load fraction 1) for the
+    given components. The default is a fixed (zero-displacement) node set."""
+
+    nodes: np.ndarray
+    components: tuple[int, ...] = (0, 1, 2)
+    values: float | np.ndarray = 0.0
+
+
+@dataclass
+class NodalLoad:
+    """Forces (N, at load fraction 1) on source nodes; repeated nodes add up."""
+
+    nodes: np.ndarray
+    forces: np.ndarray
+
+    def __post_init__(self):
+        self.nodes = np.atleast_1d(np.asarray(self.nodes, dtype=np.int64))
+        self.forces = np.asarray(self.forces, dtype=np.float64).reshape(-1, 3)
+        if self.nodes.shape[0] != self.forces.shape[0]:
+            raise ValueError(f"NodalLoad: {self.nodes.shape[0]} nodes but "
+                             f"{self.forces.shape[0]} force vectors")
+        if not np.all(np.isfinite(self.forces)):
+            raise ValueError("NodalLoad: forces contain NaN or inf")
+
+
+@dataclass
+class Solution:
+    """Result of :meth:`OgdenProblem.solve`. Arrays per *stored* output step."""
+
+    fractions: np.ndarray
+    displacement: np.ndarray | None  # (n_done, n_nodes, 3) on the comm's rank 0, else None
+    newton_iterations: list[int] = field(default_factory=list)
+    residual_norms: list[float] = field(default_factory=list)
+    cutbacks: list[int] = field(default_factory=list)
+    wall_time: list[float] = field(default_factory=list)
+    residual_history: list[list[float]] = field(default_factory=list)
+    status: str = "ok"
+    failure_reason: str = ""
+    factorizations: int = 0
+    krylov_iterations: int = 0
+
+    @property
+    def n_done(self) -> int:
+        return len(self.newton_iterations)
+
+
+class StepFailure(Exception):
+    """An increment that did not converge; the message is the recorded reason."""
+
+
+def _flat(T):
+    return ufl.as_vector([T[i, j] for i in range(3) for j in range(3)])
+
+
+class OgdenProblem:
+    """An Ogden body on a fixed mesh; solve() runs one simulation (collective on ``comm``)."""
+
+    def __init__(self, comm, points: np.ndarray | None, cells: np.ndarray | None, *,
+                 degree: int = 1, quadrature_degree: int | None = None,
+                 settings: dict | None = None, prefix: str = "ogden_"):
+        unknown = set(settings or {}) - set(DEFAULT_SETTINGS)
+        if unknown:
+            raise ValueError(f"OgdenProblem: unknown settings {sorted(unknown)}; expected "
+                             f"some of {sorted(DEFAULT_SETTINGS)}")
+        self.settings = {**DEFAULT_SETTINGS, **(settings or {})}
+        self.comm = comm
+        self.degree = degree
+        self.qdeg = quadrature_degree or (1 if degree == 1 else 2)
+        self.prefix = prefix
+        # Collective: distribute the mesh, build spaces and compile forms.
+        n_nodes = points.shape[0] if comm.rank == 0 else None
+        self.n_nodes = comm.bcast(n_nodes, root=0)
+        self.mesh = dc.create_mesh(comm, points, cells)
+        self.V = dc.vector_space(self.mesh, degree)
+        self.u = dc.fem.Function(self.V)
+        self.n_cells = dc.num_local_cells(self.mesh)
+        self.cells = np.arange(self.n_cells, dtype=np.int32)
+        self.P_q = dc.quadrature_function(self.mesh, self.qdeg, (9,))
+        self.A_q = dc.quadrature_function(self.mesh, self.qdeg, (9, 9))
+        self.q_dofs = dc.quadrature_cell_dofs(self.P_q, self.n_cells).ravel()
+        v, du = ufl.TestFunction(self.V), ufl.TrialFunction(self.V)
+        dx = ufl.dx(metadata={"quadrature_degree": self.qdeg})
+        self.L = dc.compile_form(ufl.inner(self.P_q, _flat(ufl.grad(v))) * dx)
+        self.a = dc.compile_form(
+            ufl.inner(ufl.dot(self.A_q, _flat(ufl.grad(du))), _flat(ufl.grad(v))) * dx)
+        self.grad_u = dc.compile_expression(ufl.grad(self.u), dc.quadrature_points(self.qdeg))
+        self.A = dc.create_matrix(self.a)
+        self.A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+        self.Pmat = None
+        self.b = dc.create_vector(self.L)
+        self.f_ext = self.b.duplicate()
+        self.du = self.b.duplicate()
+        self.rhs = self.b.duplicate()
+        self.lift = self.b.duplicate()
+        self.n_owned = dc.owned_size(self.V)
+        blocks, src = dc.vertex_dof_source_ids(self.mesh, self.V)
+        self.vertex_blocks, self.vertex_src = blocks, src
+        owned = blocks < self.n_owned
+        self.owned_vertex_blocks, self.owned_vertex_src = blocks[owned], src[owned]
+        self.src_to_block = dict(zip(src.tolist(), blocks.tolist()))
+        self._ksp = None
+        self.material: OgdenMaterial | None = None
+        self.min_J = 1.0
+
+    # ------------------------------------------------------------------------------------------
+    # Pieces of one Newton iteration
+    # ------------------------------------------------------------------------------------------
+    def _update_points(self, tangent: bool) -> bool:
+        """Evaluate stress (and tangent) at every quadrature point of the local cells.
+
+        Returns False (on every rank) if any point has det F <= 0 or a non-finite value.
+        Collective (the verdict is reduced over the communicator).
+        """
+        dc.scatter_forward(self.u)
+        g = dc.eval_expression(self.grad_u, self.cells).reshape(-1, 3, 3)
+        F = g + np.eye(3)
+        _, P, A, J = ogden_point_kernel(F, self.material, tangent=tangent)
+        local_min = float(np.min(J)) if J.size else 1.0
+        if not np.isfinite(local_min):
+            local_min = -math.inf
+        self.min_J = self.comm.allreduce(local_min, op=MPI.MIN)
+        if not self.min_J > 0:
+            return False
+        self.P_q.x.array.reshape(-1, 9)[self.q_dofs] = P.reshape(-1, 9)
+        if tangent:
+            self.A_q.x.array.reshape(-1, 81)[self.q_dofs] = A.reshape(-1, 81)
+        return True
+
+    def _residual(self, lam: float) -> float:
+        """b = F_int(u) - lam f_ext with constrained rows zeroed; returns |b| (collective)."""
+        dc.assemble_vector(self.b, self.L)
+        self.b.axpy(-lam, self.f_ext)
+        self.b.array[self._fixed_owned] = 0.0
+        r = self.b.norm()
+        return r if np.isfinite(r) else math.inf
+
+    def _jacobian(self, lift: float) -> None:
+        """Assemble J and the right-hand side -R (collective).
+
+        Constrained rows/columns become identity; ``self.lift`` carries the missing part of the
+        prescribed values (target - current), which PETSc moves to the right-hand side, so the
+        Newton update both satisfies the constraints and accounts for them in the free rows.
+        """
+        dc.assemble_matrix(self.A, self.a)
+        self.b.copy(self.rhs)
+        self.rhs.scale(-1.0)
+        if lift:
+            self.A.zeroRowsColumns(self._fixed_global, diag=1.0, x=self.lift, b=self.rhs)
+        else:
+            self.A.zeroRowsColumns(self._fixed_global, diag=1.0)
+
+    def _linear_solver(self) -> PETSc.KSP:
+        if self._ksp is not None:
+            return self._ksp
+        s = self.settings
+        ksp = PETSc.KSP().create(self.comm)
+        ksp.setOptionsPrefix(self.prefix)
+        opts = PETSc.Options()
+        if s["linear_solver"] == "mumps":
+            defaults = {"ksp_type": "gmres" if s["lag_factorization"] else "preonly",
+                        "ksp_gmres_restart": 100,
+                        "pc_type": "cholesky", "pc_factor_mat_solver_type": "mumps",
+                        "mat_mumps_icntl_14": 200}
+        else:
+            defaults = {"ksp_type": "cg", "pc_type": "gamg", "pc_gamg_type": "agg",
+                        "mg_levels_ksp_type": "chebyshev", "mg_levels_pc_type": "jacobi"}
+        for k, v in {**defaults, **s["petsc_options"]}.items():
+            opts[f"{self.prefix}{k}"] = v
+        ksp.setFromOptions()
+        ksp.setTolerances(rtol=s["krylov_rtol"], atol=0.0, max_it=s["max_krylov"])
+        if ksp.getType() != "preonly":
+            ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
+            ksp.getPC().setReusePreconditioner(False)
+        if s["linear_solver"] == "gamg":
+            self.A.setNearNullSpace(self._rigid_body_modes())
+        self._ksp = ksp
+        return ksp
+
+    def _rigid_body_modes(self):
+        """The six rigid-body modes of the owned dofs, as GAMG's near-nullspace."""
+        x = self.V.tabulate_dof_coordinates()[: self.n_owned]
+        vecs = [self.b.duplicate() for _ in range(6)]
+        for i in range(3):
+            vecs[i].array.reshape(-1, 3)[:, i] = 1.0
+        for k, (i, j) in enumerate(((0, 1), (1, 2), (2, 0))):
+            a = vecs[3 + k].array.reshape(-1, 3)
+            a[:, i] = -x[:, j]
+            a[:, j] = x[:, i]
+        for v in vecs:
+            v.assemble()
+        # Collective: orthonormalise for GAMG.
+        for i, v in enumerate(vecs):
+            for w in vecs[:i]:
+                v.axpy(-v.dot(w), w)
+            v.scale(1.0 / v.norm())
+        return PETSc.NullSpace().create(vectors=vecs, comm=self.comm)
+
+    def _solve_linear(self, stats: dict) -> None:
+        """du = J^{-1} rhs (collective). Raises StepFailure on linear-solver failure."""
+        s = self.settings
+        ksp = self._linear_solver()
+        lagged = s["linear_solver"] == "mumps" and s["lag_factorization"]
+        refactor = not lagged or self.Pmat is None or stats.pop("refactor_next", False)
+        if lagged:
+            if refactor:
+                if self.Pmat is None:
+                    self.Pmat = self.A.duplicate(copy=True)
+                else:
+                    self.A.copy(self.Pmat, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+                stats["factorizations"] += 1
+            ksp.setOperators(self.A, self.Pmat)
+        else:
+            ksp.setOperators(self.A, self.A)
+            stats["factorizations"] += 1
+        ksp.solve(self.rhs, self.du)
+        its, reason = ksp.getIterationNumber(), ksp.getConvergedReason()
+        stats["krylov"] += its
+        if lagged and reason < 0 and not refactor:
+            # The lagged factorisation is too far off: refactorise now and solve again.
+            self.A.copy(self.Pmat, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+            stats["factorizations"] += 1
+            ksp.setOperators(self.A, self.Pmat)
+            ksp.solve(self.rhs, self.du)
+            its, reason = ksp.getIterationNumber(), ksp.getConvergedReason()
+            stats["krylov"] += its
+        if reason < 0:
+            raise StepFailure(f"linear solver failed (PETSc KSP reason {reason} after {its} "
+                              "iterations)")
+        if lagged and its > s["refactor_after"]:
+            stats["refactor_next"] = True
+        self.du.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+
+    # ------------------------------------------------------------------------------------------
+    # Newton on one increment
+    # ------------------------------------------------------------------------------------------
+    def _constraint_gap(self, lam: float) -> float:
+        """Set self.lift = prescribed - current at the constrained owned dofs; return max |gap|."""
+        gap = lam * self._fixed_values_owned - self.u.x.array[self._fixed_owned]
+        with self.lift.localForm() as loc:
+            loc.set(0.0)
+        self.lift.array[self._fixed_owned] = gap
+        local = float(np.abs(gap).max()) if gap.size else 0.0
+        return self.comm.allreduce(local, op=MPI.MAX)
+
+    def _newton(self, lam: float, history: list[float], stats: dict) -> int:
+        """Solve R(u; lam) = 0 from the current u (collective). Returns the iteration count."""
+        s = self.settings
+        if not self._update_points(tangent=True):
+            raise StepFailure(f"det F <= 0 at the predictor (min det F = {self.min_J:.3g})")
+        r = self._residual(lam)
+        if not np.isfinite(r):
+            raise StepFailure("NaN/inf in the residual at the predictor")
+        gap = self._constraint_gap(lam)
+        scale = max(lam * self._f_norm, r)
+        tol = max(s["atol"], s["rtol"] * scale)
+        gap_tol = 1e-12 * max(1.0, self._value_norm * lam)
+        history.append(r)
+        u = self.u.vector
+        for it in range(s["max_iterations"] + 1):
+            if r <= tol and gap <= gap_tol:
+                return it
+            if it == s["max_iterations"]:
+                break
+            self._jacobian(lift=gap > 0)
+            self._solve_linear(stats)
+            u0 = u.copy()
+            alpha, accepted = 1.0, False
+            for _ in range(8 if s["line_search"] else 1):
+                u0.copy(u)
+                u.axpy(alpha, self.du)
+                ok = self._update_points(tangent=True)
+                r_new = self._residual(lam) if ok else math.inf
+                # Armijo-type decrease of |R|; without line search any finite state is taken.
+                # While constraints are still being lifted, |R| may grow: accept finite states.
+                if ok and (not s["line_search"] or gap > gap_tol
+                           or r_new <= (1.0 - 1e-4 * alpha) * r or r_new <= tol):
+                    accepted = True
+                    break
+                alpha *= 0.5
+            u0.destroy()
+            if not accepted:
+                why = ("det F <= 0" if self.min_J <= 0 else
+                       "NaN/inf in the residual" if not np.isfinite(r_new) else
+                       "no residual decrease")
+                raise StepFailure(f"line search failed at load {lam:.4g}: {why} "
+                                  f"(|R| = {r:.3e})")
+            r = r_new
+            gap = self._constraint_gap(lam)
+            history.append(r)
+        raise StepFailure(f"Newton did not converge in {s['max_iterations']} iterations at load "
+                          f"{lam:.4g} (|R| = {r:.3e}, tolerance {tol:.1e})")
+
+    # ------------------------------------------------------------------------------------------
+    # Boundary conditions and loads
+    # ------------------------------------------------------------------------------------------
+    def _set_constraints(self, constraints: list[Constraint]) -> None:
+        """Map node constraints to local dofs. For P2, an edge dof is constrained (to the mean
+        of its ends' values: the P1 interpolant) when both ends are, in that component."""
+        local, values = [], []
+        by_node: dict[tuple[int, int], float] = {}
+        for c in constraints:
+            nodes = np.atleast_1d(np.asarray(c.nodes, dtype=np.int64))
+            if nodes.size and (nodes.min() < 0 or nodes.max() >= self.n_nodes):
+                raise ValueError(f"Constraint: node ids outside [0, {self.n_nodes})")
+            vals = np.broadcast_to(np.asarray(c.values, dtype=np.float64),
+                                   (nodes.size, len(c.components)))
+            for n, row in zip(nodes.tolist(), vals):
+                for comp, val in zip(c.components, row):
+                    by_node[(n, comp)] = float(val)
+        for (n, comp), val in by_node.items():
+            blk = self.src_to_block.get(n)
+            if blk is not None:
+                local.append(3 * blk + comp)
+                values.append(val)
+        if self.degree == 2:
+            for blk, a, b in zip(*[x.tolist() for x in dc.edge_dof_source_ids(self.mesh, self.V)]):
+                for comp in range(3):
+                    va, vb = by_node.get((a, comp)), by_node.get((b, comp))
+                    if va is not None and vb is not None:
+                        local.append(3 * blk + comp)
+                        values.append(0.5 * (va + vb))
+        local = np.asarray(local, dtype=np.int32)
+        values = np.asarray(values, dtype=np.float64)
+        local, first = np.unique(local, return_index=True)
+        self._fixed_local, self._fixed_values = local, values[first]
+        owned = local < 3 * self.n_owned
+        self._fixed_owned = local[owned]
+        self._fixed_values_owned = self._fixed_values[owned]
+        self._value_norm = self.comm.allreduce(
+            float(np.abs(self._fixed_values).max()) if values.size else 0.0, op=MPI.MAX)
+        blocks = dc.global_block_indices(self.V, self._fixed_owned // 3)
+        self._fixed_global = (3 * blocks + self._fixed_owned % 3).astype(np.int32)
+        n_fixed = self.comm.allreduce(int(owned.sum()), op=MPI.SUM)
+        if n_fixed == 0:
+            raise ValueError("OgdenProblem.solve: no constrained degree of freedom (the body "
+                             "could move rigidly); give at least one Constraint")
+
+    def _set_loads(self, loads: list[NodalLoad]) -> None:
+        with self.f_ext.localForm() as loc:
+            loc.set(0.0)
+        arr = self.f_ext.array
+        for ld in loads:
+            bad = (ld.nodes < 0) | (ld.nodes >= self.n_nodes)
+            if bad.any():
+                raise ValueError(f"NodalLoad: node ids {ld.nodes[bad][:5].tolist()} outside "
+                                 f"[0, {self.n_nodes})")
+            for n, f in zip(ld.nodes.tolist(), ld.forces):
+                blk = self.src_to_block.get(n)
+                if blk is not None and blk < self.n_owned:
+                    arr[3 * blk: 3 * blk + 3] += f
+        self._f_norm = self.f_ext.norm()
+
+    # ------------------------------------------------------------------------------------------
+    # Gathering results in source-node order
+    # ------------------------------------------------------------------------------------------
+    def gather_vertex_values(self, arr_blocked: np.ndarray) -> np.ndarray | None:
+        """Values (n_local_blocks, 3) at owned vertex dofs -> (n_nodes, 3) on rank 0 (collective)."""
+        vals = arr_blocked[self.owned_vertex_blocks]
+        parts = self.comm.gather((self.owned_vertex_src, vals), root=0)
+        if self.comm.rank != 0:
+            return None
+        out = np.full((self.n_nodes, 3), np.nan)
+        for src, v in parts:
+            out[src] = v
+        return out
+
+    def displacement(self) -> np.ndarray | None:
+        """Current displacement at the mesh nodes, source order, on rank 0 (collective)."""
+        return self.gather_vertex_values(self.u.x.array.reshape(-1, 3))
+
+    def reaction(self, nodes) -> np.ndarray:
+        """Total internal force (N, 3 components) on the dofs of a node set: the reaction
+        force when the set is constrained (collective; same value on every rank).
+
+        Vertex dofs of the nodes count; for P2 also edge dofs whose two ends are in the set.
+        """
+        self._update_points(tangent=False)
+        dc.assemble_vector(self.b, self.L)
+        fint = self.b.array.reshape(-1, 3)
+        members = set(np.asarray(nodes, dtype=np.int64).tolist())
+        blocks = [b for b, n in zip(self.owned_vertex_blocks.tolist(),
+                                    self.owned_vertex_src.tolist()) if n in members]
+        if self.degree == 2:
+            eb, ea, ee = dc.edge_dof_source_ids(self.mesh, self.V)
+            blocks += [b for b, x, y in zip(eb.tolist(), ea.tolist(), ee.tolist())
+                       if b < self.n_owned and x in members and y in members]
+        local = fint[np.asarray(blocks, dtype=np.int64)].sum(axis=0) if blocks else np.zeros(3)
+        return self.comm.allreduce(local, op=MPI.SUM)
+
+    # ------------------------------------------------------------------------------------------
+    # One simulation
+    # ------------------------------------------------------------------------------------------
+    def solve(self, material: OgdenMaterial, constraints: list[Constraint],
+              loads: list[NodalLoad], fractions) -> Solution:
+        """Run the load steps of one simulation from the undeformed state (collective)."""
+        s = self.settings
+        fractions = np.asarray(fractions, dtype=np.float64)
+        if fractions.size == 0 or np.any(np.diff(fractions) <= 0) or fractions[0] <= 0:
+            raise ValueError(f"fractions must be increasing and > 0, got {fractions}")
+        self.material = material
+        self._set_constraints(constraints)
+        self._set_loads(loads)
+        self.u.x.array[:] = 0.0
+        self.Pmat = None  # a new material: the old factorisation is no preconditioner for it
+        sol = Solution(fractions=fractions, displacement=None)
+        stored = []
+        states: list[tuple[float, np.ndarray]] = [(0.0, self.u.x.array.copy())]
+        lam, dlam = 0.0, float(fractions[0])
+        stats = {"factorizations": 0, "krylov": 0}
+        for target in fractions:
+            t0 = time.perf_counter()
+            iters, cutbacks, history = 0, 0, []
+            dlam = min(dlam, target - lam) if dlam > 0 else target - lam
+            try:
+                while lam < target - 1e-14:
+                    trial = min(lam + dlam, target)
+                    if target - trial < 1e-3 * dlam:
+                        trial = target
+                    self._predict(states, trial)
+                    try:
+                        its = self._newton(trial, history, stats)
+                    except StepFailure as exc:
+                        cutbacks += 1
+                        log.debug("step to %.4g failed (%s); cut back", trial, exc)
+                        if cutbacks > s["max_cutbacks"]:
+                            raise StepFailure(f"{exc}; gave up after {s['max_cutbacks']} "
+                                              "cut-backs") from None
+                        self.u.x.array[:] = states[-1][1]
+                        dlam = 0.5 * (trial - lam)
+                        stats["refactor_next"] = True
+                        continue
+                    iters += its
+                    lam = trial
+                    states = (states + [(lam, self.u.x.array.copy())])[-3:]
+                    if its <= 3 and cutbacks:
+                        dlam *= 2.0  # easy step after a cut-back: let the increment grow
+            except StepFailure as exc:
+                sol.status, sol.failure_reason = "failed", str(exc)
+                self.u.x.array[:] = states[-1][1]
+                break
+            sol.newton_iterations.append(iters)
+            sol.residual_norms.append(history[-1])
+            sol.residual_history.append(history)
+            sol.cutbacks.append(cutbacks)
+            sol.wall_time.append(time.perf_counter() - t0)
+            stored.append(self.displacement())
+            dlam = max(dlam, 0.0)
+            nxt = np.searchsorted(fractions, target, side="right")
+            if nxt < fractions.size and not cutbacks:
+                dlam = fractions[nxt] - target
+        sol.factorizations, sol.krylov_iterations = stats["factorizations"], stats["krylov"]
+        if self.comm.rank == 0:
+            sol.displacement = (np.stack(stored) if stored
+                                else np.zeros((0, self.n_nodes, 3)))
+        return sol
+
+    def _predict(self, states: list[tuple[float, np.ndarray]], lam: float) -> None:
+        """Initial guess for load ``lam`` from the last converged states (Lagrange
+        extrapolation in the load parameter, up to quadratic)."""
+        if self.settings["predictor"] == "previous" or len(states) == 1:
+            self.u.x.array[:] = states[-1][1]
+            return
+        lams = [s[0] for s in states]
+        guess = np.zeros_like(states[-1][1])
+        for i, (li, ui) in enumerate(states):
+            w = 1.0
+            for j, lj in enumerate(lams):
+                if j != i:
+                    w *= (lam - lj) / (li - lj)
+            guess += w * ui
+        self.u.x.array[:] = guess
