@@ -1,0 +1,211 @@
+"""Scene -> simulation cases: pure numpy, no MPI.
+
+Every random draw of case ``i`` comes from ``numpy.random.default_rng([scene.seed, i])`` (and a
+scene-wide stream for material tables), so the same dataset comes out for any number of ranks
+and any order of work. Only what the scene says varies is drawn.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from data_spec import Geometry, Material, Scene
+
+_MATERIAL_TABLE_STREAM = 2**31 - 1  # rng stream of the scene-wide material table
+
+
+class CaseError(ValueError):
+    """The scene cannot produce a case on this geometry (e.g. no eligible load node)."""
+
+
+@dataclass
+class Case:
+    """One simulation: what acts on which liver with which material."""
+
+    index: int
+    geometry_index: int
+    load_kind: str
+    load_nodes: np.ndarray       # (n_loads,) source node ids (patch centres for patch loads)
+    forces: np.ndarray           # (n_loads, 3) N at load fraction 1
+    material: Material
+    patch_radius: float = 0.0
+
+
+def fixed_nodes(scene: Scene, g: Geometry, source: str = "scene") -> np.ndarray:
+    """Zero-displacement nodes of the scene on geometry ``g`` (sorted ids)."""
+    f = scene["fixed"]
+    kind = f["kind"]
+    surf = g.surface_nodes
+    x = g.points[surf]
+    if kind == "region":
+        if f["name"] not in g.regions:
+            raise CaseError(f"{source}: fixed.name = {f['name']!r} but the geometry has regions "
+                            f"{sorted(g.regions)}")
+        ids = g.regions[f["name"]]
+    elif kind == "nodes":
+        ids = np.asarray(f["nodes"], dtype=np.int64)
+    elif kind == "sphere":
+        ids = surf[np.linalg.norm(x - f["center"], axis=1) <= f["radius"]]
+    elif kind == "box":
+        ids = surf[np.all((x >= f["min"]) & (x <= f["max"]), axis=1)]
+    else:  # cylinder
+        axis = np.asarray(f["axis"], float) / np.linalg.norm(f["axis"])
+        d = x - f["center"]
+        along = d @ axis
+        radial = np.linalg.norm(d - along[:, None] * axis, axis=1)
+        ids = surf[(radial <= f["radius"]) & (np.abs(along) <= f["length"] / 2)]
+    ids = np.unique(ids)
+    if ids.size == 0:
+        raise CaseError(f"{source}: the fixed region ({kind}) selects no node of the geometry")
+    return ids
+
+
+def output_nodes(scene: Scene, g: Geometry) -> np.ndarray:
+    nodes = scene["output"]["nodes"]
+    if nodes == "all":
+        return np.arange(g.n_nodes)
+    if nodes == "surface":
+        return g.surface_nodes
+    return np.asarray(nodes, dtype=np.int64)
+
+
+def eligible_load_nodes(scene: Scene, g: Geometry, fixed: np.ndarray) -> np.ndarray:
+    """Nodes a random load may act on: surface (or all) nodes, not fixed, far enough from the
+    fixed region."""
+    ld = scene["loads"]
+    cand = g.surface_nodes if ld["eligible"] == "surface" else np.arange(g.n_nodes)
+    cand = np.setdiff1d(cand, fixed)
+    dmin = ld["min_distance_to_fixed"]
+    if dmin > 0 and cand.size:
+        d = _min_distance(g.points[cand], g.points[fixed])
+        cand = cand[d >= dmin]
+    return cand
+
+
+def _min_distance(a: np.ndarray, b: np.ndarray, chunk: int = 2048) -> np.ndarray:
+    out = np.empty(a.shape[0])
+    for i in range(0, a.shape[0], chunk):
+        d = a[i:i + chunk, None, :] - b[None, :, :]
+        out[i:i + chunk] = np.sqrt(np.min(np.einsum("ijk,ijk->ij", d, d), axis=1))
+    return out
+
+
+def _draw(rng: np.random.Generator, spec) -> float:
+    return float(rng.uniform(spec[0], spec[1])) if isinstance(spec, list) else float(spec)
+
+
+def material_table(scene: Scene) -> list[Material] | None:
+    """The scene-wide table of materials cases pick from (None if each case draws its own or
+    the material is fixed)."""
+    mat = scene["material"]
+    s = mat.get("sample")
+    if s is None:
+        return None
+    vol = mat["volumetric"]
+    if s["kind"] == "table":
+        return [_material_from_params(p, vol) for p in s["sets"]]
+    if "n_sets" not in s:
+        return None
+    rng = np.random.default_rng([scene.seed, _MATERIAL_TABLE_STREAM])
+    return [_uniform_material(rng, s, vol) for _ in range(s["n_sets"])]
+
+
+def _uniform_material(rng, s: dict, vol: str) -> Material:
+    c = [rng.uniform(lo, hi) for lo, hi in s["c"]]
+    m = [rng.uniform(lo, hi) for lo, hi in s["m"]]
+    k_over_mu = _draw(rng, s.get("K_over_mu", 200.0))
+    return Material(c=c, m=m, K=k_over_mu * 0.5 * sum(c), volumetric=vol)
+
+
+def _material_from_params(p: dict, vol: str) -> Material:
+    c = p["c"]
+    K = p["K"] if "K" in p else p.get("K_over_mu", 200.0) * 0.5 * sum(c)
+    return Material(c=c, m=p["m"], K=K, volumetric=vol)
+
+
+def base_material(scene: Scene) -> Material:
+    mat = scene["material"]
+    return _material_from_params(mat, mat["volumetric"])
+
+
+def make_case(scene: Scene, index: int, g: Geometry, fixed: np.ndarray,
+              table: list[Material] | None = None, eligible: np.ndarray | None = None) -> Case:
+    """Case ``index`` of the scene on geometry ``g`` (deterministic in (scene.seed, index))."""
+    ld = scene["loads"]
+    rng = np.random.default_rng([scene.seed, index])
+    geometry_index = 0
+    if scene["geometry"]["source"] == "population":
+        geometry_index = index % scene["geometry"]["population_size"]
+    patch = float(ld.get("patch_radius", 0.0)) if ld["kind"] == "patch" else 0.0
+    if scene.cases:
+        spec = scene.cases[index]
+        mat = (_material_from_params(spec["material"], scene["material"]["volumetric"])
+               if "material" in spec else _case_material(scene, rng, table))
+        return Case(index, spec.get("geometry_index", geometry_index), ld["kind"],
+                    np.asarray(spec["load_nodes"], np.int64),
+                    np.asarray(spec["forces"], np.float64), mat, patch)
+
+    if eligible is None:
+        eligible = eligible_load_nodes(scene, g, fixed)
+    n = ld["count"]
+    if eligible.size < n:
+        raise CaseError(f"scene {scene.name}: only {eligible.size} eligible load nodes for "
+                        f"{n} loads (check loads.eligible / min_distance_to_fixed)")
+    nodes = _pick_nodes(rng, eligible, g.points, n, ld["min_separation"])
+    if ld["direction"] == "uniform":
+        d = rng.normal(size=(n, 3))
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+    else:
+        d = np.tile(np.asarray(ld["direction"], float) / np.linalg.norm(ld["direction"]),
+                    (n, 1))
+    mags = np.array([_draw(rng, ld["magnitude"]) for _ in range(n)])
+    mat = _case_material(scene, rng, table)
+    return Case(index, geometry_index, ld["kind"], nodes, d * mags[:, None], mat, patch)
+
+
+def _case_material(scene: Scene, rng, table: list[Material] | None) -> Material:
+    s = scene["material"].get("sample")
+    if s is None:
+        return base_material(scene)
+    if table is not None:
+        return table[int(rng.integers(len(table)))]
+    return _uniform_material(rng, s, scene["material"]["volumetric"])
+
+
+def _pick_nodes(rng, eligible, points, n, min_sep, tries: int = 1000) -> np.ndarray:
+    chosen: list[int] = []
+    for _ in range(tries):
+        cand = int(eligible[rng.integers(eligible.size)])
+        if cand in chosen:
+            continue
+        if min_sep > 0 and chosen and np.min(
+                np.linalg.norm(points[chosen] - points[cand], axis=1)) < min_sep:
+            continue
+        chosen.append(cand)
+        if len(chosen) == n:
+            return np.array(chosen, dtype=np.int64)
+    raise CaseError(f"could not place {n} loads at least {min_sep} mm apart in {tries} draws")
+
+
+def patch_forces(g: Geometry, centre: int, force: np.ndarray, radius: float):
+    """Spread ``force`` over the surface within ``radius`` of node ``centre``.
+
+    Each surface node gets force * (its lumped area inside the patch) / (patch area): a uniform
+    traction over the patch, consistent for P1 triangles (area/3 per vertex). Returns
+    (nodes, forces); the forces add up to ``force`` exactly.
+    """
+    tri = g.surface_triangles
+    p = g.points
+    inside = np.linalg.norm(p - p[centre], axis=1) <= radius
+    sel = tri[inside[tri].all(axis=1)]
+    if sel.size == 0:
+        return np.array([centre]), np.asarray(force, float)[None]
+    area = 0.5 * np.linalg.norm(np.cross(p[sel[:, 1]] - p[sel[:, 0]],
+                                         p[sel[:, 2]] - p[sel[:, 0]]), axis=1)
+    w = np.zeros(g.n_nodes)
+    np.add.at(w, sel.ravel(), np.repeat(area / 3.0, 3))
+    nodes = np.flatnonzero(w)
+    share = w[nodes] / w[nodes].sum()
+    return nodes, share[:, None] * np.asarray(force, float)[None]

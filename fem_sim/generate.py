@@ -1,0 +1,306 @@
+"""Scene-driven batch generation under MPI: atomic, resumable shards, dynamic work sharing.
+
+Layout: COMM_WORLD is split into groups of R ranks (``--ranks-per-sim``). Each group solves whole
+simulations (domain decomposition inside the group); groups take the next case from a shared
+atomic counter (an MPI window on world rank 0), so a slow or failing case never idles the others.
+
+Before any MPI work: world rank 0 validates the scene, builds and checks every geometry, writes
+the geometry files and decides which shards are missing or corrupt; the verdict is broadcast, so
+a bad scene ends every rank with its message instead of hanging. The forms are compiled once on
+rank 0 before the split (FFCx waits only 10 s for another process compiling the same form).
+"""
+
+from __future__ import annotations
+
+import logging
+import shutil
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from data_spec import (
+    Geometry,
+    Scene,
+    SceneError,
+    Shard,
+    SolverStats,
+    geometry_path,
+    load_scene,
+    read_geometry,
+    shard_path,
+    shard_problems,
+    write_geometry,
+    write_shard,
+)
+from fem_sim import cases as cs
+from fem_sim.geometry_source import GeometryError, n_geometries, scene_geometry
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class Plan:
+    """What rank 0 decided before work starts (broadcast to every rank)."""
+
+    error: str = ""
+    tasks: list[int] | None = None
+    skipped: int = 0
+    geometry_ids: list[str] | None = None
+
+
+def solver_settings(scene: Scene) -> dict:
+    s = scene["solver"]
+    return {k: s[k] for k in ("rtol", "atol", "max_iterations", "max_cutbacks",
+                              "linear_solver", "petsc_options")}
+
+
+def parse_range(text: str | None, n: int) -> range:
+    """'I..J' -> range(I, J) (J exclusive, either side may be omitted); None -> all."""
+    if not text:
+        return range(n)
+    try:
+        lo, hi = text.split("..")
+        return range(int(lo) if lo else 0, min(int(hi) if hi else n, n))
+    except ValueError:
+        raise ValueError(f"--only: expected I..J (e.g. 0..100), got {text!r}") from None
+
+
+def _shard_is_done(path: Path, scene_hash: str, retry_failed: bool) -> bool:
+    if not path.exists() or shard_problems(path):
+        return False
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        if str(f.attrs["scene_hash"]) != scene_hash:
+            return False
+        return not (retry_failed and str(f.attrs["status"]) == "failed")
+
+
+def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool) -> tuple[Plan,
+                                                                                        Scene]:
+    """Rank 0 only: validate everything and decide the work. Errors go into Plan.error."""
+    try:
+        scene = load_scene(scene_file)
+        out.mkdir(parents=True, exist_ok=True)
+        copy = out / "scene.toml"
+        if copy.exists():
+            try:
+                old = load_scene(copy)
+            except SceneError:
+                old = None
+            if old is None or old.hash != scene.hash:
+                raise SceneError(str(out), [f"{out} holds a dataset of another scene "
+                                            f"({copy}); use a new --out directory"])
+        else:
+            shutil.copyfile(scene_file, copy)
+        ids = []
+        for gi in range(n_geometries(scene)):
+            g = scene_geometry(scene, gi)
+            scene.check_mesh(g.n_nodes)
+            fixed = cs.fixed_nodes(scene, g, scene_file)
+            if not scene.cases:
+                eligible = cs.eligible_load_nodes(scene, g, fixed)
+                if eligible.size < scene["loads"]["count"]:
+                    raise cs.CaseError(f"{scene_file}: geometry {gi} has {eligible.size} "
+                                       "eligible load nodes (loads.eligible, "
+                                       "min_distance_to_fixed)")
+            path = geometry_path(out, g.geometry_id)
+            if not path.exists():
+                write_geometry(path, g)
+            ids.append(g.geometry_id)
+        todo = parse_range(only, scene.n_simulations)
+        tasks = [i for i in todo if not _shard_is_done(shard_path(out, i), scene.hash,
+                                                       retry_failed)]
+        n_geo = len(ids)
+        tasks.sort(key=lambda i: (i % n_geo, i))  # cases of one liver together: fewer rebuilds
+        return Plan(tasks=tasks, skipped=len(todo) - len(tasks), geometry_ids=ids), scene
+    except (SceneError, GeometryError, cs.CaseError, ValueError, OSError) as exc:
+        return Plan(error=str(exc)), None
+
+
+class _Counter:
+    """Atomic counters in an MPI window on world rank 0: [next task, done, failed]."""
+
+    def __init__(self, comm):
+        from mpi4py import MPI
+
+        self.MPI = MPI
+        self.win = MPI.Win.Allocate(3 * 8 if comm.rank == 0 else 0, 8, comm=comm)
+        if comm.rank == 0:
+            self.win.Lock(0)
+            self.win.Put(np.zeros(3, dtype="i8"), 0)
+            self.win.Unlock(0)
+        comm.Barrier()  # collective
+
+    def add(self, slot: int, value: int = 1) -> int:
+        out = np.zeros(1, dtype="i8")
+        self.win.Lock(0)
+        self.win.Fetch_and_op(np.array([value], dtype="i8"), out, 0, target_disp=slot,
+                              op=self.MPI.SUM)
+        self.win.Unlock(0)
+        return int(out[0])
+
+    def read(self) -> np.ndarray:
+        out = np.zeros(3, dtype="i8")
+        self.win.Lock(0)
+        self.win.Get(out, 0)
+        self.win.Unlock(0)
+        return out
+
+    def free(self):
+        self.win.Free()
+
+
+def _warm_jit_cache(degree: int, qdeg: int) -> None:
+    """Compile the solver's forms on this process alone (fills FFCx's cache for every rank)."""
+    from mpi4py import MPI
+
+    from data_spec.testing import box_mesh
+    from fem_sim.problem import OgdenProblem
+
+    g = box_mesh(1)
+    OgdenProblem(MPI.COMM_SELF, g.points, g.cells, degree=degree, quadrature_degree=qdeg)
+
+
+def run_case(problem, scene: Scene, case: cs.Case, g: Geometry, fixed: np.ndarray,
+             out_nodes: np.ndarray, geometry_id: str) -> Shard | None:
+    """Solve one case on the group (collective); the shard on the group's rank 0."""
+    from fem_sim.ogden import OgdenMaterial
+    from fem_sim.problem import Constraint, NodalLoad
+
+    loads = []
+    if problem.comm.rank == 0:
+        if case.load_kind == "patch":
+            for node, force in zip(case.load_nodes, case.forces):
+                loads.append(NodalLoad(*cs.patch_forces(g, int(node), force, case.patch_radius)))
+        else:
+            loads.append(NodalLoad(case.load_nodes, case.forces))
+    loads = problem.comm.bcast(loads, root=0)
+    fractions = np.asarray(scene.load_fractions)
+    t0 = time.perf_counter()
+    try:
+        sol = problem.solve(OgdenMaterial.from_data(case.material), [Constraint(fixed)], loads,
+                            fractions)
+        status, reason = sol.status, sol.failure_reason
+    except Exception as exc:  # a crash of one case is recorded, never kills the batch
+        log.exception("case %d crashed", case.index)
+        sol, status, reason = None, "failed", f"solver error: {type(exc).__name__}: {exc}"
+    if problem.comm.rank != 0:
+        return None
+    if sol is None or sol.displacement is None:
+        disp, stats = np.zeros((0, out_nodes.size, 3)), SolverStats.empty()
+    else:
+        disp = sol.displacement[:, out_nodes]
+        stats = SolverStats(sol.newton_iterations, sol.residual_norms, sol.cutbacks,
+                            sol.wall_time, sol.residual_history)
+    stats.info = {"degree": problem.degree, "quadrature_degree": problem.qdeg,
+                  "linear_solver": problem.settings["linear_solver"],
+                  "ranks": problem.comm.size,
+                  "factorizations": sol.factorizations if sol else 0,
+                  "krylov_iterations": sol.krylov_iterations if sol else 0,
+                  "total_wall_time": time.perf_counter() - t0}
+    if not np.all(np.isfinite(disp)):  # never NaN in a shard
+        keep = np.all(np.isfinite(disp), axis=(1, 2))
+        n_ok = int(np.argmin(keep)) if not keep.all() else disp.shape[0]
+        disp = disp[:n_ok]
+        stats = SolverStats(stats.newton_iterations[:n_ok], stats.residual_norms[:n_ok],
+                            stats.cutbacks[:n_ok], stats.wall_time[:n_ok],
+                            stats.residual_history[:n_ok], stats.info)
+        status, reason = "failed", reason or "non-finite displacement"
+    return Shard(scene_name=scene.name, scene_hash=scene.hash, sim_index=case.index,
+                 seed=scene.seed, geometry_id=geometry_id, load_kind=case.load_kind,
+                 load_nodes=case.load_nodes, forces=case.forces, material=case.material,
+                 fixed_nodes=fixed, load_fractions=fractions, output_nodes=out_nodes,
+                 displacement=disp, stats=stats, status=status, failure_reason=reason,
+                 patch_radius=case.patch_radius)
+
+
+def generate(scene_file: str, out: str | Path, ranks_per_sim: int = 1, only: str | None = None,
+             retry_failed: bool = False, progress: bool = True) -> int:
+    """Run (or resume) a batch; returns the process exit code. Collective on COMM_WORLD."""
+    from mpi4py import MPI
+
+    from fem_sim.problem import OgdenProblem
+
+    world = MPI.COMM_WORLD
+    out = Path(out)
+    t_start = time.perf_counter()
+    plan, scene = make_plan(scene_file, out, only, retry_failed) if world.rank == 0 else (
+        None, None)
+    if world.rank == 0 and not plan.error and world.size % ranks_per_sim:
+        plan = Plan(error=f"--ranks-per-sim {ranks_per_sim} does not divide the "
+                          f"{world.size} MPI ranks")
+    plan = world.bcast(plan, root=0)  # collective
+    if plan.error:
+        if world.rank == 0:
+            print(f"fem_sim generate: error: {plan.error}", file=sys.stderr, flush=True)
+        return 2
+    scene = world.bcast(scene, root=0)
+    if world.rank == 0:
+        _warm_jit_cache(scene["solver"]["degree"], scene["solver"]["quadrature_degree"])
+    world.Barrier()
+    group = world.Split(world.rank // ranks_per_sim, world.rank)  # collective
+    counter = _Counter(world)
+    tasks = plan.tasks
+    bar = None
+    if progress and world.rank == 0 and tasks:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(tasks), desc=scene.name, unit="sim", file=sys.stderr,
+                   dynamic_ncols=True)
+    problem, current = None, None
+    geo = fixed = out_nodes = eligible = table = None
+    n_groups = world.size // ranks_per_sim
+    while True:
+        pos = counter.add(0) if group.rank == 0 else None
+        pos = group.bcast(pos, root=0)
+        if pos >= len(tasks):
+            break
+        index = tasks[pos]
+        gi = index % len(plan.geometry_ids) if not scene.cases else (
+            scene.cases[index].get("geometry_index", 0))
+        if gi != current:
+            gid = plan.geometry_ids[gi]
+            geo = read_geometry(geometry_path(out, gid))
+            fixed = cs.fixed_nodes(scene, geo)
+            out_nodes = cs.output_nodes(scene, geo)
+            eligible = None if scene.cases else cs.eligible_load_nodes(scene, geo, fixed)
+            table = cs.material_table(scene)
+            problem = OgdenProblem(group, geo.points if group.rank == 0 else None,
+                                   geo.cells if group.rank == 0 else None,
+                                   degree=scene["solver"]["degree"],
+                                   quadrature_degree=scene["solver"]["quadrature_degree"],
+                                   settings=solver_settings(scene),
+                                   prefix=f"g{world.rank // ranks_per_sim}_")
+            current = gi
+        case = cs.make_case(scene, index, geo, fixed, table, eligible)
+        shard = run_case(problem, scene, case, geo, fixed, out_nodes, plan.geometry_ids[gi])
+        if group.rank == 0:
+            write_shard(out, shard)
+            counter.add(1)
+            if shard.status != "ok":
+                counter.add(2)
+                log.warning("sim %d failed: %s", index, shard.failure_reason)
+        if bar is not None:
+            done, failed = counter.read()[1:]
+            bar.n = int(done)
+            bar.set_postfix(failed=int(failed), groups=n_groups)
+            bar.refresh()
+    world.Barrier()  # collective: every shard is written
+    totals = counter.read() if world.rank == 0 else None
+    counter.free()
+    if world.rank == 0:
+        if bar is not None:
+            bar.n = int(totals[1])
+            bar.close()
+        elapsed = time.perf_counter() - t_start
+        done, failed = int(totals[1]), int(totals[2])
+        rate = done / elapsed * 3600 if elapsed > 0 else 0.0
+        print(f"fem_sim generate {scene.name}: {done} simulated ({failed} failed), "
+              f"{plan.skipped} skipped (already valid), {elapsed:.1f} s, "
+              f"{rate:.0f} simulations/hour on {world.size} rank(s), "
+              f"{n_groups} group(s) of {ranks_per_sim}", flush=True)
+    return 0

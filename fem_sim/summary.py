@@ -1,0 +1,54 @@
+"""Dataset summary: counts, displacement statistics and solver statistics of a directory."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from data_spec import list_shards, read_shard, validate_dataset
+
+
+def summary(directory: str | Path, out=sys.stdout) -> int:
+    directory = Path(directory)
+    paths = list_shards(directory)
+    if not paths:
+        print(f"{directory}: no shards", file=sys.stderr)
+        return 1
+    problems = validate_dataset(directory)
+    ok, failed, reasons = 0, 0, {}
+    max_disp, iters, cut, wall = [], [], [], []
+    for p in paths:
+        try:
+            s = read_shard(p)
+        except (OSError, KeyError, ValueError):
+            continue
+        if s.status == "ok":
+            ok += 1
+        else:
+            failed += 1
+            key = s.failure_reason.split(";")[0][:80]
+            reasons[key] = reasons.get(key, 0) + 1
+        if s.n_done:
+            max_disp.append(np.linalg.norm(s.displacement[-1], axis=1).max())
+            iters.extend(s.stats.newton_iterations.tolist())
+            cut.extend(s.stats.cutbacks.tolist())
+        wall.append(float(s.stats.info.get("total_wall_time", np.sum(s.stats.wall_time))))
+    pr = lambda *a: print(*a, file=out)  # noqa: E731
+    pr(f"dataset {directory}: {len(paths)} shards, {ok} ok, {failed} failed, "
+       f"{len(problems)} validation problem(s)")
+    if max_disp:
+        d = np.array(max_disp)
+        pr(f"  max |u| at full load, mm: median {np.median(d):.2f}, min {d.min():.2f}, "
+           f"max {d.max():.2f}")
+    if iters:
+        pr(f"  Newton iterations per load step: mean {np.mean(iters):.2f}, max {max(iters)}; "
+           f"cut-backs: {int(np.sum(cut))}")
+    if wall:
+        pr(f"  seconds per simulation: median {np.median(wall):.2f}, total {np.sum(wall):.0f}")
+    for k, v in sorted(reasons.items(), key=lambda kv: -kv[1]):
+        pr(f"  failed x{v}: {k}")
+    for p in problems[:20]:
+        pr(f"  problem: {p}")
+    return 0 if not problems else 1
