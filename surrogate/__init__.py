@@ -1,1 +1,16 @@
-"""surrogate: JAX/Flax node-wise displacement surrogate (never imports dolfinx)."""
+"""surrogate: JAX/Flax node-wise displacement surrogate (never imports dolfinx).
+
+    from surrogate import load_predictor
+    predict = load_predictor("runs/train/demo_scene1/model")
+    u = predict(forces=[[0, 0, -0.4]], load_nodes=[123])     # (n_nodes, 3) mm
+"""
+
+
+def load_predictor(directory):
+    """Load an exported model directory; returns a jitted :class:`surrogate.export.Predictor`."""
+    from surrogate.export import load_predictor as _load
+
+    return _load(directory)
+
+
+__all__ = ["load_predictor"]

@@ -1,0 +1,55 @@
+"""``python -m surrogate train --data DIR --run RUN [--config NAME] [key=value ...]``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+
+def _value(text: str):
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        return text
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m surrogate")
+    sub = parser.add_subparsers(dest="command", required=True)
+    t = sub.add_parser("train", help="k-fold CV, metrics, plots and an exported model")
+    t.add_argument("--data", required=True, help="dataset directory written by fem_sim")
+    t.add_argument("--run", required=True, help="run directory to write")
+    t.add_argument("--config", help="config name (default: the scene's surrogate.config)")
+    t.add_argument("overrides", nargs="*", metavar="key=value",
+                   help="config overrides, e.g. epochs=20 hidden=[64,64]")
+    args = parser.parse_args(argv)
+
+    from pathlib import Path
+
+    from data_spec import SceneError, load_scene
+    from surrogate.config import get_config
+    from surrogate.train import train_and_evaluate
+
+    try:
+        scene = load_scene(Path(args.data) / "scene.toml")
+    except SceneError as exc:
+        print(f"surrogate train: {exc}", file=sys.stderr)
+        return 2
+    overrides = dict(kv.split("=", 1) for kv in args.overrides)
+    overrides = {k: _value(v) for k, v in overrides.items()}
+    name = args.config or scene["surrogate"]["config"]
+    overrides.setdefault("folds", scene["surrogate"]["folds"])
+    overrides.setdefault("node_fraction", scene["surrogate"]["node_fraction"])
+    try:
+        cfg = get_config(name, **overrides)
+    except KeyError as exc:
+        print(f"surrogate train: {exc.args[0]}", file=sys.stderr)
+        return 2
+    result = train_and_evaluate(args.data, args.run, cfg)
+    print(json.dumps({k: result[k] for k in ("scene", "skill", "training_seconds")}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

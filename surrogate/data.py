@@ -1,0 +1,125 @@
+"""Read a dataset (through data_spec only) into compact arrays for node-wise training.
+
+A *sample* is one stored load step of one simulation. An *example* is one (sample, output node)
+pair. Nothing node-by-feature is materialised: per geometry we keep the static node features of
+its output nodes; per sample the (scaled) forces, load-node coordinates and the material/shape
+vector; features are assembled in jit (``surrogate.features``).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from data_spec import list_shards, load_scene, read_geometry, read_shard
+from data_spec.shards import geometry_path
+from surrogate.features import FeatureSpec, material_vector, static_node_features
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class Dataset:
+    """Everything the trainer needs, as numpy arrays."""
+
+    spec: FeatureSpec
+    scene_name: str
+    static: np.ndarray          # (N_out_total, 11) static features, all geometries' output nodes
+    geo_offset: np.ndarray      # (n_geo + 1,) rows of each geometry in ``static``
+    geo_ids: list[str]
+    points: list[np.ndarray]    # per geometry: (n_nodes, 3)
+    fixed: list[np.ndarray]     # per geometry: fixed node ids
+    out_nodes: list[np.ndarray]  # per geometry: output node ids
+    shape_coeffs: list[np.ndarray]
+    sample_geo: np.ndarray      # (S,) geometry of each sample
+    sample_sim: np.ndarray      # (S,) simulation index
+    sample_fraction: np.ndarray  # (S,) load fraction
+    forces: np.ndarray          # (S, n_loads, 3) force at this step, N
+    load_points: np.ndarray     # (S, n_loads, 3) load node coordinates, mm
+    load_nodes: np.ndarray      # (S, n_loads) load node ids
+    extra: np.ndarray           # (S, e) material and/or shape coefficients
+    targets: np.ndarray         # (E, 3) float32 displacement, mm, examples of all samples
+    sample_offset: np.ndarray   # (S + 1,) examples of each sample in ``targets``
+    failed_sims: int = 0
+
+    @property
+    def n_samples(self) -> int:
+        return self.sample_geo.shape[0]
+
+    def sample_rows(self, s: np.ndarray) -> np.ndarray:
+        """Static-feature rows of all examples of the given samples, concatenated."""
+        return np.concatenate([np.arange(self.geo_offset[g], self.geo_offset[g + 1])
+                               for g in self.sample_geo[s]])
+
+
+def load_dataset(directory: str | Path) -> Dataset:
+    """Read every shard of ``directory`` (ok shards and the converged steps of failed ones)."""
+    directory = Path(directory)
+    scene = load_scene(directory / "scene.toml")
+    paths = list_shards(directory)
+    if not paths:
+        raise FileNotFoundError(f"{directory}: no shards (expected {directory}/sims/sim_*.h5)")
+    geo_index: dict[str, int] = {}
+    points, fixed, out_nodes, shapes, statics = [], [], [], [], []
+    s_geo, s_sim, s_fr, s_f, s_lp, s_ln, s_extra, targets = [], [], [], [], [], [], [], []
+    failed = 0
+    for p in paths:
+        sh = read_shard(p)
+        if sh.status != "ok":
+            failed += 1
+        if sh.n_done == 0:
+            continue
+        if sh.geometry_id not in geo_index:
+            g = read_geometry(geometry_path(directory, sh.geometry_id))
+            geo_index[sh.geometry_id] = len(points)
+            points.append(g.points)
+            fixed.append(sh.fixed_nodes)
+            out_nodes.append(sh.output_nodes)
+            shapes.append(g.shape_coefficients if g.shape_coefficients is not None
+                          else np.zeros(0))
+            statics.append(static_node_features(g.points, sh.fixed_nodes)[sh.output_nodes])
+        gi = geo_index[sh.geometry_id]
+        lp = points[gi][sh.load_nodes]  # load nodes, or patch centres
+        mat = material_vector(sh.material.c, sh.material.m, sh.material.K)
+        for k in range(sh.n_done):
+            s_geo.append(gi)
+            s_sim.append(sh.sim_index)
+            s_fr.append(sh.load_fractions[k])
+            s_f.append(sh.forces * sh.load_fractions[k])
+            s_lp.append(lp)
+            s_ln.append(sh.load_nodes)
+            s_extra.append(mat)
+            targets.append(sh.displacement[k].astype(np.float32))
+    n_shape = shapes[0].size if shapes else 0
+    spec = FeatureSpec.from_scene(scene, n_shape)
+    extra = np.asarray(s_extra)[:, : spec.material_dim] if spec.material_dim else np.zeros(
+        (len(s_geo), 0))
+    if spec.geometry_dim:
+        extra = np.concatenate([extra, np.asarray([shapes[g] for g in s_geo])], axis=1)
+    sizes = np.array([t.shape[0] for t in targets])
+    return Dataset(
+        spec=spec, scene_name=scene.name,
+        static=np.concatenate(statics).astype(np.float32),
+        geo_offset=np.concatenate([[0], np.cumsum([s.shape[0] for s in statics])]),
+        geo_ids=list(geo_index), points=points, fixed=fixed, out_nodes=out_nodes,
+        shape_coeffs=shapes, sample_geo=np.asarray(s_geo), sample_sim=np.asarray(s_sim),
+        sample_fraction=np.asarray(s_fr), forces=np.asarray(s_f, dtype=np.float32),
+        load_points=np.asarray(s_lp, dtype=np.float32), load_nodes=np.asarray(s_ln),
+        extra=np.asarray(extra, dtype=np.float32), targets=np.concatenate(targets),
+        sample_offset=np.concatenate([[0], np.cumsum(sizes)]), failed_sims=failed)
+
+
+def kfold_groups(ds: Dataset, k: int, seed: int) -> list[np.ndarray]:
+    """Split simulations (livers, when the geometry varies) into k folds of sample indices."""
+    key = ds.sample_geo if ds.spec.geometry_dim else ds.sample_sim
+    units = np.unique(key)
+    if units.size < k:
+        raise ValueError(f"{k}-fold cross-validation needs at least {k} "
+                         f"{'livers' if ds.spec.geometry_dim else 'simulations'}, "
+                         f"the dataset has {units.size}")
+    perm = np.random.default_rng(seed).permutation(units)
+    folds = np.array_split(perm, k)
+    return [np.flatnonzero(np.isin(key, f)) for f in folds]

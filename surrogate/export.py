@@ -1,0 +1,177 @@
+"""Exported models: plain files only (JSON + .npz read with allow_pickle=False), so loading a
+model never executes code. ``load_predictor(path)`` returns a jitted predictor in millimetres.
+
+    RUN/model/model.json     format, version, config, feature spec, normalisation statistics,
+                             training ranges
+    RUN/model/params.npz     network parameters, keys "Dense_0/kernel", ...
+    RUN/model/geometry.npz   the liver (points, fixed nodes) when the scene has one liver
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from surrogate.features import FeatureSpec, static_node_features
+
+MODEL_FORMAT = "liverfem-surrogate"
+MODEL_VERSION = 1
+log = logging.getLogger(__name__)
+
+
+def _flatten(tree, prefix=""):
+    out = {}
+    for k, v in tree.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, dict):
+            out.update(_flatten(v, key + "/"))
+        else:
+            out[key] = np.asarray(v)
+    return out
+
+
+def _unflatten(flat):
+    tree: dict = {}
+    for key, v in flat.items():
+        node = tree
+        parts = key.split("/")
+        for p in parts[:-1]:
+            node = node.setdefault(p, {})
+        node[parts[-1]] = v
+    return tree
+
+
+def export_model(directory, params, stats, cfg, ds) -> Path:
+    """Write a model directory from a trained network and its dataset."""
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    np.savez(d / "params.npz", **_flatten(params))
+    fnorm = np.linalg.norm(ds.forces, axis=-1)
+    meta = {
+        "format": MODEL_FORMAT, "version": MODEL_VERSION, "scene": ds.scene_name,
+        "config": cfg, "feature_spec": ds.spec.to_dict(), "feature_names": ds.spec.names(),
+        "stats": {k: np.asarray(v).tolist() for k, v in stats.items()},
+        "training_range": {
+            "force_norm_max": float(fnorm.max()),
+            "extra_min": ds.extra.min(axis=0).tolist() if ds.extra.size else [],
+            "extra_max": ds.extra.max(axis=0).tolist() if ds.extra.size else []},
+        "units": {"length": "mm", "force": "N", "stress": "MPa"},
+    }
+    if len(ds.points) == 1:
+        np.savez(d / "geometry.npz", points=ds.points[0], fixed=ds.fixed[0],
+                 output_nodes=ds.out_nodes[0])
+    (d / "model.json").write_text(json.dumps(meta, indent=1))
+    return d
+
+
+class Predictor:
+    """Jitted surrogate: forces (and load nodes, material) -> node displacements in mm.
+
+    Call ``predict(forces, load_nodes, nodes=None, material=None)`` with
+    forces (n_loads, 3) or (n_cases, n_loads, 3) in N, load_nodes (n_loads,) or
+    (n_cases, n_loads) node ids; returns (n_nodes, 3) or (n_cases, n_nodes, 3).
+    ``nodes`` selects output nodes (default: all), e.g. the surface.
+    """
+
+    def __init__(self, directory):
+        import jax
+        import jax.numpy as jnp
+
+        from surrogate.model import NodeMLP
+
+        d = Path(directory)
+        meta = json.loads((d / "model.json").read_text())
+        if meta.get("format") != MODEL_FORMAT:
+            raise ValueError(f"{d}/model.json: not a {MODEL_FORMAT} model")
+        if meta.get("version") != MODEL_VERSION:
+            raise ValueError(f"{d}/model.json: version {meta.get('version')}, this code reads "
+                             f"{MODEL_VERSION}")
+        self.meta = meta
+        self.spec = FeatureSpec(**meta["feature_spec"])
+        with np.load(d / "params.npz", allow_pickle=False) as z:
+            params = _unflatten({k: z[k] for k in z.files})
+        self.params = jax.tree_util.tree_map(jnp.asarray, params)
+        self.stats = {k: jnp.asarray(np.asarray(v, dtype=np.float32))
+                      for k, v in meta["stats"].items()}
+        geo = d / "geometry.npz"
+        if geo.exists():
+            with np.load(geo, allow_pickle=False) as z:
+                self.points, self.fixed = z["points"], z["fixed"]
+            self.static = jnp.asarray(static_node_features(self.points, self.fixed),
+                                      dtype=jnp.float32)
+        else:
+            self.points = self.fixed = self.static = None
+        cfg = meta["config"]
+        model = NodeMLP(hidden=tuple(cfg["hidden"]), dropout=cfg["dropout"])
+        stats = self.stats
+
+        def one_case(params, static, forces, load_points, extra):
+            x = static[:, :3]
+            blocks = [static]
+            for j in range(forces.shape[0]):
+                dl = load_points[j][None, :] - x
+                blocks += [jnp.broadcast_to(forces[j], (x.shape[0], 3)), dl,
+                           jnp.sqrt(jnp.sum(dl * dl, axis=1, keepdims=True))]
+            if extra.shape[0]:
+                blocks.append(jnp.broadcast_to(extra, (x.shape[0], extra.shape[0])))
+            feats = (jnp.concatenate(blocks, axis=1) - stats["x_mean"]) / stats["x_std"]
+            y = model.apply({"params": params}, feats, train=False)
+            return y * stats["y_std"] + stats["y_mean"]
+
+        self._batched = jax.jit(jax.vmap(one_case, in_axes=(None, None, 0, 0, 0)))
+
+    def __call__(self, forces, load_nodes, nodes=None, material=None, geometry=None):
+        import jax.numpy as jnp
+
+        forces = np.asarray(forces, dtype=np.float64)
+        load_nodes = np.asarray(load_nodes)
+        single = forces.ndim == 2
+        if single:
+            forces, load_nodes = forces[None], load_nodes[None]
+        L = self.spec.n_loads
+        if forces.ndim != 3 or forces.shape[1:] != (L, 3):
+            raise ValueError(f"forces: expected shape ({L}, 3) or (n_cases, {L}, 3), got "
+                             f"{np.shape(forces) if not single else forces.shape[1:]}")
+        if load_nodes.shape != forces.shape[:2]:
+            raise ValueError(f"load_nodes: expected shape {forces.shape[1:2]} per case, got "
+                             f"{load_nodes.shape[1:]}")
+        if not np.all(np.isfinite(forces)):
+            raise ValueError("forces: contain NaN or inf")
+        if self.static is None:
+            raise ValueError("this model was trained on several livers: pass geometry=...")
+        n_nodes = self.points.shape[0]
+        if not np.issubdtype(load_nodes.dtype, np.integer) or load_nodes.min() < 0 or \
+                load_nodes.max() >= n_nodes:
+            raise ValueError(f"load_nodes: expected integer node ids in [0, {n_nodes})")
+        static = self.static
+        if nodes is not None:
+            nodes = np.asarray(nodes)
+            if not np.issubdtype(nodes.dtype, np.integer) or nodes.ndim != 1 or (
+                    nodes.size and (nodes.min() < 0 or nodes.max() >= n_nodes)):
+                raise ValueError(f"nodes: expected a 1-D array of node ids in [0, {n_nodes})")
+            static = static[jnp.asarray(nodes)]
+        extra = np.zeros((forces.shape[0], 0))
+        if self.spec.material_dim:
+            if material is None:
+                raise ValueError("material: this model needs (c, m, K) for each case")
+            extra = np.broadcast_to(np.asarray(material, dtype=np.float64).reshape(
+                -1, self.spec.material_dim), (forces.shape[0], self.spec.material_dim))
+        fmax = np.linalg.norm(forces, axis=-1).max()
+        if fmax > 1.05 * self.meta["training_range"]["force_norm_max"]:
+            warnings.warn(f"force magnitude {fmax:.3g} N exceeds the training range "
+                          f"({self.meta['training_range']['force_norm_max']:.3g} N): "
+                          "extrapolating", stacklevel=2)
+        out = self._batched(self.params, static, jnp.asarray(forces, dtype=jnp.float32),
+                            jnp.asarray(self.points[load_nodes], dtype=jnp.float32),
+                            jnp.asarray(extra, dtype=jnp.float32))
+        out = np.asarray(out)
+        return out[0] if single else out
+
+
+def load_predictor(directory) -> Predictor:
+    """Load an exported model directory; see :class:`Predictor`."""
+    return Predictor(directory)

@@ -1,0 +1,41 @@
+"""The paper's metrics (Table 4): MAE per axis, mean Euclidean error, % of nodes with Euclidean
+error < 1 mm and < 3 mm, Pearson correlation per axis. Pure numpy."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def displacement_metrics(pred: np.ndarray, true: np.ndarray) -> dict:
+    """pred, true: (n, 3) displacements in mm."""
+    pred = np.asarray(pred, dtype=np.float64)
+    true = np.asarray(true, dtype=np.float64)
+    err = pred - true
+    ee = np.linalg.norm(err, axis=1)
+    out = {f"mae_{a}": float(np.mean(np.abs(err[:, i]))) for i, a in enumerate("xyz")}
+    out["mee"] = float(np.mean(ee))
+    out["pct_ee_lt_1mm"] = float(100.0 * np.mean(ee < 1.0))
+    out["pct_ee_lt_3mm"] = float(100.0 * np.mean(ee < 3.0))
+    for i, a in enumerate("xyz"):
+        sp, st = pred[:, i].std(), true[:, i].std()
+        out[f"corr_{a}"] = float(np.mean((pred[:, i] - pred[:, i].mean()) *
+                                         (true[:, i] - true[:, i].mean())) / (sp * st)) \
+            if sp > 0 and st > 0 else 0.0
+    return out
+
+
+def metrics_table(rows: dict[str, dict]) -> str:
+    """Markdown table, one row per model."""
+    keys = ["mae_x", "mae_y", "mae_z", "mee", "pct_ee_lt_1mm", "pct_ee_lt_3mm", "corr_x",
+            "corr_y", "corr_z"]
+    head = ("| model | MAE x (mm) | MAE y (mm) | MAE z (mm) | MEE (mm) | % EE < 1 mm | "
+            "% EE < 3 mm | corr x | corr y | corr z |")
+    lines = [head, "|" + "---|" * (len(keys) + 1)]
+    for name, m in rows.items():
+        cells = []
+        for k in keys:
+            v = m[k]
+            cells.append(f"{v:.1f}" if k.startswith("pct") else
+                         f"{v:.3f}" if not k.startswith("corr") else f"{v:.4f}")
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)

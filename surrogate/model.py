@@ -1,0 +1,23 @@
+"""The node-wise MLP: normalised features (dim,) -> normalised displacement (3,).
+
+Dense layers act on the last axis, so the same module maps one node or a batch of nodes.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import flax.linen as nn
+
+
+class NodeMLP(nn.Module):
+    hidden: Sequence[int]
+    dropout: float = 0.0
+
+    @nn.compact
+    def __call__(self, x, *, train: bool = False):
+        for width in self.hidden:
+            x = nn.relu(nn.Dense(width)(x))
+            if self.dropout > 0:
+                x = nn.Dropout(self.dropout, deterministic=not train)(x)
+        return nn.Dense(3)(x)

@@ -1,0 +1,274 @@
+"""Training: pure ``train_step``; side effects (files, printing) only in ``train_and_evaluate``.
+
+k-fold cross-validation split by simulation (by liver when the geometry varies); inside each
+fold a fraction of the training simulations is held out for early stopping and the learning-rate
+rule, so the reported metrics come from folds the model never saw in any way.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import sys
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+from flax.training import train_state
+
+from surrogate.data import Dataset, kfold_groups, load_dataset
+from surrogate.metrics import displacement_metrics, metrics_table
+from surrogate.model import NodeMLP
+
+log = logging.getLogger(__name__)
+
+EVAL_CHUNK = 65536
+
+
+def batch_features(data: dict, rows, samples, flip=None):
+    """Raw features of examples (static row, sample) inside jit. ``flip`` (B,) swaps the two
+    force blocks (the paper's augmentation for two simultaneous forces)."""
+    st = data["static"][rows]
+    f = data["forces"][samples]
+    lp = data["load_points"][samples]
+    if flip is not None:
+        f = jnp.where(flip[:, None, None], f[:, ::-1], f)
+        lp = jnp.where(flip[:, None, None], lp[:, ::-1], lp)
+    d = lp - st[:, None, :3]
+    dist = jnp.sqrt(jnp.sum(d * d, axis=-1, keepdims=True))
+    blocks = [st]
+    for j in range(f.shape[1]):
+        blocks += [f[:, j], d[:, j], dist[:, j]]
+    if data["extra"].shape[1]:
+        blocks.append(data["extra"][samples])
+    return jnp.concatenate(blocks, axis=1)
+
+
+def make_fns(model: NodeMLP, cfg: dict, n_loads: int):
+    """Pure jitted functions: train_step(state, data, batch, key) and predict(params, data,
+    rows, samples) -> mm."""
+
+    def normalised_inputs(data, rows, samples, flip=None):
+        x = batch_features(data, rows, samples, flip)
+        return (x - data["x_mean"]) / data["x_std"]
+
+    def loss_fn(params, data, rows, samples, targets, key, train):
+        k_noise, k_drop, k_flip = jax.random.split(key, 3)
+        flip = (jax.random.bernoulli(k_flip, 0.5, (rows.shape[0],))
+                if (train and n_loads == 2) else None)
+        x = normalised_inputs(data, rows, samples, flip)
+        if train and cfg["input_noise"] > 0:
+            x = x + cfg["input_noise"] * jax.random.normal(k_noise, x.shape)
+        y = (targets - data["y_mean"]) / data["y_std"]
+        pred = model.apply({"params": params}, x, train=train, rngs={"dropout": k_drop})
+        mse = jnp.mean((pred - y) ** 2)
+        if cfg["l2"] > 0:
+            l2 = sum(jnp.sum(w**2) for p, w in jax.tree_util.tree_leaves_with_path(params)
+                     if "kernel" in jax.tree_util.keystr(p))
+            return mse + 0.5 * cfg["l2"] * l2, mse
+        return mse, mse
+
+    @jax.jit
+    def train_step(state, data, rows, samples, targets, key):
+        grad_fn = jax.value_and_grad(loss_fn, has_aux=True)
+        (_, mse), grads = grad_fn(state.params, data, rows, samples, targets, key, True)
+        return state.apply_gradients(grads=grads), mse
+
+    @jax.jit
+    def eval_loss(params, data, rows, samples, targets):
+        return loss_fn(params, data, rows, samples, targets, jax.random.PRNGKey(0), False)[1]
+
+    @jax.jit
+    def predict(params, data, rows, samples):
+        x = normalised_inputs(data, rows, samples)
+        y = model.apply({"params": params}, x, train=False)
+        return y * data["y_std"] + data["y_mean"]
+
+    return train_step, eval_loss, predict
+
+
+def example_index(ds: Dataset, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray,
+                                                              np.ndarray]:
+    """(static rows, sample of each example, target rows) of all examples of ``samples``."""
+    rows, smp, tgt = [], [], []
+    for s in samples:
+        g = ds.sample_geo[s]
+        n = ds.geo_offset[g + 1] - ds.geo_offset[g]
+        rows.append(np.arange(ds.geo_offset[g], ds.geo_offset[g + 1]))
+        smp.append(np.full(n, s))
+        tgt.append(np.arange(ds.sample_offset[s], ds.sample_offset[s] + n))
+    return np.concatenate(rows), np.concatenate(smp), np.concatenate(tgt)
+
+
+def normalisation(ds: Dataset, rows, smp, tgt, rng, n_max: int = 200_000) -> dict:
+    """Feature and target mean/std from (a random subset of) the training examples."""
+    pick = rng.choice(rows.size, size=min(n_max, rows.size), replace=False)
+    data = {"static": ds.static, "forces": ds.forces, "load_points": ds.load_points,
+            "extra": ds.extra}
+    x = np.asarray(batch_features(data, rows[pick], smp[pick]))
+    y = ds.targets[tgt[pick]]
+    std = x.std(axis=0)
+    return {"x_mean": x.mean(axis=0).astype(np.float32),
+            "x_std": np.where(std > 1e-8 * (np.abs(x).max(axis=0) + 1e-30), std, 1.0)
+            .astype(np.float32),
+            "y_mean": y.mean(axis=0).astype(np.float32),
+            "y_std": np.maximum(y.std(axis=0), 1e-12).astype(np.float32)}
+
+
+def device_data(ds: Dataset, stats: dict) -> dict:
+    return {"static": jnp.asarray(ds.static), "forces": jnp.asarray(ds.forces),
+            "load_points": jnp.asarray(ds.load_points), "extra": jnp.asarray(ds.extra),
+            **{k: jnp.asarray(v) for k, v in stats.items()}}
+
+
+def fit(ds: Dataset, train_samples: np.ndarray, cfg: dict, seed: int, label: str = "",
+        log_fn=print) -> tuple[dict, dict, list[dict]]:
+    """Train on ``train_samples`` (a slice held out for early stopping). Returns
+    (params, normalisation stats, per-epoch history)."""
+    rng = np.random.default_rng(seed)
+    unit = ds.sample_geo if ds.spec.geometry_dim else ds.sample_sim
+    units = np.unique(unit[train_samples])
+    n_val = max(1, int(round(cfg["inner_val_fraction"] * units.size))) if units.size > 1 else 0
+    val_units = rng.choice(units, size=n_val, replace=False) if n_val else np.array([])
+    is_val = np.isin(unit[train_samples], val_units)
+    tr, va = train_samples[~is_val], train_samples[is_val]
+    rows, smp, tgt = example_index(ds, tr)
+    stats = normalisation(ds, rows, smp, tgt, rng)
+    data = device_data(ds, stats)
+    model = NodeMLP(hidden=tuple(cfg["hidden"]), dropout=cfg["dropout"])
+    key = jax.random.PRNGKey(seed)
+    key, k_init = jax.random.split(key)
+    params = model.init(k_init, jnp.zeros((1, ds.spec.dim)))["params"]
+    tx = optax.inject_hyperparams(optax.adam)(learning_rate=cfg["learning_rate"])
+    state = train_state.TrainState.create(apply_fn=model.apply, params=params, tx=tx)
+    train_step, eval_loss, _ = make_fns(model, cfg, ds.spec.n_loads)
+    if va.size:
+        vrows, vsmp, vtgt = example_index(ds, va)
+        if vrows.size > 200_000:
+            pick = rng.choice(vrows.size, 200_000, replace=False)
+            vrows, vsmp, vtgt = vrows[pick], vsmp[pick], vtgt[pick]
+        vtargets = jnp.asarray(ds.targets[vtgt])
+    B = cfg["batch_size"]
+    n_per_epoch = max(B, int(cfg["node_fraction"] * rows.size)) // B * B
+    lr, best, best_params, since, history = cfg["learning_rate"], np.inf, state.params, 0, []
+    for epoch in range(cfg["epochs"]):
+        t0 = time.perf_counter()
+        order = rng.choice(rows.size, size=n_per_epoch, replace=n_per_epoch > rows.size)
+        losses = []
+        for i in range(0, n_per_epoch, B):
+            b = order[i:i + B]
+            key, k = jax.random.split(key)
+            state, mse = train_step(state, data, jnp.asarray(rows[b]), jnp.asarray(smp[b]),
+                                    jnp.asarray(ds.targets[tgt[b]]), k)
+            losses.append(mse)
+        train_loss = float(np.mean(jax.device_get(losses)))
+        val_loss = float(eval_loss(state.params, data, jnp.asarray(vrows), jnp.asarray(vsmp),
+                                   vtargets)) if va.size else train_loss
+        dt = time.perf_counter() - t0
+        history.append({"epoch": epoch + 1, "train_loss": train_loss, "val_loss": val_loss,
+                        "lr": lr, "seconds": dt, "examples_per_s": n_per_epoch / dt})
+        log_fn(f"{label}epoch {epoch + 1:3d}  train {train_loss:.4e}  val {val_loss:.4e}  "
+               f"lr {lr:.1e}  {n_per_epoch / dt:,.0f} examples/s")
+        if val_loss < best * (1 - 1e-4):
+            best, best_params, since = val_loss, state.params, 0
+        else:
+            since += 1
+        if cfg["lr_rule"] == "decay":
+            lr /= 1.5
+        elif since and since % cfg["lr_patience"] == 0:
+            lr *= 0.1
+        state.opt_state.hyperparams["learning_rate"] = jnp.asarray(lr)
+        if since >= cfg["early_stopping"]:
+            break
+    return jax.device_get(best_params), stats, history
+
+
+def predict_samples(ds: Dataset, params, stats: dict, cfg: dict, samples: np.ndarray):
+    """Predicted and true displacement (mm) of every output node of ``samples``."""
+    model = NodeMLP(hidden=tuple(cfg["hidden"]), dropout=cfg["dropout"])
+    _, _, predict = make_fns(model, cfg, ds.spec.n_loads)
+    data = device_data(ds, stats)
+    rows, smp, tgt = example_index(ds, samples)
+    out = np.empty((rows.size, 3), dtype=np.float32)
+    for i in range(0, rows.size, EVAL_CHUNK):
+        r, s = rows[i:i + EVAL_CHUNK], smp[i:i + EVAL_CHUNK]
+        n = r.size
+        pad = EVAL_CHUNK - n  # one compiled shape for every chunk
+        r = np.concatenate([r, np.repeat(r[:1], pad)])
+        s = np.concatenate([s, np.repeat(s[:1], pad)])
+        out[i:i + n] = np.asarray(predict(params, data, jnp.asarray(r), jnp.asarray(s)))[:n]
+    return out, ds.targets[tgt], smp
+
+
+def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
+                       log_fn=None) -> dict:
+    """k-fold CV + metrics + plots + (optionally) a final model exported to RUN/model."""
+    from surrogate.export import export_model
+    from surrogate.plots import error_plots
+
+    run = Path(run_dir)
+    run.mkdir(parents=True, exist_ok=True)
+    lines = []
+
+    def say(msg):
+        lines.append(msg)
+        (log_fn or (lambda m: print(m, file=sys.stderr, flush=True)))(msg)
+
+    t0 = time.perf_counter()
+    ds = load_dataset(data_dir)
+    say(f"dataset {data_dir}: {ds.n_samples} samples ({np.unique(ds.sample_sim).size} "
+        f"simulations, {ds.failed_sims} failed), {ds.targets.shape[0]:,} node examples, "
+        f"{ds.spec.dim} features: {', '.join(ds.spec.names())}")
+    (run / "config.json").write_text(json.dumps(cfg, indent=1))
+    folds = kfold_groups(ds, cfg["folds"], cfg["seed"])
+    preds, trues, smps, naive, history = [], [], [], [], {}
+    train_time, examples = 0.0, 0
+    for k, held in enumerate(folds):
+        train_samples = np.setdiff1d(np.arange(ds.n_samples), held)
+        t = time.perf_counter()
+        params, stats, hist = fit(ds, train_samples, cfg, cfg["seed"] + 1 + k,
+                                  f"fold {k + 1}/{len(folds)} ", say)
+        train_time += time.perf_counter() - t
+        examples += sum(h["examples_per_s"] * h["seconds"] for h in hist)
+        history[f"fold{k}"] = hist
+        p, y, s = predict_samples(ds, params, stats, cfg, held)
+        _, _, tr_tgt = example_index(ds, train_samples)
+        mean_disp = ds.targets[tr_tgt].mean(axis=0)
+        preds.append(p)
+        trues.append(y)
+        smps.append(s)
+        naive.append(np.broadcast_to(mean_disp, y.shape))
+    pred, true, smp, nv = (np.concatenate(a) for a in (preds, trues, smps, naive))
+    m_nn, m_naive = displacement_metrics(pred, true), displacement_metrics(nv, true)
+    result = {"scene": ds.scene_name, "folds": cfg["folds"], "network": m_nn,
+              "naive": m_naive, "skill": m_nn["mee"] / m_naive["mee"],
+              "n_simulations": int(np.unique(ds.sample_sim).size),
+              "n_samples": int(ds.n_samples), "n_examples": int(ds.targets.shape[0]),
+              "training_seconds": train_time,
+              "training_examples_per_s": examples / train_time if train_time else 0.0}
+    if ds.spec.geometry_dim or len(ds.geo_ids) > 1:
+        geo = ds.sample_geo[smp]
+        ee = np.linalg.norm(pred - true, axis=1)
+        per = [float(ee[geo == g].mean()) for g in np.unique(geo)]
+        result["per_liver_mee"] = {"mean": float(np.mean(per)), "median": float(np.median(per)),
+                                   "values": per}
+    table = metrics_table({"network": m_nn, "naive (mean displacement)": m_naive})
+    md = (f"# {ds.scene_name}: {cfg['folds']}-fold cross-validation\n\n{table}\n\n"
+          f"skill = MEE_NN / MEE_naive = {result['skill']:.4f} (paper, scene 1: 0.078)\n")
+    say("\n" + table + f"\nskill = MEE_NN / MEE_naive = {result['skill']:.4f}")
+    error_plots(run, pred, true, result)
+    if cfg["final_fit"]:
+        params, stats, hist = fit(ds, np.arange(ds.n_samples), cfg, cfg["seed"], "final ",
+                                  say)
+        history["final"] = hist
+        export_model(run / "model", params, stats, cfg, ds)
+        say(f"model exported to {run / 'model'}")
+    result["total_seconds"] = time.perf_counter() - t0
+    (run / "metrics.json").write_text(json.dumps(result, indent=1))
+    (run / "metrics.md").write_text(md)
+    (run / "history.json").write_text(json.dumps(history, indent=1))
+    (run / "log.txt").write_text("\n".join(lines) + "\n")
+    return result

@@ -1,0 +1,46 @@
+import numpy as np
+import pytest
+
+from data_spec import load_scene
+from surrogate.features import FeatureSpec, node_features, static_node_features
+from surrogate.metrics import displacement_metrics
+from tests.surrogate.conftest import ROOT
+
+
+def test_feature_blocks_follow_the_scene():
+    dims = {}
+    for name in ("scene1_base", "scene2_two_forces", "scene3_materials"):
+        spec = FeatureSpec.from_scene(load_scene(ROOT / "data_spec" / "scenes" /
+                                                 f"{name}.toml"))
+        dims[name] = spec.dim
+        assert len(spec.names()) == spec.dim
+    # 11 static + 7 per force (+ c1, m1, K when the material varies)
+    assert dims == {"scene1_base": 18, "scene2_two_forces": 25, "scene3_materials": 21}
+    s4 = FeatureSpec.from_scene(load_scene(ROOT / "data_spec" / "scenes" /
+                                           "scene4_livers.toml"), n_shape=27)
+    assert s4.dim == 18 + 27 and s4.material_dim == 0
+
+
+def test_static_and_load_features_by_hand():
+    pts = np.array([[0.0, 0, 0], [2.0, 0, 0], [0.0, 4, 0], [0.0, 0, 6]])
+    fixed = np.array([1, 2])
+    st = static_node_features(pts, fixed)
+    # node 0: closest fixed node is 1 at (2, 0, 0); centroid of fixed = (1, 2, 0)
+    np.testing.assert_allclose(st[0], [0, 0, 0, 2, 0, 0, 2, 1, 2, 0, np.sqrt(5)])
+    # node 3: closest fixed is 1 (dist sqrt(40)) vs 2 (sqrt(52))
+    np.testing.assert_allclose(st[3, 3:7], [2, 0, -6, np.sqrt(40)])
+    f = node_features(st, np.array([[0.0, 0, -0.4]]), pts[[3]], np.zeros(0))
+    assert f.shape == (4, 18)
+    np.testing.assert_allclose(f[0, 11:], [0, 0, -0.4, 0, 0, 6, 6])
+
+
+def test_metrics_by_hand():
+    true = np.array([[0.0, 0, 0], [1.0, 2, 2], [3.0, 0, 4]])
+    pred = np.array([[0.0, 0, 0.5], [1.0, 2, 0], [0.0, 0, 0]])
+    m = displacement_metrics(pred, true)
+    # errors: (0,0,.5) -> .5; (0,0,-2) -> 2; (-3,0,-4) -> 5
+    assert m["mee"] == pytest.approx((0.5 + 2 + 5) / 3)
+    assert m["mae_z"] == pytest.approx((0.5 + 2 + 4) / 3)
+    assert m["pct_ee_lt_1mm"] == pytest.approx(100 / 3)
+    assert m["pct_ee_lt_3mm"] == pytest.approx(200 / 3)
+    assert m["corr_x"] == pytest.approx(np.corrcoef(pred[:, 0], true[:, 0])[0, 1])
