@@ -45,14 +45,16 @@ setup-system:
 	@bash scripts/setup_system.sh requirements/debian-packages-trainer.txt
 
 # The solver venv sees Debian's packages (dolfinx, petsc4py, numpy 1.24); pip is constrained so
-# that nothing installed into it can replace numpy.
+# that nothing installed into it can replace numpy. The project itself is put on each venv's path
+# with a .pth file (no build step, no wheel needed).
 $(SOLVER_VENV)/.stamp: requirements/debian-packages.txt requirements/solver-extras.txt \
                        requirements/solver-constraints.txt pyproject.toml
 	@bash scripts/setup_system.sh requirements/debian-packages.txt
 	$(SYS_PY) -m venv --system-site-packages $(SOLVER_VENV)
 	$(SPY) -m pip install -q --disable-pip-version-check -c requirements/solver-constraints.txt \
 	    -r requirements/solver-extras.txt
-	$(SPY) -m pip install -q --disable-pip-version-check --no-deps --no-build-isolation -e .
+	$(SPY) -c "import sysconfig; print(sysconfig.get_paths()['purelib'])" | \
+	    xargs -I{} sh -c 'echo "$(CURDIR)" > {}/liverfem.pth'
 	$(SPY) -c "import dolfinx, numpy; assert numpy.__version__.startswith('1.'), numpy.__version__"
 	@touch $@
 
@@ -62,7 +64,9 @@ $(TRAIN_VENV)/.stamp: requirements/trainer.lock requirements/debian-packages-tra
 	@bash scripts/setup_system.sh requirements/debian-packages-trainer.txt
 	$(SYS_PY) -m venv $(TRAIN_VENV)
 	$(TPY) -m pip install -q --disable-pip-version-check -r requirements/trainer.lock
-	$(TPY) -m pip install -q --disable-pip-version-check --no-deps --no-build-isolation -e .
+	$(TPY) -c "import sysconfig; print(sysconfig.get_paths()['purelib'])" | \
+	    xargs -I{} sh -c 'echo "$(CURDIR)" > {}/liverfem.pth'
+	$(TPY) -c "import jax, flax, optax, numpy; assert int(numpy.__version__[0]) >= 2"
 	@touch $@
 
 setup-trainer: $(TRAIN_VENV)/.stamp
