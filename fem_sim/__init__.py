@@ -5,12 +5,12 @@ Importing the package does not import dolfinx; the solver classes load it on fir
 
 from fem_sim.ogden import OgdenMaterial, ogden_point_kernel
 
-__all__ = ["Constraint", "NodalLoad", "OgdenMaterial", "OgdenProblem", "Solution",
+__all__ = ["Constraint", "NodalLoad", "OgdenMaterial", "OgdenProblem", "PatchLoad", "Solution",
            "ogden_point_kernel"]
 
 
 def __getattr__(name):
-    if name in ("Constraint", "NodalLoad", "OgdenProblem", "Solution"):
+    if name in ("Constraint", "NodalLoad", "OgdenProblem", "PatchLoad", "Solution"):
         from fem_sim import problem
 
         return getattr(problem, name)

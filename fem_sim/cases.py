@@ -187,25 +187,3 @@ def _pick_nodes(rng, eligible, points, n, min_sep, tries: int = 1000) -> np.ndar
         if len(chosen) == n:
             return np.array(chosen, dtype=np.int64)
     raise CaseError(f"could not place {n} loads at least {min_sep} mm apart in {tries} draws")
-
-
-def patch_forces(g: Geometry, centre: int, force: np.ndarray, radius: float):
-    """Spread ``force`` over the surface within ``radius`` of node ``centre``.
-
-    Each surface node gets force * (its lumped area inside the patch) / (patch area): a uniform
-    traction over the patch, consistent for P1 triangles (area/3 per vertex). Returns
-    (nodes, forces); the forces add up to ``force`` exactly.
-    """
-    tri = g.surface_triangles
-    p = g.points
-    inside = np.linalg.norm(p - p[centre], axis=1) <= radius
-    sel = tri[inside[tri].all(axis=1)]
-    if sel.size == 0:
-        return np.array([centre]), np.asarray(force, float)[None]
-    area = 0.5 * np.linalg.norm(np.cross(p[sel[:, 1]] - p[sel[:, 0]],
-                                         p[sel[:, 2]] - p[sel[:, 0]]), axis=1)
-    w = np.zeros(g.n_nodes)
-    np.add.at(w, sel.ravel(), np.repeat(area / 3.0, 3))
-    nodes = np.flatnonzero(w)
-    share = w[nodes] / w[nodes].sum()
-    return nodes, share[:, None] * np.asarray(force, float)[None]

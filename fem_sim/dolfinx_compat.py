@@ -47,6 +47,24 @@ def vector_space(msh, degree: int):
     return fem.VectorFunctionSpace(msh, ("Lagrange", degree))
 
 
+def scalar_space(msh, degree: int):
+    return fem.FunctionSpace(msh, ("Lagrange", degree))
+
+
+def constant(msh, value):
+    return fem.Constant(msh, np.asarray(value, dtype=PETSc.ScalarType))
+
+
+def interpolate(f, fn) -> None:
+    """f <- fn(x) at f's interpolation points; fn takes (n, 3) coordinates."""
+    f.interpolate(lambda x: fn(x.T))
+
+
+def assemble_scalar(form, comm) -> float:
+    """Assemble a functional and sum it over ranks (collective)."""
+    return comm.allreduce(fem.assemble_scalar(form))
+
+
 def vertex_dof_source_ids(msh, V) -> tuple[np.ndarray, np.ndarray]:
     """(local dof blocks, source node ids) for the vertex dofs of V (owned and ghost).
 

@@ -169,16 +169,13 @@ def run_case(problem, scene: Scene, case: cs.Case, g: Geometry, fixed: np.ndarra
              out_nodes: np.ndarray, geometry_id: str) -> Shard | None:
     """Solve one case on the group (collective); the shard on the group's rank 0."""
     from fem_sim.ogden import OgdenMaterial
-    from fem_sim.problem import Constraint, NodalLoad
+    from fem_sim.problem import Constraint, NodalLoad, PatchLoad
 
-    loads = []
-    if problem.comm.rank == 0:
-        if case.load_kind == "patch":
-            for node, force in zip(case.load_nodes, case.forces):
-                loads.append(NodalLoad(*cs.patch_forces(g, int(node), force, case.patch_radius)))
-        else:
-            loads.append(NodalLoad(case.load_nodes, case.forces))
-    loads = problem.comm.bcast(loads, root=0)
+    if case.load_kind == "patch":
+        loads = [PatchLoad(g.points[node], force, case.patch_radius)
+                 for node, force in zip(case.load_nodes, case.forces)]
+    else:
+        loads = [NodalLoad(case.load_nodes, case.forces)]
     fractions = np.asarray(scene.load_fractions)
     t0 = time.perf_counter()
     try:
