@@ -1,0 +1,129 @@
+"""Batch generation under mpirun: same shards for any rank layout, resumable after SIGKILL,
+failures recorded without killing the batch, bad scenes rejected fast on every rank."""
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from data_spec import list_shards, read_shard, validate_dataset
+from data_spec.atomic import leftover_temporaries
+
+ROOT = Path(__file__).parents[2]
+TINY = ROOT / "data_spec" / "scenes" / "tiny_scene1.toml"
+ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
+       "OMPI_MCA_rmaps_base_oversubscribe": "1", "OPENBLAS_NUM_THREADS": "1",
+       "PYTHONPATH": str(ROOT)}
+
+
+def generate(scene, out, n=1, r=1, extra=(), **kw):
+    cmd = ["mpirun", "-n", str(n), sys.executable, "-m", "fem_sim", "generate", str(scene),
+           "--out", str(out), "--ranks-per-sim", str(r), "--no-progress", *extra]
+    return subprocess.run(cmd, env=ENV, capture_output=True, text=True, timeout=600, **kw)
+
+
+def displacements(d):
+    return {p.name: read_shard(p).displacement for p in list_shards(d)}
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    out = tmp_path_factory.mktemp("ref")
+    res = generate(TINY, out, n=1)
+    assert res.returncode == 0, res.stderr
+    return out
+
+
+def test_reference_dataset_is_valid_and_rerun_skips_everything(reference):
+    assert validate_dataset(reference) == []
+    assert len(list_shards(reference)) == 4
+    with h5py.File(list_shards(reference)[0], "r") as f:
+        assert f.attrs["status"] == "ok" and f["displacement"].shape[0] == 3
+    res = generate(TINY, reference, n=1)
+    assert "0 simulated (0 failed), 4 skipped" in res.stdout
+
+
+@pytest.mark.parametrize("n, r", [(2, 1), (2, 2)])
+def test_same_shards_for_any_rank_layout(reference, tmp_path, n, r):
+    res = generate(TINY, tmp_path, n=n, r=r)
+    assert res.returncode == 0, res.stderr
+    assert validate_dataset(tmp_path) == []
+    a, b = displacements(reference), displacements(tmp_path)
+    assert a.keys() == b.keys()
+    for k in a:
+        np.testing.assert_allclose(b[k], a[k], rtol=0, atol=1e-10 * np.abs(a[k]).max())
+
+
+def test_rerun_skips_valid_and_redoes_corrupt(reference, tmp_path):
+    shutil.copytree(reference, tmp_path / "d")
+    d = tmp_path / "d"
+    victim = list_shards(d)[2]
+    victim.write_bytes(victim.read_bytes()[:500])  # corrupt
+    list_shards(d)[0].unlink()                     # missing
+    res = generate(TINY, d, n=2)
+    assert res.returncode == 0, res.stderr
+    assert "2 simulated (0 failed), 2 skipped" in res.stdout
+    assert validate_dataset(d) == []
+    a, b = displacements(reference), displacements(d)
+    for k in a:
+        np.testing.assert_allclose(b[k], a[k], rtol=0, atol=1e-10 * np.abs(a[k]).max())
+
+
+def test_sigkill_midway_then_resume(reference, tmp_path):
+    scene = tmp_path / "many.toml"
+    scene.write_text(TINY.read_text().replace("n_simulations = 4", "n_simulations = 12"))
+    d = tmp_path / "d"
+    cmd = ["mpirun", "-n", "2", sys.executable, "-m", "fem_sim", "generate", str(scene),
+           "--out", str(d), "--no-progress"]
+    proc = subprocess.Popen(cmd, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    t0 = time.time()
+    while len(list_shards(d)) < 3 and time.time() - t0 < 120:
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert len(list_shards(d)) < 12
+    res = generate(scene, d, n=2)
+    assert res.returncode == 0, res.stderr
+    assert validate_dataset(d) == []
+    assert leftover_temporaries(d) == []
+    full = tmp_path / "full"
+    assert generate(scene, full, n=1).returncode == 0
+    a, b = displacements(full), displacements(d)
+    assert a.keys() == b.keys() and len(a) == 12
+    for k in a:
+        np.testing.assert_allclose(b[k], a[k], rtol=0, atol=1e-10 * np.abs(a[k]).max())
+
+
+def test_failing_case_is_recorded_and_batch_finishes(tmp_path):
+    """A force far beyond what the soft liver can carry in the allowed cut-backs."""
+    scene = tmp_path / "hard.toml"
+    text = TINY.read_text().replace("magnitude = 0.4", "magnitude = 40.0")
+    text = text.replace('linear_solver = "mumps"', 'linear_solver = "mumps"\nmax_cutbacks = 2')
+    scene.write_text(text)
+    res = generate(scene, tmp_path / "d", n=2)
+    assert res.returncode == 0, res.stderr
+    assert "failed)" in res.stdout and "(0 failed)" not in res.stdout
+    shards = [read_shard(p) for p in list_shards(tmp_path / "d")]
+    failed = [s for s in shards if s.status == "failed"]
+    assert failed and all(s.failure_reason for s in failed)
+    assert all(np.isfinite(s.displacement).all() for s in shards)
+    assert validate_dataset(tmp_path / "d") == []
+
+
+def test_bad_scene_exits_nonzero_on_every_rank_quickly(tmp_path):
+    scene = tmp_path / "bad.toml"
+    scene.write_text(TINY.read_text().replace("magnitude = 0.4", "magnitude = -0.4"))
+    t0 = time.time()
+    res = generate(scene, tmp_path / "d", n=2)
+    assert res.returncode != 0
+    assert "loads.magnitude: expected a number > 0" in res.stderr
+    assert time.time() - t0 < 60
+    assert not (tmp_path / "d" / "sims").exists()
