@@ -170,10 +170,12 @@ class OgdenProblem:
         self.cells = np.arange(self.n_cells, dtype=np.int32)
         self.P_q = dc.quadrature_function(self.mesh, self.qdeg, (9,))
         self.A_q = dc.quadrature_function(self.mesh, self.qdeg, (9, 9))
+        self.W_q = dc.quadrature_function(self.mesh, self.qdeg, (1,))
         self.q_dofs = dc.quadrature_cell_dofs(self.P_q, self.n_cells).ravel()
         v, du = ufl.TestFunction(self.V), ufl.TrialFunction(self.V)
         dx = ufl.dx(metadata={"quadrature_degree": self.qdeg})
         self.L = dc.compile_form(ufl.inner(self.P_q, _flat(ufl.grad(v))) * dx)
+        self.energy_form = dc.compile_form(self.W_q[0] * dx)
         self.a = dc.compile_form(
             ufl.inner(ufl.dot(self.A_q, _flat(ufl.grad(du))), _flat(ufl.grad(v))) * dx)
         self.grad_u = dc.compile_expression(ufl.grad(self.u), dc.quadrature_points(self.qdeg))
@@ -213,7 +215,7 @@ class OgdenProblem:
         dc.scatter_forward(self.u)
         g = dc.eval_expression(self.grad_u, self.cells).reshape(-1, 3, 3)
         F = g + np.eye(3)
-        _, P, A, J = ogden_point_kernel(F, self.material, tangent=tangent)
+        W, P, A, J = ogden_point_kernel(F, self.material, tangent=tangent)
         local_min = float(np.min(J)) if J.size else 1.0
         if not np.isfinite(local_min):
             local_min = -math.inf
@@ -221,6 +223,7 @@ class OgdenProblem:
         if not self.min_J > 0:
             return False
         self.P_q.x.array.reshape(-1, 9)[self.q_dofs] = P.reshape(-1, 9)
+        self.W_q.x.array[self.q_dofs] = W
         if tangent:
             self.A_q.x.array.reshape(-1, 81)[self.q_dofs] = A.reshape(-1, 81)
         return True
@@ -232,6 +235,11 @@ class OgdenProblem:
         self.b.array[self._fixed_owned] = 0.0
         r = self.b.norm()
         return r if np.isfinite(r) else math.inf
+
+    def _energy(self, lam: float) -> float:
+        """Potential energy: strain energy minus the work of the (dead) loads (collective)."""
+        return dc.assemble_scalar(self.energy_form, self.comm) - lam * self.f_ext.dot(
+            self.u.vector)
 
     def _jacobian(self, lift: float) -> None:
         """Assemble J and the right-hand side -R (collective).
@@ -363,16 +371,19 @@ class OgdenProblem:
             self._jacobian(lift=gap > 0)
             self._solve_linear(stats)
             u0 = u.copy()
+            # Merit: the potential energy (Armijo along du, the natural merit function of
+            # hyperelasticity: full Newton steps that first raise |R| are still taken), or |R|.
+            energy0 = self._energy(lam)
+            slope = self.b.dot(self.du)  # dPi/dalpha at alpha = 0 (free rows; b is R)
             alpha, accepted = 1.0, False
             for _ in range(8 if s["line_search"] else 1):
                 u0.copy(u)
                 u.axpy(alpha, self.du)
                 ok = self._update_points(tangent=True)
                 r_new = self._residual(lam) if ok else math.inf
-                # Armijo-type decrease of |R|; without line search any finite state is taken.
-                # While constraints are still being lifted, |R| may grow: accept finite states.
-                if ok and (not s["line_search"] or gap > gap_tol
-                           or r_new <= (1.0 - 1e-4 * alpha) * r or r_new <= tol):
+                if ok and (not s["line_search"] or gap > gap_tol or r_new <= tol
+                           or r_new <= (1.0 - 1e-4 * alpha) * r
+                           or (slope < 0 and self._energy(lam) <= energy0 + 1e-4 * alpha * slope)):
                     accepted = True
                     break
                 alpha *= 0.5

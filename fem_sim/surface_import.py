@@ -1,0 +1,160 @@
+"""Closed liver surfaces in, tetrahedral meshes out.
+
+Reads legacy VTK POLYDATA (ASCII or binary; meshio 5 cannot) and, through meshio, STL/OBJ/PLY/
+VTU surfaces; cleans the triangulation (largest connected component, merged duplicate
+vertices, no degenerate triangles, consistent outward orientation), checks that it is closed,
+and remeshes the volume with gmsh at the requested size (the surface is re-triangulated too).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from data_spec.geometry import Geometry, boundary_triangles
+from fem_sim.geometry_source import GeometryError
+
+
+def read_vtk_polydata(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """(points (n, 3), triangles (m, 3)) of a legacy VTK POLYDATA file (polygons must be
+    triangles)."""
+    path = Path(path)
+    data = path.read_bytes()
+    if not data.startswith(b"# vtk DataFile"):
+        raise GeometryError(f"{path}: not a legacy VTK file")
+    head = data[:256].split(b"\n")
+    binary = head[2].strip().upper() == b"BINARY"
+    if b"POLYDATA" not in head[3]:
+        raise GeometryError(f"{path}: expected DATASET POLYDATA, got {head[3].decode()!r}")
+
+    def section(keyword: bytes):
+        i = data.find(b"\n" + keyword + b" ")
+        if i < 0:
+            raise GeometryError(f"{path}: no {keyword.decode()} section")
+        j = data.index(b"\n", i + 1)
+        return data[i + 1:j].split(), j + 1
+
+    (_, n, dtype), start = section(b"POINTS")
+    n = int(n)
+    ftype = {b"float": ">f4", b"double": ">f8"}[dtype]
+    if binary:
+        pts = np.frombuffer(data, dtype=ftype, count=3 * n, offset=start).astype(np.float64)
+    else:
+        pts = np.array(data[start:].split()[: 3 * n], dtype=np.float64)
+    (_, m, size), start = section(b"POLYGONS")
+    m, size = int(m), int(size)
+    if binary:
+        conn = np.frombuffer(data, dtype=">i4", count=size, offset=start).astype(np.int64)
+    else:
+        conn = np.array(data[start:].split()[:size], dtype=np.int64)
+    if size != 4 * m or np.any(conn[::4] != 3):
+        raise GeometryError(f"{path}: only triangle polygons are supported")
+    return pts.reshape(-1, 3), conn.reshape(-1, 4)[:, 1:]
+
+
+def read_surface(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    path = Path(path)
+    if path.suffix.lower() == ".vtk":
+        return read_vtk_polydata(path)
+    import meshio
+
+    try:
+        m = meshio.read(path)
+    except Exception as exc:
+        raise GeometryError(f"{path}: cannot read surface: {exc}") from None
+    tris = [c.data for c in m.cells if c.type == "triangle"]
+    if not tris:
+        raise GeometryError(f"{path}: no triangles")
+    return np.asarray(m.points, dtype=np.float64)[:, :3], np.concatenate(tris).astype(np.int64)
+
+
+def clean_surface(points, tris, source: str = "surface") -> tuple[np.ndarray, np.ndarray]:
+    """Largest closed component, outward orientation, no duplicates or degenerate triangles."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    if len(tris) == 0:
+        raise GeometryError(f"{source}: empty surface")
+    _, inv = np.unique(np.round(points, 9), axis=0, return_inverse=True)
+    tris = inv.ravel()[tris]
+    tris = tris[(tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) &
+                (tris[:, 0] != tris[:, 2])]
+    pts = np.zeros((inv.max() + 1, 3))
+    pts[inv.ravel()] = points
+    a = np.linalg.norm(np.cross(pts[tris[:, 1]] - pts[tris[:, 0]],
+                                pts[tris[:, 2]] - pts[tris[:, 0]]), axis=1)
+    tris = tris[a > 1e-12 * a.max()]
+    n = pts.shape[0]
+    e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+    g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    _, label = connected_components(g, directed=False)
+    keep = np.bincount(label[tris[:, 0]]).argmax()
+    tris = tris[label[tris[:, 0]] == keep]
+    edges = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    if np.any(counts != 2):
+        raise GeometryError(f"{source}: the surface is not closed ({int(np.sum(counts == 1))} "
+                            f"boundary edges, {int(np.sum(counts > 2))} non-manifold edges)")
+    used = np.unique(tris)
+    renum = np.full(n, -1)
+    renum[used] = np.arange(used.size)
+    pts, tris = pts[used], renum[tris]
+    vol = np.einsum("ij,ij->", pts[tris[:, 0]], np.cross(pts[tris[:, 1]], pts[tris[:, 2]])) / 6
+    if vol < 0:
+        tris = tris[:, [0, 2, 1]]
+    return pts, tris
+
+
+def mesh_closed_surface(points, tris, mesh_size: float, description: str = "") -> Geometry:
+    """Tetrahedral mesh of the solid bounded by a clean closed surface (gmsh)."""
+    import gmsh
+
+    from fem_sim.phantom import _tetrahedra
+
+    gmsh.initialize([], readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("General.NumThreads", 1)
+        gmsh.model.add("surface")
+        s = gmsh.model.addDiscreteEntity(2)
+        gmsh.model.mesh.addNodes(2, s, np.arange(1, len(points) + 1), points.ravel())
+        gmsh.model.mesh.addElementsByType(s, 2, [], (tris + 1).ravel())
+        gmsh.model.mesh.classifySurfaces(np.pi / 4, True, True, np.pi)
+        gmsh.model.mesh.createGeometry()
+        surfaces = [t for _, t in gmsh.model.getEntities(2)]
+        loop = gmsh.model.geo.addSurfaceLoop(surfaces)
+        gmsh.model.geo.addVolume([loop])
+        gmsh.model.geo.synchronize()
+        gmsh.option.setNumber("Mesh.MeshSizeMin", 0.5 * mesh_size)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size)
+        gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
+        gmsh.option.setNumber("Mesh.Algorithm3D", 1)
+        gmsh.option.setNumber("Mesh.Optimize", 1)
+        try:
+            gmsh.model.mesh.generate(3)
+        except Exception as exc:
+            raise GeometryError(f"{description}: gmsh could not mesh the volume ({exc}); "
+                                "self-intersecting surface?") from None
+        pts, cells = _tetrahedra()
+    finally:
+        gmsh.finalize()
+    if cells.size == 0:
+        raise GeometryError(f"{description}: gmsh produced no tetrahedra")
+    return Geometry(points=pts, cells=cells, surface_triangles=boundary_triangles(cells, pts),
+                    description=description)
+
+
+def mesh_surface_file(path: str | Path, mesh_size: float, scale_to_mm: float = 1.0,
+                      fixed_radius: float = 25.0) -> Geometry:
+    """Read, clean and mesh a surface file. As a default fixed region (``vena_cava``) it marks
+    the surface nodes within ``fixed_radius`` mm of the most posterior (max y) surface point;
+    scenes can select any other region."""
+    pts, tris = read_surface(path)
+    pts, tris = clean_surface(pts * scale_to_mm, tris, str(path))
+    g = mesh_closed_surface(pts, tris, mesh_size, f"{Path(path).name}, mesh size {mesh_size}")
+    surf = g.surface_nodes
+    top = surf[np.argmax(g.points[surf, 1])]
+    near = surf[np.linalg.norm(g.points[surf] - g.points[top], axis=1) <= fixed_radius]
+    g.regions["vena_cava"] = near
+    return g

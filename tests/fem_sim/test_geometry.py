@@ -1,0 +1,70 @@
+"""Phantom and surface import: volumes, closedness, orientation, fixed region on the surface."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from data_spec.geometry import geometry_problems
+from fem_sim.geometry_source import GeometryError
+from fem_sim.phantom import make_phantom, mesh_volume, phantom_parameters
+from fem_sim.surface_import import clean_surface, mesh_surface_file, read_vtk_polydata
+
+SOFA = Path(__file__).resolve().parents[3] / "shared" / "data" / "livers" / "sofa_liver.vtk"
+
+
+def surface_volume(points, tris):
+    return np.einsum("ij,ij->", points[tris[:, 0]],
+                     np.cross(points[tris[:, 1]], points[tris[:, 2]])) / 6
+
+
+def check_geometry(g):
+    assert geometry_problems(g) == []
+    vol = mesh_volume(g)
+    # outward, closed boundary: the divergence theorem gives the tetrahedra's volume back
+    assert surface_volume(g.points, g.surface_triangles) == pytest.approx(vol, rel=1e-9)
+    det = np.linalg.det(g.points[g.cells[:, 1:]] - g.points[g.cells[:, :1]])
+    assert det.min() > 0
+    cava = g.regions["vena_cava"]
+    assert cava.size > 0 and np.isin(cava, g.surface_nodes).all()
+    return vol
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_phantom_is_a_liver_sized_closed_solid(seed):
+    g = make_phantom(seed, 12.0)
+    vol = check_geometry(g)
+    assert 1.2e6 < vol < 2.0e6  # 1.2-2 L
+    ext = np.ptp(g.points, axis=0)
+    assert 180 < ext[0] < 250 and 120 < ext[1] < 180 and 80 < ext[2] < 140
+
+
+def test_phantom_is_deterministic_and_seeds_differ():
+    a, b = make_phantom(3, 20.0), make_phantom(3, 20.0)
+    assert a.geometry_id == b.geometry_id
+    assert phantom_parameters(3) != phantom_parameters(4)
+
+
+@pytest.mark.skipif(not SOFA.exists(), reason="shared/data/livers/sofa_liver.vtk not present")
+def test_real_liver_imports_and_meshes():
+    pts, tris = read_vtk_polydata(SOFA)
+    assert pts.shape == (5008, 3) and tris.shape == (10000, 3)
+    cp, ct = clean_surface(pts, tris)
+    src_vol = surface_volume(cp, ct)
+    assert 1.4e6 < src_vol < 1.55e6  # 1.48 L, after dropping the specks and flipping normals
+    g = mesh_surface_file(SOFA, 8.0)
+    vol = check_geometry(g)
+    assert vol == pytest.approx(src_vol, rel=0.02)
+
+
+def test_broken_surfaces_are_rejected(tmp_path):
+    pts = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    tris = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2]])  # tetrahedron with one face missing
+    with pytest.raises(GeometryError, match="not closed"):
+        clean_surface(pts, tris, "open.stl")
+    with pytest.raises(GeometryError, match="empty surface"):
+        clean_surface(pts, np.zeros((0, 3), int), "empty.stl")
+    bad = tmp_path / "empty.vtk"
+    bad.write_text("")
+    with pytest.raises(GeometryError, match="not a legacy VTK file"):
+        read_vtk_polydata(bad)
