@@ -52,7 +52,7 @@ DEFAULT_SETTINGS = {
     "linear_solver": "mumps",  # "mumps" (lagged LDL^T + GMRES) or "gamg" (CG + GAMG)
     "lag_factorization": True,  # False: factorise every Newton iteration (textbook)
     "krylov_rtol": 1e-10,    # relative tolerance of each linear solve
-    "refactor_after": 12,    # refactorise when a solve needs more Krylov iterations
+    "refactor_after": 25,    # refactorise when a solve needs more Krylov iterations
     "max_krylov": 60,        # Krylov iterations before the solve counts as failed
     "predictor": "extrapolate",  # or "previous" (start from the last converged state)
     "line_search": True,
@@ -302,10 +302,12 @@ class OgdenProblem:
             v.scale(1.0 / v.norm())
         return PETSc.NullSpace().create(vectors=vecs, comm=self.comm)
 
-    def _solve_linear(self, stats: dict) -> None:
-        """du = J^{-1} rhs (collective). Raises StepFailure on linear-solver failure."""
+    def _solve_linear(self, stats: dict, eta: float | None = None) -> None:
+        """du = J^{-1} rhs to relative accuracy ``eta`` (collective). Raises StepFailure on
+        linear-solver failure."""
         s = self.settings
         ksp = self._linear_solver()
+        ksp.setTolerances(rtol=eta or s["krylov_rtol"], atol=0.0, max_it=s["max_krylov"])
         lagged = s["linear_solver"] == "mumps" and s["lag_factorization"]
         refactor = not lagged or self.Pmat is None or stats.pop("refactor_next", False)
         if lagged:
@@ -369,7 +371,10 @@ class OgdenProblem:
             if it == s["max_iterations"]:
                 break
             self._jacobian(lift=gap > 0)
-            self._solve_linear(stats)
+            # Accurate linear solves keep Newton quadratic; measured: loose (Eisenstat-Walker)
+            # tolerances cost more Newton iterations (assembly + kernels) than they save.
+            eta = max(s["krylov_rtol"], 0.1 * tol / max(r, 1e-300))
+            self._solve_linear(stats, eta)
             u0 = u.copy()
             # Merit: the potential energy (Armijo along du, the natural merit function of
             # hyperelasticity: full Newton steps that first raise |R| are still taken), or |R|.
