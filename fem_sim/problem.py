@@ -373,7 +373,8 @@ class OgdenProblem:
             self._jacobian(lift=gap > 0)
             # Accurate linear solves keep Newton quadratic; measured: loose (Eisenstat-Walker)
             # tolerances cost more Newton iterations (assembly + kernels) than they save.
-            eta = max(s["krylov_rtol"], 0.1 * tol / max(r, 1e-300))
+            eta = s["krylov_rtol"] if gap > 0 else min(
+                1e-2, max(s["krylov_rtol"], 0.1 * tol / max(r, 1e-300)))
             self._solve_linear(stats, eta)
             u0 = u.copy()
             # Merit: the potential energy (Armijo along du, the natural merit function of
