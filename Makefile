@@ -92,8 +92,16 @@ test: setup test-solver test-trainer
 test-solver: setup-solver
 	bash scripts/run_pytest.sh $(SPY) tests/common tests/data_spec tests/fem_sim -q $(TESTS)
 
-test-trainer: setup-trainer
-	bash scripts/run_pytest.sh $(TPY) tests/data_spec tests/surrogate -q $(TESTS)
+# A small real dataset (fem_sim) for the trainer's end-to-end test; regenerated only if missing.
+TEST_DATA := runs/test-data/ci_scene1
+$(TEST_DATA)/.done: data_spec/scenes/ci_scene1.toml | setup-solver
+	$(MPIRUN) $(SPY) -m fem_sim generate $< --out $(TEST_DATA) --no-progress
+	@touch $@
+
+test-trainer: setup-trainer $(TEST_DATA)/.done
+	$(TRAIN_VENV)/bin/ruff check .
+	LIVERFEM_TEST_DATASET=$(TEST_DATA) \
+	    bash scripts/run_pytest.sh $(TPY) tests/data_spec tests/surrogate -q $(TESTS)
 
 bench: setup
 	@bash scripts/bench.sh "$(SPY)" "$(TPY)"

@@ -20,8 +20,9 @@ import json
 import math
 import re
 import tomllib
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 SCENE_SCHEMA_VERSION = 1
 

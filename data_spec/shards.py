@@ -68,7 +68,8 @@ class Material:
 @dataclass
 class SolverStats:
     """Per stored load step: Newton iterations, final residual, cut-backs, wall time and the
-    residual history (all Newton residual norms of the step, sub-steps included)."""
+    residual history (all Newton residual norms of the step, sub-steps included).
+    """
 
     newton_iterations: np.ndarray
     residual_norms: np.ndarray
@@ -85,7 +86,7 @@ class SolverStats:
         self.residual_history = [np.asarray(h, dtype=np.float64) for h in self.residual_history]
 
     @classmethod
-    def empty(cls) -> "SolverStats":
+    def empty(cls) -> SolverStats:
         return cls(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), [])
 
 

@@ -22,7 +22,9 @@ def shard_xdmf(*, shard_file: str, geometry_file: str, n_nodes: int, n_cells: in
     Args:
         shard_file: the shard's HDF5 file name, relative to the XDMF file.
         geometry_file: the geometry HDF5 file, relative to the XDMF file.
-        n_nodes, n_cells: mesh sizes. n_out: number of output nodes.
+        n_nodes: number of mesh nodes.
+        n_cells: number of tetrahedra.
+        n_out: number of output nodes.
         output_is_all: displacement covers every node (else a point cloud of the output nodes,
             whose coordinates the shard stores under /xdmf/points).
         fractions: load fraction of each stored step (the XDMF time values).

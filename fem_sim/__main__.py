@@ -1,8 +1,8 @@
 """Command line of fem_sim.
 
-    mpirun -n N python3 -m fem_sim generate SCENE.toml --out DIR [--ranks-per-sim R]
-                                                      [--only I..J] [--retry-failed]
-    python3 -m fem_sim summary DIR
+mpirun -n N python3 -m fem_sim generate SCENE.toml --out DIR [--ranks-per-sim R]
+[--only I..J] [--retry-failed]
+python3 -m fem_sim summary DIR
 """
 
 from __future__ import annotations
@@ -40,6 +40,7 @@ def main(argv: list[str] | None = None) -> int:
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
     s = sub.add_parser("summary", help="print counts and statistics of a dataset")
     s.add_argument("directory")
+    s.add_argument("--png", help="picture of deformed livers (default DIR/summary.png)")
     args = parser.parse_args(argv)
 
     if args.command == "generate":
@@ -51,7 +52,7 @@ def main(argv: list[str] | None = None) -> int:
                         args.retry_failed, progress=not args.no_progress)
     from fem_sim.summary import summary
 
-    return summary(args.directory)
+    return summary(args.directory, png=args.png)
 
 
 if __name__ == "__main__":

@@ -73,7 +73,8 @@ def output_nodes(scene: Scene, g: Geometry) -> np.ndarray:
 
 def eligible_load_nodes(scene: Scene, g: Geometry, fixed: np.ndarray) -> np.ndarray:
     """Nodes a random load may act on: surface (or all) nodes, not fixed, far enough from the
-    fixed region."""
+    fixed region.
+    """
     ld = scene["loads"]
     cand = g.surface_nodes if ld["eligible"] == "surface" else np.arange(g.n_nodes)
     cand = np.setdiff1d(cand, fixed)
@@ -98,7 +99,8 @@ def _draw(rng: np.random.Generator, spec) -> float:
 
 def material_table(scene: Scene) -> list[Material] | None:
     """The scene-wide table of materials cases pick from (None if each case draws its own or
-    the material is fixed)."""
+    the material is fixed).
+    """
     mat = scene["material"]
     s = mat.get("sample")
     if s is None:

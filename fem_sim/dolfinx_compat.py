@@ -56,7 +56,7 @@ def constant(msh, value):
 
 
 def interpolate(f, fn) -> None:
-    """f <- fn(x) at f's interpolation points; fn takes (n, 3) coordinates."""
+    """F <- fn(x) at f's interpolation points; fn takes (n, 3) coordinates."""
     f.interpolate(lambda x: fn(x.T))
 
 

@@ -16,7 +16,8 @@ then wrong (measured ~20 % too stiff). Written as a *spectral function* of C, W 
 
 and gamma_ab has a closed form that is continuous across c_a = c_b (below), so no perturbation and
 no special case is needed: at F = I the stress is exactly 0 and the tangent is exactly the
-linear-elastic one. The kernels are vectorised over points (batched small matrix products), cost a few
+linear-elastic one. The kernels are vectorised over points (batched small matrix products),
+cost a few
 milliseconds per 10^4 points, and keep the material parameters out of the compiled forms, so one
 compiled form serves every material of a scene.
 
@@ -74,7 +75,7 @@ class OgdenMaterial:
         return 0.5 * sum(self.c)
 
     @classmethod
-    def from_data(cls, material) -> "OgdenMaterial":
+    def from_data(cls, material) -> OgdenMaterial:
         """From a :class:`data_spec.Material` (or anything with c, m, K, volumetric)."""
         return cls(tuple(material.c), tuple(material.m), material.K, material.volumetric)
 

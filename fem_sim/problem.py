@@ -63,7 +63,8 @@ DEFAULT_SETTINGS = {
 @dataclass
 class Constraint:
     """Prescribed displacement of source nodes: ``values`` (mm, at load fraction 1) for the
-    given components. The default is a fixed (zero-displacement) node set."""
+    given components. The default is a fixed (zero-displacement) node set.
+    """
 
     nodes: np.ndarray
     components: tuple[int, ...] = (0, 1, 2)
@@ -94,7 +95,8 @@ class PatchLoad:
     w = (1 - (d / radius)^2)^2 for d = |x - centre| < radius ("bump", smooth, an indenter's
     pressure profile) or w = 1 inside ("uniform"). The applied total force is exactly ``force``
     and the load is a proper surface integral, so it converges under refinement (P1 and P2),
-    unlike a point force."""
+    unlike a point force.
+    """
 
     centre: np.ndarray
     force: np.ndarray
@@ -229,7 +231,7 @@ class OgdenProblem:
         return True
 
     def _residual(self, lam: float) -> float:
-        """b = F_int(u) - lam f_ext with constrained rows zeroed; returns |b| (collective)."""
+        """B = F_int(u) - lam f_ext with constrained rows zeroed; returns |b| (collective)."""
         dc.assemble_vector(self.b, self.L)
         self.b.axpy(-lam, self.f_ext)
         self.b.array[self._fixed_owned] = 0.0
@@ -303,8 +305,9 @@ class OgdenProblem:
         return PETSc.NullSpace().create(vectors=vecs, comm=self.comm)
 
     def _solve_linear(self, stats: dict, eta: float | None = None) -> None:
-        """du = J^{-1} rhs to relative accuracy ``eta`` (collective). Raises StepFailure on
-        linear-solver failure."""
+        """Du = J^{-1} rhs to relative accuracy ``eta`` (collective). Raises StepFailure on
+        linear-solver failure.
+        """
         s = self.settings
         ksp = self._linear_solver()
         ksp.setTolerances(rtol=eta or s["krylov_rtol"], atol=0.0, max_it=s["max_krylov"])
@@ -419,7 +422,8 @@ class OgdenProblem:
     # ------------------------------------------------------------------------------------------
     def _set_constraints(self, constraints: list[Constraint]) -> None:
         """Map node constraints to local dofs. For P2, an edge dof is constrained (to the mean
-        of its ends' values: the P1 interpolant) when both ends are, in that component."""
+        of its ends' values: the P1 interpolant) when both ends are, in that component.
+        """
         local, values = [], []
         by_node: dict[tuple[int, int], float] = {}
         for c in constraints:
@@ -493,7 +497,10 @@ class OgdenProblem:
     # Gathering results in source-node order
     # ------------------------------------------------------------------------------------------
     def gather_vertex_values(self, arr_blocked: np.ndarray) -> np.ndarray | None:
-        """Values (n_local_blocks, 3) at owned vertex dofs -> (n_nodes, 3) on rank 0 (collective)."""
+        """Values (n_local_blocks, 3) at owned vertex dofs -> (n_nodes, 3) on rank 0.
+
+        Collective.
+        """
         vals = arr_blocked[self.owned_vertex_blocks]
         parts = self.comm.gather((self.owned_vertex_src, vals), root=0)
         if self.comm.rank != 0:
@@ -595,7 +602,8 @@ class OgdenProblem:
 
     def _predict(self, states: list[tuple[float, np.ndarray]], lam: float) -> None:
         """Initial guess for load ``lam`` from the last converged states (Lagrange
-        extrapolation in the load parameter, up to quadratic)."""
+        extrapolation in the load parameter, up to quadratic).
+        """
         if self.settings["predictor"] == "previous" or len(states) == 1:
             self.u.x.array[:] = states[-1][1]
             return

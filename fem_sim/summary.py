@@ -7,10 +7,12 @@ from pathlib import Path
 
 import numpy as np
 
-from data_spec import list_shards, read_shard, validate_dataset
+from data_spec import geometry_path, list_shards, read_geometry, read_shard, validate_dataset
 
 
-def summary(directory: str | Path, out=sys.stdout) -> int:
+def summary(directory: str | Path, out=sys.stdout, png: str | Path | None = None) -> int:
+    """Print counts and statistics; render up to four deformed livers to ``png``
+    (default DIR/summary.png)."""
     directory = Path(directory)
     paths = list_shards(directory)
     if not paths:
@@ -18,7 +20,7 @@ def summary(directory: str | Path, out=sys.stdout) -> int:
         return 1
     problems = validate_dataset(directory)
     ok, failed, reasons = 0, 0, {}
-    max_disp, iters, cut, wall = [], [], [], []
+    max_disp, iters, cut, wall, shown = [], [], [], [], []
     for p in paths:
         try:
             s = read_shard(p)
@@ -32,6 +34,8 @@ def summary(directory: str | Path, out=sys.stdout) -> int:
             reasons[key] = reasons.get(key, 0) + 1
         if s.n_done:
             max_disp.append(np.linalg.norm(s.displacement[-1], axis=1).max())
+            if s.status == "ok" and len(shown) < 4 and s.output_nodes.size:
+                shown.append(p)
             iters.extend(s.stats.newton_iterations.tolist())
             cut.extend(s.stats.cutbacks.tolist())
         wall.append(float(s.stats.info.get("total_wall_time", np.sum(s.stats.wall_time))))
@@ -51,4 +55,19 @@ def summary(directory: str | Path, out=sys.stdout) -> int:
         pr(f"  failed x{v}: {k}")
     for p in problems[:20]:
         pr(f"  problem: {p}")
+    if shown:
+        from fem_sim.render import render_shards
+
+        items = []
+        for p in shown:
+            s = read_shard(p)
+            g = read_geometry(geometry_path(directory, s.geometry_id))
+            u = np.zeros((g.n_nodes, 3))
+            u[s.output_nodes] = s.displacement[-1]
+            items.append((g, u, s.load_nodes, f"sim {s.sim_index}: |F| = "
+                          f"{np.linalg.norm(s.forces, axis=1).max():.2f} N, max |u| = "
+                          f"{np.linalg.norm(u, axis=1).max():.1f} mm"))
+        target = render_shards(items, png or directory / "summary.png",
+                               f"{directory.name}: deformed livers at full load")
+        pr(f"  picture: {target}")
     return 0 if not problems else 1

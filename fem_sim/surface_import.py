@@ -18,7 +18,8 @@ from fem_sim.geometry_source import GeometryError
 
 def read_vtk_polydata(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """(points (n, 3), triangles (m, 3)) of a legacy VTK POLYDATA file (polygons must be
-    triangles)."""
+    triangles).
+    """
     path = Path(path)
     data = path.read_bytes()
     if not data.startswith(b"# vtk DataFile"):
@@ -149,7 +150,8 @@ def mesh_surface_file(path: str | Path, mesh_size: float, scale_to_mm: float = 1
                       fixed_radius: float = 25.0) -> Geometry:
     """Read, clean and mesh a surface file. As a default fixed region (``vena_cava``) it marks
     the surface nodes within ``fixed_radius`` mm of the most posterior (max y) surface point;
-    scenes can select any other region."""
+    scenes can select any other region.
+    """
     pts, tris = read_surface(path)
     pts, tris = clean_surface(pts * scale_to_mm, tris, str(path))
     g = mesh_closed_surface(pts, tris, mesh_size, f"{Path(path).name}, mesh size {mesh_size}")

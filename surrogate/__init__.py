@@ -1,8 +1,8 @@
 """surrogate: JAX/Flax node-wise displacement surrogate (never imports dolfinx).
 
-    from surrogate import load_predictor
-    predict = load_predictor("runs/train/demo_scene1/model")
-    u = predict(forces=[[0, 0, -0.4]], load_nodes=[123])     # (n_nodes, 3) mm
+from surrogate import load_predictor
+predict = load_predictor("runs/train/demo_scene1/model")
+u = predict(forces=[[0, 0, -0.4]], load_nodes=[123])     # (n_nodes, 3) mm
 """
 
 

@@ -51,7 +51,7 @@ class FeatureSpec:
         return asdict(self)
 
     @classmethod
-    def from_scene(cls, scene, n_shape: int = 0) -> "FeatureSpec":
+    def from_scene(cls, scene, n_shape: int = 0) -> FeatureSpec:
         varies = scene.varies
         n_terms = len(scene["material"]["c"])
         sample = scene["material"].get("sample")
@@ -66,7 +66,8 @@ class FeatureSpec:
 
 def static_node_features(points: np.ndarray, fixed: np.ndarray) -> np.ndarray:
     """(n_nodes, 11): coordinates, vector/distance to the closest fixed node and to the
-    fixed-node centroid. numpy, once per geometry."""
+    fixed-node centroid. numpy, once per geometry.
+    """
     x = np.asarray(points, dtype=np.float64)
     fx = x[np.asarray(fixed)]
     out = np.empty((x.shape[0], STATIC_DIM))

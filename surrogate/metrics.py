@@ -1,5 +1,6 @@
 """The paper's metrics (Table 4): MAE per axis, mean Euclidean error, % of nodes with Euclidean
-error < 1 mm and < 3 mm, Pearson correlation per axis. Pure numpy."""
+error < 1 mm and < 3 mm, Pearson correlation per axis. Pure numpy.
+"""
 
 from __future__ import annotations
 

@@ -5,12 +5,14 @@ Dense layers act on the last axis, so the same module maps one node or a batch o
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import flax.linen as nn
 
 
 class NodeMLP(nn.Module):
+    """ReLU MLP with optional dropout; hidden widths from the config, 3 outputs."""
+
     hidden: Sequence[int]
     dropout: float = 0.0
 

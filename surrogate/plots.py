@@ -1,5 +1,6 @@
 """Figures of a run: error box plots (paper's Fig. 11) and sorted actual vs predicted Euclidean
-displacement (Fig. 12); per-liver MEE histogram (Fig. 19) when several livers."""
+displacement (Fig. 12); per-liver MEE histogram (Fig. 19) when several livers.
+"""
 
 from __future__ import annotations
 

@@ -30,7 +30,8 @@ EVAL_CHUNK = 65536
 
 def batch_features(data: dict, rows, samples, flip=None):
     """Raw features of examples (static row, sample) inside jit. ``flip`` (B,) swaps the two
-    force blocks (the paper's augmentation for two simultaneous forces)."""
+    force blocks (the paper's augmentation for two simultaneous forces).
+    """
     st = data["static"][rows]
     f = data["forces"][samples]
     lp = data["load_points"][samples]
@@ -49,7 +50,8 @@ def batch_features(data: dict, rows, samples, flip=None):
 
 def make_fns(model: NodeMLP, cfg: dict, n_loads: int):
     """Pure jitted functions: train_step(state, data, batch, key) and predict(params, data,
-    rows, samples) -> mm."""
+    rows, samples) -> mm.
+    """
 
     def normalised_inputs(data, rows, samples, flip=None):
         x = batch_features(data, rows, samples, flip)
@@ -127,7 +129,8 @@ def device_data(ds: Dataset, stats: dict) -> dict:
 def fit(ds: Dataset, train_samples: np.ndarray, cfg: dict, seed: int, label: str = "",
         log_fn=print) -> tuple[dict, dict, list[dict]]:
     """Train on ``train_samples`` (a slice held out for early stopping). Returns
-    (params, normalisation stats, per-epoch history)."""
+    (params, normalisation stats, per-epoch history).
+    """
     rng = np.random.default_rng(seed)
     unit = ds.sample_geo if ds.spec.geometry_dim else ds.sample_sim
     units = np.unique(unit[train_samples])

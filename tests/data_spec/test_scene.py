@@ -70,7 +70,7 @@ nodes = [%s]
 
 [loads]
 magnitude = -0.4
-""" % ", ".join(str(i) for i in range(30))
+""".replace("%s", ", ".join(str(i) for i in range(30)))
     path = tmp_path / "bad.toml"
     path.write_text(text)
     with pytest.raises(SceneError) as err:
