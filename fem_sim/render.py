@@ -1,5 +1,6 @@
 """Pictures of deformed livers (matplotlib, off-screen): the surface at full load, coloured by
-displacement magnitude, with the undeformed outline and the load points."""
+displacement magnitude, with the undeformed outline and the load points.
+"""
 
 from __future__ import annotations
 

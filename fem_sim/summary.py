@@ -12,7 +12,8 @@ from data_spec import geometry_path, list_shards, read_geometry, read_shard, val
 
 def summary(directory: str | Path, out=sys.stdout, png: str | Path | None = None) -> int:
     """Print counts and statistics; render up to four deformed livers to ``png``
-    (default DIR/summary.png)."""
+    (default DIR/summary.png).
+    """
     directory = Path(directory)
     paths = list_shards(directory)
     if not paths:
