@@ -284,7 +284,7 @@ def generate(scene_file: str, out: str | Path, ranks_per_sim: int = 1, only: str
         if bar is not None:
             done, failed = counter.read()[1:]
             bar.n = int(done)
-            bar.set_postfix(failed=int(failed), groups=n_groups)
+            bar.set_postfix(failed=int(failed), groups=n_groups, refresh=False)
             bar.refresh()
     world.Barrier()  # collective: every shard is written
     totals = counter.read() if world.rank == 0 else None
