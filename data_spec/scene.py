@@ -425,7 +425,7 @@ def _check_geometry(g: dict, problems: list[str]) -> None:
         problems.append("geometry.path: missing (expected a mesh/surface file when "
                         "source = 'file')")
     if src == "population" and "population_size" not in g:
-        problems.append("geometry.population_size: missing (expected an integer >= 2 when "
+        problems.append("geometry.population_size: missing (expected an integer >= 1 when "
                         "source = 'population')")
     if src != "file":
         for key in ("path",):

@@ -84,9 +84,8 @@ def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool) 
     """Rank 0 only: validate everything and decide the work. Errors go into Plan.error."""
     try:
         scene = load_scene(scene_file)
-        out.mkdir(parents=True, exist_ok=True)
         copy = out / "scene.toml"
-        if copy.exists():
+        if copy.exists() and any((out / "sims").glob("sim_*.h5")):
             try:
                 old = load_scene(copy)
             except SceneError:
@@ -94,8 +93,7 @@ def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool) 
             if old is None or old.hash != scene.hash:
                 raise SceneError(str(out), [f"{out} holds a dataset of another scene "
                                             f"({copy}); use a new --out directory"])
-        else:
-            shutil.copyfile(scene_file, copy)
+        out.mkdir(parents=True, exist_ok=True)
         ids = []
         for gi in range(n_geometries(scene)):
             g = scene_geometry(scene, gi)
@@ -111,6 +109,9 @@ def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool) 
             if not path.exists():
                 write_geometry(path, g)
             ids.append(g.geometry_id)
+        # Everything checked: record the scene (a directory without shards takes a new one).
+        if not (copy.exists() and load_scene(copy).hash == scene.hash):
+            shutil.copyfile(scene_file, copy)
         todo = parse_range(only, scene.n_simulations)
         tasks = [i for i in todo if not _shard_is_done(shard_path(out, i), scene.hash,
                                                        retry_failed)]

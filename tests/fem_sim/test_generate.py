@@ -127,3 +127,14 @@ def test_bad_scene_exits_nonzero_on_every_rank_quickly(tmp_path):
     assert "loads.magnitude: expected a number > 0" in res.stderr
     assert time.time() - t0 < 60
     assert not (tmp_path / "d" / "sims").exists()
+    # the corrected scene is then accepted in the same directory
+    scene.write_text(TINY.read_text())
+    assert generate(scene, tmp_path / "d", n=2).returncode == 0
+    assert validate_dataset(tmp_path / "d") == []
+
+
+def test_directory_of_another_scene_is_refused(reference, tmp_path):
+    other = tmp_path / "other.toml"
+    other.write_text(TINY.read_text().replace("seed = 1\n", "seed = 7\n"))
+    res = generate(other, reference, n=1)
+    assert res.returncode == 2 and "holds a dataset of another scene" in res.stderr
