@@ -71,10 +71,12 @@ def export_model(directory, params, stats, cfg, ds) -> Path:
 class Predictor:
     """Jitted surrogate: forces (and load nodes, material) -> node displacements in mm.
 
-    Call ``predict(forces, load_nodes, nodes=None, material=None)`` with
+    Call ``predict(forces, load_nodes, nodes=None, material=None, geometry=None)`` with
     forces (n_loads, 3) or (n_cases, n_loads, 3) in N, load_nodes (n_loads,) or
     (n_cases, n_loads) node ids; returns (n_nodes, 3) or (n_cases, n_nodes, 3).
-    ``nodes`` selects output nodes (default: all), e.g. the surface.
+    ``nodes`` selects output nodes (default: all), e.g. the surface. ``material`` (c..., m...,
+    K) is required when the scene varied the material; ``geometry`` = (points, fixed_nodes,
+    shape_coefficients) when it varied the liver (or to predict on another mesh).
     """
 
     def __init__(self, directory):
@@ -141,35 +143,71 @@ class Predictor:
                              f"{load_nodes.shape[1:]}")
         if not np.all(np.isfinite(forces)):
             raise ValueError("forces: contain NaN or inf")
-        if self.static is None:
-            raise ValueError("this model was trained on several livers: pass geometry=...")
-        n_nodes = self.points.shape[0]
+        static, points = self._geometry(geometry)
+        n_nodes = points.shape[0]
         if not np.issubdtype(load_nodes.dtype, np.integer) or load_nodes.min() < 0 or \
                 load_nodes.max() >= n_nodes:
             raise ValueError(f"load_nodes: expected integer node ids in [0, {n_nodes})")
-        static = self.static
         if nodes is not None:
             nodes = np.asarray(nodes)
             if not np.issubdtype(nodes.dtype, np.integer) or nodes.ndim != 1 or (
                     nodes.size and (nodes.min() < 0 or nodes.max() >= n_nodes)):
                 raise ValueError(f"nodes: expected a 1-D array of node ids in [0, {n_nodes})")
             static = static[jnp.asarray(nodes)]
-        extra = np.zeros((forces.shape[0], 0))
+        blocks = []
         if self.spec.material_dim:
             if material is None:
                 raise ValueError("material: this model needs (c, m, K) for each case")
-            extra = np.broadcast_to(np.asarray(material, dtype=np.float64).reshape(
-                -1, self.spec.material_dim), (forces.shape[0], self.spec.material_dim))
+            mat = np.asarray(material, dtype=np.float64).reshape(-1, self.spec.material_dim)
+            if not np.all(np.isfinite(mat)):
+                raise ValueError("material: contains NaN or inf")
+            rng = self.meta["training_range"]
+            lo = np.asarray(rng["extra_min"][: self.spec.material_dim])
+            hi = np.asarray(rng["extra_max"][: self.spec.material_dim])
+            span = np.maximum(hi - lo, 1e-12 * np.abs(hi))
+            if np.any(mat < lo - 0.05 * span) or np.any(mat > hi + 0.05 * span):
+                warnings.warn(f"material {mat.tolist()} is outside the training range "
+                              f"[{lo.tolist()}, {hi.tolist()}]: extrapolating", stacklevel=2)
+            blocks.append(np.broadcast_to(mat, (forces.shape[0], self.spec.material_dim)))
+        if self.spec.geometry_dim:
+            shape = np.asarray(geometry[2] if geometry is not None else [], dtype=np.float64)
+            if shape.shape != (self.spec.geometry_dim,):
+                raise ValueError(f"geometry: expected {self.spec.geometry_dim} shape "
+                                 f"coefficients, got {shape.shape}")
+            blocks.append(np.broadcast_to(shape, (forces.shape[0], shape.size)))
+        extra = np.concatenate(blocks, axis=1) if blocks else np.zeros((forces.shape[0], 0))
         fmax = np.linalg.norm(forces, axis=-1).max()
         if fmax > 1.05 * self.meta["training_range"]["force_norm_max"]:
             warnings.warn(f"force magnitude {fmax:.3g} N exceeds the training range "
                           f"({self.meta['training_range']['force_norm_max']:.3g} N): "
                           "extrapolating", stacklevel=2)
         out = self._batched(self.params, static, jnp.asarray(forces, dtype=jnp.float32),
-                            jnp.asarray(self.points[load_nodes], dtype=jnp.float32),
+                            jnp.asarray(points[load_nodes], dtype=jnp.float32),
                             jnp.asarray(extra, dtype=jnp.float32))
         out = np.asarray(out)
         return out[0] if single else out
+
+
+    def _geometry(self, geometry):
+        """(static node features, points) of the liver to predict on."""
+        import jax.numpy as jnp
+
+        if geometry is None:
+            if self.static is None:
+                raise ValueError("geometry: this model was trained on several livers; pass "
+                                 "geometry=(points, fixed_nodes, shape_coefficients)")
+            return self.static, self.points
+        points, fixed = np.asarray(geometry[0], dtype=np.float64), np.asarray(geometry[1])
+        if points.ndim != 2 or points.shape[1] != 3 or not np.all(np.isfinite(points)):
+            raise ValueError("geometry: points must be a finite (n_nodes, 3) array in mm")
+        if fixed.size == 0 or fixed.min() < 0 or fixed.max() >= points.shape[0]:
+            raise ValueError("geometry: fixed_nodes must be node ids of the given points")
+        key = (points.tobytes(), fixed.tobytes())
+        if getattr(self, "_geo_key", None) != key:  # static features once per liver
+            self._geo_key = key
+            self._geo_static = jnp.asarray(static_node_features(points, fixed),
+                                           dtype=jnp.float32)
+        return self._geo_static, points
 
 
 def load_predictor(directory) -> Predictor:

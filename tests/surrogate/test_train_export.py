@@ -74,3 +74,12 @@ def test_model_files_are_plain(run):
         assert all(z[k].dtype == np.float32 for k in z.files)
     meta = json.loads((d / "model.json").read_text())
     assert meta["format"] == "liverfem-surrogate" and meta["version"] == 1
+
+
+def test_predictor_on_an_explicit_geometry_matches_the_embedded_one(run):
+    predict = load_predictor(run[0] / "model")
+    f, n = np.array([[0.1, 0.0, -0.3]]), np.array([11])
+    same = predict(f, n, geometry=(predict.points, predict.fixed, None))
+    np.testing.assert_array_equal(same, predict(f, n))
+    with pytest.raises(ValueError, match="geometry: fixed_nodes"):
+        predict(f, n, geometry=(predict.points, np.array([10**6]), None))
