@@ -54,7 +54,7 @@ class Plan:
 def solver_settings(scene: Scene) -> dict:
     s = scene["solver"]
     return {k: s[k] for k in ("rtol", "atol", "max_iterations", "max_cutbacks",
-                              "linear_solver", "petsc_options")}
+                              "linear_solver", "petsc_options", "predictor")}
 
 
 def parse_range(text: str | None, n: int) -> range:
