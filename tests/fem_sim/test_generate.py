@@ -116,6 +116,11 @@ def test_failing_case_is_recorded_and_batch_finishes(tmp_path):
     assert failed and all(s.failure_reason for s in failed)
     assert all(np.isfinite(s.displacement).all() for s in shards)
     assert validate_dataset(tmp_path / "d") == []
+    # failed shards are kept on a re-run, and redone only on request
+    again = generate(scene, tmp_path / "d", n=2)
+    assert "0 simulated (0 failed), 4 skipped" in again.stdout
+    retry = generate(scene, tmp_path / "d", n=2, extra=("--retry-failed",))
+    assert f"{len(failed)} simulated ({len(failed)} failed)" in retry.stdout
 
 
 def test_bad_scene_exits_nonzero_on_every_rank_quickly(tmp_path):
