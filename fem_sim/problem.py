@@ -22,7 +22,7 @@ Design (measured choices; bench/ has the numbers):
   15k nodes on the real liver, where the nearly incompressible, strongly nonlinear point-load
   response makes stale factorisations poor preconditioners. So it is off by default.
 * Load steps start from a tangent (Euler) predictor, one back-solve with the last
-  factorisation (measured on the real liver at 15k nodes: 40 Newton iterations per simulation,
+  factorisation (measured on the real liver at 15k nodes: 42 Newton iterations per simulation,
   against 48 with extrapolation from previous states and 51 from the previous state); if
   Newton fails from there, the increment is retried from the last converged state before
   cutting back.
@@ -54,7 +54,7 @@ DEFAULT_SETTINGS = {
     "atol": 1e-10,           # N
     "max_iterations": 25,    # Newton iterations per increment attempt
     "max_cutbacks": 8,       # increment halvings per output step
-    "linear_solver": "mumps",  # "mumps" (lagged LDL^T + GMRES) or "gamg" (CG + GAMG)
+    "linear_solver": "mumps",  # "mumps" (direct LDL^T) or "gamg" (CG + GAMG)
     "lag_factorization": False,  # True: GMRES with a lagged factorisation as preconditioner
     "krylov_rtol": 1e-10,    # relative tolerance of each linear solve
     "refactor_after": 8,     # refactorise when a solve needs more Krylov iterations
@@ -632,8 +632,8 @@ class OgdenProblem:
         """Initial guess for load ``lam`` (collective).
 
         "tangent": u_last + (lam - lam_last) J^-1 f_ext, one back-solve with the last
-        factorisation (measured on the real liver: 40 instead of 48 Newton iterations per
-        simulation than extrapolation, which overshoots in the stiffening early steps);
+        factorisation (measured on the real liver: 42 instead of 48 Newton iterations per
+        simulation with extrapolation, which overshoots in the stiffening early steps);
         "extrapolate": Lagrange extrapolation through the last converged states (up to
         quadratic), also used when displacements are prescribed; "previous": the last state.
         """
