@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from surrogate.features import FeatureSpec, static_node_features
+from surrogate.features import FeatureSpec, node_features, static_node_features
 
 MODEL_FORMAT = "liverfem-surrogate"
 MODEL_VERSION = 1
@@ -112,15 +112,8 @@ class Predictor:
         stats = self.stats
 
         def one_case(params, static, forces, load_points, extra):
-            x = static[:, :3]
-            blocks = [static]
-            for j in range(forces.shape[0]):
-                dl = load_points[j][None, :] - x
-                blocks += [jnp.broadcast_to(forces[j], (x.shape[0], 3)), dl,
-                           jnp.sqrt(jnp.sum(dl * dl, axis=1, keepdims=True))]
-            if extra.shape[0]:
-                blocks.append(jnp.broadcast_to(extra, (x.shape[0], extra.shape[0])))
-            feats = (jnp.concatenate(blocks, axis=1) - stats["x_mean"]) / stats["x_std"]
+            raw = node_features(static, forces, load_points, extra, xp=jnp)
+            feats = (raw - stats["x_mean"]) / stats["x_std"]
             y = model.apply({"params": params}, feats, train=False)
             return y * stats["y_std"] + stats["y_mean"]
 

@@ -44,3 +44,24 @@ def test_metrics_by_hand():
     assert m["pct_ee_lt_1mm"] == pytest.approx(100 / 3)
     assert m["pct_ee_lt_3mm"] == pytest.approx(200 / 3)
     assert m["corr_x"] == pytest.approx(np.corrcoef(pred[:, 0], true[:, 0])[0, 1])
+
+
+def test_training_and_inference_build_the_same_features():
+    """train.batch_features (per example, inside jit) and features.node_features (per load
+    case, used by the exported predictor) must lay out identical feature vectors."""
+    import jax.numpy as jnp
+
+    from surrogate.train import batch_features
+
+    rng = np.random.default_rng(0)
+    pts = rng.normal(size=(9, 3))
+    st = static_node_features(pts, np.array([0, 4]))
+    forces = rng.normal(size=(2, 2, 3))          # 2 samples, 2 loads
+    lp = pts[[[1, 2], [3, 5]]]
+    extra = rng.normal(size=(2, 3))
+    data = {"static": jnp.asarray(st), "forces": jnp.asarray(forces),
+            "load_points": jnp.asarray(lp), "extra": jnp.asarray(extra)}
+    rows = np.arange(9)
+    got = np.asarray(batch_features(data, jnp.asarray(rows), jnp.full(9, 1)))
+    want = node_features(st, forces[1], lp[1], extra[1])
+    np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-6)
