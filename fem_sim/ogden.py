@@ -185,3 +185,27 @@ def ogden_point_kernel(F: np.ndarray, mat: OgdenMaterial, tangent: bool = True):
         if A is not None:
             A[bad] = np.nan
     return W, P, A, J_in
+
+
+def point_kernel(F: np.ndarray, mat: OgdenMaterial, tangent: bool = True, out=None):
+    """:func:`ogden_point_kernel` through the compiled kernel (:mod:`fem_sim.ogden_c`) when it
+    can be built, else through numpy; same results to round-off (tested).
+
+    ``out`` = (W (n,), P (n, 9), A (n, 81) or None, J (n,)) arrays to fill. Returns
+    (W, P, A, J) shaped as ``out`` if given, else as :func:`ogden_point_kernel`.
+    """
+    from fem_sim import ogden_c
+
+    if ogden_c.load() is not None:
+        W, P, A, J = ogden_c.ogden_points(F, mat.c, mat.m, mat.K, mat.volumetric, tangent, out)
+        if out is None:
+            P = P.reshape(-1, 3, 3)
+            A = A.reshape(-1, 9, 9) if tangent else None
+        return W, P, A, J
+    W, P, A, J = ogden_point_kernel(np.asarray(F).reshape(-1, 3, 3), mat, tangent)
+    if out is None:
+        return W, P, A, J
+    out[0][:], out[1][:], out[3][:] = W, P.reshape(-1, 9), J
+    if tangent:
+        out[2][:] = A.reshape(-1, 81)
+    return out

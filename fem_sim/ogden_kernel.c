@@ -1,0 +1,213 @@
+/* Uncoupled Ogden point kernel: the same formulas as fem_sim/ogden.py (see its docstring for
+ * the derivation), one point at a time instead of batched numpy. Compiled at first use by
+ * fem_sim/ogden_c.py; tests/fem_sim/test_ogden.py checks it against the numpy kernel.
+ *
+ * Layout: F, P row-major 3x3 per point; A row-major 9x9 per point, rows (i, J), columns (k, L).
+ * Points with det F <= 0 or non-finite F get NaN in W, P, A; the return value counts them.
+ */
+#include <math.h>
+
+/* Eigen-decomposition of a symmetric 3x3 matrix by cyclic Jacobi rotations: accurate to
+ * round-off in every eigenvalue (relative to the matrix norm), orthonormal vectors even for
+ * coinciding eigenvalues. On return, a[0], a[4], a[8] hold the eigenvalues, v's columns the
+ * eigenvectors (v[3 * r + col]). */
+static void jacobi3(double a[9], double v[9])
+{
+    for (int i = 0; i < 9; ++i)
+        v[i] = (i % 4 == 0) ? 1.0 : 0.0;
+    for (int sweep = 0; sweep < 50; ++sweep) {
+        double off = a[1] * a[1] + a[2] * a[2] + a[5] * a[5];
+        double diag = a[0] * a[0] + a[4] * a[4] + a[8] * a[8];
+        if (off <= 1e-36 * diag || off == 0.0)
+            return;
+        for (int p = 0; p < 2; ++p) {
+            for (int q = p + 1; q < 3; ++q) {
+                double apq = a[3 * p + q];
+                if (apq == 0.0)
+                    continue;
+                double app = a[3 * p + p], aqq = a[3 * q + q];
+                double theta = 0.5 * (aqq - app) / apq;
+                double t = 1.0 / (fabs(theta) + sqrt(theta * theta + 1.0));
+                if (theta < 0.0)
+                    t = -t;
+                double c = 1.0 / sqrt(t * t + 1.0), s = t * c;
+                /* A <- R^T A R with R the rotation in the (p, q) plane */
+                for (int k = 0; k < 3; ++k) {
+                    double akp = a[3 * k + p], akq = a[3 * k + q];
+                    a[3 * k + p] = c * akp - s * akq;
+                    a[3 * k + q] = s * akp + c * akq;
+                }
+                for (int k = 0; k < 3; ++k) {
+                    double apk = a[3 * p + k], aqk = a[3 * q + k];
+                    a[3 * p + k] = c * apk - s * aqk;
+                    a[3 * q + k] = s * apk + c * aqk;
+                }
+                a[3 * p + q] = a[3 * q + p] = 0.0;
+                for (int k = 0; k < 3; ++k) {
+                    double vkp = v[3 * k + p], vkq = v[3 * k + q];
+                    v[3 * k + p] = c * vkp - s * vkq;
+                    v[3 * k + q] = s * vkp + c * vkq;
+                }
+            }
+        }
+    }
+}
+
+/* (x^e - y^e) / (x - y) for x, y > 0, exact as x -> y (limit e y^(e-1)); given
+ * t = ln x - ln y and ye1 = y^(e-1). */
+static double divided_power(double t, double ye1, double e)
+{
+    double ratio = (t == 0.0) ? e : expm1(e * t) / expm1(t);
+    return ye1 * ratio;
+}
+
+int ogden_points(int n, const double *F_all, int nterms, const double *ck, const double *mk,
+                 double K, int vol_log, int want_tangent, double *W_all, double *P_all,
+                 double *A_all, double *J_all)
+{
+    int bad_count = 0;
+    const double nan = NAN;
+    for (int pt = 0; pt < n; ++pt) {
+        const double *F = F_all + 9 * pt;
+        double *P = P_all + 9 * pt;
+        double *A = want_tangent ? A_all + 81 * pt : 0;
+        double J = F[0] * (F[4] * F[8] - F[5] * F[7]) - F[1] * (F[3] * F[8] - F[5] * F[6])
+                   + F[2] * (F[3] * F[7] - F[4] * F[6]);
+        J_all[pt] = J;
+        int finite = 1;
+        for (int i = 0; i < 9; ++i)
+            finite &= isfinite(F[i]);
+        if (!(finite && isfinite(J) && J > 0.0)) {
+            ++bad_count;
+            W_all[pt] = nan;
+            for (int i = 0; i < 9; ++i)
+                P[i] = nan;
+            if (A)
+                for (int i = 0; i < 81; ++i)
+                    A[i] = nan;
+            continue;
+        }
+        double C[9], Q[9];
+        for (int I = 0; I < 3; ++I)
+            for (int L = 0; L < 3; ++L)
+                C[3 * I + L] = F[I] * F[L] + F[3 + I] * F[3 + L] + F[6 + I] * F[6 + L];
+        jacobi3(C, Q);
+        double c[3] = {C[0], C[4], C[8]};
+        for (int a = 0; a < 3; ++a)
+            if (c[a] < 2.2250738585072014e-308)
+                c[a] = 2.2250738585072014e-308;
+        double D = J * J;
+        double U, UpJ, UppJ;
+        if (vol_log) {
+            double lnJ = log(J);
+            U = 0.5 * K * lnJ * lnJ;
+            UpJ = K * lnJ;
+            UppJ = K;
+        } else {
+            U = 0.5 * K * (J - 1.0) * (J - 1.0);
+            UpJ = K * (J - 1.0) * J;
+            UppJ = K * (2.0 * J - 1.0) * J;
+        }
+        double W = U, Phi[3] = {0.0, 0.0, 0.0}, B = 0.5 * UpJ;
+        double Phi2[9] = {0}, gam[9] = {0};
+        double inv[3] = {1.0 / c[0], 1.0 / c[1], 1.0 / c[2]};
+        double lnc[3] = {log(c[0]), log(c[1]), log(c[2])};
+        for (int k = 0; k < nterms; ++k) {
+            double m = mk[k], p = 0.5 * m, q = -m / 6.0;
+            double Dq = pow(D, q), a = ck[k] / (m * m) * Dq;
+            double cp[3], g[3];
+            for (int i = 0; i < 3; ++i) {
+                cp[i] = exp(p * lnc[i]);
+                g[i] = p * cp[i] * inv[i];
+            }
+            double T = cp[0] + cp[1] + cp[2];
+            W += ck[k] / (m * m) * (Dq * T - 3.0);
+            for (int i = 0; i < 3; ++i)
+                Phi[i] += a * g[i];
+            B += q * a * T;
+            if (A) {
+                for (int i = 0; i < 3; ++i) {
+                    double dg = (p - 1.0) * g[i] * inv[i];  /* p (p-1) c^(p-2) */
+                    for (int j = 0; j < 3; ++j)
+                        Phi2[3 * i + j] += a * ((i == j ? dg : 0.0)
+                                                + q * (g[i] * inv[j] + inv[i] * g[j])
+                                                + q * q * T * inv[i] * inv[j]);
+                }
+                /* only the off-diagonal pairs enter the tangent; g_k[x, y] = p (x^(p-1) -
+                 * y^(p-1)) / (x - y) and p y^(p-2) = g(y) / y */
+                for (int i = 0; i < 2; ++i)
+                    for (int j = i + 1; j < 3; ++j) {
+                        double v = a * divided_power(lnc[i] - lnc[j], g[j] * inv[j], p - 1.0);
+                        gam[3 * i + j] += v;
+                        gam[3 * j + i] += v;
+                    }
+            }
+        }
+        for (int i = 0; i < 3; ++i)
+            Phi[i] += B * inv[i];
+        W_all[pt] = W;
+        double S[9];
+        for (int I = 0; I < 3; ++I)
+            for (int L = 0; L < 3; ++L) {
+                double s = 0.0;
+                for (int a = 0; a < 3; ++a)
+                    s += Q[3 * I + a] * 2.0 * Phi[a] * Q[3 * L + a];
+                S[3 * I + L] = s;
+            }
+        for (int i = 0; i < 3; ++i)
+            for (int L = 0; L < 3; ++L)
+                P[3 * i + L] = F[3 * i] * S[L] + F[3 * i + 1] * S[3 + L] + F[3 * i + 2] * S[6 + L];
+        if (!A)
+            continue;
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j) {
+                Phi2[3 * i + j] += 0.25 * UppJ * inv[i] * inv[j];
+                gam[3 * i + j] -= B * inv[i] * inv[j];
+            }
+        for (int i = 0; i < 3; ++i)
+            Phi2[4 * i] -= B * inv[i] * inv[i];
+        /* Fn[a][i] = (F n_a)_i; M_ab[i, J] = Fn[a][i] n_b[J]; the six vectors G_s:
+         * M_00, M_11, M_22, M_01 + M_10, M_02 + M_20, M_12 + M_21 (see ogden.py). */
+        double Fn[9];
+        for (int a = 0; a < 3; ++a)
+            for (int i = 0; i < 3; ++i)
+                Fn[3 * a + i] = F[3 * i] * Q[a] + F[3 * i + 1] * Q[3 + a] + F[3 * i + 2] * Q[6 + a];
+        static const int pa[6] = {0, 1, 2, 0, 0, 1}, pb[6] = {0, 1, 2, 1, 2, 2};
+        double G[6][9];
+        for (int s = 0; s < 6; ++s) {
+            int a = pa[s], b = pb[s];
+            for (int i = 0; i < 3; ++i)
+                for (int Jj = 0; Jj < 3; ++Jj) {
+                    double v = Fn[3 * a + i] * Q[3 * Jj + b];
+                    if (s >= 3)
+                        v += Fn[3 * b + i] * Q[3 * Jj + a];
+                    G[s][3 * i + Jj] = v;
+                }
+        }
+        /* H = Wm G with Wm = [[4 Phi2, 0], [0, diag(2 gam_01, 2 gam_02, 2 gam_12)]] */
+        double H[6][9];
+        for (int s = 0; s < 3; ++s)
+            for (int r = 0; r < 9; ++r)
+                H[s][r] = 4.0 * (Phi2[3 * s] * G[0][r] + Phi2[3 * s + 1] * G[1][r]
+                                 + Phi2[3 * s + 2] * G[2][r]);
+        for (int s = 3; s < 6; ++s) {
+            double w = 2.0 * gam[3 * pa[s] + pb[s]];
+            for (int r = 0; r < 9; ++r)
+                H[s][r] = w * G[s][r];
+        }
+        for (int r = 0; r < 9; ++r)
+            for (int col = r; col < 9; ++col) {
+                double v = 0.0;
+                for (int s = 0; s < 6; ++s)
+                    v += G[s][r] * H[s][col];
+                A[9 * r + col] = v;
+                A[9 * col + r] = v;
+            }
+        /* + delta_ik S_JL */
+        for (int i = 0; i < 3; ++i)
+            for (int Jj = 0; Jj < 3; ++Jj)
+                for (int L = 0; L < 3; ++L)
+                    A[9 * (3 * i + Jj) + 3 * i + L] += S[3 * Jj + L];
+    }
+    return bad_count;
+}
