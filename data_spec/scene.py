@@ -185,6 +185,7 @@ _SCHEMA: dict[str, dict[str, Key]] = {
         "population_size": Key(_int(1), OPTIONAL, "number of livers (population)"),
         "population_seed": Key(_int(0), 0, "first phantom seed of the population"),
         "pca_components": Key(_int(1), 27, "shape coefficients per liver (population)"),
+        "spacing": Key(_vec3, OPTIONAL, "voxel size (mm) of a .npy segmentation mask"),
     },
     "fixed": {
         "kind": Key(_choice("region", "sphere", "box", "cylinder", "nodes"), "region",
@@ -433,6 +434,11 @@ def _check_geometry(g: dict, problems: list[str]) -> None:
         for key in ("path",):
             if key in g:
                 problems.append(f"geometry.{key}: only used when source = 'file'")
+    if src == "population" and "population_size" in g and \
+            g.get("pca_components", 27) > g["population_size"] - 1:
+        problems.append(f"geometry.pca_components: {g.get('pca_components', 27)} components "
+                        f"need more than {g['population_size']} livers (expected at most "
+                        "population_size - 1)")
     if src != "population" and "population_size" in g:
         problems.append("geometry.population_size: only used when source = 'population'")
 

@@ -23,6 +23,19 @@ def n_geometries(scene: Scene) -> int:
     return g["population_size"] if g["source"] == "population" else 1
 
 
+def scene_geometries(scene: Scene, cache=None, progress=None) -> list[Geometry]:
+    """Every geometry of a scene; for a population, with its PCA shape coefficients
+    (:mod:`fem_sim.population`; ``cache``: an .npz file that keeps them between runs).
+    """
+    livers = [scene_geometry(scene, i) for i in range(n_geometries(scene))]
+    g = scene["geometry"]
+    if g["source"] == "population" and len(livers) > 1:
+        from fem_sim.population import attach_shape_coefficients
+
+        attach_shape_coefficients(livers, g["pca_components"], cache=cache, progress=progress)
+    return livers
+
+
 def scene_geometry(scene: Scene, index: int = 0) -> Geometry:
     """Geometry ``index`` of the scene (0 unless the scene is a population)."""
     g = scene["geometry"]
@@ -34,7 +47,36 @@ def scene_geometry(scene: Scene, index: int = 0) -> Geometry:
         from fem_sim.phantom import make_phantom
 
         return make_phantom(g["population_seed"] + index, g["mesh_size"])
-    return read_mesh_file(g["path"], g["scale_to_mm"])
+    return read_any(g["path"], g["mesh_size"], g["scale_to_mm"], g.get("spacing"))
+
+
+SURFACES = (".vtk", ".stl", ".obj", ".ply")
+MASKS = (".npy", ".npz", ".nii", ".nii.gz")
+
+
+def read_any(path, mesh_size: float, scale_to_mm: float = 1.0, spacing=None) -> Geometry:
+    """A liver from a file, by kind: a segmentation mask (meshed through
+    :mod:`fem_sim.masks`), a closed surface (remeshed at ``mesh_size``), or a volume mesh /
+    data_spec geometry (used as is, node order kept).
+    """
+    name = str(path).lower()
+    if name.endswith(MASKS):
+        from fem_sim.masks import mesh_mask_file
+
+        return mesh_mask_file(path, mesh_size, spacing)
+    if name.endswith(SURFACES) and not _is_volume_vtk(path):
+        from fem_sim.surface_import import mesh_surface_file
+
+        return mesh_surface_file(path, mesh_size, scale_to_mm)
+    return read_mesh_file(path, scale_to_mm)
+
+
+def _is_volume_vtk(path) -> bool:
+    if not str(path).lower().endswith(".vtk") or not Path(path).exists():
+        return False
+    with open(path, "rb") as f:
+        head = f.read(256)
+    return b"UNSTRUCTURED_GRID" in head
 
 
 def read_mesh_file(path: str | Path, scale_to_mm: float = 1.0) -> Geometry:
@@ -71,4 +113,7 @@ def read_mesh_file(path: str | Path, scale_to_mm: float = 1.0) -> Geometry:
     problems = geometry_problems(g)
     if problems:
         raise GeometryError(f"{path}: " + "; ".join(problems))
+    from fem_sim.surface_import import default_vena_cava
+
+    g.regions["vena_cava"] = default_vena_cava(g)
     return g

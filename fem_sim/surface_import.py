@@ -155,8 +155,14 @@ def mesh_surface_file(path: str | Path, mesh_size: float, scale_to_mm: float = 1
     pts, tris = read_surface(path)
     pts, tris = clean_surface(pts * scale_to_mm, tris, str(path))
     g = mesh_closed_surface(pts, tris, mesh_size, f"{Path(path).name}, mesh size {mesh_size}")
+    g.regions["vena_cava"] = default_vena_cava(g, fixed_radius)
+    return g
+
+
+def default_vena_cava(g: Geometry, radius: float = 25.0) -> np.ndarray:
+    """Surface nodes within ``radius`` mm of the most posterior (max y) surface point: the
+    default fixed region of an imported liver (its vena-cava side in the usual orientation).
+    """
     surf = g.surface_nodes
     top = surf[np.argmax(g.points[surf, 1])]
-    near = surf[np.linalg.norm(g.points[surf] - g.points[top], axis=1) <= fixed_radius]
-    g.regions["vena_cava"] = near
-    return g
+    return surf[np.linalg.norm(g.points[surf] - g.points[top], axis=1) <= radius]
