@@ -3,6 +3,7 @@
 mpirun -n N python3 -m fem_sim generate SCENE.toml --out DIR [--ranks-per-sim R]
 [--only I..J] [--retry-failed]
 python3 -m fem_sim summary DIR
+python3 -m fem_sim population SCENE.toml --out DIR   (scene 4: CPD + PCA shape coefficients)
 """
 
 from __future__ import annotations
@@ -24,6 +25,11 @@ and converged steps) and only retried with --retry-failed. Exit code 2: bad scen
 
 def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["population"]:
+        from fem_sim.population_cli import main as population_main
+
+        return population_main(argv[1:])
     logging.getLogger().setLevel(logging.WARNING)  # FFCx's JIT logs to the root logger
     parser = argparse.ArgumentParser(prog="python3 -m fem_sim", epilog=EPILOG,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -38,6 +44,8 @@ def main(argv: list[str] | None = None) -> int:
     g.add_argument("--retry-failed", action="store_true",
                    help="also redo simulations recorded as failed")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
+    sub.add_parser("population", help="scene 4: CPD + PCA shape coefficients of a liver "
+                   "population, with the IoU/Dice report (see population --help)")
     s = sub.add_parser("summary", help="print counts and statistics of a dataset")
     s.add_argument("directory")
     s.add_argument("--png", help="picture of deformed livers (default DIR/summary.png)")

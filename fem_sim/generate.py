@@ -36,7 +36,7 @@ from data_spec import (
     write_shard,
 )
 from fem_sim import cases as cs
-from fem_sim.geometry_source import GeometryError, n_geometries, scene_geometry
+from fem_sim.geometry_source import GeometryError, scene_geometries
 
 log = logging.getLogger(__name__)
 
@@ -95,8 +95,8 @@ def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool) 
                                             f"({copy}); use a new --out directory"])
         out.mkdir(parents=True, exist_ok=True)
         ids = []
-        for gi in range(n_geometries(scene)):
-            g = scene_geometry(scene, gi)
+        livers = scene_geometries(scene, cache=out / "geometry" / "population.npz")
+        for gi, g in enumerate(livers):
             scene.check_mesh(g.n_nodes)
             fixed = cs.fixed_nodes(scene, g, scene_file)
             if not scene.cases:
