@@ -27,7 +27,7 @@ export OMP_NUM_THREADS ?= 1
 MPIRUN := mpirun -n $(NP)
 
 .PHONY: help setup setup-system setup-solver setup-trainer demo test test-solver test-trainer \
-        dataset train bench lint clean lock-trainer
+        dataset train population bench docs lint clean lock-trainer
 
 help:
 	@echo "make demo     set up, generate a small dataset on the embedded liver, train, report"
@@ -35,7 +35,9 @@ help:
 	@echo "make setup    install Debian packages (root) and create $(SOLVER_VENV), $(TRAIN_VENV)"
 	@echo "make dataset  SCENE=... NP=... R=... OUT=...   generate a dataset with mpirun"
 	@echo "make train    SCENE=... DATA=... RUN=...       train the surrogate on a dataset"
+	@echo "make population SCENE=... OUT=...  CPD + PCA shape coefficients (scene 4)"
 	@echo "make bench    run the benchmarks in bench/ (long)"
+	@echo "make docs     regenerate docs/phantoms.png"
 	@echo "make lint     ruff";  echo "make clean    remove environments and outputs"
 
 setup: setup-solver setup-trainer
@@ -105,6 +107,12 @@ test-trainer: setup-trainer $(TEST_DATA)/.done
 
 bench: setup
 	@bash scripts/bench.sh "$(SPY)" "$(TPY)"
+
+population: setup-solver
+	$(SPY) -m fem_sim population $(SCENE) --out $(OUT)
+
+docs: setup-solver
+	$(SPY) scripts/render_phantoms.py docs/phantoms.png
 
 lint: setup-trainer
 	$(TRAIN_VENV)/bin/ruff check .

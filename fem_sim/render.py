@@ -50,3 +50,46 @@ def render_shards(items, out_png: str | Path, title: str = "") -> Path:
     fig.savefig(out_png, dpi=90)
     plt.close(fig)
     return Path(out_png)
+
+
+def render_geometries(items, out_png: str | Path, title: str = "") -> Path:
+    """items: list of (Geometry, label). Shaded surfaces with the vena-cava region in red."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    n = len(items)
+    cols = min(n, 3)
+    rows = (n + cols - 1) // cols
+    fig = plt.figure(figsize=(4.4 * cols, 3.6 * rows))
+    light = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
+    for k, (g, label) in enumerate(items):
+        ax = fig.add_subplot(rows, cols, k + 1, projection="3d")
+        x = g.points
+        tri = g.surface_triangles
+        nrm = np.cross(x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]])
+        nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+        shade = 0.35 + 0.65 * np.clip(nrm @ light, 0, 1)
+        base = np.tile([0.72, 0.42, 0.36], (tri.shape[0], 1))
+        fixed = g.regions.get("vena_cava")
+        if fixed is not None and fixed.size:
+            on = np.isin(tri, fixed).all(axis=1)
+            base[on] = [0.25, 0.35, 0.8]
+        ax.add_collection3d(Poly3DCollection(x[tri], facecolors=base * shade[:, None],
+                                             edgecolor="none"))
+        lo, hi = x.min(axis=0), x.max(axis=0)
+        ax.set_xlim(lo[0], hi[0])
+        ax.set_ylim(lo[1], hi[1])
+        ax.set_zlim(lo[2], hi[2])
+        ax.set_box_aspect(hi - lo)
+        ax.view_init(35, 70)  # from behind and above: the vena-cava side
+        ax.set_title(label, fontsize=9)
+        ax.set_axis_off()
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(out_png, dpi=70)
+    plt.close(fig)
+    return Path(out_png)
