@@ -83,3 +83,41 @@ def test_predictor_on_an_explicit_geometry_matches_the_embedded_one(run):
     np.testing.assert_array_equal(same, predict(f, n))
     with pytest.raises(ValueError, match="geometry: fixed_nodes"):
         predict(f, n, geometry=(predict.points, np.array([10**6]), None))
+
+
+def test_material_model_warns_outside_the_training_range(tmp_path):
+    """A model trained on varying materials takes (c, m, K) per case and warns when a material
+    leaves the range it was trained on (by more than 5 %)."""
+    import dataclasses
+
+    from data_spec import Material, geometry_path, write_geometry, write_shard
+    from data_spec.testing import box_mesh, synthetic_shard
+
+    from tests.surrogate.conftest import ROOT
+
+    geo = box_mesh(3)
+    write_geometry(geometry_path(tmp_path, geo.geometry_id), geo)
+    rng = np.random.default_rng(0)
+    for i in range(12):
+        c, m = rng.uniform(2e-3, 8e-3), rng.uniform(6.0, 14.0)
+        shard = synthetic_shard(geo, i)
+        shard = dataclasses.replace(shard, material=Material(c=[c], m=[m], K=100 * c),
+                                    displacement=shard.displacement * 4.1e-3 / c)
+        write_shard(tmp_path, shard)
+    scene = (ROOT / "data_spec" / "scenes" / "scene3_materials.toml").read_text()
+    (tmp_path / "scene.toml").write_text(scene.replace("n_simulations = 3000",
+                                                      "n_simulations = 12"))
+    cfg = get_config("small", folds=2, epochs=2, hidden=[16], batch_size=256,
+                     final_fit=True)
+    train_and_evaluate(tmp_path, tmp_path / "run", cfg, log_fn=lambda m: None)
+    predict = load_predictor(tmp_path / "run" / "model")
+    with pytest.raises(ValueError, match="material: this model needs"):
+        predict([[0, 0, 0.4]], [3])
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        predict([[0, 0, 0.4]], [3], material=[5e-3, 10.0, 0.5])
+    assert not any("outside the training range" in str(x.message) for x in w)
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        predict([[0, 0, 0.4]], [3], material=[2e-2, 10.0, 2.0])
+    assert any("outside the training range" in str(x.message) for x in w)
