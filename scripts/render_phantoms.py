@@ -1,5 +1,6 @@
 """docs/phantoms.png: six livers of the embedded phantom population (seeds 0-5), vena-cava
-region in blue. Regenerate with ``make docs``."""
+region in blue. Regenerate with ``make docs``.
+"""
 
 import sys
 from pathlib import Path

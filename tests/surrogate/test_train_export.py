@@ -92,7 +92,6 @@ def test_material_model_warns_outside_the_training_range(tmp_path):
 
     from data_spec import Material, geometry_path, write_geometry, write_shard
     from data_spec.testing import box_mesh, synthetic_shard
-
     from tests.surrogate.conftest import ROOT
 
     geo = box_mesh(3)
