@@ -68,3 +68,36 @@ def test_broken_surfaces_are_rejected(tmp_path):
     bad.write_text("")
     with pytest.raises(GeometryError, match="not a legacy VTK file"):
         read_vtk_polydata(bad)
+
+
+@pytest.mark.parametrize("suffix", [".vtu", ".msh", ".xdmf"])
+def test_volume_mesh_is_used_as_is_in_source_node_order(tmp_path, suffix):
+    """A tetrahedral mesh file keeps its nodes, their order and its cells (orientation fixed);
+    it gets the default vena_cava region on its surface."""
+    import meshio
+
+    from fem_sim.geometry_source import read_any
+
+    g = make_phantom(1, 20.0)
+    perm = np.random.default_rng(0).permutation(g.n_nodes)  # an arbitrary source order
+    inv = np.argsort(perm)
+    pts, cells = g.points[perm], inv[g.cells]
+    cells[::2] = cells[::2][:, [0, 2, 1, 3]]  # half the tetrahedra inverted in the file
+    path = tmp_path / f"liver{suffix}"
+    meshio.write(path, meshio.Mesh(pts, [("tetra", cells)]))
+    out = read_any(path, mesh_size=8.0)
+    np.testing.assert_allclose(out.points, pts, atol=1e-6)
+    assert check_geometry(out) == pytest.approx(mesh_volume(g), rel=1e-6)
+    np.testing.assert_array_equal(np.sort(out.cells, axis=1), np.sort(cells, axis=1))
+
+
+def test_stl_surface_is_remeshed(tmp_path):
+    import meshio
+
+    from fem_sim.geometry_source import read_any
+
+    g = make_phantom(2, 10.0)
+    meshio.write(tmp_path / "liver.stl", meshio.Mesh(g.points, [("triangle",
+                                                                  g.surface_triangles)]))
+    out = read_any(tmp_path / "liver.stl", mesh_size=12.0)
+    assert check_geometry(out) == pytest.approx(mesh_volume(g), rel=0.02)
