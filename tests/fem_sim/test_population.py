@@ -115,3 +115,32 @@ def test_surface_points_sample_the_triangles(phantom):
     pts = surface_points(phantom)
     assert pts.shape[0] > 5 * phantom.surface_nodes.size
     assert chamfer(surface_samples(phantom, 200), pts) < 6.0
+
+
+def test_population_command_writes_geometries_and_report(tmp_path):
+    """`python3 -m fem_sim population`: geometry files with coefficients, the npz, and the
+    Markdown/JSON/PNG report (rows for n = 1..R-1); a non-population scene exits 2."""
+    import json
+
+    from data_spec import read_geometry
+    from fem_sim.__main__ import main
+
+    scene = tmp_path / "pop.toml"
+    scene.write_text('schema_version = 1\n[scene]\nname = "pop_test"\nn_simulations = 4\n'
+                     '[geometry]\nsource = "population"\npopulation_size = 4\n'
+                     'pca_components = 2\nmesh_size = 20.0\n'
+                     '[material]\nc = [4.1e-3]\nm = [10.06]\n[loads]\nmagnitude = 0.4\n')
+    out = tmp_path / "out"
+    assert main(["population", str(scene), "--out", str(out), "--no-progress",
+                 "--compare-plain", "1"]) == 0
+    geos = sorted((out / "geometry").glob("*.h5"))
+    assert len(geos) == 4
+    assert all(read_geometry(p).shape_coefficients.shape == (2,) for p in geos)
+    rows = json.loads((out / "population.json").read_text())["rows"]
+    assert [r["n"] for r in rows] == [1, 2, 3]
+    assert (out / "population.png").stat().st_size > 0
+    assert "Staged vs plain" in (out / "population.md").read_text()
+    bad = tmp_path / "bad.toml"
+    bad.write_text(scene.read_text().replace('source = "population"\npopulation_size = 4\n'
+                                             'pca_components = 2\n', 'source = "phantom"\n'))
+    assert main(["population", str(bad), "--out", str(out)]) == 2
