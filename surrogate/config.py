@@ -26,6 +26,8 @@ BASE = {
     "final_fit": True,         # train the exported model on all simulations after CV
     "seed": 0,
     "dtype": "float32",
+    "stream": "auto",          # targets memory-mapped from disk: True, False, or "auto" (when
+                               # they would take more than half of the available memory)
 }
 
 CONFIGS = {

@@ -55,13 +55,50 @@ class Dataset:
                                for g in self.sample_geo[s]])
 
 
-def load_dataset(directory: str | Path) -> Dataset:
-    """Read every shard of ``directory`` (ok shards and the converged steps of failed ones)."""
+def available_memory() -> int:
+    """Bytes of memory available to this process (Linux MemAvailable; else physical pages)."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    import os
+
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def _estimated_target_bytes(paths) -> int:
+    """Bytes of all displacement targets, from the first shard's size and the shard count."""
+    sh = read_shard(paths[0])
+    per = max(sh.displacement.shape[0], 1) * sh.displacement.shape[1] * 3 * 4
+    return per * len(paths)
+
+
+def load_dataset(directory: str | Path, stream: bool | str = "auto",
+                 spill_dir: str | Path | None = None) -> Dataset:
+    """Read every shard of ``directory`` (ok shards and the converged steps of failed ones).
+
+    ``stream``: True keeps the displacement targets (the only array that grows with nodes x
+    samples; 12 bytes per example) in a file under ``spill_dir`` (default: the dataset
+    directory), memory-mapped, written shard by shard, so the dataset never has to fit in
+    memory; batches then read their rows from disk through the page cache. "auto" does this
+    when the targets would take more than half of the available memory.
+    """
     directory = Path(directory)
     scene = load_scene(directory / "scene.toml")
     paths = list_shards(directory)
     if not paths:
         raise FileNotFoundError(f"{directory}: no shards (expected {directory}/sims/sim_*.h5)")
+    if stream == "auto":
+        stream = _estimated_target_bytes(paths) > 0.5 * available_memory()
+    spill = None
+    if stream:
+        spill_dir = Path(spill_dir or directory)
+        spill_dir.mkdir(parents=True, exist_ok=True)
+        spill_path = spill_dir / "targets.f32.tmp"
+        spill = open(spill_path, "wb")  # noqa: SIM115 (closed below, after the loop)
+        log.info("streaming targets to %s", spill_path)
     geo_index: dict[str, int] = {}
     points, fixed, out_nodes, shapes, statics = [], [], [], [], []
     s_geo, s_sim, s_fr, s_f, s_lp, s_ln, s_extra, targets = [], [], [], [], [], [], [], []
@@ -92,7 +129,12 @@ def load_dataset(directory: str | Path) -> Dataset:
             s_lp.append(lp)
             s_ln.append(sh.load_nodes)
             s_extra.append(mat)
-            targets.append(sh.displacement[k].astype(np.float32))
+            t = sh.displacement[k].astype(np.float32)
+            if spill is not None:
+                spill.write(np.ascontiguousarray(t).tobytes())
+                targets.append(np.empty((t.shape[0], 0), np.float32))  # size only
+            else:
+                targets.append(t)
     n_shape = shapes[0].size if shapes else 0
     spec = FeatureSpec.from_scene(scene, n_shape)
     extra = np.asarray(s_extra)[:, : spec.material_dim] if spec.material_dim else np.zeros(
@@ -100,6 +142,13 @@ def load_dataset(directory: str | Path) -> Dataset:
     if spec.geometry_dim:
         extra = np.concatenate([extra, np.asarray([shapes[g] for g in s_geo])], axis=1)
     sizes = np.array([t.shape[0] for t in targets])
+    if spill is not None:
+        spill.close()
+        final = spill_path.with_suffix("")  # targets.f32
+        spill_path.replace(final)
+        all_targets = np.memmap(final, dtype=np.float32, mode="r", shape=(int(sizes.sum()), 3))
+    else:
+        all_targets = np.concatenate(targets)
     return Dataset(
         spec=spec, scene_name=scene.name,
         static=np.concatenate(statics).astype(np.float32),
@@ -108,7 +157,7 @@ def load_dataset(directory: str | Path) -> Dataset:
         shape_coeffs=shapes, sample_geo=np.asarray(s_geo), sample_sim=np.asarray(s_sim),
         sample_fraction=np.asarray(s_fr), forces=np.asarray(s_f, dtype=np.float32),
         load_points=np.asarray(s_lp, dtype=np.float32), load_nodes=np.asarray(s_ln),
-        extra=np.asarray(extra, dtype=np.float32), targets=np.concatenate(targets),
+        extra=np.asarray(extra, dtype=np.float32), targets=all_targets,
         sample_offset=np.concatenate([[0], np.cumsum(sizes)]), failed_sims=failed)
 
 

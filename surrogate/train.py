@@ -221,10 +221,11 @@ def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
         (log_fn or (lambda m: print(m, file=sys.stderr, flush=True)))(msg)
 
     t0 = time.perf_counter()
-    ds = load_dataset(data_dir)
+    ds = load_dataset(data_dir, stream=cfg.get("stream", "auto"), spill_dir=run)
     say(f"dataset {data_dir}: {ds.n_samples} samples ({np.unique(ds.sample_sim).size} "
         f"simulations, {ds.failed_sims} failed), {ds.targets.shape[0]:,} node examples, "
-        f"{ds.spec.dim} features: {', '.join(ds.spec.names())}")
+        f"{ds.spec.dim} features: {', '.join(ds.spec.names())}"
+        + ("; targets streamed from disk" if isinstance(ds.targets, np.memmap) else ""))
     (run / "config.json").write_text(json.dumps(cfg, indent=1))
     folds = kfold_groups(ds, cfg["folds"], cfg["seed"])
     preds, trues, smps, naive, history = [], [], [], [], {}
@@ -274,4 +275,6 @@ def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
     (run / "metrics.md").write_text(md)
     (run / "history.json").write_text(json.dumps(history, indent=1))
     (run / "log.txt").write_text("\n".join(lines) + "\n")
+    if isinstance(ds.targets, np.memmap):
+        Path(ds.targets.filename).unlink(missing_ok=True)  # a cache, not a result
     return result

@@ -120,3 +120,23 @@ def test_material_model_warns_outside_the_training_range(tmp_path):
         warnings.simplefilter("always")
         predict([[0, 0, 0.4]], [3], material=[2e-2, 10.0, 2.0])
     assert any("outside the training range" in str(x.message) for x in w)
+
+
+def test_streaming_from_disk_gives_the_same_training(synth_dir, tmp_path):
+    """stream=True keeps the targets in a memory-mapped file (written shard by shard) and
+    trains to bitwise the same metrics as the in-memory dataset; the file is removed after."""
+    from surrogate.data import load_dataset
+
+    mem = load_dataset(synth_dir, stream=False)
+    disk = load_dataset(synth_dir, stream=True, spill_dir=tmp_path / "spill")
+    assert isinstance(disk.targets, np.memmap) and not isinstance(mem.targets, np.memmap)
+    np.testing.assert_array_equal(np.asarray(disk.targets), mem.targets)
+    cfg = get_config("small", folds=2, epochs=2, hidden=[16], batch_size=256,
+                     final_fit=False)
+    results = {}
+    for stream in (False, True):
+        out = tmp_path / f"run_{stream}"
+        results[stream] = train_and_evaluate(synth_dir, out, {**cfg, "stream": stream},
+                                             log_fn=lambda m: None)
+        assert not (out / "targets.f32").exists()
+    assert results[True]["network"] == results[False]["network"]
