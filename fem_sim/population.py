@@ -264,6 +264,11 @@ def write_report(rows: list[dict], pop: Population, out_dir, title: str,
     (out_dir / "population.json").write_text(json.dumps({
         "rows": rows, "registration_error_mm": pop.registration_error.tolist(),
         "explained_variance_ratio": pop.explained_variance_ratio.tolist()}, indent=1))
+    plot_report(rows, out_dir / "population.png", title)
+
+
+def plot_report(rows: list[dict], png, title: str) -> None:
+    """Explained variance, IoU and Dice against the number of components (Figure 9)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -276,12 +281,12 @@ def write_report(rows: list[dict], pop: Population, out_dir, title: str,
     ax.plot(n, [r["dice_mean"] for r in rows], "r-^", ms=3, label="Dice (mean)")
     ax.plot(n, [r["iou_min"] for r in rows], "b:", lw=1, label="IoU (worst liver)")
     ax.set_xlabel("PCA components")
-    ax.set_ylim(min(0.5, min(r["iou_min"] for r in rows)), 1.0)
+    ax.set_ylim(0.0, 1.0)
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right")
     ax.set_title(title, fontsize=9)
     fig.tight_layout()
-    fig.savefig(out_dir / "population.png", dpi=120)
+    fig.savefig(png, dpi=120)
     plt.close(fig)
 
 
