@@ -79,7 +79,8 @@ def _shard_is_done(path: Path, scene_hash: str, retry_failed: bool) -> bool:
         return not (retry_failed and str(f.attrs["status"]) == "failed")
 
 
-def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool) -> tuple[Plan,
+def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool,
+              progress: bool = False) -> tuple[Plan,
                                                                                         Scene]:
     """Rank 0 only: validate everything and decide the work. Errors go into Plan.error."""
     try:
@@ -95,7 +96,18 @@ def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool) 
                                             f"({copy}); use a new --out directory"])
         out.mkdir(parents=True, exist_ok=True)
         ids = []
-        livers = scene_geometries(scene, cache=out / "geometry" / "population.npz")
+        bar = None
+        if progress and scene["geometry"]["source"] == "population":
+            from tqdm import tqdm
+
+            bar = tqdm(total=scene["geometry"]["population_size"], unit="liver",
+                       desc="shape coefficients (CPD)", file=sys.stderr)
+        try:
+            livers = scene_geometries(scene, cache=out / "geometry" / "population.npz",
+                                      progress=(lambda r: bar.update()) if bar else None)
+        finally:
+            if bar is not None:
+                bar.close()
         for gi, g in enumerate(livers):
             scene.check_mesh(g.n_nodes)
             fixed = cs.fixed_nodes(scene, g, scene_file)
@@ -226,7 +238,7 @@ def generate(scene_file: str, out: str | Path, ranks_per_sim: int = 1, only: str
     world = MPI.COMM_WORLD
     out = Path(out)
     t_start = time.perf_counter()
-    plan, scene = make_plan(scene_file, out, only, retry_failed) if world.rank == 0 else (
+    plan, scene = make_plan(scene_file, out, only, retry_failed, progress) if world.rank == 0 else (
         None, None)
     if world.rank == 0 and not plan.error and world.size % ranks_per_sim:
         plan = Plan(error=f"--ranks-per-sim {ranks_per_sim} does not divide the "
