@@ -52,8 +52,6 @@ log = logging.getLogger(__name__)
 DEFAULT_SETTINGS = {
     "rtol": 1e-9,            # Newton: |R| <= max(atol, rtol * force scale)
     "atol": 1e-10,           # N
-    "utol": 0.0,             # ... or: last update |du|_inf <= utol |u|_inf (0: residual only)
-    "utol_residual": 1e-5,   # ... with |R| <= this * force scale
     "max_iterations": 25,    # Newton iterations per increment attempt
     "max_cutbacks": 8,       # increment halvings per output step
     "linear_solver": "mumps",  # "mumps" (direct LDL^T) or "gamg" (CG + GAMG)
@@ -224,7 +222,6 @@ class OgdenProblem:
         self.min_J = 1.0
         self._tangent_fresh = False
         self._factorized = False
-        self._du_rel = math.inf
         self._predicted_order = 0
 
     # ------------------------------------------------------------------------------------------
@@ -414,24 +411,20 @@ class OgdenProblem:
         # ``chord_trigger`` or more, and kept up while each step contracts by
         # ``chord_contraction``. Measured on the real liver (15k nodes): chord steps straight
         # after the predictor or in Newton's slow phase derail the next Newton step.
-        chord = small_update = False
+        chord = False
         first = self._predicted_order <= 1
         it = n_chord = 0
-        # Converged: |R| <= tol, or the last full update changed u by <= utol relative (the
-        # error left is then about utol times the contraction) with |R| already small.
-        r_guard = s["utol_residual"] * scale
         while True:
             self._attempt_its = it
-            if (r <= tol or (small_update and r <= r_guard)) and gap <= gap_tol:
+            if r <= tol and gap <= gap_tol:
                 return it
             if chord and gap <= gap_tol and n_chord < s["max_chord_steps"]:
-                r_new = self._chord_step(lam, r, r_guard)
+                r_new = self._chord_step(lam, r)
                 if r_new is not None:
                     n_chord += 1
                     stats["chord"] += 1
                     history.append(r_new)
                     chord = r_new <= s["chord_contraction"] * r
-                    small_update = self._du_rel <= s["utol"]
                     r = r_new
                     continue
                 stats["chord_rejected"] += 1
@@ -486,7 +479,6 @@ class OgdenProblem:
                                   f"(|R| = {r:.3e})")
             it += 1
             chord = self._chord_allowed() and alpha == 1.0 and r_new <= s["chord_trigger"] * r
-            small_update = alpha == 1.0 and self._relative_update() <= s["utol"]
             r = r_new
             gap = self._constraint_gap(lam)
             history.append(r)
@@ -501,18 +493,11 @@ class OgdenProblem:
         return (s["chord_contraction"] > 0 and s["linear_solver"] == "mumps"
                 and not s["lag_factorization"])
 
-    def _relative_update(self) -> float:
-        """|du|_inf / |u|_inf (collective); stored in self._du_rel."""
-        inf = PETSc.NormType.INFINITY
-        self._du_rel = self.du.norm(inf) / max(self.u.vector.norm(inf), 1e-300)
-        return self._du_rel
+    def _chord_step(self, lam: float, r: float) -> float | None:
+        """One chord step, u += J_old^-1 (-R): a back-solve with the last factorisation.
 
-    def _chord_step(self, lam: float, r: float, r_guard: float) -> float | None:
-        """U += J_old^-1 (-R): one back-solve with the last factorisation (collective).
-
-        Returns the new |R| if it contracted by ``chord_contraction``, or if it decreased and
-        the update was below ``utol`` (converged); otherwise restores the state (u, stresses,
-        residual) and returns None.
+        Returns the new |R| if it contracted by ``chord_contraction``; otherwise restores the
+        state (u, stresses, residual) and returns None. Collective.
         """
         saved = (self.u.x.array.copy(), self.P_q.x.array.copy(), self.W_q.x.array.copy(),
                  self.b.array.copy(), self._tangent_fresh, self.min_J)
@@ -521,15 +506,12 @@ class OgdenProblem:
         ksp = self._linear_solver()
         ksp.solve(self.rhs, self.du)  # the operator is unchanged: no refactorisation
         r_new = math.inf
-        self._du_rel = math.inf
         if ksp.getConvergedReason() > 0:
             self.du.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
             self.u.vector.axpy(1.0, self.du)
-            self._relative_update()
             if self._update_points(tangent=False):
                 r_new = self._residual(lam)
-        if r_new <= self.settings["chord_contraction"] * r or (
-                r_new < r and r_new <= r_guard and self._du_rel <= self.settings["utol"]):
+        if r_new <= self.settings["chord_contraction"] * r:
             return r_new
         u_arr, P_arr, W_arr, b_arr, self._tangent_fresh, self.min_J = saved
         self.u.x.array[:] = u_arr
