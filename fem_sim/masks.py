@@ -188,11 +188,6 @@ def voxelize(points: np.ndarray, cells: np.ndarray, spacing: float,
                             origin, shape)
 
 
-def mesh_volume(points: np.ndarray, cells: np.ndarray) -> float:
-    e = points[cells[:, 1:]] - points[cells[:, :1]]
-    return float(np.abs(np.linalg.det(e)).sum() / 6.0)
-
-
 def voxelize_surface(points: np.ndarray, tris: np.ndarray, spacing: float, origin=None,
                      shape=None) -> tuple[np.ndarray, np.ndarray]:
     """Boolean mask of the voxel centres inside a closed triangle surface (ray parity along z).

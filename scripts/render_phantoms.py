@@ -5,15 +5,14 @@ region in blue. Regenerate with ``make docs``.
 import sys
 from pathlib import Path
 
-from fem_sim.masks import mesh_volume
-from fem_sim.phantom import make_phantom
+from fem_sim.phantom import make_phantom, mesh_volume
 from fem_sim.render import render_geometries
 
 out = Path(sys.argv[1] if len(sys.argv) > 1 else "docs/phantoms.png")
 items = []
 for seed in range(6):
     g = make_phantom(seed, 8.0)
-    vol = mesh_volume(g.points, g.cells) / 1e6
+    vol = mesh_volume(g) / 1e6
     ext = g.points.max(0) - g.points.min(0)
     items.append((g, f"seed {seed}: {vol:.2f} L, {ext[0]:.0f} x {ext[1]:.0f} x {ext[2]:.0f} mm, "
                      f"{g.n_nodes} nodes"))

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from fem_sim.geometry_source import GeometryError
-from fem_sim.masks import clean_mask, mesh_mask, mesh_mask_file, mesh_volume, read_mask, voxelize
-from fem_sim.phantom import make_phantom
+from fem_sim.masks import clean_mask, mesh_mask, mesh_mask_file, read_mask, voxelize
+from fem_sim.phantom import make_phantom, mesh_volume
 from tests.fem_sim.test_geometry import SOFA, check_geometry
 
 pytest.importorskip("skimage")
@@ -42,7 +42,7 @@ def test_phantom_mask_round_trip_keeps_the_volume(spacing, tmp_path):
     """Phantom -> voxels (anisotropic, like CT) -> .npz file -> mesh: volume within 3 %,
     closed, outward, fixed region on the surface."""
     g = make_phantom(0, 10.0)
-    vol = mesh_volume(g.points, g.cells)
+    vol = mesh_volume(g)
     sp = np.array(spacing)
     # anisotropic voxelisation: scale the mesh so that one voxel = one unit, then back
     mask, origin = voxelize(g.points / sp, g.cells, 1.0)
@@ -59,7 +59,7 @@ def test_real_liver_mask_keeps_the_volume(tmp_path):
     from fem_sim.surface_import import mesh_surface_file
 
     g = mesh_surface_file(SOFA, 8.0)
-    vol = mesh_volume(g.points, g.cells)
+    vol = mesh_volume(g)
     mask, origin = voxelize(g.points, g.cells, 1.5)
     np.save(tmp_path / "liver.npy", mask)
     out = mesh_mask(*read_mask(tmp_path / "liver.npy", spacing=1.5)[:2], 8.0, origin)

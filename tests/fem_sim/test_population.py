@@ -61,10 +61,10 @@ def test_cpd_recovers_a_known_smooth_deformation(phantom):
 
 
 def test_voxelised_surface_matches_the_tetrahedra(phantom):
-    from fem_sim.masks import mesh_volume
+    from fem_sim.phantom import mesh_volume
 
     mask, _ = voxelize_surface(phantom.points, phantom.surface_triangles, 1.0)
-    assert mask.sum() == pytest.approx(mesh_volume(phantom.points, phantom.cells), rel=0.01)
+    assert mask.sum() == pytest.approx(mesh_volume(phantom), rel=0.01)
     iou, dice = overlap(phantom.points, phantom.surface_triangles, phantom.points,
                         phantom.surface_triangles)
     assert iou == 1.0 and dice == 1.0
