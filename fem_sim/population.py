@@ -58,15 +58,13 @@ def _sqdist(A, B):
 class CPDResult:
     """A fitted non-rigid CPD: the displacement field, stage by stage, in normalised frames."""
 
-    Y: np.ndarray            # template sample points (normalised frame of the template)
-    W: np.ndarray            # GRBF weights of the last stage, per stage in ``stages``
+    x_mean: np.ndarray       # normalisation of the target (x) and template (y) point sets
+    x_scale: float
+    y_mean: np.ndarray
+    y_scale: float
     stages: list = field(default_factory=list)  # (beta, W, Y_start) per stage, normalised
     iterations: list = field(default_factory=list)
-    sigma2: float = 0.0
-    x_mean: np.ndarray = None
-    x_scale: float = 1.0
-    y_mean: np.ndarray = None
-    y_scale: float = 1.0
+    sigma2: float = 0.0      # final GMM variance (normalised units)
 
     def transform(self, Z: np.ndarray) -> np.ndarray:
         """Moved positions (target frame, mm) of template points Z (template frame, mm)."""
@@ -85,7 +83,7 @@ def cpd_nonrigid(X: np.ndarray, Y: np.ndarray, schedule=STAGED, w: float = 0.0,
     x, y0 = (X - xm) / xs, (Y - ym) / ys
     n, d = x.shape
     m = y0.shape[0]
-    res = CPDResult(Y=y0, W=None, x_mean=xm, x_scale=xs, y_mean=ym, y_scale=ys)
+    res = CPDResult(x_mean=xm, x_scale=xs, y_mean=ym, y_scale=ys)
     sigma2 = _sqdist(x, y0).sum() / (d * n * m)
     xx = (x * x).sum(1)
     Ys = y0
@@ -119,7 +117,7 @@ def cpd_nonrigid(X: np.ndarray, Y: np.ndarray, schedule=STAGED, w: float = 0.0,
         res.stages.append((beta, W, Ys))
         res.iterations.append(its)
         Ys = T
-    res.W, res.sigma2 = W, sigma2
+    res.sigma2 = sigma2
     return res
 
 
@@ -166,9 +164,6 @@ class Population:
         renum = np.full(M.n_nodes, -1)
         renum[M.surface_nodes] = np.arange(M.surface_nodes.size)
         return renum[M.surface_triangles]
-
-    def coefficients_of(self, displacement: np.ndarray, n: int) -> np.ndarray:
-        return (displacement.ravel() - self.mean) @ self.components[:n].T
 
 
 def build_population(livers: list[Geometry], template: int = 0, n_points: int = 600,
@@ -311,13 +306,26 @@ def attach_shape_coefficients(livers: list[Geometry], n_components: int, cache=N
                     g.shape_coefficients = c[:n_components].copy()
                 return None
     pop = build_population(livers, 0, n_points, progress=progress)
+    set_coefficients(livers, pop, n_components)
+    if cache is not None:
+        save_population(cache, livers, pop)
+    return pop
+
+
+def set_coefficients(livers: list[Geometry], pop: Population, n_components: int) -> None:
+    """Each liver's first ``n_components`` PCA coefficients, as its ``shape_coefficients``."""
     for g, c in zip(livers, pop.coefficients):
         g.shape_coefficients = c[:n_components].copy()
-    if cache is not None:
-        Path(cache).parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(str(cache) + ".tmp.npz")
-        np.savez(tmp, geometry_ids=ids, coefficients=pop.coefficients, mean=pop.mean,
-                 components=pop.components, singular_values=pop.singular_values,
-                 registration_error=pop.registration_error)
-        tmp.replace(cache)
-    return pop
+
+
+def save_population(path, livers: list[Geometry], pop: Population) -> None:
+    """The PCA (and the geometry ids it belongs to) as an .npz, written atomically."""
+    from pathlib import Path
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(str(path) + ".tmp.npz")
+    np.savez(tmp, geometry_ids=np.array([g.geometry_id for g in livers]),
+             coefficients=pop.coefficients, mean=pop.mean, components=pop.components,
+             singular_values=pop.singular_values, registration_error=pop.registration_error)
+    tmp.replace(path)

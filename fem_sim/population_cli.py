@@ -25,6 +25,8 @@ def run(scene_file, out, n_max: int = 40, overlap_livers: int | None = None,
         chamfer,
         cpd_nonrigid,
         report,
+        save_population,
+        set_coefficients,
         surface_points,
         surface_samples,
         write_report,
@@ -53,15 +55,10 @@ def run(scene_file, out, n_max: int = 40, overlap_livers: int | None = None,
     t_cpd = time.perf_counter() - t0
     if bar:
         bar.close()
-    k = scene["geometry"]["pca_components"]
-    (out / "geometry").mkdir(parents=True, exist_ok=True)
-    for g, c in zip(livers, pop.coefficients):
-        g.shape_coefficients = c[:k].copy()
+    set_coefficients(livers, pop, scene["geometry"]["pca_components"])
+    save_population(out / "geometry" / "population.npz", livers, pop)
+    for g in livers:
         write_geometry(geometry_path(out, g.geometry_id), g)
-    ids = np.array([g.geometry_id for g in livers])
-    np.savez(out / "geometry" / "population.npz", geometry_ids=ids,
-             coefficients=pop.coefficients, mean=pop.mean, components=pop.components,
-             singular_values=pop.singular_values, registration_error=pop.registration_error)
     n_values = [n for n in range(1, n_max + 1) if n <= len(livers) - 1]
     which = None if overlap_livers is None else list(range(min(overlap_livers, len(livers))))
     t0 = time.perf_counter()
