@@ -9,6 +9,17 @@ from pathlib import Path
 import numpy as np
 
 
+def _frame(ax, lo, hi, view, label: str) -> None:
+    """Equal-aspect 3-D axes over the box [lo, hi], seen from (elevation, azimuth) ``view``."""
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_zlim(lo[2], hi[2])
+    ax.set_box_aspect(hi - lo)
+    ax.view_init(*view)
+    ax.set_title(label, fontsize=9)
+    ax.set_axis_off()
+
+
 def render_shards(items, out_png: str | Path, title: str = "") -> Path:
     """items: list of (Geometry, displacement (n_nodes, 3) at full load, load node ids, label)."""
     import matplotlib
@@ -35,14 +46,7 @@ def render_shards(items, out_png: str | Path, title: str = "") -> Path:
         if fixed is not None and fixed.size:
             ax.scatter(*x[fixed].T, s=3, c="k")
         ax.scatter(*x[np.asarray(loads)].T, s=40, c="r", marker="v")
-        lo, hi = g.points.min(axis=0) - 10, g.points.max(axis=0) + 10
-        ax.set_xlim(lo[0], hi[0])
-        ax.set_ylim(lo[1], hi[1])
-        ax.set_zlim(lo[2], hi[2])
-        ax.set_box_aspect(hi - lo)
-        ax.view_init(25, -60)
-        ax.set_title(label, fontsize=9)
-        ax.set_axis_off()
+        _frame(ax, g.points.min(axis=0) - 10, g.points.max(axis=0) + 10, (25, -60), label)
     fig.colorbar(cm.ScalarMappable(norm=norm, cmap="viridis"), ax=fig.axes, shrink=0.6,
                  label="|u| (mm)")
     if title:
@@ -79,14 +83,7 @@ def render_geometries(items, out_png: str | Path, title: str = "") -> Path:
             base[on] = [0.25, 0.35, 0.8]
         ax.add_collection3d(Poly3DCollection(x[tri], facecolors=base * shade[:, None],
                                              edgecolor="none"))
-        lo, hi = x.min(axis=0), x.max(axis=0)
-        ax.set_xlim(lo[0], hi[0])
-        ax.set_ylim(lo[1], hi[1])
-        ax.set_zlim(lo[2], hi[2])
-        ax.set_box_aspect(hi - lo)
-        ax.view_init(35, 70)  # from behind and above: the vena-cava side
-        ax.set_title(label, fontsize=9)
-        ax.set_axis_off()
+        _frame(ax, x.min(axis=0), x.max(axis=0), (35, 70), label)  # from behind: vena cava
     if title:
         fig.suptitle(title)
     fig.tight_layout()
