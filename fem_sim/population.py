@@ -320,12 +320,10 @@ def set_coefficients(livers: list[Geometry], pop: Population, n_components: int)
 
 def save_population(path, livers: list[Geometry], pop: Population) -> None:
     """The PCA (and the geometry ids it belongs to) as an .npz, written atomically."""
-    from pathlib import Path
+    from data_spec.atomic import atomic_path
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(str(path) + ".tmp.npz")
-    np.savez(tmp, geometry_ids=np.array([g.geometry_id for g in livers]),
-             coefficients=pop.coefficients, mean=pop.mean, components=pop.components,
-             singular_values=pop.singular_values, registration_error=pop.registration_error)
-    tmp.replace(path)
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:  # a file object: no ".npz" appended
+        np.savez(f, geometry_ids=np.array([g.geometry_id for g in livers]),
+                 coefficients=pop.coefficients, mean=pop.mean, components=pop.components,
+                 singular_values=pop.singular_values,
+                 registration_error=pop.registration_error)
