@@ -3,7 +3,7 @@
 Same formulas and the same outputs as :func:`fem_sim.ogden.ogden_point_kernel` (the numpy
 reference, which the tests compare it with), about 10x faster: one pass per point instead of
 ~40 batched numpy operations, a 3x3 Jacobi eigen-solver instead of LAPACK's per-matrix calls.
-Measured at 75k points on this machine: see ``bench/bench_kernel.py``.
+Measured at 75k points on this machine: ``bench/bench_kernel.py``.
 
 The extension is cached under ``$FEM_SIM_CACHE`` (default ``$XDG_CACHE_HOME/fem_sim`` or
 ``~/.cache/fem_sim``), keyed by a hash of the C source and the interpreter. Every rank may build
