@@ -248,6 +248,10 @@ _SCHEMA: dict[str, dict[str, Key]] = {
         "quadrature_degree": Key(_int(1), OPTIONAL, "default: 1 for P1 (FEBio tet4), 2 for P2"),
         "linear_solver": Key(_choice("mumps", "gamg"), "mumps",
                              "mumps: direct (symmetric); gamg: CG + GAMG, rigid-body modes"),
+        "factorization": Key(_choice("auto", "single", "double", "petsc"), "auto",
+                             "mumps: single (float32 LDL^T, METIS, GMRES-refined) or double "
+                             "(float64) on one rank; petsc (PETSc's MUMPS); auto: single on "
+                             "one rank, petsc on several"),
         "rtol": Key(_num(0.0), 1e-9, "Newton relative residual tolerance"),
         "atol": Key(_num(0.0), 1e-10, "Newton absolute residual tolerance, N"),
         "max_iterations": Key(_int(1), 25, "Newton iterations per attempt"),

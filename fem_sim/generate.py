@@ -54,7 +54,8 @@ class Plan:
 def solver_settings(scene: Scene) -> dict:
     s = scene["solver"]
     return {k: s[k] for k in ("rtol", "atol", "max_iterations", "max_cutbacks",
-                              "linear_solver", "petsc_options", "predictor")}
+                              "linear_solver", "factorization", "petsc_options",
+                              "predictor")}
 
 
 def parse_range(text: str | None, n: int) -> range:
@@ -208,6 +209,7 @@ def run_case(problem, scene: Scene, case: cs.Case, g: Geometry, fixed: np.ndarra
                             sol.wall_time, sol.residual_history)
     stats.info = {"degree": problem.degree, "quadrature_degree": problem.qdeg,
                   "linear_solver": problem.settings["linear_solver"],
+                  "factorization": problem.factorization,
                   "ranks": problem.comm.size,
                   "factorizations": sol.factorizations if sol else 0,
                   "krylov_iterations": sol.krylov_iterations if sol else 0,

@@ -5,26 +5,17 @@ reference, which the tests compare it with), about 10x faster: one pass per poin
 ~40 batched numpy operations, a 3x3 Jacobi eigen-solver instead of LAPACK's per-matrix calls.
 Measured at 75k points on this machine: ``bench/bench_kernel.py``.
 
-The extension is cached under ``$FEM_SIM_CACHE`` (default ``$XDG_CACHE_HOME/fem_sim`` or
-``~/.cache/fem_sim``), keyed by a hash of the C source and the interpreter. Every rank may build
-it at once: each builds in its own temporary directory and renames atomically. If no C compiler
-is available, :func:`load` returns None and callers use the numpy kernel (with a warning).
+The extension is built and cached by :mod:`fem_sim.cext`; if no C compiler is available,
+:func:`load` returns None and callers use the numpy kernel (with a warning).
 """
 
 from __future__ import annotations
 
-import hashlib
-import importlib.util
-import logging
-import os
-import sys
-import sysconfig
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-log = logging.getLogger(__name__)
+from fem_sim import cext
 
 SOURCE = Path(__file__).with_name("ogden_kernel.c")
 CDEF = """
@@ -34,51 +25,11 @@ int ogden_points(int n, const double *F_all, int nterms, const double *ck, const
 """
 COMPILE_ARGS = ["-O2", "-std=c99"]  # no -ffast-math: the kernel relies on NaN and isfinite
 
-_module = None
-_failed = False
-
-
-def cache_dir() -> Path:
-    if os.environ.get("FEM_SIM_CACHE"):
-        return Path(os.environ["FEM_SIM_CACHE"])
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base) / "fem_sim"
-
-
-def _build(name: str, target: Path) -> None:
-    import cffi
-
-    ffi = cffi.FFI()
-    ffi.cdef(CDEF)
-    ffi.set_source(name, SOURCE.read_text(), extra_compile_args=COMPILE_ARGS,
-                   libraries=["m"])
-    target.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
-        built = ffi.compile(tmpdir=tmp, verbose=False)
-        os.replace(built, target)
-
 
 def load():
     """The compiled module (with ``.ffi`` and ``.lib``), or None if it cannot be built."""
-    global _module, _failed
-    if _module is not None or _failed:
-        return _module
-    key = hashlib.sha256((SOURCE.read_text() + CDEF + " ".join(COMPILE_ARGS) + sys.version)
-                         .encode()).hexdigest()[:16]
-    name = f"_fem_sim_ogden_{key}"
-    target = cache_dir() / (name + sysconfig.get_config_var("EXT_SUFFIX"))
-    try:
-        if not target.exists():
-            _build(name, target)
-        spec = importlib.util.spec_from_file_location(name, target)
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-        _module = mod
-    except Exception as exc:  # no compiler, read-only cache, ...
-        _failed = True
-        log.warning("fem_sim: compiled Ogden kernel unavailable (%s); using the numpy kernel "
-                    "(several times slower)", exc)
-    return _module
+    return cext.load("ogden", SOURCE, CDEF, "using the numpy kernel (several times slower)",
+                     extra_compile_args=COMPILE_ARGS, libraries=["m"])
 
 
 def _ptr(ffi, arr: np.ndarray):

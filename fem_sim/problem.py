@@ -45,6 +45,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fem_sim import dolfinx_compat as dc
+from fem_sim import ldlt
 from fem_sim.ogden import OgdenMaterial, point_kernel
 
 log = logging.getLogger(__name__)
@@ -55,6 +56,9 @@ DEFAULT_SETTINGS = {
     "max_iterations": 25,    # Newton iterations per increment attempt
     "max_cutbacks": 8,       # increment halvings per output step
     "linear_solver": "mumps",  # "mumps" (direct LDL^T) or "gamg" (CG + GAMG)
+    "factorization": "auto",  # mumps: "single" (float32 LDL^T, METIS; GMRES to krylov_rtol),
+                              # "double" (float64, METIS), "petsc" (PETSc's MUMPS, PORD);
+                              # "auto": "single" on one process, "petsc" on several
     "lag_factorization": False,  # True: GMRES with a lagged factorisation as preconditioner
     "krylov_rtol": 1e-10,    # relative tolerance of each linear solve
     "refactor_after": 8,     # refactorise when a solve needs more Krylov iterations
@@ -175,6 +179,7 @@ class OgdenProblem:
         self.degree = degree
         self.qdeg = quadrature_degree or (1 if degree == 1 else 2)
         self.prefix = prefix
+        self._own_mode = self._own_factorization()  # validates settings.factorization
         # Collective: distribute the mesh, build spaces and compile forms.
         n_nodes = points.shape[0] if comm.rank == 0 else None
         self.n_nodes = comm.bcast(n_nodes, root=0)
@@ -218,6 +223,7 @@ class OgdenProblem:
         self.owned_vertex_blocks, self.owned_vertex_src = blocks[owned], src[owned]
         self.src_to_block = dict(zip(src.tolist(), blocks.tolist()))
         self._ksp = None
+        self._ldlt: ldlt.SerialLDLT | None = None
         self.material: OgdenMaterial | None = None
         self.min_J = 1.0
         self._tangent_fresh = False
@@ -313,6 +319,48 @@ class OgdenProblem:
         self._ksp = ksp
         return ksp
 
+    @property
+    def factorization(self) -> str:
+        """The factorisation in use: "single", "double", "petsc" (MUMPS), or "none" (GAMG)."""
+        if self.settings["linear_solver"] != "mumps":
+            return "none"
+        return self._own_mode or "petsc"
+
+    def _own_factorization(self) -> str | None:
+        """"single"/"double" when the serial METIS LDL^T of :mod:`fem_sim.ldlt` is used, else
+        None (PETSc's MUMPS or GAMG). Measured on the real liver (``bench/bench_solver.py``).
+        """
+        s = self.settings
+        mode = s["factorization"]
+        if mode not in ("auto", "single", "double", "petsc"):
+            raise ValueError(f"settings.factorization: expected auto, single, double or petsc, "
+                             f"got {mode!r}")
+        if (s["linear_solver"] != "mumps" or s["lag_factorization"] or mode == "petsc"
+                or self.comm.size > 1 or "pc_type" in s["petsc_options"]):
+            if mode in ("single", "double") and self.comm.size > 1:
+                raise ValueError(f"settings.factorization = {mode!r} runs on one process; "
+                                 f"this problem has {self.comm.size} (use 'auto' or 'petsc')")
+            return None
+        if ldlt.load() is None:
+            return None
+        return "single" if mode == "auto" else mode
+
+    def _back_solve(self) -> bool:
+        """Set du = J^-1 rhs with the last factorisation (collective); False on failure.
+
+        For chord steps and tangent predictors, which are approximate anyway: with float32
+        factors this is one back-solve (relative error ~1e-3), not a refined solve.
+        """
+        if self._ldlt is not None:
+            self.du.array[:] = self._ldlt.solve(self.rhs.array_r)
+            ok = bool(np.all(np.isfinite(self.du.array_r)))
+        else:
+            self._ksp.solve(self.rhs, self.du)
+            ok = self._ksp.getConvergedReason() > 0
+        if ok:
+            self.du.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        return ok
+
     def _rigid_body_modes(self):
         """The six rigid-body modes of the owned dofs, as GAMG's near-nullspace."""
         x = self.V.tabulate_dof_coordinates()[: self.n_owned]
@@ -337,6 +385,11 @@ class OgdenProblem:
         linear-solver failure.
         """
         s = self.settings
+        if self._ldlt is None and self._own_mode:
+            self._ldlt = ldlt.SerialLDLT(self._own_mode, bs=3)
+        if self._ldlt is not None:
+            self._solve_own(stats, eta or s["krylov_rtol"])
+            return
         ksp = self._linear_solver()
         ksp.setTolerances(rtol=eta or s["krylov_rtol"], atol=0.0, max_it=s["max_krylov"])
         lagged = s["linear_solver"] == "mumps" and s["lag_factorization"]
@@ -368,6 +421,23 @@ class OgdenProblem:
                               "iterations)")
         if lagged and its > s["refactor_after"]:
             stats["refactor_next"] = True
+        self.du.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+
+    def _solve_own(self, stats: dict, rtol: float) -> None:
+        """Factorise J with :class:`fem_sim.ldlt.SerialLDLT` and solve to ``rtol`` (serial)."""
+        indptr, indices, values = self.A.getValuesCSR()
+        try:
+            self._ldlt.factor(indptr, indices, values)
+        except ldlt.FactorError as exc:
+            raise StepFailure(f"linear solver failed: {exc}") from None
+        stats["factorizations"] += 1
+        x, its, ok = self._ldlt.solve_refined(self.rhs.array_r, rtol,
+                                              self.settings["max_krylov"])
+        stats["krylov"] += its
+        if not ok:
+            raise StepFailure(f"linear solver failed: GMRES with the LDL^T factors did not "
+                              f"reach {rtol:.1e} in {its} iterations")
+        self.du.array[:] = x
         self.du.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
 
     # ------------------------------------------------------------------------------------------
@@ -503,11 +573,8 @@ class OgdenProblem:
                  self.b.array.copy(), self._tangent_fresh, self.min_J)
         self.b.copy(self.rhs)
         self.rhs.scale(-1.0)
-        ksp = self._linear_solver()
-        ksp.solve(self.rhs, self.du)  # the operator is unchanged: no refactorisation
         r_new = math.inf
-        if ksp.getConvergedReason() > 0:
-            self.du.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        if self._back_solve():  # the operator is unchanged: no refactorisation
             self.u.vector.axpy(1.0, self.du)
             if self._update_points(tangent=False):
                 r_new = self._residual(lam)
@@ -741,8 +808,7 @@ class OgdenProblem:
             lam0, u0 = states[-1]
             self.rhs.array[:] = self.f_ext.array
             self.rhs.array[self._fixed_owned] = 0.0
-            self._ksp.solve(self.rhs, self.du)
-            if self._ksp.getConvergedReason() > 0:
+            if self._back_solve():
                 # du/dlam at lam0 = J^-1 f_ext (J from the last Newton iteration). Keep the
                 # last few; u(lam) = u0 + integral over [lam0, lam] of the polynomial through
                 # them (order 1: Euler; 2, 3: the tangent's own change is extrapolated too).
