@@ -256,8 +256,10 @@ _SCHEMA: dict[str, dict[str, Key]] = {
         "atol": Key(_num(0.0), 1e-10, "Newton absolute residual tolerance, N"),
         "max_iterations": Key(_int(1), 25, "Newton iterations per attempt"),
         "max_cutbacks": Key(_int(0), 8, "increment halvings allowed per output step"),
-        "predictor": Key(_choice("tangent", "extrapolate", "previous"), "tangent",
-                         "start of each load step: Euler step, extrapolation, or last state"),
+        "predictor": Key(_choice("hermite", "tangent", "extrapolate", "previous"), "hermite",
+                         "start of each load step: Hermite polynomial through the last "
+                         "converged states and their tangents, tangent integration, "
+                         "extrapolation of states, or the last state"),
         "petsc_options": Key(_petsc_options, {}, "extra PETSc options (override defaults)"),
     },
     "surrogate": {

@@ -145,15 +145,17 @@ def test_iterative_solver_and_lagged_factorisation_give_the_direct_answer():
         assert np.abs(out[name] - ref).max() <= 1e-6 * np.abs(ref).max(), name
 
 
-def test_chord_steps_and_tangent_predictors_reach_the_plain_newton_answer():
-    """The default solver (third-order tangent predictor, chord steps between Newton steps)
-    and plain full Newton from the previous state converge to the same displacements at every
-    load step, and the default needs fewer factorisations."""
+def test_chord_steps_and_predictors_reach_the_plain_newton_answer():
+    """The default solver (Hermite predictor through three converged states and their
+    tangents, chord steps between Newton steps), the tangent-integration predictor, Euler, and
+    plain full Newton from the previous state converge to the same displacements at every
+    load step; the default needs the fewest factorisations."""
     g = make_phantom(0, 20.0)
     node = int(np.argmax(g.points[:, 0]))
     fractions = np.linspace(0.1, 1.0, 10)
     runs = {}
     for name, st in {"default": {},
+                     "tangent": {"predictor": "tangent"},
                      "euler": {"predictor_order": 1},
                      "plain": {"predictor": "previous", "chord_contraction": 0.0}}.items():
         prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells,
@@ -164,13 +166,42 @@ def test_chord_steps_and_tangent_predictors_reach_the_plain_newton_answer():
         runs[name] = s
     ref = runs["plain"].displacement
     assert runs["plain"].chord_steps == 0
-    for name in ("default", "euler"):
+    for name in ("default", "tangent", "euler"):
         u = runs[name].displacement
         for k in range(fractions.size):
             assert np.abs(u[k] - ref[k]).max() <= 1e-8 * np.abs(ref[k]).max(), (name, k)
     assert runs["default"].chord_steps > 0
-    assert runs["default"].factorizations < runs["plain"].factorizations, (
-        runs["default"].factorizations, runs["plain"].factorizations)
+    counts = {k: v.factorizations for k, v in runs.items()}
+    assert counts["default"] == min(counts.values()), counts
+    assert counts["default"] < counts["plain"], counts
+
+
+def test_hermite_predictor_error_falls_with_the_polynomial_degree():
+    """From exact states and tangents of a smooth load path, the Hermite predictor's error
+    over one increment h falls as h^(2m) for m points: halving h divides it by ~2^(2m)."""
+    g = make_phantom(0, 20.0)
+    node = int(np.argmax(g.points[:, 0]))
+    prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, settings={"rtol": 1e-12})
+    cons, load = [Constraint(g.regions["vena_cava"])], [NodalLoad([node], [[0.0, 0.0, -0.2]])]
+
+    def path(fractions):
+        s = prob.solve(MAT, cons, load, fractions)
+        assert s.status == "ok"
+        return s.displacement
+
+    def predictor_error(h, m):
+        lams = 0.5 + h * np.arange(-m + 1, 2)  # m converged points, then the target
+        u = path(lams)  # the solve records (lam, u, du/dlam) at each converged step
+        prob._hermite = prob._hermite[-1 - m:-1]  # the m points before the target
+        assert [p[0] for p in prob._hermite] == pytest.approx(lams[:-1])
+        prob._predict_hermite(lams[-1])
+        pred = prob.displacement()
+        return np.abs(pred - u[-1]).max()
+
+    for m in (1, 2):
+        e1, e2 = predictor_error(0.04, m), predictor_error(0.02, m)
+        order = np.log2(e1 / e2)
+        assert abs(order - 2 * m) < 0.6, (m, e1, e2, order)
 
 
 def test_factorisation_backends_give_the_same_answer():
