@@ -171,7 +171,7 @@ class SerialLDLT:
                 np.array_equal(self._pattern[0], indptr)
                 and np.array_equal(self._pattern[1], indices)):
             self._analyse(indptr, indices)
-        self._values = values
+        self._values = values.copy()  # the caller may reuse its array
         self._a = np.ascontiguousarray(values[self._upper], dtype=self.dtype)
         self.lib.ldlt_factor(self._h, self._ptr(self._a, "void *"))
         self.factorizations += 1
@@ -191,7 +191,7 @@ class SerialLDLT:
         Returns (x, iterations, converged).
         """
         indptr, indices, values = self._pattern[0], self._pattern[1], self._values
-        A = _csr(indptr, indices, values)
+        A = csr(indptr, indices, values)
         return gmres(A.dot, self.solve, b, rtol, maxit)
 
     @property
@@ -210,7 +210,7 @@ class SerialLDLT:
         return int(self.lib.ldlt_info(self._h, 29))
 
 
-def _csr(indptr, indices, values):
+def csr(indptr, indices, values):
     import scipy.sparse as sp
 
     n = indptr.size - 1

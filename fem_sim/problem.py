@@ -54,7 +54,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fem_sim import dolfinx_compat as dc
-from fem_sim import ldlt
+from fem_sim import ldlt, p1
 from fem_sim.ogden import OgdenMaterial, point_kernel
 
 log = logging.getLogger(__name__)
@@ -240,11 +240,13 @@ class OgdenProblem:
         self.src_to_block = dict(zip(src.tolist(), blocks.tolist()))
         self._ksp = None
         self._ldlt: ldlt.SerialLDLT | None = None
+        self._p1: p1.P1Jacobian | bool | None = None  # False: not used
         self.material: OgdenMaterial | None = None
         self.min_J = 1.0
         self._tangent_fresh = False
         self._factorized = False
         self._predicted_order = 0
+        self._p1_jacobian()  # set-up of the C assembly (positions in the CSR pattern)
 
     # ------------------------------------------------------------------------------------------
     # Pieces of one Newton iteration
@@ -300,6 +302,15 @@ class OgdenProblem:
         """
         if not self._tangent_fresh:
             self._update_points(tangent=True)  # the tangent is evaluated only when needed
+        p1 = self._p1_jacobian()
+        if p1 is not None:
+            A = self.A_q.x.array.reshape(-1, 81)
+            p1.assemble(A[: self.n_cells] if self._q_contiguous else A[self.q_dofs])
+            self.b.copy(self.rhs)
+            self.rhs.scale(-1.0)
+            p1.apply_dirichlet(self._fixed_owned, self.rhs.array if lift else None,
+                               self.lift.array_r if lift else None)
+            return
         dc.assemble_matrix(self.A, self.a)
         self.b.copy(self.rhs)
         self.rhs.scale(-1.0)
@@ -307,6 +318,31 @@ class OgdenProblem:
             self.A.zeroRowsColumns(self._fixed_global, diag=1.0, x=self.lift, b=self.rhs)
         else:
             self.A.zeroRowsColumns(self._fixed_global, diag=1.0)
+
+    def _p1_jacobian(self) -> p1.P1Jacobian | None:
+        """The C assembly of P1 one-point Jacobians into CSR arrays, used with the serial
+        factorisation (:mod:`fem_sim.p1`); None when the dolfinx/PETSc path is used.
+        """
+        if self._p1 is None:
+            if not (self._own_mode and self.degree == 1 and self.qdeg == 1
+                    and p1.load() is not None):
+                self._p1 = False
+            else:
+                dc.assemble_matrix(self.A, self.a)  # the pattern (an empty matrix has none)
+                indptr, indices, _ = self.A.getValuesCSR()
+                cells = self.V.dofmap.list.array.reshape(-1, 4)[: self.n_cells]
+                coords = self.V.tabulate_dof_coordinates()
+                self._p1 = p1.P1Jacobian(cells, coords, indptr, indices)
+        return self._p1 or None
+
+    def jacobian_csr(self):
+        """The last assembled Jacobian (with the constraint rows/columns) as CSR arrays
+        (indptr, indices, values); one process only.
+        """
+        p1j = self._p1_jacobian()
+        if p1j is not None:
+            return p1j.indptr, p1j.indices, p1j.values
+        return self.A.getValuesCSR()
 
     def _linear_solver(self) -> PETSc.KSP:
         if self._ksp is not None:
@@ -441,7 +477,7 @@ class OgdenProblem:
 
     def _solve_own(self, stats: dict, rtol: float) -> None:
         """Factorise J with :class:`fem_sim.ldlt.SerialLDLT` and solve to ``rtol`` (serial)."""
-        indptr, indices, values = self.A.getValuesCSR()
+        indptr, indices, values = self.jacobian_csr()
         try:
             self._ldlt.factor(indptr, indices, values)
         except ldlt.FactorError as exc:
@@ -826,8 +862,7 @@ class OgdenProblem:
         n = self.rhs.array_r.size
         done = False
         if self._ldlt is not None and self._ldlt.factorizations:
-            indptr, indices, values = self.A.getValuesCSR()
-            A = ldlt._csr(indptr, indices, values)
+            A = ldlt.csr(*self.jacobian_csr())
             x, its, done = ldlt.gmres(A.dot, self._ldlt.solve, self.rhs.array_r,
                                       TANGENT_RTOL, TANGENT_MAX_GMRES)
             stats["krylov"] += its
