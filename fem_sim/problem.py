@@ -875,7 +875,12 @@ class OgdenProblem:
             if done:
                 self.du.array[:] = x
         if not done:
-            self._solve_linear(stats, TANGENT_RTOL)
+            try:
+                self._solve_linear(stats, TANGENT_RTOL)
+            except StepFailure as exc:  # e.g. a singular tangent: predict without tangents
+                log.debug("no tangent at load %.4g (%s)", lam, exc)
+                self._hermite = []
+                return
             self._factorized = True
         t = self.du.array_r[:n].copy()
         self._hermite = (self._hermite + [(lam, self.u.x.array[:n].copy(), t)])[
