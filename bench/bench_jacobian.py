@@ -1,13 +1,15 @@
-"""Factorisation benchmark: one Jacobian of the real liver (or the phantom), factorised by
-PETSc's MUMPS LDL^T (PORD ordering, what Debian's MUMPS offers) and by fem_sim's serial
-LDL^T (MUMPS' C interface, METIS ordering) in float64 and float32.
+"""One Newton step's linear algebra on the real liver (or the phantom): the Jacobian assembled
+by dolfinx and by fem_sim's C assembly for P1 (fem_sim/p1.py), then factorised by PETSc's
+MUMPS LDL^T (PORD ordering, what Debian's MUMPS offers) and by fem_sim's serial LDL^T (MUMPS'
+C interface, METIS ordering) in float64 and float32.
 
-    OPENBLAS_NUM_THREADS=1 .venv-solver/bin/python bench/bench_factor.py [--mesh sofa] [--h 5.0]
+    OPENBLAS_NUM_THREADS=1 .venv-solver/bin/python bench/bench_jacobian.py [--mesh sofa] [--h 5.0]
 
 The matrix is the constrained Jacobian at the converged state of bench_solver.py's problem
-(0.4 N at the node farthest from the fixed region). Prints GFlop (MUMPS' estimate), seconds per
-numerical factorisation and per back-solve (medians of --runs), and the relative residual of
-one solve with a random right-hand side.
+(0.4 N at the node farthest from the fixed region). Prints the assembly times (medians of
+--runs, with the constraint rows/columns set) and their largest difference, then GFlop (MUMPS'
+estimate), seconds per numerical factorisation and per back-solve (medians of --runs), and the
+relative residual of one solve with a random right-hand side.
 """
 
 from __future__ import annotations
@@ -38,7 +40,31 @@ def jacobian(kind: str, h: float):
     prob._residual(1.0)
     prob._jacobian(lift=False)
     indptr, indices, values = (np.array(a) for a in prob.jacobian_csr())
-    return name, g.n_nodes, indptr, indices, values
+    return name, g.n_nodes, prob, (indptr, indices, values)
+
+
+def assembly(prob, runs):
+    """Median seconds of dolfinx's and the C assembly (each with the constraints applied),
+    and the largest entry difference relative to the largest entry."""
+    from fem_sim import dolfinx_compat as dc
+
+    def with_dolfinx():
+        dc.assemble_matrix(prob.A, prob.a)
+        prob.A.zeroRowsColumns(prob._fixed_global, diag=1.0)
+
+    def with_c():
+        prob._jacobian(lift=False)
+
+    t_d, t_c = [], []
+    for _ in range(runs):
+        for fn, ts in ((with_dolfinx, t_d), (with_c, t_c)):
+            t = time.perf_counter()
+            fn()
+            ts.append(time.perf_counter() - t)
+    ref = ldlt.csr(*prob.A.getValuesCSR())
+    ours = ldlt.csr(*prob.jacobian_csr())
+    diff = abs(ours - ref).max() / abs(ref).max()
+    return np.median(t_d), np.median(t_c), diff
 
 
 def petsc_mumps(indptr, indices, values, b, runs):
@@ -98,12 +124,19 @@ def main():
     from bench_solver import SOFA
 
     kind = args.mesh or ("sofa" if SOFA.exists() else "phantom")
-    name, nodes, indptr, indices, values = jacobian(kind, args.h)
+    name, nodes, prob, (indptr, indices, values) = jacobian(kind, args.h)
     n = indptr.size - 1
     A = ldlt.csr(indptr, indices, values)
     b = np.random.default_rng(0).standard_normal(n)
     print(f"{name}, h = {args.h} mm: {nodes} nodes, {n} dofs, {indices.size} non-zeros; "
           f"median of {args.runs}, one process")
+    print()
+    t_d, t_c, diff = assembly(prob, args.runs)
+    print("| Jacobian assembly (P1, one point, constraints applied) | s | speed-up |")
+    print("|---|---|---|")
+    print(f"| dolfinx assemble_matrix + zeroRowsColumns | {t_d:.3f} | 1.0x |")
+    print(f"| fem_sim C assembly into the CSR pattern | {t_c:.3f} | {t_d / t_c:.1f}x |")
+    print(f"\nlargest entry difference / largest entry: {diff:.1e}")
     print()
     print("| factorisation | GFlop | s / factorisation | s / back-solve | relative residual |")
     print("|---|---|---|---|---|")
