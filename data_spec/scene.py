@@ -260,7 +260,8 @@ _SCHEMA: dict[str, dict[str, Key]] = {
                          "start of each load step: Hermite polynomial through the last "
                          "converged states and their tangents, tangent integration, "
                          "extrapolation of states, or the last state"),
-        "petsc_options": Key(_petsc_options, {}, "extra PETSc options (override defaults)"),
+        "petsc_options": Key(_petsc_options, {}, "extra PETSc options for PETSc's solvers "
+                             "(factorization petsc, gamg); a pc_type here selects PETSc's path"),
     },
     "surrogate": {
         "node_fraction": Key(lambda v: None if _is_num(v) and 0 < v <= 1 else
