@@ -166,6 +166,7 @@ class Solution:
     krylov_iterations: int = 0
     chord_steps: int = 0      # accepted back-solves with an old factorisation
     chord_rejected: int = 0   # chord steps tried and undone (too little contraction)
+    double_fallbacks: int = 0  # float32 factorisations that had to be redone in float64
 
     @property
     def n_done(self) -> int:
@@ -239,7 +240,8 @@ class OgdenProblem:
         self.owned_vertex_blocks, self.owned_vertex_src = blocks[owned], src[owned]
         self.src_to_block = dict(zip(src.tolist(), blocks.tolist()))
         self._ksp = None
-        self._ldlt: ldlt.SerialLDLT | None = None
+        self._ldlt: ldlt.SerialLDLT | None = None  # the one holding the last factorisation
+        self._ldlts: dict[str, ldlt.SerialLDLT] = {}  # by precision
         self._p1: p1.P1Jacobian | bool | None = None  # False: not used
         self.material: OgdenMaterial | None = None
         self.min_J = 1.0
@@ -403,7 +405,9 @@ class OgdenProblem:
         For chord steps and tangent predictors, which are approximate anyway: with float32
         factors this is one back-solve (relative error ~1e-3), not a refined solve.
         """
-        if self._ldlt is not None:
+        if self._own_mode:
+            if self._ldlt is None:
+                return False
             self.du.array[:] = self._ldlt.solve(self.rhs.array_r)
             ok = bool(np.all(np.isfinite(self.du.array_r)))
         else:
@@ -437,9 +441,7 @@ class OgdenProblem:
         linear-solver failure.
         """
         s = self.settings
-        if self._ldlt is None and self._own_mode:
-            self._ldlt = ldlt.SerialLDLT(self._own_mode, bs=3)
-        if self._ldlt is not None:
+        if self._own_mode:
             self._solve_own(stats, eta or s["krylov_rtol"])
             return
         ksp = self._linear_solver()
@@ -476,21 +478,40 @@ class OgdenProblem:
         self.du.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
 
     def _solve_own(self, stats: dict, rtol: float) -> None:
-        """Factorise J with :class:`fem_sim.ldlt.SerialLDLT` and solve to ``rtol`` (serial)."""
+        """Factorise J with :class:`fem_sim.ldlt.SerialLDLT` and solve to ``rtol`` (serial).
+
+        If float32 factors cannot give the solve (GMRES does not reach ``rtol`` within
+        ``max_krylov`` iterations, e.g. a tangent too ill-conditioned for single precision, or
+        the float32 factorisation fails), the same matrix is factorised in float64 and the
+        simulation goes on; ``stats["double_fallbacks"]`` counts these.
+        """
         indptr, indices, values = self.jacobian_csr()
-        try:
-            self._ldlt.factor(indptr, indices, values)
-        except ldlt.FactorError as exc:
-            raise StepFailure(f"linear solver failed: {exc}") from None
-        stats["factorizations"] += 1
-        x, its, ok = self._ldlt.solve_refined(self.rhs.array_r, rtol,
-                                              self.settings["max_krylov"])
-        stats["krylov"] += its
-        if not ok:
-            raise StepFailure(f"linear solver failed: GMRES with the LDL^T factors did not "
-                              f"reach {rtol:.1e} in {its} iterations")
-        self.du.array[:] = x
-        self.du.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        precisions = [self._own_mode] + (["double"] if self._own_mode == "single" else [])
+        why = ""
+        for k, precision in enumerate(precisions):
+            solver = self._ldlts.get(precision)
+            if solver is None:
+                solver = self._ldlts[precision] = ldlt.SerialLDLT(precision, bs=3)
+            if k:
+                stats["double_fallbacks"] = stats.get("double_fallbacks", 0) + 1
+                log.debug("float32 LDL^T insufficient (%s); factorising in float64", why)
+            try:
+                solver.factor(indptr, indices, values)
+            except ldlt.FactorError as exc:
+                why = str(exc)
+                continue
+            stats["factorizations"] += 1
+            x, its, ok = solver.solve_refined(self.rhs.array_r, rtol, self.settings["max_krylov"])
+            stats["krylov"] += its
+            if ok:
+                self._ldlt = solver
+                self.du.array[:] = x
+                self.du.ghostUpdate(addv=PETSc.InsertMode.INSERT,
+                                    mode=PETSc.ScatterMode.FORWARD)
+                return
+            why = f"GMRES with the LDL^T factors did not reach {rtol:.1e} in {its} iterations"
+        self._ldlt = None  # no valid factorisation: chord steps and tangents must not use one
+        raise StepFailure(f"linear solver failed: {why}")
 
     # ------------------------------------------------------------------------------------------
     # Newton on one increment
@@ -770,6 +791,7 @@ class OgdenProblem:
         self._set_loads(loads)
         self.u.x.array[:] = 0.0
         self.Pmat = None  # a new material: the old factorisation is no preconditioner for it
+        self._ldlt = None
         sol = Solution(fractions=fractions, displacement=None)
         stored = []
         states: list[tuple[float, np.ndarray]] = [(0.0, self.u.x.array.copy())]
@@ -841,6 +863,7 @@ class OgdenProblem:
         sol.factorizations, sol.krylov_iterations = stats["factorizations"], stats["krylov"]
         sol.chord_steps = stats["chord"]
         sol.chord_rejected = stats["chord_rejected"]
+        sol.double_fallbacks = stats.get("double_fallbacks", 0)
         if self.comm.rank == 0:
             sol.displacement = (np.stack(stored) if stored
                                 else np.zeros((0, self.n_nodes, 3)))

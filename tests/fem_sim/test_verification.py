@@ -256,3 +256,23 @@ def test_factorisation_backends_give_the_same_answer():
         OgdenProblem(MPI.COMM_WORLD, g.points, g.cells,
                      settings={"factorization": "quad"}).solve(
             MAT, [Constraint(g.regions["vena_cava"])], [], [1.0])
+
+
+def test_float32_factorisation_falls_back_to_float64_when_it_cannot_solve():
+    """One GMRES iteration (max_krylov = 1) cannot take a float32 solve to 1e-10: every
+    Newton system is then factorised again in float64, and the answer is unchanged."""
+    if MPI.COMM_WORLD.size > 1:
+        pytest.skip("the serial factorisation runs on one process")
+    g = make_phantom(0, 20.0)
+    node = int(np.argmax(g.points[:, 0]))
+    out = {}
+    for name, st in {"default": {}, "one_iteration": {"max_krylov": 1}}.items():
+        prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells,
+                            settings={"rtol": 1e-10, **st}, prefix=f"fb64_{name}_")
+        out[name] = prob.solve(MAT, [Constraint(g.regions["vena_cava"])],
+                               [NodalLoad([node], [[0.0, -0.3, -0.3]])], [0.5, 1.0])
+        assert out[name].status == "ok", out[name].failure_reason
+    assert out["default"].double_fallbacks == 0
+    assert out["one_iteration"].double_fallbacks > 0
+    ref = out["default"].displacement[-1]
+    assert np.abs(out["one_iteration"].displacement[-1] - ref).max() <= 1e-8 * np.abs(ref).max()
