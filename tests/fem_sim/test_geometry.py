@@ -91,13 +91,15 @@ def test_volume_mesh_is_used_as_is_in_source_node_order(tmp_path, suffix):
     np.testing.assert_array_equal(np.sort(out.cells, axis=1), np.sort(cells, axis=1))
 
 
-def test_stl_surface_is_remeshed(tmp_path):
+@pytest.mark.parametrize("suffix", [".stl", ".obj", ".ply"])
+def test_surface_files_are_remeshed(tmp_path, suffix):
     import meshio
 
     from fem_sim.geometry_source import read_any
 
     g = make_phantom(2, 10.0)
-    meshio.write(tmp_path / "liver.stl", meshio.Mesh(g.points, [("triangle",
-                                                                  g.surface_triangles)]))
-    out = read_any(tmp_path / "liver.stl", mesh_size=12.0)
+    path = tmp_path / f"liver{suffix}"
+    meshio.write(path, meshio.Mesh(g.points, [("triangle", g.surface_triangles)]))
+    out = read_any(path, mesh_size=12.0)
     assert check_geometry(out) == pytest.approx(mesh_volume(g), rel=0.02)
+    assert out.regions["vena_cava"].size > 0
