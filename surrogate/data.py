@@ -8,6 +8,7 @@ vector; features are assembled in jit (``surrogate.features``).
 
 from __future__ import annotations
 
+import contextlib
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from data_spec import list_shards, load_scene, read_geometry, read_shard
+from data_spec.atomic import atomic_path
 from data_spec.shards import geometry_path
 from surrogate.features import FeatureSpec, material_vector, static_node_features
 
@@ -92,49 +94,51 @@ def load_dataset(directory: str | Path, stream: bool | str = "auto",
         raise FileNotFoundError(f"{directory}: no shards (expected {directory}/sims/sim_*.h5)")
     if stream == "auto":
         stream = _estimated_target_bytes(paths) > 0.5 * available_memory()
-    spill = None
+    spill, final = None, None
+    stack = contextlib.ExitStack()
     if stream:
-        spill_dir = Path(spill_dir or directory)
-        spill_dir.mkdir(parents=True, exist_ok=True)
-        spill_path = spill_dir / "targets.f32.tmp"
-        spill = open(spill_path, "wb")  # noqa: SIM115 (closed below, after the loop)
-        log.info("streaming targets to %s", spill_path)
+        # Written through data_spec's atomic_path: a temporary next to targets.f32, fsynced
+        # and renamed once every shard is in, removed if reading fails half-way.
+        final = Path(spill_dir or directory) / "targets.f32"
+        spill = stack.enter_context(open(stack.enter_context(atomic_path(final)), "wb"))
+        log.info("streaming targets to %s", final)
     geo_index: dict[str, int] = {}
     points, fixed, out_nodes, shapes, statics = [], [], [], [], []
     s_geo, s_sim, s_fr, s_f, s_lp, s_ln, s_extra, targets = [], [], [], [], [], [], [], []
     failed = 0
-    for p in paths:
-        sh = read_shard(p)
-        if sh.status != "ok":
-            failed += 1
-        if sh.n_done == 0:
-            continue
-        if sh.geometry_id not in geo_index:
-            g = read_geometry(geometry_path(directory, sh.geometry_id))
-            geo_index[sh.geometry_id] = len(points)
-            points.append(g.points)
-            fixed.append(sh.fixed_nodes)
-            out_nodes.append(sh.output_nodes)
-            shapes.append(g.shape_coefficients if g.shape_coefficients is not None
-                          else np.zeros(0))
-            statics.append(static_node_features(g.points, sh.fixed_nodes)[sh.output_nodes])
-        gi = geo_index[sh.geometry_id]
-        lp = points[gi][sh.load_nodes]  # load nodes, or patch centres
-        mat = material_vector(sh.material.c, sh.material.m, sh.material.K)
-        for k in range(sh.n_done):
-            s_geo.append(gi)
-            s_sim.append(sh.sim_index)
-            s_fr.append(sh.load_fractions[k])
-            s_f.append(sh.forces * sh.load_fractions[k])
-            s_lp.append(lp)
-            s_ln.append(sh.load_nodes)
-            s_extra.append(mat)
-            t = sh.displacement[k].astype(np.float32)
-            if spill is not None:
-                spill.write(np.ascontiguousarray(t).tobytes())
-                targets.append(np.empty((t.shape[0], 0), np.float32))  # size only
-            else:
-                targets.append(t)
+    with stack:  # on leaving: the spill file is closed, then renamed (last in, first out)
+        for p in paths:
+            sh = read_shard(p)
+            if sh.status != "ok":
+                failed += 1
+            if sh.n_done == 0:
+                continue
+            if sh.geometry_id not in geo_index:
+                g = read_geometry(geometry_path(directory, sh.geometry_id))
+                geo_index[sh.geometry_id] = len(points)
+                points.append(g.points)
+                fixed.append(sh.fixed_nodes)
+                out_nodes.append(sh.output_nodes)
+                shapes.append(g.shape_coefficients if g.shape_coefficients is not None
+                              else np.zeros(0))
+                statics.append(static_node_features(g.points, sh.fixed_nodes)[sh.output_nodes])
+            gi = geo_index[sh.geometry_id]
+            lp = points[gi][sh.load_nodes]  # load nodes, or patch centres
+            mat = material_vector(sh.material.c, sh.material.m, sh.material.K)
+            for k in range(sh.n_done):
+                s_geo.append(gi)
+                s_sim.append(sh.sim_index)
+                s_fr.append(sh.load_fractions[k])
+                s_f.append(sh.forces * sh.load_fractions[k])
+                s_lp.append(lp)
+                s_ln.append(sh.load_nodes)
+                s_extra.append(mat)
+                t = sh.displacement[k].astype(np.float32)
+                if spill is not None:
+                    spill.write(np.ascontiguousarray(t).tobytes())
+                    targets.append(np.empty((t.shape[0], 0), np.float32))  # size only
+                else:
+                    targets.append(t)
     n_shape = shapes[0].size if shapes else 0
     spec = FeatureSpec.from_scene(scene, n_shape)
     extra = np.asarray(s_extra)[:, : spec.material_dim] if spec.material_dim else np.zeros(
@@ -142,10 +146,7 @@ def load_dataset(directory: str | Path, stream: bool | str = "auto",
     if spec.geometry_dim:
         extra = np.concatenate([extra, np.asarray([shapes[g] for g in s_geo])], axis=1)
     sizes = np.array([t.shape[0] for t in targets])
-    if spill is not None:
-        spill.close()
-        final = spill_path.with_suffix("")  # targets.f32
-        spill_path.replace(final)
+    if final is not None:
         all_targets = np.memmap(final, dtype=np.float32, mode="r", shape=(int(sizes.sum()), 3))
     else:
         all_targets = np.concatenate(targets)

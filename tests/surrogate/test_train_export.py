@@ -140,3 +140,21 @@ def test_streaming_from_disk_gives_the_same_training(synth_dir, tmp_path):
                                              log_fn=lambda m: None)
         assert not (out / "targets.f32").exists()
     assert results[True]["network"] == results[False]["network"]
+
+
+def test_streaming_leaves_nothing_behind_when_a_shard_is_unreadable(synth_dir, tmp_path):
+    """The spill file goes through data_spec's atomic_path: a shard that cannot be read
+    half-way stops loading and leaves neither targets.f32 nor a temporary."""
+    import shutil
+
+    from data_spec import list_shards
+    from surrogate.data import load_dataset
+
+    d = tmp_path / "data"
+    shutil.copytree(synth_dir, d)
+    victim = list_shards(d)[-1]
+    victim.write_bytes(victim.read_bytes()[:300])  # truncated
+    spill = tmp_path / "spill"
+    with pytest.raises(Exception):  # noqa: B017 (h5py's error type depends on the damage)
+        load_dataset(d, stream=True, spill_dir=spill)
+    assert list(spill.iterdir()) == []
