@@ -1,8 +1,11 @@
-"""Jacobian assembly for P1 tetrahedra with one-point quadrature, in C, into a fixed CSR
-pattern (one process). On the real liver at 73k cells, dolfinx's generic assembly of the same
-form with the constraints applied takes 0.20 s, this 0.029 s (``bench/bench_jacobian.py``),
-and the values go straight to the factorisation without a PETSc matrix in between.
-``tests/fem_sim/test_verification.py`` checks it against dolfinx's assembly.
+"""P1 tetrahedra with one quadrature point, in C, for the serial solver: deformation gradients
+from the displacements, internal forces from the stresses, and the Jacobian assembled into a
+fixed CSR pattern. On the real liver at 73k cells, dolfinx's generic assembly of the Jacobian
+with the constraints applied takes 0.20 s, this 0.029 s (``bench/bench_jacobian.py``), and the
+values go straight to the factorisation without a PETSc matrix in between; F and the forces
+replace dolfinx's expression evaluation and vector assembly (~10 ms per residual there, ~4 ms
+here, profile of ``bench/bench_solver.py``'s problem).
+``tests/fem_sim/test_verification.py`` checks all three against dolfinx.
 """
 
 from __future__ import annotations
@@ -16,6 +19,10 @@ SOURCE = cext.Path(__file__).with_name("p1_kernel.c")
 CDEF = """
 void p1_stiffness(int ncells, const double *dN_all, const double *vol, const double *A_all,
                   const int32_t *pos_all, double *values);
+void p1_deformation(int ncells, const int32_t *cells, const double *dN_all, const double *u,
+                    double *F_all);
+void p1_forces(int ncells, const int32_t *cells, const double *dN_all, const double *vol,
+               const double *P_all, double *b);
 """
 
 
@@ -24,8 +31,9 @@ def load():
                      extra_compile_args=["-O2", "-std=c99"])
 
 
-class P1Jacobian:
-    """The Jacobian of a P1 vector problem as CSR arrays (indptr, indices, values).
+class P1Assembler:
+    """Deformation gradients, internal forces and the Jacobian (as CSR arrays indptr, indices,
+    values) of a P1 vector problem with one quadrature point per cell.
 
     ``cell_blocks`` (ncells, 4): the node (block) numbers of each cell's vertices, in the
     order of the cells' tangent values; ``coords`` (nblocks, 3) reference coordinates;
@@ -39,6 +47,7 @@ class P1Jacobian:
             raise RuntimeError("the compiled P1 assembly is unavailable")
         self.ffi, self.lib = mod.ffi, mod.lib
         cb = np.asarray(cell_blocks, dtype=np.int64)
+        self.cells = np.ascontiguousarray(cb, dtype=np.int32)
         x = coords[cb]  # (nc, 4, 3)
         Jm = np.stack([x[:, 1] - x[:, 0], x[:, 2] - x[:, 0], x[:, 3] - x[:, 0]], axis=2)
         G = np.linalg.inv(Jm)  # row r = gradient of the shape function of vertex r + 1
@@ -64,7 +73,7 @@ class P1Jacobian:
         bpos = np.searchsorted(keys, want.ravel())
         if np.any(bpos >= keys.size) or np.any(keys[np.minimum(bpos, keys.size - 1)]
                                                != want.ravel()):
-            raise ValueError("P1Jacobian: the CSR pattern misses element entries")
+            raise ValueError("P1Assembler: the CSR pattern misses element entries")
         boff = (row0[bpos] - first[rows_b[row0[bpos]]]).reshape(-1, 4, 4)  # offset in row 3A
         i = np.arange(3)
         # pos[c, a, i, b, k] = indptr[3 cb[c, a] + i] + boff[c, a, b] + k
@@ -74,7 +83,7 @@ class P1Jacobian:
         self.values = np.zeros(self.indices.size)
         self.diag = np.flatnonzero(rows == self.indices)
         if self.diag.size != n:
-            raise ValueError("P1Jacobian: the CSR pattern misses diagonal entries")
+            raise ValueError("P1Assembler: the CSR pattern misses diagonal entries")
         self._bc_key = None
 
     def _check_blocked(self, n: int) -> None:
@@ -85,13 +94,13 @@ class P1Jacobian:
                 and np.all(lengths % 3 == 0)
                 and np.all(triples == triples[:, :1] + np.arange(3))
                 and np.all(triples[:, 0] % 3 == 0)):
-            raise ValueError("P1Jacobian: the pattern is not made of 3 x 3 blocks")
+            raise ValueError("P1Assembler: the pattern is not made of 3 x 3 blocks")
 
     def assemble(self, A_cells: np.ndarray) -> np.ndarray:
         """Values of the Jacobian from the tangents (ncells, 81) at the cells' points."""
         A_cells = np.ascontiguousarray(A_cells, dtype=np.float64)
         if A_cells.shape != (self.vol.size, 81):
-            raise ValueError(f"P1Jacobian: tangents of shape {A_cells.shape}, expected "
+            raise ValueError(f"P1Assembler: tangents of shape {A_cells.shape}, expected "
                              f"({self.vol.size}, 81)")
         self.values[:] = 0.0
         p = self.ffi.cast
@@ -101,6 +110,29 @@ class P1Jacobian:
                               p("int32_t *", self.pos.ctypes.data),
                               p("double *", self.values.ctypes.data))
         return self.values
+
+    def deformation(self, u: np.ndarray) -> np.ndarray:
+        """F = I + grad u per cell, (ncells, 9) row-major; ``u`` (nodes, 3) displacements."""
+        u = np.ascontiguousarray(u, dtype=np.float64)
+        F = np.empty((self.vol.size, 9))
+        p = self.ffi.cast
+        self.lib.p1_deformation(self.vol.size, p("int32_t *", self.cells.ctypes.data),
+                                p("double *", self.dN.ctypes.data),
+                                p("double *", u.ctypes.data), p("double *", F.ctypes.data))
+        return F
+
+    def forces(self, P: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """Internal forces (3 per node) from first Piola stresses (ncells, 9), into ``out``."""
+        P = np.ascontiguousarray(P, dtype=np.float64)
+        if P.shape != (self.vol.size, 9) or not (out.flags.c_contiguous
+                                                 and out.dtype == np.float64):
+            raise ValueError("P1Assembler.forces: P must be (ncells, 9), out contiguous float64")
+        out[:] = 0.0
+        p = self.ffi.cast
+        self.lib.p1_forces(self.vol.size, p("int32_t *", self.cells.ctypes.data),
+                           p("double *", self.dN.ctypes.data), p("double *", self.vol.ctypes.data),
+                           p("double *", P.ctypes.data), p("double *", out.ctypes.data))
+        return out
 
     def matrix(self) -> sp.csr_matrix:
         n = self.indptr.size - 1

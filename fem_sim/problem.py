@@ -242,13 +242,13 @@ class OgdenProblem:
         self._ksp = None
         self._ldlt: ldlt.SerialLDLT | None = None  # the one holding the last factorisation
         self._ldlts: dict[str, ldlt.SerialLDLT] = {}  # by precision
-        self._p1: p1.P1Jacobian | bool | None = None  # False: not used
+        self._p1: p1.P1Assembler | bool | None = None  # False: not used
         self.material: OgdenMaterial | None = None
         self.min_J = 1.0
         self._tangent_fresh = False
         self._factorized = False
         self._predicted_order = 0
-        self._p1_jacobian()  # set-up of the C assembly (positions in the CSR pattern)
+        self._p1_assembler()  # set-up of the C assembly (positions in the CSR pattern)
 
     # ------------------------------------------------------------------------------------------
     # Pieces of one Newton iteration
@@ -260,8 +260,12 @@ class OgdenProblem:
         Collective (the verdict is reduced over the communicator).
         """
         dc.scatter_forward(self.u)
-        g = dc.eval_expression(self.grad_u, self.cells).reshape(-1, 9)
-        g[:, ::4] += 1.0  # F = I + grad u
+        p1a = self._p1_assembler()
+        if p1a is not None:  # one point per cell, cells in order: F straight from C
+            g = p1a.deformation(self.u.x.array.reshape(-1, 3))
+        else:
+            g = dc.eval_expression(self.grad_u, self.cells).reshape(-1, 9)
+            g[:, ::4] += 1.0  # F = I + grad u
         n = g.shape[0]
         if self._q_contiguous:
             out = (self.W_q.x.array[:n], self.P_q.x.array.reshape(-1, 9)[:n],
@@ -284,7 +288,11 @@ class OgdenProblem:
 
     def _residual(self, lam: float) -> float:
         """B = F_int(u) - lam f_ext with constrained rows zeroed; returns |b| (collective)."""
-        dc.assemble_vector(self.b, self.L)
+        p1a = self._p1_assembler()
+        if p1a is not None:
+            p1a.forces(self._cell_values(self.P_q, 9), self.b.array)
+        else:
+            dc.assemble_vector(self.b, self.L)
         self.b.axpy(-lam, self.f_ext)
         self.b.array[self._fixed_owned] = 0.0
         r = self.b.norm()
@@ -292,8 +300,17 @@ class OgdenProblem:
 
     def _energy(self, lam: float) -> float:
         """Potential energy: strain energy minus the work of the (dead) loads (collective)."""
-        return dc.assemble_scalar(self.energy_form, self.comm) - lam * self.f_ext.dot(
-            self.u.vector)
+        p1a = self._p1_assembler()
+        if p1a is not None:
+            strain = float(p1a.vol @ self._cell_values(self.W_q, 1)[:, 0])
+        else:
+            strain = dc.assemble_scalar(self.energy_form, self.comm)
+        return strain - lam * self.f_ext.dot(self.u.vector)
+
+    def _cell_values(self, q: dc.fem.Function, size: int) -> np.ndarray:
+        """Values of a one-point quadrature function, cell by cell: (ncells, size)."""
+        arr = q.x.array.reshape(-1, size)
+        return arr[: self.n_cells] if self._q_contiguous else arr[self.q_dofs]
 
     def _jacobian(self, lift: float) -> None:
         """Assemble J and the right-hand side -R (collective).
@@ -304,10 +321,9 @@ class OgdenProblem:
         """
         if not self._tangent_fresh:
             self._update_points(tangent=True)  # the tangent is evaluated only when needed
-        p1 = self._p1_jacobian()
+        p1 = self._p1_assembler()
         if p1 is not None:
-            A = self.A_q.x.array.reshape(-1, 81)
-            p1.assemble(A[: self.n_cells] if self._q_contiguous else A[self.q_dofs])
+            p1.assemble(self._cell_values(self.A_q, 81))
             self.b.copy(self.rhs)
             self.rhs.scale(-1.0)
             p1.apply_dirichlet(self._fixed_owned, self.rhs.array if lift else None,
@@ -321,9 +337,10 @@ class OgdenProblem:
         else:
             self.A.zeroRowsColumns(self._fixed_global, diag=1.0)
 
-    def _p1_jacobian(self) -> p1.P1Jacobian | None:
-        """The C assembly of P1 one-point Jacobians into CSR arrays, used with the serial
-        factorisation (:mod:`fem_sim.p1`); None when the dolfinx/PETSc path is used.
+    def _p1_assembler(self) -> p1.P1Assembler | None:
+        """The C routines for P1 cells with one quadrature point (:mod:`fem_sim.p1`: F from u,
+        internal forces, the Jacobian into CSR arrays), used with the serial factorisation;
+        None when dolfinx assembles (P2, several ranks, PETSc's solvers).
         """
         if self._p1 is None:
             if not (self._own_mode and self.degree == 1 and self.qdeg == 1
@@ -334,14 +351,14 @@ class OgdenProblem:
                 indptr, indices, _ = self.A.getValuesCSR()
                 cells = self.V.dofmap.list.array.reshape(-1, 4)[: self.n_cells]
                 coords = self.V.tabulate_dof_coordinates()
-                self._p1 = p1.P1Jacobian(cells, coords, indptr, indices)
+                self._p1 = p1.P1Assembler(cells, coords, indptr, indices)
         return self._p1 or None
 
     def jacobian_csr(self):
         """The last assembled Jacobian (with the constraint rows/columns) as CSR arrays
         (indptr, indices, values); one process only.
         """
-        p1j = self._p1_jacobian()
+        p1j = self._p1_assembler()
         if p1j is not None:
             return p1j.indptr, p1j.indices, p1j.values
         return self.A.getValuesCSR()

@@ -54,12 +54,13 @@ def test_assembled_jacobian_is_the_residual_derivative(degree, state):
     assert err <= 1e-7 * np.abs(Jv[free]).max(), err
 
 
-def test_c_assembly_of_p1_jacobians_matches_dolfinx():
-    """The serial solver's C assembly (fem_sim/p1.py) gives dolfinx's matrix entry by entry,
-    before and after the constraint rows/columns are replaced by identity."""
+def test_c_assembly_of_p1_matches_dolfinx():
+    """The serial solver's C routines (fem_sim/p1.py) give dolfinx's deformation gradients,
+    internal forces, energy, and Jacobian entry by entry, before and after the constraint
+    rows/columns are replaced by identity."""
     g = make_phantom(3, 15.0)
     prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, degree=1)
-    assert prob._p1_jacobian() is not None, "the C assembly is not used on one process"
+    assert prob._p1_assembler() is not None, "the C assembly is not used on one process"
     prob.material = MAT
     prob._set_constraints([Constraint(g.regions["vena_cava"])])
     prob._set_loads([])
@@ -67,9 +68,19 @@ def test_c_assembly_of_p1_jacobians_matches_dolfinx():
     prob.u.x.array[:] = (0.1 * np.sin(X[:, [1, 2, 0]] / 7.0) + 0.02 * X).ravel()
     assert prob._update_points(tangent=True)
     prob._residual(0.0)
+    grad = dc.eval_expression(prob.grad_u, prob.cells).reshape(-1, 9)
+    F = prob._p1_assembler().deformation(prob.u.x.array.reshape(-1, 3))
+    np.testing.assert_allclose(F - np.eye(3).ravel(), grad, rtol=0, atol=1e-13)
+    ours_b = prob.b.array.copy()
+    dc.assemble_vector(prob.b, prob.L)
+    ref_b = prob.b.array.copy()
+    ref_b[prob._fixed_owned] = 0.0
+    assert np.abs(ours_b - ref_b).max() <= 1e-13 * np.abs(ref_b).max()
+    assert prob._energy(0.0) == pytest.approx(
+        dc.assemble_scalar(prob.energy_form, MPI.COMM_WORLD), rel=1e-13)
     dc.assemble_matrix(prob.A, prob.a)
     ref_pattern = prob.A.getValuesCSR()
-    p1j = prob._p1_jacobian()
+    p1j = prob._p1_assembler()
     A_q = prob.A_q.x.array.reshape(-1, 81)
     p1j.assemble(A_q[: prob.n_cells] if prob._q_contiguous else A_q[prob.q_dofs])
     ours, ref = ldlt.csr(p1j.indptr, p1j.indices, p1j.values), ldlt.csr(*ref_pattern)
