@@ -287,3 +287,31 @@ def test_float32_factorisation_falls_back_to_float64_when_it_cannot_solve():
     assert out["one_iteration"].double_fallbacks > 0
     ref = out["default"].displacement[-1]
     assert np.abs(out["one_iteration"].displacement[-1] - ref).max() <= 1e-8 * np.abs(ref).max()
+
+
+def test_petsc_path_counts_every_factorisation_and_hermite_needs_fewer():
+    """With PETSc's MUMPS, the Hermite predictor's tangents are solved by GMRES with the kept
+    factorisation (PCSetReusePreconditioner): PETSc's own count of numerical Cholesky
+    factorisations equals the solver's, so chord steps and tangents never refactorise
+    silently; and Hermite needs fewer than the tangent predictor."""
+    from petsc4py import PETSc
+
+    PETSc.Log.begin()
+    event = PETSc.Log.Event("MatCholFctrNum")
+    g = make_phantom(0, 20.0)
+    node = int(np.argmax(g.points[:, 0]))
+    counted, sols = {}, {}
+    for pred in ("tangent", "hermite"):
+        before = event.getPerfInfo()["count"]
+        prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells,
+                            settings={"factorization": "petsc", "predictor": pred,
+                                      "rtol": 1e-10}, prefix=f"cnt_{pred}_")
+        sols[pred] = prob.solve(MAT, [Constraint(g.regions["vena_cava"])],
+                                [NodalLoad([node], [[0.0, -0.3, -0.3]])],
+                                np.linspace(0.1, 1.0, 10))
+        assert sols[pred].status == "ok"
+        counted[pred] = event.getPerfInfo()["count"] - before
+        assert counted[pred] == sols[pred].factorizations, (pred, counted[pred])
+    assert counted["hermite"] < counted["tangent"], counted
+    ref = sols["tangent"].displacement[-1]
+    assert np.abs(sols["hermite"].displacement[-1] - ref).max() <= 1e-8 * np.abs(ref).max()
