@@ -17,6 +17,7 @@ Only for one process: under MPI with more ranks per simulation the solver uses P
 from __future__ import annotations
 
 import atexit
+import functools
 import weakref
 
 import numpy as np
@@ -39,6 +40,7 @@ MPI_INCLUDE = ["/usr/lib/x86_64-linux-gnu/openmpi/include",
                "/usr/lib/x86_64-linux-gnu/openmpi/include/openmpi"]
 
 
+@functools.lru_cache(maxsize=1)
 def _mpi_flags() -> dict:
     """Include and library directories of the MPI that mpi4py uses (``mpicc --showme``)."""
     import shutil
@@ -55,15 +57,17 @@ def _mpi_flags() -> dict:
             libdirs = [a[2:] for a in link if a.startswith("-L")] or libdirs
         except (OSError, subprocess.SubprocessError):
             pass
-    return {"include_dirs": inc, "library_dirs": libdirs}
+    return {"include_dirs": tuple(inc), "library_dirs": tuple(libdirs)}
 
 
 def load():
     """The compiled module, or None (then the solver uses PETSc's MUMPS, with a warning)."""
+    flags = _mpi_flags()  # asked once per process (mpicc --showme)
     return cext.load("ldlt", SOURCE, CDEF, "using PETSc's MUMPS (PORD ordering, slower)",
                      extra_compile_args=["-O2", "-std=c99"],
                      libraries=["dmumps", "smumps", "mumps_common", "metis", "mpi"],
-                     **_mpi_flags())
+                     include_dirs=list(flags["include_dirs"]),
+                     library_dirs=list(flags["library_dirs"]))
 
 
 # MUMPS instances must be freed before MPI_Finalize: mpi4py finalises MPI in an atexit hook
