@@ -51,8 +51,9 @@ def test_metis_ordering_needs_fewer_operations_than_mumps_default():
     A = laplacian_3d(12)
     nd = ldlt.SerialLDLT("double", bs=3)
     nd.factor(A.indptr, A.indices, A.data)
-    own = ldlt.SerialLDLT("double", bs=1)  # block size 1 on purpose: no block ordering
-    own.bs = 7  # 3 * 12^3 is not a multiple of 7: MUMPS orders it itself (AMD)
+    # A block size that does not divide n = 3 * 12^3 = 5184: no METIS ordering is computed and
+    # MUMPS orders the matrix itself (AMD).
+    own = ldlt.SerialLDLT("double", bs=7)
     own.factor(A.indptr, A.indices, A.data)
     assert nd.flops < 0.8 * own.flops, (nd.flops, own.flops)
     b = np.ones(A.shape[0])
