@@ -120,7 +120,6 @@ class SerialLDLT:
         if self._h == self.ffi.NULL:
             raise MemoryError("ldlt_new failed")
         self._pattern = None
-        self.n = 0
         _live.add(self)
         self.analyses = self.factorizations = 0
 
@@ -166,7 +165,6 @@ class SerialLDLT:
         self.lib.ldlt_analyse(self._h, n, self._irn.size, self._ptr(self._irn, "int *"),
                               self._ptr(self._jcn, "int *"), perm_in, 100)
         self._check("analysis")
-        self.n = n
         self._pattern = (indptr.copy(), indices.copy())
         self.analyses += 1
 
@@ -175,7 +173,6 @@ class SerialLDLT:
                 np.array_equal(self._pattern[0], indptr)
                 and np.array_equal(self._pattern[1], indices)):
             self._analyse(indptr, indices)
-        self._values = values.copy()  # the caller may reuse its array
         self._a = np.ascontiguousarray(values[self._upper], dtype=self.dtype)
         self.lib.ldlt_factor(self._h, self._ptr(self._a, "void *"))
         self.factorizations += 1
@@ -188,14 +185,13 @@ class SerialLDLT:
         self._check("solve")
         return x.astype(np.float64)
 
-    def solve_refined(self, b: np.ndarray, rtol: float, maxit: int = 30):
-        """Solve to |b - A x| <= rtol |b| for the last factorised A, in float64: GMRES
-        preconditioned (on the right) by the factors. Double-precision factors usually need
-        one iteration, single-precision ones 2-4 (each contracts the residual ~1e3 times).
+    def solve_refined(self, A, b: np.ndarray, rtol: float, maxit: int = 30):
+        """Solve A x = b to |b - A x| <= rtol |b| in float64: GMRES preconditioned (on the
+        right) by the factors. A is the factorised matrix (double-precision factors usually
+        need one iteration, single-precision ones 2-4: each contracts the residual ~1e3 times)
+        or a nearby one (the factors of an older Jacobian for a newer one).
         Returns (x, iterations, converged).
         """
-        indptr, indices, values = self._pattern[0], self._pattern[1], self._values
-        A = csr(indptr, indices, values)
         return gmres(A.dot, self.solve, b, rtol, maxit)
 
     @property

@@ -519,7 +519,8 @@ class OgdenProblem:
                 why = str(exc)
                 continue
             stats["factorizations"] += 1
-            x, its, ok = solver.solve_refined(self.rhs.array_r, rtol, self.settings["max_krylov"])
+            x, its, ok = solver.solve_refined(ldlt.csr(indptr, indices, values),
+                                              self.rhs.array_r, rtol, self.settings["max_krylov"])
             stats["krylov"] += its
             if ok:
                 self._ldlt = solver
@@ -911,10 +912,10 @@ class OgdenProblem:
         self.rhs.array[self._fixed_owned] = 0.0
         n = self.rhs.array_r.size
         done = False
-        if self._ldlt is not None and self._ldlt.factorizations:
-            A = ldlt.csr(*self.jacobian_csr())
-            x, its, done = ldlt.gmres(A.dot, self._ldlt.solve, self.rhs.array_r,
-                                      TANGENT_RTOL, TANGENT_MAX_GMRES)
+        if self._ldlt is not None:  # the factors of an older Jacobian precondition this one
+            x, its, done = self._ldlt.solve_refined(ldlt.csr(*self.jacobian_csr()),
+                                                    self.rhs.array_r, TANGENT_RTOL,
+                                                    TANGENT_MAX_GMRES)
             stats["krylov"] += its
             if done:
                 self.du.array[:] = x

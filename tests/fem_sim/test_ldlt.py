@@ -39,7 +39,7 @@ def test_solves_match_dense_and_inertia_is_exact(precision, shift):
     cond = np.linalg.cond(dense)
     eps = np.finfo(np.float32 if precision == "single" else np.float64).eps
     assert err <= 50 * cond * eps, (err, cond)
-    x, its, ok = solver.solve_refined(b, 1e-12)
+    x, its, ok = solver.solve_refined(A, b, 1e-12)
     assert ok and its <= (2 if precision == "double" else 6), its
     assert np.linalg.norm(A @ x - b) <= 1e-12 * np.linalg.norm(b)
     # LDL^T gives the inertia: negative pivots = negative eigenvalues
