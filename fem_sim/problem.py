@@ -242,13 +242,12 @@ class OgdenProblem:
         self._ksp = None
         self._ldlt: ldlt.SerialLDLT | None = None  # the one holding the last factorisation
         self._ldlts: dict[str, ldlt.SerialLDLT] = {}  # by precision
-        self._p1: p1.P1Assembler | bool | None = None  # False: not used
         self.material: OgdenMaterial | None = None
         self.min_J = 1.0
         self._tangent_fresh = False
         self._factorized = False
         self._predicted_order = 0
-        self._p1_assembler()  # set-up of the C assembly (positions in the CSR pattern)
+        self._p1 = self._build_p1()  # C routines for P1 one-point cells, or None
 
     # ------------------------------------------------------------------------------------------
     # Pieces of one Newton iteration
@@ -260,9 +259,8 @@ class OgdenProblem:
         Collective (the verdict is reduced over the communicator).
         """
         dc.scatter_forward(self.u)
-        p1a = self._p1_assembler()
-        if p1a is not None:  # one point per cell, cells in order: F straight from C
-            g = p1a.deformation(self.u.x.array.reshape(-1, 3))
+        if self._p1 is not None:  # one point per cell, cells in order: F straight from C
+            g = self._p1.deformation(self.u.x.array.reshape(-1, 3))
         else:
             g = dc.eval_expression(self.grad_u, self.cells).reshape(-1, 9)
             g[:, ::4] += 1.0  # F = I + grad u
@@ -288,9 +286,8 @@ class OgdenProblem:
 
     def _residual(self, lam: float) -> float:
         """B = F_int(u) - lam f_ext with constrained rows zeroed; returns |b| (collective)."""
-        p1a = self._p1_assembler()
-        if p1a is not None:
-            p1a.forces(self._cell_values(self.P_q, 9), self.b.array)
+        if self._p1 is not None:
+            self._p1.forces(self._cell_values(self.P_q, 9), self.b.array)
         else:
             dc.assemble_vector(self.b, self.L)
         self.b.axpy(-lam, self.f_ext)
@@ -300,9 +297,8 @@ class OgdenProblem:
 
     def _energy(self, lam: float) -> float:
         """Potential energy: strain energy minus the work of the (dead) loads (collective)."""
-        p1a = self._p1_assembler()
-        if p1a is not None:
-            strain = float(p1a.vol @ self._cell_values(self.W_q, 1)[:, 0])
+        if self._p1 is not None:
+            strain = float(self._p1.vol @ self._cell_values(self.W_q, 1)[:, 0])
         else:
             strain = dc.assemble_scalar(self.energy_form, self.comm)
         return strain - lam * self.f_ext.dot(self.u.vector)
@@ -321,12 +317,11 @@ class OgdenProblem:
         """
         if not self._tangent_fresh:
             self._update_points(tangent=True)  # the tangent is evaluated only when needed
-        p1 = self._p1_assembler()
-        if p1 is not None:
-            p1.assemble(self._cell_values(self.A_q, 81))
+        if self._p1 is not None:
+            self._p1.assemble(self._cell_values(self.A_q, 81))
             self.b.copy(self.rhs)
             self.rhs.scale(-1.0)
-            p1.apply_dirichlet(self._fixed_owned, self.rhs.array if lift else None,
+            self._p1.apply_dirichlet(self._fixed_owned, self.rhs.array if lift else None,
                                self.lift.array_r if lift else None)
             return
         dc.assemble_matrix(self.A, self.a)
@@ -337,30 +332,26 @@ class OgdenProblem:
         else:
             self.A.zeroRowsColumns(self._fixed_global, diag=1.0)
 
-    def _p1_assembler(self) -> p1.P1Assembler | None:
+    def _build_p1(self) -> p1.P1Assembler | None:
         """The C routines for P1 cells with one quadrature point (:mod:`fem_sim.p1`: F from u,
         internal forces, the Jacobian into CSR arrays), used with the serial factorisation;
         None when dolfinx assembles (P2, several ranks, PETSc's solvers).
         """
-        if self._p1 is None:
-            if not (self._own_mode and self.degree == 1 and self.qdeg == 1
-                    and p1.load() is not None):
-                self._p1 = False
-            else:
-                dc.assemble_matrix(self.A, self.a)  # the pattern (an empty matrix has none)
-                indptr, indices, _ = self.A.getValuesCSR()
-                cells = self.V.dofmap.list.array.reshape(-1, 4)[: self.n_cells]
-                coords = self.V.tabulate_dof_coordinates()
-                self._p1 = p1.P1Assembler(cells, coords, indptr, indices)
-        return self._p1 or None
+        if not (self._own_mode and self.degree == 1 and self.qdeg == 1
+                and p1.load() is not None):
+            return None
+        dc.assemble_matrix(self.A, self.a)  # the pattern (an empty matrix has none)
+        indptr, indices, _ = self.A.getValuesCSR()
+        cells = self.V.dofmap.list.array.reshape(-1, 4)[: self.n_cells]
+        coords = self.V.tabulate_dof_coordinates()
+        return p1.P1Assembler(cells, coords, indptr, indices)
 
     def jacobian_csr(self):
         """The last assembled Jacobian (with the constraint rows/columns) as CSR arrays
         (indptr, indices, values); one process only.
         """
-        p1j = self._p1_assembler()
-        if p1j is not None:
-            return p1j.indptr, p1j.indices, p1j.values
+        if self._p1 is not None:
+            return self._p1.indptr, self._p1.indices, self._p1.values
         return self.A.getValuesCSR()
 
     def _linear_solver(self) -> PETSc.KSP:
@@ -460,6 +451,7 @@ class OgdenProblem:
         s = self.settings
         if self._own_mode:
             self._solve_own(stats, eta or s["krylov_rtol"])
+            self._factorized = True
             return
         ksp = self._linear_solver()
         ksp.setTolerances(rtol=eta or s["krylov_rtol"], atol=0.0, max_it=s["max_krylov"])
@@ -493,6 +485,7 @@ class OgdenProblem:
                               "iterations)")
         if lagged and its > s["refactor_after"]:
             stats["refactor_next"] = True
+        self._factorized = True
         self.du.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
 
     def _solve_own(self, stats: dict, rtol: float) -> None:
@@ -599,7 +592,6 @@ class OgdenProblem:
             eta = s["krylov_rtol"] if gap > 0 else min(
                 1e-2, max(s["krylov_rtol"], 0.1 * tol / max(r, 1e-300)))
             self._solve_linear(stats, eta)
-            self._factorized = True
             u0 = u.copy()
             # Merit: the potential energy (Armijo along du, the natural merit function of
             # hyperelasticity: full Newton steps that first raise |R| are still taken), or |R|.
@@ -928,7 +920,6 @@ class OgdenProblem:
                 log.debug("no tangent at load %.4g (%s)", lam, exc)
                 self._hermite = []
                 return
-            self._factorized = True
         t = self.du.array_r[:n].copy()
         self._hermite = (self._hermite + [(lam, self.u.x.array[:n].copy(), t)])[
             -self.settings["predictor_order"]:]

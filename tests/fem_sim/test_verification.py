@@ -60,7 +60,7 @@ def test_c_assembly_of_p1_matches_dolfinx():
     rows/columns are replaced by identity."""
     g = make_phantom(3, 15.0)
     prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, degree=1)
-    assert prob._p1_assembler() is not None, "the C assembly is not used on one process"
+    assert prob._p1 is not None, "the C assembly is not used on one process"
     prob.material = MAT
     prob._set_constraints([Constraint(g.regions["vena_cava"])])
     prob._set_loads([])
@@ -69,7 +69,7 @@ def test_c_assembly_of_p1_matches_dolfinx():
     assert prob._update_points(tangent=True)
     prob._residual(0.0)
     grad = dc.eval_expression(prob.grad_u, prob.cells).reshape(-1, 9)
-    F = prob._p1_assembler().deformation(prob.u.x.array.reshape(-1, 3))
+    F = prob._p1.deformation(prob.u.x.array.reshape(-1, 3))
     np.testing.assert_allclose(F - np.eye(3).ravel(), grad, rtol=0, atol=1e-13)
     ours_b = prob.b.array.copy()
     dc.assemble_vector(prob.b, prob.L)
@@ -80,7 +80,7 @@ def test_c_assembly_of_p1_matches_dolfinx():
         dc.assemble_scalar(prob.energy_form, MPI.COMM_WORLD), rel=1e-13)
     dc.assemble_matrix(prob.A, prob.a)
     ref_pattern = prob.A.getValuesCSR()
-    p1j = prob._p1_assembler()
+    p1j = prob._p1
     A_q = prob.A_q.x.array.reshape(-1, 81)
     p1j.assemble(A_q[: prob.n_cells] if prob._q_contiguous else A_q[prob.q_dofs])
     ours, ref = ldlt.csr(p1j.indptr, p1j.indices, p1j.values), ldlt.csr(*ref_pattern)
