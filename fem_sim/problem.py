@@ -883,10 +883,9 @@ class OgdenProblem:
     def _hermite_on(self) -> bool:
         """The Hermite predictor needs cheap tangents at converged states: GMRES with the last
         factorisation, from fem_sim.ldlt or from PETSc's MUMPS with the preconditioner kept
-        (measured on the 3k-node phantom with two ranks: 11.8 factorisations per simulation
-        instead of 15.0 with "tangent"; a new factorisation per tangent made it 21.8). With
-        GAMG, a lagged factorisation or a user KSP it means "tangent"; with prescribed
-        displacements, "extrapolate".
+        (``bench/bench_predictor.py``, 3k-node phantom, two ranks: 11.5 factorisations per
+        simulation instead of 13.9 with "tangent"). With GAMG, a lagged factorisation or a
+        user KSP it means "tangent"; with prescribed displacements, "extrapolate".
         """
         s = self.settings
         return (s["predictor"] == "hermite" and self._value_norm == 0.0
