@@ -18,12 +18,13 @@ Design (measured choices; bench/ has the numbers):
 * Each Newton iteration assembles the exact Jacobian and factorises it. On one process the
   factorisation is MUMPS' LDL^T through its C interface, ordered with METIS nested dissection
   and in float32, the Newton system then solved to full accuracy by GMRES preconditioned with
-  it (:mod:`fem_sim.ldlt`: 0.6 s instead of 1.1 s per factorisation on the real liver at
-  15k nodes); on several processes PETSc's MUMPS LDL^T (PORD ordering). Optionally
-  (``lag_factorization``) the factorisation is lagged and used as a GMRES preconditioner;
-  measured: slower at 15k nodes on the real liver, where the strongly nonlinear point-load
-  response makes stale factorisations poor preconditioners (5 of 10 solves needed a new one
-  after 12 iterations). So it is off by default.
+  it (:mod:`fem_sim.ldlt`: 0.65 s instead of PETSc's 1.26 s per factorisation on the real
+  liver at 15k nodes, ``bench/bench_jacobian.py``); on several processes PETSc's MUMPS LDL^T
+  (PORD ordering). Optionally (``lag_factorization``) the factorisation is lagged and used
+  as a GMRES preconditioner; in development runs it was slower at 15k nodes on the real
+  liver, where the strongly nonlinear point-load response makes stale factorisations poor
+  preconditioners (5 of 10 solves needed a new one after 12 iterations). So it is off by
+  default.
 * Between Newton steps, chord steps (back-solves with the last factorisation) are taken while
   they contract |R| 10x each (see :meth:`OgdenProblem._newton`).
 * Load steps start from a Hermite predictor: at every converged state u_k the tangent
