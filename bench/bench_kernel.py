@@ -1,5 +1,5 @@
-"""Ogden point kernel: the compiled C kernel (fem_sim.ogden_c) against the numpy reference
-(fem_sim.ogden.ogden_point_kernel), stress only and stress + tangent, at 75k points (about
+"""Ogden point kernel: the compiled C kernel (fem_sim.material.ogden_c) against the numpy reference
+(fem_sim.material.ogden.ogden_point_kernel), stress only and stress + tangent, at 75k points (about
 the quadrature points of the 15k-node liver at P1). Median of --runs calls each; prints a table
 and the ratios, and the largest relative difference of the two kernels' outputs.
 
@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from fem_sim.ogden import OgdenMaterial, ogden_point_kernel, point_kernel
+from fem_sim.material.ogden import OgdenMaterial, ogden_point_kernel, point_kernel
 
 
 def median_time(fn, runs: int) -> float:

@@ -39,7 +39,7 @@ def main() -> int:
     ap.add_argument("--mesh-size", type=float, default=8.0)
     ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "population"))
     a = ap.parse_args()
-    from fem_sim.population_cli import run
+    from fem_sim.batch.population_cli import run
 
     with tempfile.TemporaryDirectory() as tmp:
         scene = Path(tmp) / "population_bench.toml"

@@ -19,7 +19,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fem_sim import Constraint, NodalLoad, OgdenMaterial, OgdenProblem
-from fem_sim.phantom import make_phantom
+from fem_sim.geometry.phantom import make_phantom
 
 
 def main() -> None:

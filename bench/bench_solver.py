@@ -30,7 +30,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fem_sim import Constraint, NodalLoad, OgdenMaterial, OgdenProblem
-from fem_sim import dolfinx_compat as dc
+from fem_sim.solver import dolfinx_compat as dc
 
 SOFA = Path(__file__).resolve().parents[2] / "shared" / "data" / "livers" / "sofa_liver.vtk"
 
@@ -116,10 +116,10 @@ def our_simulation(g, fixed, node, force, mat, fractions):
 
 def load_mesh(kind: str, h: float):
     if kind == "sofa":
-        from fem_sim.surface_import import mesh_surface_file
+        from fem_sim.geometry.surfaces import mesh_surface_file
 
         return mesh_surface_file(SOFA, h), "sofa_liver.vtk"
-    from fem_sim.phantom import make_phantom
+    from fem_sim.geometry.phantom import make_phantom
 
     return make_phantom(0, h), "phantom seed 0"
 

@@ -24,6 +24,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from data_spec import solver_settings
+
 SCENE_SCHEMA_VERSION = 1
 
 _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
@@ -125,15 +127,6 @@ def _table(v: Any) -> str | None:
     return None if isinstance(v, dict) else "a table"
 
 
-def _petsc_options(v: Any) -> str | None:
-    if not isinstance(v, dict):
-        return "a table of PETSc option -> value"
-    for k, x in v.items():
-        if not isinstance(x, (str, int, float, bool)):
-            return f"a string/number/boolean value for PETSc option {k!r}"
-    return None
-
-
 def _output_nodes(v: Any) -> str | None:
     if v in ("all", "surface"):
         return None
@@ -166,6 +159,14 @@ class Key:
 
 REQUIRED = object()
 OPTIONAL = None  # a key with default None is optional and only checked when present
+
+def _solver_keys() -> dict[str, Key]:
+    """The scene's solver keys: the ``scene=True`` fields of :class:`SolverSettings`, with their
+    defaults, checks and documentation (one source for the scene and the solver).
+    """
+    return {f.name: Key(lambda v, f=f: solver_settings.check(f, v), solver_settings.default(f),
+                        f.metadata["doc"]) for f in solver_settings.fields(scene_only=True)}
+
 
 _SCHEMA: dict[str, dict[str, Key]] = {
     "scene": {
@@ -246,22 +247,7 @@ _SCHEMA: dict[str, dict[str, Key]] = {
     "solver": {
         "degree": Key(_int(1, 2), 1, "Lagrange degree of the displacement (1 or 2)"),
         "quadrature_degree": Key(_int(1), OPTIONAL, "default: 1 for P1 (FEBio tet4), 2 for P2"),
-        "linear_solver": Key(_choice("mumps", "gamg"), "mumps",
-                             "mumps: direct (symmetric); gamg: CG + GAMG, rigid-body modes"),
-        "factorization": Key(_choice("auto", "single", "double", "petsc"), "auto",
-                             "mumps: single (float32 LDL^T, METIS, GMRES-refined) or double "
-                             "(float64) on one rank; petsc (PETSc's MUMPS); auto: single on "
-                             "one rank, petsc on several"),
-        "rtol": Key(_num(0.0), 1e-9, "Newton relative residual tolerance"),
-        "atol": Key(_num(0.0), 1e-10, "Newton absolute residual tolerance, N"),
-        "max_iterations": Key(_int(1), 25, "Newton iterations per attempt"),
-        "max_cutbacks": Key(_int(0), 8, "increment halvings allowed per output step"),
-        "predictor": Key(_choice("hermite", "tangent", "extrapolate", "previous"), "hermite",
-                         "start of each load step: Hermite polynomial through the last "
-                         "converged states and their tangents, tangent integration, "
-                         "extrapolation of states, or the last state"),
-        "petsc_options": Key(_petsc_options, {}, "extra PETSc options for PETSc's solvers "
-                             "(factorization petsc, gamg); a pc_type here selects PETSc's path"),
+        **_solver_keys(),
     },
     "surrogate": {
         "node_fraction": Key(lambda v: None if _is_num(v) and 0 < v <= 1 else

@@ -27,7 +27,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["population"]:
-        from fem_sim.population_cli import main as population_main
+        from fem_sim.batch.population_cli import main as population_main
 
         return population_main(argv[1:])
     logging.getLogger().setLevel(logging.WARNING)  # FFCx's JIT logs to the root logger
@@ -54,11 +54,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "generate":
         if args.ranks_per_sim < 1:
             parser.error("--ranks-per-sim must be >= 1")
-        from fem_sim.generate import generate
+        from fem_sim.batch.generate import generate
 
         return generate(args.scene, args.out, args.ranks_per_sim, args.only,
                         args.retry_failed, progress=not args.no_progress)
-    from fem_sim.summary import summary
+    from fem_sim.batch.summary import summary
 
     return summary(args.directory, png=args.png)
 

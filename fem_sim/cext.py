@@ -21,6 +21,7 @@ from pathlib import Path
 log = logging.getLogger(__name__)
 
 _loaded: dict[str, object] = {}
+_errors: dict[str, str] = {}  # why a module could not be built
 
 
 def cache_dir() -> Path:
@@ -64,6 +65,12 @@ def load(stem: str, source_file: Path, cdef: str, fallback: str, **build):
         spec.loader.exec_module(mod)
     except Exception as exc:  # no compiler, missing headers, read-only cache, ...
         mod = None
+        _errors[stem] = f"{type(exc).__name__}: {exc}"
         log.warning("fem_sim: compiled %s unavailable (%s); %s", stem, exc, fallback)
     _loaded[stem] = mod
     return mod
+
+
+def why_unavailable(stem: str) -> str | None:
+    """Why :func:`load` returned None for ``stem`` (None if it loaded or was never tried)."""
+    return _errors.get(stem)

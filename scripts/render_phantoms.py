@@ -5,7 +5,7 @@ region in blue. Regenerate with ``make docs``.
 import sys
 from pathlib import Path
 
-from fem_sim.phantom import make_phantom, mesh_volume
+from fem_sim.geometry.phantom import make_phantom, mesh_volume
 from fem_sim.render import render_geometries
 
 out = Path(sys.argv[1] if len(sys.argv) > 1 else "docs/phantoms.png")

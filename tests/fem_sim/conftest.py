@@ -8,6 +8,34 @@ logging.getLogger().setLevel(logging.WARNING)
 
 
 @pytest.fixture(scope="session")
+def compiled():
+    """``compiled(name)`` loads a C extension ("ogden", "p1", "ldlt") or skips with the reason
+    when no C compiler is installed; with a compiler, a failed build fails the test.
+    """
+    import importlib
+    import shutil
+    import sysconfig
+
+    from fem_sim import cext
+
+    modules = {"ogden": "fem_sim.material.ogden_c", "p1": "fem_sim.solver.p1",
+               "ldlt": "fem_sim.solver.ldlt"}
+
+    def load(name: str):
+        mod = importlib.import_module(modules[name]).load()
+        if mod is None:
+            cc = (sysconfig.get_config_var("CC") or "cc").split()[0]
+            if shutil.which(cc) is None:
+                pytest.skip(f"no C compiler ({cc}): the compiled {name} kernel cannot be "
+                            f"built here, the solver uses its fallback")
+            pytest.fail(f"{cc} is installed but the {name} extension did not build: "
+                        f"{cext.why_unavailable(name)}")
+        return mod
+
+    return load
+
+
+@pytest.fixture(scope="session")
 def comm():
     from mpi4py import MPI
 

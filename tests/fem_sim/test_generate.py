@@ -1,5 +1,5 @@
 """Batch generation under mpirun: same shards for any rank layout, resumable after SIGKILL,
-failures recorded without killing the batch, bad scenes rejected fast on every rank."""
+failures recorded without killing the batch, bad scenes rejected on every rank before any work."""
 
 import os
 import shutil
@@ -15,6 +15,8 @@ import pytest
 
 from data_spec import list_shards, read_shard, validate_dataset
 from data_spec.atomic import leftover_temporaries
+
+pytestmark = pytest.mark.mpi  # every test here spawns mpirun
 
 ROOT = Path(__file__).parents[2]
 TINY = ROOT / "data_spec" / "scenes" / "tiny_scene1.toml"
@@ -82,6 +84,7 @@ def test_rerun_skips_valid_and_redoes_corrupt(reference, tmp_path):
         np.testing.assert_allclose(b[k], a[k], rtol=0, atol=1e-10 * np.abs(a[k]).max())
 
 
+@pytest.mark.slow
 def test_sigkill_midway_then_resume(reference, tmp_path):
     scene = tmp_path / "many.toml"
     scene.write_text(TINY.read_text().replace("n_simulations = 4", "n_simulations = 12"))
@@ -108,6 +111,7 @@ def test_sigkill_midway_then_resume(reference, tmp_path):
         np.testing.assert_allclose(b[k], a[k], rtol=0, atol=1e-10 * np.abs(a[k]).max())
 
 
+@pytest.mark.slow
 def test_failing_case_is_recorded_and_batch_finishes(tmp_path):
     """A force far beyond what the soft liver can carry in the allowed cut-backs."""
     scene = tmp_path / "hard.toml"
@@ -129,14 +133,12 @@ def test_failing_case_is_recorded_and_batch_finishes(tmp_path):
     assert f"{len(failed)} simulated ({len(failed)} failed)" in retry.stdout
 
 
-def test_bad_scene_exits_nonzero_on_every_rank_quickly(tmp_path):
+def test_bad_scene_exits_nonzero_on_every_rank_before_any_work(tmp_path):
     scene = tmp_path / "bad.toml"
     scene.write_text(TINY.read_text().replace("magnitude = 0.4", "magnitude = -0.4"))
-    t0 = time.time()
-    res = generate(scene, tmp_path / "d", n=2)
+    res = generate(scene, tmp_path / "d", n=2)  # a hang would hit generate()'s timeout
     assert res.returncode != 0
     assert "loads.magnitude: expected a number > 0" in res.stderr
-    assert time.time() - t0 < 60
     assert not (tmp_path / "d" / "sims").exists()
     # the corrected scene is then accepted in the same directory
     scene.write_text(TINY.read_text())

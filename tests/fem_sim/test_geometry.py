@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from data_spec.geometry import geometry_problems
-from fem_sim.geometry_source import GeometryError
-from fem_sim.phantom import make_phantom, mesh_volume, phantom_parameters
-from fem_sim.surface_import import clean_surface, mesh_surface_file, read_vtk_polydata
+from fem_sim.geometry.phantom import make_phantom, mesh_volume, phantom_parameters
+from fem_sim.geometry.source import GeometryError
+from fem_sim.geometry.surfaces import clean_surface, mesh_surface_file, read_vtk_polydata
 
 SOFA = Path(__file__).resolve().parents[3] / "shared" / "data" / "livers" / "sofa_liver.vtk"
 
@@ -76,7 +76,7 @@ def test_volume_mesh_is_used_as_is_in_source_node_order(tmp_path, suffix):
     it gets the default vena_cava region on its surface."""
     import meshio
 
-    from fem_sim.geometry_source import read_any
+    from fem_sim.geometry.source import read_any
 
     g = make_phantom(1, 20.0)
     perm = np.random.default_rng(0).permutation(g.n_nodes)  # an arbitrary source order
@@ -95,7 +95,7 @@ def test_volume_mesh_is_used_as_is_in_source_node_order(tmp_path, suffix):
 def test_surface_files_are_remeshed(tmp_path, suffix):
     import meshio
 
-    from fem_sim.geometry_source import read_any
+    from fem_sim.geometry.source import read_any
 
     g = make_phantom(2, 10.0)
     path = tmp_path / f"liver{suffix}"

@@ -4,9 +4,9 @@
 import numpy as np
 import pytest
 
-from fem_sim.geometry_source import GeometryError
-from fem_sim.masks import clean_mask, mesh_mask, mesh_mask_file, read_mask, voxelize
-from fem_sim.phantom import make_phantom, mesh_volume
+from fem_sim.geometry.masks import clean_mask, mesh_mask, mesh_mask_file, read_mask, voxelize
+from fem_sim.geometry.phantom import make_phantom, mesh_volume
+from fem_sim.geometry.source import GeometryError
 from tests.fem_sim.test_geometry import SOFA, check_geometry
 
 pytest.importorskip("skimage")
@@ -37,6 +37,7 @@ def test_cleaning_removes_specks_and_fills_cavities():
     assert 0.92 * 30**3 <= int(out.sum()) <= 30**3
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("spacing", [[1.0, 1.0, 1.0], [0.8, 0.8, 2.0]])
 def test_phantom_mask_round_trip_keeps_the_volume(spacing, tmp_path):
     """Phantom -> voxels (anisotropic, like CT) -> .npz file -> mesh: volume within 3 %,
@@ -54,9 +55,10 @@ def test_phantom_mask_round_trip_keeps_the_volume(spacing, tmp_path):
     np.testing.assert_allclose(out.points.mean(axis=0), g.points.mean(axis=0), atol=3.0)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not SOFA.exists(), reason="shared/data/livers/sofa_liver.vtk not present")
 def test_real_liver_mask_keeps_the_volume(tmp_path):
-    from fem_sim.surface_import import mesh_surface_file
+    from fem_sim.geometry.surfaces import mesh_surface_file
 
     g = mesh_surface_file(SOFA, 8.0)
     vol = mesh_volume(g)

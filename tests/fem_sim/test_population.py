@@ -4,9 +4,9 @@ reconstructions and their IoU behave; the scene pipeline attaches and caches coe
 import numpy as np
 import pytest
 
-from fem_sim.masks import voxelize_surface
-from fem_sim.phantom import make_phantom
-from fem_sim.population import (
+from fem_sim.geometry.masks import voxelize_surface
+from fem_sim.geometry.phantom import make_phantom
+from fem_sim.geometry.population import (
     PLAIN,
     STAGED,
     attach_shape_coefficients,
@@ -42,6 +42,7 @@ def test_farthest_points_spread_out():
     assert d.min() > 0.1  # random 50 points would come much closer
 
 
+@pytest.mark.slow
 def test_cpd_recovers_a_known_smooth_deformation(phantom):
     """Register the phantom's surface onto its warped copy: the moved template surface lies
     on the warped surface (symmetric mean distance between the densely sampled surfaces; a
@@ -61,7 +62,7 @@ def test_cpd_recovers_a_known_smooth_deformation(phantom):
 
 
 def test_voxelised_surface_matches_the_tetrahedra(phantom):
-    from fem_sim.phantom import mesh_volume
+    from fem_sim.geometry.phantom import mesh_volume
 
     mask, _ = voxelize_surface(phantom.points, phantom.surface_triangles, 1.0)
     assert mask.sum() == pytest.approx(mesh_volume(phantom), rel=0.01)

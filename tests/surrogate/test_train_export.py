@@ -33,6 +33,9 @@ def test_beats_naive_on_held_out_simulations(run):
 
 
 def test_export_reloads_bitwise_in_a_fresh_process(run, tmp_path):
+    """Same inputs, same shapes, same machine: a fresh process gives the same bits. A
+    prediction of another shape (a subset of nodes, one case) may use other XLA kernels, so
+    it is compared with a float32 tolerance."""
     out, _ = run
     predict = load_predictor(out / "model")
     forces = np.array([[[0.1, -0.2, 0.3]], [[0.0, 0.0, -0.4]]])
@@ -49,7 +52,8 @@ def test_export_reloads_bitwise_in_a_fresh_process(run, tmp_path):
     assert here.dtype == np.float32 and here.shape == (2, 216, 3)
     assert np.array_equal(here, there)
     single = predict(forces[1], nodes[1], nodes=np.array([0, 7, 9]))
-    np.testing.assert_array_equal(single, here[1][[0, 7, 9]])
+    scale = np.abs(here).max()
+    np.testing.assert_allclose(single, here[1][[0, 7, 9]], rtol=1e-5, atol=1e-6 * scale)
 
 
 def test_predictor_rejects_bad_input(run):
@@ -80,7 +84,8 @@ def test_predictor_on_an_explicit_geometry_matches_the_embedded_one(run):
     predict = load_predictor(run[0] / "model")
     f, n = np.array([[0.1, 0.0, -0.3]]), np.array([11])
     same = predict(f, n, geometry=(predict.points, predict.fixed, None))
-    np.testing.assert_array_equal(same, predict(f, n))
+    ref = predict(f, n)
+    np.testing.assert_allclose(same, ref, rtol=1e-5, atol=1e-6 * np.abs(ref).max())
     with pytest.raises(ValueError, match="geometry: fixed_nodes"):
         predict(f, n, geometry=(predict.points, np.array([10**6]), None))
 

@@ -17,8 +17,7 @@ import numpy as np
 def run(scene_file, out, n_max: int = 40, overlap_livers: int | None = None,
         compare_plain: int = 0, progress: bool = True) -> int:
     from data_spec import SceneError, geometry_path, load_scene, write_geometry
-    from fem_sim.geometry_source import GeometryError, n_geometries, scene_geometry
-    from fem_sim.population import (
+    from fem_sim.geometry.population import (
         PLAIN,
         STAGED,
         build_population,
@@ -31,6 +30,7 @@ def run(scene_file, out, n_max: int = 40, overlap_livers: int | None = None,
         surface_samples,
         write_report,
     )
+    from fem_sim.geometry.source import GeometryError, n_geometries, scene_geometry
 
     out = Path(out)
     try:

@@ -13,7 +13,9 @@ from pathlib import Path
 import numpy as np
 
 from data_spec.geometry import Geometry, boundary_triangles
-from fem_sim.geometry_source import GeometryError
+from fem_sim.geometry.errors import GeometryError
+from fem_sim.geometry.meshing import gmsh_tetrahedra
+from fem_sim.geometry.regions import default_vena_cava
 
 
 def read_vtk_polydata(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
@@ -111,7 +113,6 @@ def mesh_closed_surface(points, tris, mesh_size: float, description: str = "") -
     """Tetrahedral mesh of the solid bounded by a clean closed surface (gmsh)."""
     import gmsh
 
-    from fem_sim.phantom import _tetrahedra
 
     gmsh.initialize([], readConfigFiles=False)
     try:
@@ -137,7 +138,7 @@ def mesh_closed_surface(points, tris, mesh_size: float, description: str = "") -
         except Exception as exc:
             raise GeometryError(f"{description}: gmsh could not mesh the volume ({exc}); "
                                 "self-intersecting surface?") from None
-        pts, cells = _tetrahedra()
+        pts, cells = gmsh_tetrahedra()
     finally:
         gmsh.finalize()
     if cells.size == 0:
@@ -157,12 +158,3 @@ def mesh_surface_file(path: str | Path, mesh_size: float, scale_to_mm: float = 1
     g = mesh_closed_surface(pts, tris, mesh_size, f"{Path(path).name}, mesh size {mesh_size}")
     g.regions["vena_cava"] = default_vena_cava(g, fixed_radius)
     return g
-
-
-def default_vena_cava(g: Geometry, radius: float = 25.0) -> np.ndarray:
-    """Surface nodes within ``radius`` mm of the most posterior (max y) surface point: the
-    default fixed region of an imported liver (its vena-cava side in the usual orientation).
-    """
-    surf = g.surface_nodes
-    top = surf[np.argmax(g.points[surf, 1])]
-    return surf[np.linalg.norm(g.points[surf] - g.points[top], axis=1) <= radius]

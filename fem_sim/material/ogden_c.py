@@ -1,6 +1,6 @@
 """The compiled Ogden point kernel (``ogden_kernel.c``), built with cffi at first use.
 
-Same formulas and the same outputs as :func:`fem_sim.ogden.ogden_point_kernel` (the numpy
+Same formulas and the same outputs as :func:`fem_sim.material.ogden.ogden_point_kernel` (the numpy
 reference, which the tests compare it with), about 10x faster: one pass per point instead of
 ~40 batched numpy operations, a 3x3 Jacobi eigen-solver instead of LAPACK's per-matrix calls.
 Measured at 75k points on this machine: ``bench/bench_kernel.py``.
@@ -38,7 +38,7 @@ def _ptr(ffi, arr: np.ndarray):
 
 def ogden_points(F: np.ndarray, c, m, K: float, volumetric: str, tangent: bool,
                  out: tuple | None = None):
-    """Compiled kernel; arguments and results as :func:`fem_sim.ogden.ogden_point_kernel`.
+    """Compiled kernel; arguments and results as :func:`fem_sim.material.ogden.ogden_point_kernel`.
 
     ``out`` = (W (n,), P (n, 9), A (n, 81) or None, J (n,)): C-contiguous float64 arrays to
     write into (for example views of quadrature-function arrays), instead of new ones.

@@ -12,10 +12,8 @@ import numpy as np
 
 from data_spec import Geometry, Scene, read_geometry
 from data_spec.geometry import boundary_triangles, geometry_problems
-
-
-class GeometryError(ValueError):
-    """A mesh file cannot be used; the message names the file and what is wrong."""
+from fem_sim.geometry.errors import GeometryError
+from fem_sim.geometry.regions import default_vena_cava
 
 
 def n_geometries(scene: Scene) -> int:
@@ -25,12 +23,12 @@ def n_geometries(scene: Scene) -> int:
 
 def scene_geometries(scene: Scene, cache=None, progress=None) -> list[Geometry]:
     """Every geometry of a scene; for a population, with its PCA shape coefficients
-    (:mod:`fem_sim.population`; ``cache``: an .npz file that keeps them between runs).
+    (:mod:`fem_sim.geometry.population`; ``cache``: an .npz file that keeps them between runs).
     """
     livers = [scene_geometry(scene, i) for i in range(n_geometries(scene))]
     g = scene["geometry"]
     if g["source"] == "population" and len(livers) > 1:
-        from fem_sim.population import attach_shape_coefficients
+        from fem_sim.geometry.population import attach_shape_coefficients
 
         attach_shape_coefficients(livers, g["pca_components"], cache=cache, progress=progress)
     return livers
@@ -40,11 +38,11 @@ def scene_geometry(scene: Scene, index: int = 0) -> Geometry:
     """Geometry ``index`` of the scene (0 unless the scene is a population)."""
     g = scene["geometry"]
     if g["source"] == "phantom":
-        from fem_sim.phantom import make_phantom
+        from fem_sim.geometry.phantom import make_phantom
 
         return make_phantom(g["phantom_seed"], g["mesh_size"])
     if g["source"] == "population":
-        from fem_sim.phantom import make_phantom
+        from fem_sim.geometry.phantom import make_phantom
 
         return make_phantom(g["population_seed"] + index, g["mesh_size"])
     return read_any(g["path"], g["mesh_size"], g["scale_to_mm"], g.get("spacing"))
@@ -56,16 +54,16 @@ MASKS = (".npy", ".npz", ".nii", ".nii.gz")
 
 def read_any(path, mesh_size: float, scale_to_mm: float = 1.0, spacing=None) -> Geometry:
     """A liver from a file, by kind: a segmentation mask (meshed through
-    :mod:`fem_sim.masks`), a closed surface (remeshed at ``mesh_size``), or a volume mesh /
+    :mod:`fem_sim.geometry.masks`), a closed surface (remeshed at ``mesh_size``), or a volume mesh /
     data_spec geometry (used as is, node order kept).
     """
     name = str(path).lower()
     if name.endswith(MASKS):
-        from fem_sim.masks import mesh_mask_file
+        from fem_sim.geometry.masks import mesh_mask_file
 
         return mesh_mask_file(path, mesh_size, spacing)
     if name.endswith(SURFACES) and not _is_volume_vtk(path):
-        from fem_sim.surface_import import mesh_surface_file
+        from fem_sim.geometry.surfaces import mesh_surface_file
 
         return mesh_surface_file(path, mesh_size, scale_to_mm)
     return read_mesh_file(path, scale_to_mm)
@@ -113,7 +111,6 @@ def read_mesh_file(path: str | Path, scale_to_mm: float = 1.0) -> Geometry:
     problems = geometry_problems(g)
     if problems:
         raise GeometryError(f"{path}: " + "; ".join(problems))
-    from fem_sim.surface_import import default_vena_cava
 
     g.regions["vena_cava"] = default_vena_cava(g)
     return g

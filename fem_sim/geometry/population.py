@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from data_spec.geometry import Geometry
+from fem_sim.geometry.voxels import voxelize_surface
 
 STAGED = ((8.0, 6.0, 5e-3), (2.0, 1.5, 1e-3), (1.2, 0.9, 1e-4), (0.6, 0.45, 1e-5),
           (0.3, 0.225, 1e-5))
@@ -197,8 +198,6 @@ def build_population(livers: list[Geometry], template: int = 0, n_points: int = 
 
 def overlap(a_points, a_tris, b_points, b_tris, voxel: float = 1.5) -> tuple[float, float]:
     """(IoU, Dice) of the solids bounded by two closed surfaces, voxelised at ``voxel`` mm."""
-    from fem_sim.masks import voxelize_surface
-
     allp = np.concatenate([a_points, b_points])
     lo, hi = allp.min(0) - 2 * voxel, allp.max(0) + 2 * voxel
     shape = tuple(np.ceil((hi - lo) / voxel).astype(int) + 1)

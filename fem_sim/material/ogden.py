@@ -188,13 +188,13 @@ def ogden_point_kernel(F: np.ndarray, mat: OgdenMaterial, tangent: bool = True):
 
 
 def point_kernel(F: np.ndarray, mat: OgdenMaterial, tangent: bool = True, out=None):
-    """:func:`ogden_point_kernel` through the compiled kernel (:mod:`fem_sim.ogden_c`) when it
-    can be built, else through numpy; same results to round-off (tested).
+    """:func:`ogden_point_kernel` through the compiled kernel (:mod:`fem_sim.material.ogden_c`)
+    when it can be built, else through numpy; same results to round-off (tested).
 
     ``out`` = (W (n,), P (n, 9), A (n, 81) or None, J (n,)) arrays to fill. Returns
     (W, P, A, J) shaped as ``out`` if given, else as :func:`ogden_point_kernel`.
     """
-    from fem_sim import ogden_c
+    from fem_sim.material import ogden_c
 
     if ogden_c.load() is not None:
         W, P, A, J = ogden_c.ogden_points(F, mat.c, mat.m, mat.K, mat.volumetric, tangent, out)

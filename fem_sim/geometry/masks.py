@@ -7,7 +7,7 @@ to masks (voxelisation, used for tests and for IoU/Dice of shape reconstructions
       -> largest connected component, internal cavities filled
       -> surface by marching cubes on the (lightly Gaussian-smoothed) image
       -> Taubin smoothing (no shrinkage)
-      -> tetrahedra by gmsh at the requested size (fem_sim.surface_import)
+      -> tetrahedra by gmsh at the requested size (fem_sim.geometry.surfaces)
 
 Runs on one process; the batch generator calls it on rank 0 before any MPI work.
 """
@@ -19,7 +19,10 @@ from pathlib import Path
 import numpy as np
 
 from data_spec.geometry import Geometry
-from fem_sim.geometry_source import GeometryError
+from fem_sim.geometry.errors import GeometryError
+from fem_sim.geometry.regions import default_vena_cava
+from fem_sim.geometry.surfaces import clean_surface, mesh_closed_surface
+from fem_sim.geometry.voxels import voxelize, voxelize_surface  # noqa: F401  (re-exported)
 
 
 def read_mask(path: str | Path, spacing=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -144,7 +147,6 @@ def mask_surface(mask, spacing, origin=(0.0, 0.0, 0.0), *, voxel: float = 1.0,
     from scipy import ndimage
     from skimage.measure import marching_cubes
 
-    from fem_sim.surface_import import clean_surface
 
     m, sp = clean_mask(mask, spacing, voxel, radius)
     f = np.pad(m.astype(np.float32), 2)
@@ -160,10 +162,8 @@ def mesh_mask(mask, spacing, mesh_size: float, origin=(0.0, 0.0, 0.0), *,
               description: str = "mask", fixed_radius: float = 25.0, **kw) -> Geometry:
     """Tetrahedral mesh of a segmentation mask (see the module docstring). As a default fixed
     region (``vena_cava``) it marks the surface nodes within ``fixed_radius`` mm of the most
-    posterior (max y) surface point, as :func:`fem_sim.surface_import.mesh_surface_file`.
+    posterior (max y) surface point, as :func:`fem_sim.geometry.surfaces.mesh_surface_file`.
     """
-    from fem_sim.surface_import import default_vena_cava, mesh_closed_surface
-
     pts, tris = mask_surface(mask, spacing, origin, **kw)
     g = mesh_closed_surface(pts, tris, mesh_size, f"{description}, mesh size {mesh_size}")
     g.regions["vena_cava"] = default_vena_cava(g, fixed_radius)
@@ -173,63 +173,3 @@ def mesh_mask(mask, spacing, mesh_size: float, origin=(0.0, 0.0, 0.0), *,
 def mesh_mask_file(path, mesh_size: float, spacing=None, **kw) -> Geometry:
     mask, sp, origin = read_mask(path, spacing)
     return mesh_mask(mask, sp, mesh_size, origin, description=Path(path).name, **kw)
-
-
-def voxelize(points: np.ndarray, cells: np.ndarray, spacing: float,
-             origin=None, shape=None) -> tuple[np.ndarray, np.ndarray]:
-    """Boolean mask of the voxels whose centre lies in a tetrahedral mesh (through its
-    boundary, :func:`voxelize_surface`). Returns (mask, origin): voxel (i, j, k) has its centre
-    at origin + spacing * (i, j, k). By default the grid covers the mesh's bounding box with a
-    margin of 2 voxels.
-    """
-    from data_spec.geometry import boundary_triangles
-
-    return voxelize_surface(points, boundary_triangles(np.asarray(cells), points), spacing,
-                            origin, shape)
-
-
-def voxelize_surface(points: np.ndarray, tris: np.ndarray, spacing: float, origin=None,
-                     shape=None) -> tuple[np.ndarray, np.ndarray]:
-    """Boolean mask of the voxel centres inside a closed triangle surface (ray parity along z).
-
-    Each triangle toggles, in every (i, j) column its xy-projection covers, the voxels above
-    the height where the column's ray crosses it; a running parity along z then marks the
-    inside. Rays pass through voxel centres, shifted by a tiny irrational offset so that they
-    never hit an edge or a vertex exactly. Returns (mask, origin) as :func:`voxelize`.
-    """
-    points = np.asarray(points, dtype=float)
-    if origin is None:
-        origin = points.min(axis=0) - 2 * spacing
-    origin = np.asarray(origin, dtype=float)
-    if shape is None:
-        shape = tuple(np.ceil((points.max(axis=0) + 2 * spacing - origin) / spacing)
-                      .astype(int) + 1)
-    nx, ny, nz = shape
-    toggles = np.zeros((nx, ny, nz + 1), dtype=np.int8)
-    eps = np.array([1e-7 * np.sqrt(2.0), 1e-7 * np.sqrt(3.0)]) * spacing
-    P = (points - origin) / spacing  # voxel units: centres at integers
-    T = P[tris]  # (m, 3, 3)
-    lo = np.clip(np.ceil(T[:, :, :2].min(axis=1) - eps / spacing).astype(int), 0, None)
-    hi = np.minimum(np.floor(T[:, :, :2].max(axis=1)).astype(int), [nx - 1, ny - 1])
-    ext = hi - lo + 1
-    ok = np.all(ext > 0, axis=1)
-    for key in np.unique(ext[ok], axis=0):
-        sel = np.where(ok & np.all(ext == key, axis=1))[0]
-        gi, gj = np.meshgrid(np.arange(key[0]), np.arange(key[1]), indexing="ij")
-        offs = np.stack([gi.ravel(), gj.ravel()], axis=1)
-        ij = lo[sel][:, None, :] + offs[None]  # (c, q, 2)
-        q = ij + eps / spacing  # ray positions
-        a, b, c = T[sel, 0][:, None], T[sel, 1][:, None], T[sel, 2][:, None]
-        v0, v1 = (b - a)[..., :2], (c - a)[..., :2]
-        w = q - a[..., :2]
-        den = v0[..., 0] * v1[..., 1] - v0[..., 1] * v1[..., 0]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = (w[..., 0] * v1[..., 1] - w[..., 1] * v1[..., 0]) / den
-            t = (v0[..., 0] * w[..., 1] - v0[..., 1] * w[..., 0]) / den
-            hit = (den != 0) & (s >= 0) & (t >= 0) & (s + t <= 1)
-            z = a[..., 2] + s * (b - a)[..., 2] + t * (c - a)[..., 2]
-        k = np.clip(np.ceil(z[hit]).astype(int), 0, nz)
-        i, j = ij[hit][:, 0], ij[hit][:, 1]
-        np.add.at(toggles, (i, j, k), 1)
-    mask = (np.cumsum(toggles, axis=2, dtype=np.int32)[:, :, :nz] % 2) == 1
-    return mask, origin

@@ -35,8 +35,8 @@ from data_spec import (
     write_geometry,
     write_shard,
 )
-from fem_sim import cases as cs
-from fem_sim.geometry_source import GeometryError, scene_geometries
+from fem_sim.batch import cases as cs
+from fem_sim.geometry.source import GeometryError, scene_geometries
 
 log = logging.getLogger(__name__)
 
@@ -52,10 +52,10 @@ class Plan:
 
 
 def solver_settings(scene: Scene) -> dict:
-    s = scene["solver"]
-    return {k: s[k] for k in ("rtol", "atol", "max_iterations", "max_cutbacks",
-                              "linear_solver", "factorization", "petsc_options",
-                              "predictor")}
+    """The scene's solver keys that are solver settings (all but the discretisation's)."""
+    from data_spec.solver_settings import fields
+
+    return {f.name: scene["solver"][f.name] for f in fields(scene_only=True)}
 
 
 def parse_range(text: str | None, n: int) -> range:
@@ -173,7 +173,7 @@ def _warm_jit_cache(degree: int, qdeg: int) -> None:
     from mpi4py import MPI
 
     from data_spec.testing import box_mesh
-    from fem_sim.problem import OgdenProblem
+    from fem_sim.solver.problem import OgdenProblem
 
     g = box_mesh(1)
     OgdenProblem(MPI.COMM_SELF, g.points, g.cells, degree=degree, quadrature_degree=qdeg)
@@ -182,8 +182,8 @@ def _warm_jit_cache(degree: int, qdeg: int) -> None:
 def run_case(problem, scene: Scene, case: cs.Case, g: Geometry, fixed: np.ndarray,
              out_nodes: np.ndarray, geometry_id: str) -> Shard | None:
     """Solve one case on the group (collective); the shard on the group's rank 0."""
-    from fem_sim.ogden import OgdenMaterial
-    from fem_sim.problem import Constraint, NodalLoad, PatchLoad
+    from fem_sim.material.ogden import OgdenMaterial
+    from fem_sim.solver.problem import Constraint, NodalLoad, PatchLoad
 
     if case.load_kind == "patch":
         loads = [PatchLoad(g.points[node], force, case.patch_radius)
@@ -208,7 +208,7 @@ def run_case(problem, scene: Scene, case: cs.Case, g: Geometry, fixed: np.ndarra
         stats = SolverStats(sol.newton_iterations, sol.residual_norms, sol.cutbacks,
                             sol.wall_time, sol.residual_history)
     stats.info = {"degree": problem.degree, "quadrature_degree": problem.qdeg,
-                  "linear_solver": problem.settings["linear_solver"],
+                  "linear_solver": problem.settings.linear_solver,
                   "factorization": problem.factorization,
                   "ranks": problem.comm.size,
                   "factorizations": sol.factorizations if sol else 0,
@@ -236,7 +236,7 @@ def generate(scene_file: str, out: str | Path, ranks_per_sim: int = 1, only: str
     """Run (or resume) a batch; returns the process exit code. Collective on COMM_WORLD."""
     from mpi4py import MPI
 
-    from fem_sim.problem import OgdenProblem
+    from fem_sim.solver.problem import OgdenProblem
 
     world = MPI.COMM_WORLD
     out = Path(out)

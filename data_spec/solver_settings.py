@@ -1,0 +1,126 @@
+"""The solver's settings: one frozen dataclass, the single source of every default.
+
+It lives in data_spec (standard library only) because it is part of the contract: the scene
+schema's ``[solver]`` keys are the fields marked ``scene=True`` here (same defaults, same checks,
+same documentation), and ``fem_sim``'s solver reads the whole record. The other fields are
+Python-API knobs (``OgdenProblem(..., settings={...})``) that a scene does not expose, so adding
+them never changes a scene's hash.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+
+def _setting(default: Any, doc: str, *, choices: tuple[str, ...] | None = None,
+             lo: float | None = None, strict: bool = False, scene: bool = False) -> Any:
+    meta = {"doc": doc, "choices": choices, "lo": lo, "strict": strict, "scene": scene}
+    if isinstance(default, dict):
+        return field(default_factory=lambda: dict(default), metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """Newton, load stepping and linear-solver settings of one :class:`OgdenProblem`."""
+
+    rtol: float = _setting(1e-9, "Newton relative residual tolerance", lo=0.0, strict=True,
+                           scene=True)
+    atol: float = _setting(1e-10, "Newton absolute residual tolerance, N", lo=0.0, strict=True,
+                           scene=True)
+    max_iterations: int = _setting(25, "Newton iterations per attempt", lo=1, scene=True)
+    max_cutbacks: int = _setting(8, "increment halvings allowed per output step", lo=0,
+                                 scene=True)
+    linear_solver: str = _setting("mumps", "mumps: direct (symmetric); gamg: CG + GAMG, "
+                                  "rigid-body modes", choices=("mumps", "gamg"), scene=True)
+    factorization: str = _setting(
+        "auto", "mumps: single (float32 LDL^T, METIS, GMRES-refined) or double (float64) on "
+        "one rank; petsc (PETSc's MUMPS); auto: single on one rank, petsc on several",
+        choices=("auto", "single", "double", "petsc"), scene=True)
+    predictor: str = _setting(
+        "hermite", "start of each load step: Hermite polynomial through the last converged "
+        "states and their tangents, tangent integration, extrapolation of states, or the last "
+        "state", choices=("hermite", "tangent", "extrapolate", "previous"), scene=True)
+    petsc_options: dict = _setting({}, "extra PETSc options for PETSc's solvers (factorization "
+                                   "petsc, gamg); a pc_type here selects PETSc's path",
+                                   scene=True)
+    lag_factorization: bool = _setting(False, "GMRES with a lagged factorisation as "
+                                       "preconditioner (PETSc's MUMPS)")
+    krylov_rtol: float = _setting(1e-10, "relative tolerance of each linear solve", lo=0.0,
+                                  strict=True)
+    refactor_after: int = _setting(8, "lagged factorisation: refactorise after a solve that "
+                                   "needed more Krylov iterations", lo=1)
+    max_krylov: int = _setting(60, "Krylov iterations before a solve counts as failed", lo=1)
+    predictor_order: int = _setting(3, "hermite: converged points used (1 = Euler); tangent: "
+                                    "tangents used", lo=1)
+    line_search: bool = _setting(True, "backtracking on the energy or |R| after each Newton "
+                                 "step")
+    chord_contraction: float = _setting(0.1, "keep back-solving with the last factorisation "
+                                        "while |R| drops by this factor per step (0: no chord "
+                                        "steps)", lo=0.0)
+    chord_trigger: float = _setting(1e-2, "try chord steps after a Newton step that cut |R| "
+                                    "this much", lo=0.0, strict=True)
+    max_chord_steps: int = _setting(30, "chord steps per increment attempt", lo=0)
+
+    @classmethod
+    def from_dict(cls, values: dict | None, where: str = "settings") -> SolverSettings:
+        """Settings from overrides of the defaults; ValueError listing every problem."""
+        values = dict(values or {})
+        found = problems(values, where)
+        if found:
+            raise ValueError("; ".join(found))
+        return cls(**values)
+
+    def as_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def fields(scene_only: bool = False) -> list[dataclasses.Field]:
+    return [f for f in dataclasses.fields(SolverSettings)
+            if f.metadata["scene"] or not scene_only]
+
+
+def default(f: dataclasses.Field) -> Any:
+    return f.default_factory() if f.default is dataclasses.MISSING else f.default
+
+
+def check(f: dataclasses.Field, v: Any) -> str | None:
+    """None if ``v`` is a valid value of the field, else what was expected."""
+    m = f.metadata
+    kind = type(default(f))
+    if m["choices"]:
+        return None if v in m["choices"] else "one of " + ", ".join(map(repr, m["choices"]))
+    if kind is bool:
+        return None if isinstance(v, bool) else "true or false"
+    if kind is dict:
+        if not isinstance(v, dict):
+            return "a table of PETSc option -> value"
+        for k, x in v.items():
+            if not isinstance(x, (str, int, float, bool)):
+                return f"a string/number/boolean value for PETSc option {k!r}"
+        return None
+    is_int = isinstance(v, int) and not isinstance(v, bool)
+    if kind is int and not is_int:
+        return "an integer" + (f" >= {m['lo']}" if m["lo"] is not None else "")
+    if kind is float and not ((is_int or isinstance(v, float)) and math.isfinite(v)):
+        return "a finite number"
+    lo = m["lo"]
+    if lo is not None and (v <= lo if m["strict"] else v < lo):
+        return f"{'an integer' if kind is int else 'a number'} {'>' if m['strict'] else '>='} {lo}"
+    return None
+
+
+def problems(values: dict, where: str = "settings") -> list[str]:
+    """Every problem of a dict of overrides: unknown keys and invalid values."""
+    known = {f.name: f for f in fields()}
+    out = [f"{where}: unknown setting {k!r}; expected one of {sorted(known)}"
+           for k in values if k not in known]
+    for k, v in values.items():
+        if k in known:
+            why = check(known[k], v)
+            if why:
+                out.append(f"{where}.{k}: expected {why}, got {v!r}")
+    return out

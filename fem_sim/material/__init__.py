@@ -1,0 +1,1 @@
+"""Material laws: the uncoupled Ogden model (numpy reference and compiled kernel)."""

@@ -1,0 +1,335 @@
+"""Linear solvers for the Newton systems J du = rhs.
+
+One interface, :class:`LinearSolver`:
+
+* ``solve(J, rhs, du, rtol)``: factorise J (or precondition) and solve to ``rtol``; raises
+  :class:`StepFailure` when it cannot;
+* ``back_solve(rhs, du)``: one solve with the last factorisation (chord steps, predictors);
+* ``solve_near(J, rhs, du, rtol, maxit)``: GMRES on J preconditioned with the last
+  factorisation of a nearby matrix, no new factorisation (the Hermite predictor's tangents);
+* ``invalidate()``: the next ``solve`` must factorise afresh (after a cut-back).
+
+Each solver counts its own work in ``counts`` (:class:`LinearCounts`), reset per simulation.
+
+Implementations: :class:`SerialLDLTSolver` (MUMPS' LDL^T through its C interface with METIS
+ordering, float32 factors refined by GMRES, :mod:`fem_sim.solver.ldlt`; one process; it exists
+because Debian's MUMPS has no METIS and PETSc 3.18 gives a user ordering only to LU) and
+:class:`PetscSolver` (PETSc KSP: MUMPS LDL^T, GMRES with a lagged factorisation, or CG + GAMG
+with the rigid-body near-nullspace; any number of processes). :func:`make_linear_solver`
+picks one from the settings.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+from petsc4py import PETSc
+
+from fem_sim.solver import ldlt
+from fem_sim.solver.assembly import Jacobian
+from fem_sim.solver.results import LinearCounts, StepFailure
+from fem_sim.solver.settings import SolverSettings
+
+log = logging.getLogger(__name__)
+
+
+def _ghost_update(vec) -> None:
+    vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+
+
+class LinearSolver:
+    """Interface (see the module docstring)."""
+
+    name = "none"
+    csr = False          # takes CSR arrays (one process) rather than a PETSc matrix
+    direct = False       # back-solves with a kept factorisation are cheap (chord steps)
+    solves_near = False  # solve_near is available (Hermite tangents)
+
+    def __init__(self, settings: SolverSettings):
+        self.settings = settings
+        self.counts = LinearCounts()
+
+    def reset(self) -> None:
+        """A new simulation: no factorisation of its Jacobians exists yet; counts from zero."""
+        self.counts = LinearCounts()
+
+    @property
+    def has_factorization(self) -> bool:
+        raise NotImplementedError
+
+    def solve(self, J: Jacobian, rhs, du, rtol: float) -> None:
+        raise NotImplementedError
+
+    def back_solve(self, rhs, du) -> bool:
+        raise NotImplementedError
+
+    def solve_near(self, J: Jacobian, rhs, du, rtol: float, maxit: int) -> bool:
+        return False
+
+    def invalidate(self) -> None:
+        pass
+
+
+class SerialLDLTSolver(LinearSolver):
+    """MUMPS LDL^T with METIS ordering in float32 ("single") or float64 ("double").
+
+    If float32 factors cannot give the solve (GMRES does not reach ``rtol`` within
+    ``max_krylov`` iterations, e.g. a tangent too ill-conditioned for single precision, or the
+    float32 factorisation fails), the same matrix is factorised in float64 and the simulation
+    goes on; ``counts.double_fallbacks`` counts these.
+    """
+
+    csr = direct = solves_near = True
+
+    def __init__(self, settings: SolverSettings, precision: str):
+        super().__init__(settings)
+        self.name = precision
+        self._ldlts: dict[str, ldlt.SerialLDLT] = {}  # by precision; keeps the analysis
+        self._ldlt: ldlt.SerialLDLT | None = None     # the one holding the last factorisation
+
+    def reset(self) -> None:
+        super().reset()
+        self._ldlt = None
+
+    @property
+    def has_factorization(self) -> bool:
+        return self._ldlt is not None
+
+    def solve(self, J: Jacobian, rhs, du, rtol: float) -> None:
+        indptr, indices, values = J.csr()
+        precisions = [self.name] + (["double"] if self.name == "single" else [])
+        why = ""
+        for k, precision in enumerate(precisions):
+            solver = self._ldlts.get(precision)
+            if solver is None:
+                solver = self._ldlts[precision] = ldlt.SerialLDLT(precision, bs=3)
+            if k:
+                self.counts.double_fallbacks += 1
+                log.debug("float32 LDL^T insufficient (%s); factorising in float64", why)
+            try:
+                solver.factor(indptr, indices, values)
+            except ldlt.FactorError as exc:
+                why = str(exc)
+                continue
+            self.counts.factorizations += 1
+            x, its, ok = solver.solve_refined(ldlt.csr(indptr, indices, values),
+                                              rhs.array_r, rtol, self.settings.max_krylov)
+            self.counts.krylov_iterations += its
+            if ok:
+                self._ldlt = solver
+                du.array[:] = x
+                _ghost_update(du)
+                return
+            why = f"GMRES with the LDL^T factors did not reach {rtol:.1e} in {its} iterations"
+        self._ldlt = None  # no valid factorisation: chord steps and tangents must not use one
+        raise StepFailure(f"linear solver failed: {why}")
+
+    def back_solve(self, rhs, du) -> bool:
+        """One back-solve: with float32 factors the relative error is ~1e-3, fine for chord
+        steps and predictors, which are approximate anyway.
+        """
+        if self._ldlt is None:
+            return False
+        self.counts.back_solves += 1
+        du.array[:] = self._ldlt.solve(rhs.array_r)
+        ok = bool(np.all(np.isfinite(du.array_r)))
+        if ok:
+            _ghost_update(du)
+        return ok
+
+    def solve_near(self, J: Jacobian, rhs, du, rtol: float, maxit: int) -> bool:
+        if self._ldlt is None:
+            return False
+        x, its, ok = self._ldlt.solve_refined(ldlt.csr(*J.csr()), rhs.array_r, rtol, maxit)
+        self.counts.krylov_iterations += its
+        if ok:
+            du.array[:] = x
+        return ok
+
+
+class PetscSolver(LinearSolver):
+    """PETSc's KSP on the assembled PETSc matrix: MUMPS LDL^T ("petsc"), GMRES with a lagged
+    MUMPS factorisation as preconditioner ("lagged"), or CG + GAMG ("gamg"); any KSP/PC from
+    ``petsc_options``. Collective on the matrix's communicator.
+    """
+
+    def __init__(self, settings: SolverSettings, comm, prefix: str,
+                 coordinates: np.ndarray | None = None):
+        super().__init__(settings)
+        self.comm, self.prefix = comm, prefix
+        self.coordinates = coordinates  # of the owned dof blocks: GAMG's rigid-body modes
+        s = settings
+        self.lagged = s.linear_solver == "mumps" and s.lag_factorization
+        self.name = "none" if s.linear_solver != "mumps" else "petsc"
+        self.direct = s.linear_solver == "mumps" and not s.lag_factorization
+        self.solves_near = self.direct and "ksp_type" not in s.petsc_options
+        self._ksp = None
+        self._A = None
+        self._Pmat = None
+        self._factorized = False
+        self._refactor_next = False
+
+    def reset(self) -> None:
+        super().reset()
+        self._Pmat = None  # a new material: the old factorisation is no preconditioner for it
+        self._factorized = False
+
+    @property
+    def has_factorization(self) -> bool:
+        return self._factorized
+
+    def invalidate(self) -> None:
+        self._refactor_next = True
+
+    def _get_ksp(self, A) -> PETSc.KSP:
+        if self._ksp is not None:
+            return self._ksp
+        s = self.settings
+        ksp = PETSc.KSP().create(self.comm)
+        ksp.setOptionsPrefix(self.prefix)
+        opts = PETSc.Options()
+        if s.linear_solver == "mumps":
+            defaults = {"ksp_type": "gmres" if s.lag_factorization else "preonly",
+                        "ksp_gmres_restart": 100,
+                        "pc_type": "cholesky", "pc_factor_mat_solver_type": "mumps",
+                        "mat_mumps_icntl_14": 200}
+        else:
+            defaults = {"ksp_type": "cg", "pc_type": "gamg", "pc_gamg_type": "agg",
+                        "mg_levels_ksp_type": "chebyshev", "mg_levels_pc_type": "jacobi"}
+        for k, v in {**defaults, **s.petsc_options}.items():
+            opts[f"{self.prefix}{k}"] = v
+        ksp.setFromOptions()
+        ksp.setTolerances(rtol=s.krylov_rtol, atol=0.0, max_it=s.max_krylov)
+        if ksp.getType() != "preonly":
+            ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
+            ksp.getPC().setReusePreconditioner(False)
+        if s.linear_solver == "gamg":
+            A.setNearNullSpace(_rigid_body_modes(A, self.coordinates, self.comm))
+        self._ksp = ksp
+        return ksp
+
+    def solve(self, J: Jacobian, rhs, du, rtol: float) -> None:
+        s = self.settings
+        A = J.petsc()
+        self._A = A
+        ksp = self._get_ksp(A)
+        ksp.setTolerances(rtol=rtol, atol=0.0, max_it=s.max_krylov)
+        refactor = not self.lagged or self._Pmat is None or self._refactor_next
+        self._refactor_next = False
+        if self.lagged:
+            if refactor:
+                if self._Pmat is None:
+                    self._Pmat = A.duplicate(copy=True)
+                else:
+                    A.copy(self._Pmat, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+                self.counts.factorizations += 1
+            ksp.setOperators(A, self._Pmat)
+        else:
+            ksp.getPC().setReusePreconditioner(False)  # a new factorisation of this J
+            ksp.setOperators(A, A)
+            self.counts.factorizations += 1
+        ksp.solve(rhs, du)
+        its, reason = ksp.getIterationNumber(), ksp.getConvergedReason()
+        self.counts.krylov_iterations += its
+        if self.lagged and reason < 0 and not refactor:
+            # The lagged factorisation is too far off: refactorise now and solve again.
+            A.copy(self._Pmat, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+            self.counts.factorizations += 1
+            ksp.setOperators(A, self._Pmat)
+            ksp.solve(rhs, du)
+            its, reason = ksp.getIterationNumber(), ksp.getConvergedReason()
+            self.counts.krylov_iterations += its
+        if reason < 0:
+            raise StepFailure(f"linear solver failed (PETSc KSP reason {reason} after {its} "
+                              "iterations)")
+        if self.lagged and its > s.refactor_after:
+            self._refactor_next = True
+        self._factorized = True
+        _ghost_update(du)
+
+    def back_solve(self, rhs, du) -> bool:
+        """A solve with the operators as they are: for a direct KSP a back-solve with the kept
+        factorisation (the operator is unchanged, or the reuse flag is on).
+        """
+        if self._ksp is None:
+            return False
+        self.counts.back_solves += 1
+        self._ksp.solve(rhs, du)
+        ok = self._ksp.getConvergedReason() > 0
+        if ok:
+            _ghost_update(du)
+        return ok
+
+    def solve_near(self, J: Jacobian, rhs, du, rtol: float, maxit: int) -> bool:
+        """GMRES on J preconditioned with the last MUMPS factorisation, kept
+        (``PCSetReusePreconditioner``) although J changed. The reuse flag stays on, so
+        back-solves keep using that factorisation until :meth:`solve` asks for a new one.
+        """
+        if not (self.solves_near and self._factorized):
+            return False
+        A = J.petsc()
+        ksp = self._get_ksp(A)
+        ksp.getPC().setReusePreconditioner(True)
+        ksp.setType(PETSc.KSP.Type.GMRES)
+        ksp.setPCSide(PETSc.PC.Side.RIGHT)
+        ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
+        ksp.setTolerances(rtol=rtol, atol=0.0, max_it=maxit)
+        ksp.setOperators(A, A)
+        try:
+            ksp.solve(rhs, du)
+            its, ok = ksp.getIterationNumber(), ksp.getConvergedReason() > 0
+        finally:
+            ksp.setType(PETSc.KSP.Type.PREONLY)
+        self.counts.krylov_iterations += its
+        if ok:
+            _ghost_update(du)
+        return ok
+
+
+def _rigid_body_modes(A, x: np.ndarray, comm):
+    """The six rigid-body modes of the owned dofs (block coordinates ``x``), orthonormalised,
+    as GAMG's near-nullspace (collective).
+    """
+    vecs = [A.createVecLeft() for _ in range(6)]
+    for i in range(3):
+        vecs[i].array.reshape(-1, 3)[:, i] = 1.0
+    for k, (i, j) in enumerate(((0, 1), (1, 2), (2, 0))):
+        a = vecs[3 + k].array.reshape(-1, 3)
+        a[:, i] = -x[:, j]
+        a[:, j] = x[:, i]
+    for v in vecs:
+        v.assemble()
+    for i, v in enumerate(vecs):
+        for w in vecs[:i]:
+            v.axpy(-v.dot(w), w)
+        v.scale(1.0 / v.norm())
+    return PETSc.NullSpace().create(vectors=vecs, comm=comm)
+
+
+def factorization_mode(settings: SolverSettings, comm_size: int) -> str | None:
+    """"single"/"double" when the serial METIS LDL^T applies, else None (PETSc's KSP).
+
+    ``auto`` is "single" on one process (float32 factors: 0.65 s instead of PETSc's 1.26 s per
+    factorisation at 15k nodes, ``bench/bench_jacobian.py``) and PETSc's MUMPS on several.
+    """
+    s = settings
+    mode = s.factorization
+    if (s.linear_solver != "mumps" or s.lag_factorization or mode == "petsc"
+            or comm_size > 1 or "pc_type" in s.petsc_options):
+        if mode in ("single", "double") and comm_size > 1:
+            raise ValueError(f"settings.factorization = {mode!r} runs on one process; "
+                             f"this problem has {comm_size} (use 'auto' or 'petsc')")
+        return None
+    if ldlt.load() is None:
+        return None
+    return "single" if mode == "auto" else mode
+
+
+def make_linear_solver(settings: SolverSettings, comm, prefix: str,
+                       coordinates: np.ndarray | None = None) -> LinearSolver:
+    """The solver the settings ask for; ``coordinates`` (owned dof blocks) for GAMG."""
+    mode = factorization_mode(settings, comm.size)
+    if mode is not None:
+        return SerialLDLTSolver(settings, mode)
+    return PetscSolver(settings, comm, prefix, coordinates)

@@ -1,0 +1,97 @@
+"""Static Ogden problem on a tetrahedral mesh: the public facade of the solver.
+
+Python API, usable without the batch machinery::
+
+    from fem_sim import OgdenProblem, OgdenMaterial, Constraint, NodalLoad
+    prob = OgdenProblem(comm, points, cells, degree=1)           # collective; mesh on rank 0
+    sol = prob.solve(OgdenMaterial((4.1e-3,), (10.06,), 0.82),
+                     [Constraint(fixed_nodes)], [NodalLoad([1234], [[0, 0, -0.4]])],
+                     fractions=[0.1, 0.2, ..., 1.0])
+    sol.displacement   # (n_done, n_nodes, 3) mm, source-mesh node order, on rank 0
+
+:class:`OgdenProblem` only wires the pieces together, each an object with one job, handed to
+the others (FEBio's Newton solver and strategy objects, PETSc's SNES/KSP objects are the model):
+
+* :class:`~fem_sim.solver.discretisation.Discretisation`: mesh, space, forms, dof maps;
+* :class:`~fem_sim.solver.assembly.Assembler`: material points, forces, Jacobian (dolfinx or C);
+* :class:`~fem_sim.solver.equations.Equations`: the state u and R(u; lam) of one simulation;
+* :class:`~fem_sim.solver.linear.LinearSolver`: serial LDL^T or PETSc's KSP, counting its work;
+* :class:`~fem_sim.solver.predictors.Predictor`: the start of each load step;
+* :class:`~fem_sim.solver.newton.NewtonSolver`: Newton with chord steps and line search;
+* :class:`~fem_sim.solver.stepping.LoadStepper`: load steps and cut-backs.
+
+The settings (:class:`~fem_sim.solver.settings.SolverSettings`) name the pieces; forms are
+compiled once per problem, and one problem serves every material and load on its mesh.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fem_sim.material.ogden import OgdenMaterial
+from fem_sim.solver.assembly import make_assembler
+from fem_sim.solver.discretisation import Discretisation
+from fem_sim.solver.equations import Equations
+from fem_sim.solver.linear import factorization_mode, make_linear_solver
+from fem_sim.solver.loads import Constraint, NodalLoad, PatchLoad
+from fem_sim.solver.newton import NewtonSolver
+from fem_sim.solver.predictors import make_predictor
+from fem_sim.solver.results import Solution, StepFailure
+from fem_sim.solver.settings import SolverSettings
+from fem_sim.solver.stepping import LoadStepper
+
+__all__ = ["Constraint", "NodalLoad", "OgdenProblem", "PatchLoad", "Solution", "StepFailure"]
+
+
+class OgdenProblem:
+    """An Ogden body on a fixed mesh; :meth:`solve` runs one simulation (collective on
+    ``comm``). ``settings``: overrides of :class:`SolverSettings` (a dict or the dataclass).
+    """
+
+    def __init__(self, comm, points: np.ndarray | None, cells: np.ndarray | None, *,
+                 degree: int = 1, quadrature_degree: int | None = None,
+                 settings: dict | SolverSettings | None = None, prefix: str = "ogden_"):
+        if not isinstance(settings, SolverSettings):
+            settings = SolverSettings.from_dict(settings)
+        self.settings = settings
+        factorization_mode(settings, comm.size)  # a bad combination fails before MPI work
+        self.comm = comm
+        self.degree = degree
+        self.qdeg = quadrature_degree or (1 if degree == 1 else 2)
+        self.disc = Discretisation(comm, points, cells, degree, self.qdeg)  # collective
+        coords = self.disc.V.tabulate_dof_coordinates()[: self.disc.n_owned]
+        self.linear = make_linear_solver(settings, comm, prefix, coords)
+        self.assembler = make_assembler(self.disc, csr_solver=self.linear.csr)
+        self.equations = Equations(self.disc, self.assembler)
+        self.newton = NewtonSolver(settings, self.equations, self.linear)
+        self.predictor = make_predictor(settings, self.equations, self.linear)
+        self.stepper = LoadStepper(settings, self.equations, self.newton, self.predictor,
+                                   self.linear)
+
+    @property
+    def n_nodes(self) -> int:
+        return self.disc.n_nodes
+
+    @property
+    def factorization(self) -> str:
+        """The factorisation in use: "single", "double", "petsc" (MUMPS), or "none" (GAMG)."""
+        return self.linear.name
+
+    def solve(self, material: OgdenMaterial, constraints: list[Constraint],
+              loads: list, fractions) -> Solution:
+        """Run the load steps of one simulation from the undeformed state (collective)."""
+        fractions = np.asarray(fractions, dtype=np.float64)
+        if fractions.size == 0 or np.any(np.diff(fractions) <= 0) or fractions[0] <= 0:
+            raise ValueError(f"fractions must be increasing and > 0, got {fractions}")
+        self.equations.set_problem(material, constraints, loads)
+        return self.stepper.run(fractions, self.displacement)
+
+    def displacement(self) -> np.ndarray | None:
+        """Current displacement at the mesh nodes, source order, on rank 0 (collective)."""
+        return self.disc.gather_vertex_values(self.disc.u.x.array.reshape(-1, 3))
+
+    def reaction(self, nodes) -> np.ndarray:
+        """Total internal force (N) on the dofs of a node set: the reaction force when the set
+        is constrained (collective; the same value on every rank).
+        """
+        return self.equations.reaction(nodes)

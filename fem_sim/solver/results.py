@@ -1,0 +1,48 @@
+"""What one simulation returns (:class:`Solution`) and the one exception a failed increment
+raises (:class:`StepFailure`). Control flags live in the pieces that use them, not here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+class StepFailure(Exception):
+    """An increment that did not converge; the message is the recorded reason."""
+
+
+@dataclass
+class LinearCounts:
+    """Work of a linear solver in one simulation, counted by the solver itself."""
+
+    factorizations: int = 0
+    krylov_iterations: int = 0
+    back_solves: int = 0
+    double_fallbacks: int = 0  # float32 factorisations that had to be redone in float64
+
+
+@dataclass
+class Solution:
+    """Result of :meth:`fem_sim.OgdenProblem.solve`. Arrays per *stored* output step."""
+
+    fractions: np.ndarray
+    displacement: np.ndarray | None  # (n_done, n_nodes, 3) on the comm's rank 0, else None
+    newton_iterations: list[int] = field(default_factory=list)
+    residual_norms: list[float] = field(default_factory=list)
+    cutbacks: list[int] = field(default_factory=list)
+    wall_time: list[float] = field(default_factory=list)
+    residual_history: list[list[float]] = field(default_factory=list)
+    status: str = "ok"
+    failure_reason: str = ""
+    factorizations: int = 0
+    krylov_iterations: int = 0
+    back_solves: int = 0       # back-solves with an existing factorisation (chord, predictor)
+    chord_steps: int = 0       # accepted back-solves with an old factorisation
+    chord_rejected: int = 0    # chord steps tried and undone (too little contraction)
+    double_fallbacks: int = 0  # float32 factorisations that had to be redone in float64
+
+    @property
+    def n_done(self) -> int:
+        return len(self.newton_iterations)

@@ -1,0 +1,107 @@
+"""Load stepping: from the undeformed state through the requested load fractions.
+
+Each increment starts from the predictor's guess. If Newton fails from an extrapolated guess,
+the same increment is retried from the last converged state; if that fails too, the increment
+is halved (up to ``max_cutbacks`` halvings per output step), and easy steps after a cut-back
+let it grow again. Only the requested fractions are stored; nothing is ever returned for a
+step that did not converge: a simulation that cannot go on stops with its reason and keeps
+the steps it reached.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import numpy as np
+
+from fem_sim.solver.equations import Equations
+from fem_sim.solver.linear import LinearSolver
+from fem_sim.solver.newton import NewtonSolver
+from fem_sim.solver.predictors import Predictor
+from fem_sim.solver.results import Solution, StepFailure
+from fem_sim.solver.settings import SolverSettings
+
+log = logging.getLogger(__name__)
+
+
+class LoadStepper:
+    """Runs one simulation through its load fractions with the pieces it is given."""
+
+    def __init__(self, settings: SolverSettings, eqs: Equations, newton: NewtonSolver,
+                 predictor: Predictor, linear: LinearSolver):
+        self.settings, self.eqs, self.newton = settings, eqs, newton
+        self.predictor, self.linear = predictor, linear
+
+    def run(self, fractions: np.ndarray, gather) -> Solution:
+        """Solve at every fraction from u = 0 (collective). ``gather()`` returns the current
+        displacement at the source nodes (on rank 0) for storage.
+        """
+        s, eqs = self.settings, self.eqs
+        eqs.set_state(np.zeros_like(eqs.u.x.array))
+        self.linear.reset()
+        self.newton.reset()
+        self.predictor.start()
+        sol = Solution(fractions=fractions, displacement=None)
+        stored = []
+        states: list[tuple[float, np.ndarray]] = [(0.0, eqs.state())]
+        lam, dlam = 0.0, float(fractions[0])
+        for target in fractions:
+            t0 = time.perf_counter()
+            iters, cutbacks, history, retry_plain = 0, 0, [], False
+            dlam = min(dlam, target - lam) if dlam > 0 else target - lam
+            try:
+                while lam < target - 1e-14:
+                    trial = min(lam + dlam, target)
+                    if target - trial < 1e-3 * dlam:
+                        trial = target
+                    self.predictor.predict(states, trial, extrapolate=not retry_plain)
+                    try:
+                        its = self.newton.solve(trial, history, self.predictor.order <= 1)
+                    except StepFailure as exc:
+                        iters += self.newton.attempt_iterations  # failed attempts cost too
+                        if not retry_plain and len(states) > 1 and s.predictor != "previous":
+                            # An extrapolated start can lie outside Newton's basin: retry the
+                            # same increment from the last converged state before cutting back.
+                            retry_plain = True
+                            eqs.set_state(states[-1][1])
+                            continue
+                        retry_plain = False
+                        cutbacks += 1
+                        log.debug("step to %.4g failed (%s); cut back", trial, exc)
+                        if cutbacks > s.max_cutbacks:
+                            raise StepFailure(f"{exc}; gave up after {s.max_cutbacks} "
+                                              "cut-backs") from None
+                        eqs.set_state(states[-1][1])
+                        dlam = 0.5 * (trial - lam)
+                        self.linear.invalidate()
+                        continue
+                    iters += its
+                    retry_plain = False
+                    lam = trial
+                    states = (states + [(lam, eqs.state())])[-3:]
+                    self.predictor.converged(lam, its)
+                    if its <= 3 and cutbacks:
+                        dlam *= 2.0  # easy step after a cut-back: let the increment grow
+            except StepFailure as exc:
+                sol.status, sol.failure_reason = "failed", str(exc)
+                eqs.set_state(states[-1][1])
+                break
+            sol.newton_iterations.append(iters)
+            sol.residual_norms.append(history[-1])
+            sol.residual_history.append(history)
+            sol.cutbacks.append(cutbacks)
+            sol.wall_time.append(time.perf_counter() - t0)
+            stored.append(gather())
+            dlam = max(dlam, 0.0)
+            nxt = np.searchsorted(fractions, target, side="right")
+            if nxt < fractions.size and not cutbacks:
+                dlam = fractions[nxt] - target
+        c = self.linear.counts
+        sol.factorizations, sol.krylov_iterations = c.factorizations, c.krylov_iterations
+        sol.back_solves, sol.double_fallbacks = c.back_solves, c.double_fallbacks
+        sol.chord_steps, sol.chord_rejected = self.newton.chord_steps, self.newton.chord_rejected
+        if eqs.disc.comm.rank == 0:
+            sol.displacement = (np.stack(stored) if stored
+                                else np.zeros((0, eqs.disc.n_nodes, 3)))
+        return sol
