@@ -24,6 +24,7 @@ from surrogate.config import get_config
 from surrogate.export import export_model
 from surrogate.features import FeatureSpec
 from surrogate.model import NodeMLP
+from surrogate.normalise import Normaliser
 from surrogate.train import make_fns
 
 NETS = {"small (128,128,128)": [128, 128, 128],
@@ -39,12 +40,12 @@ def fake_model(directory: Path, hidden, n_nodes: int, seed: int = 0) -> np.ndarr
     model = NodeMLP(hidden=tuple(hidden))
     params = jax.device_get(model.init(jax.random.PRNGKey(seed), jnp.zeros((1, spec.dim)))
                             ["params"])
-    stats = {"x_mean": np.zeros(spec.dim, np.float32), "x_std": np.ones(spec.dim, np.float32),
-             "y_mean": np.zeros(3, np.float32), "y_std": np.ones(3, np.float32)}
+    norm = Normaliser(x_mean=np.zeros(spec.dim, np.float32), x_std=np.ones(spec.dim, np.float32),
+                       y_mean=np.zeros(3, np.float32), y_std=np.ones(3, np.float32))
     ds = SimpleNamespace(forces=np.full((1, 1, 3), 0.4), extra=np.zeros((1, 0)),
                          scene_name="bench", spec=spec, points=[pts], fixed=[fixed],
                          out_nodes=[np.arange(n_nodes)])
-    export_model(directory, params, stats, get_config("small", hidden=hidden), ds)
+    export_model(directory, params, norm, get_config("small", hidden=hidden), ds)
     return pts
 
 
@@ -91,21 +92,22 @@ def main():
         state = train_state.TrainState.create(
             apply_fn=model.apply, params=params,
             tx=optax.inject_hyperparams(optax.adam)(learning_rate=1e-3))
-        step, _, _ = make_fns(model, cfg, 1)
+        step, _, _ = make_fns(cfg, 1)
         n = 20000
         data = {"static": jnp.asarray(np.random.rand(n, 11), jnp.float32),
                 "forces": jnp.ones((100, 1, 3)), "load_points": jnp.ones((100, 1, 3)),
-                "extra": jnp.zeros((100, 0)), "x_mean": jnp.zeros(18), "x_std": jnp.ones(18),
-                "y_mean": jnp.zeros(3), "y_std": jnp.ones(3)}
+                "extra": jnp.zeros((100, 0))}
+        norm = Normaliser(x_mean=jnp.zeros(18), x_std=jnp.ones(18), y_mean=jnp.zeros(3),
+                          y_std=jnp.ones(3))
         B = cfg["batch_size"]
         rows = jnp.asarray(np.random.randint(0, n, B))
         smp = jnp.asarray(np.random.randint(0, 100, B))
         tgt = jnp.zeros((B, 3))
-        state, loss = step(state, data, rows, smp, tgt, jax.random.PRNGKey(0))
+        state, loss = step(state, norm, data, rows, smp, tgt, jax.random.PRNGKey(0))
         loss.block_until_ready()
         t = time.perf_counter()
         for i in range(20):
-            state, loss = step(state, data, rows, smp, tgt, jax.random.PRNGKey(i))
+            state, loss = step(state, norm, data, rows, smp, tgt, jax.random.PRNGKey(i))
         loss.block_until_ready()
         print(f"| {name} | {B} | {20 * B / (time.perf_counter() - t):,.0f} |")
 

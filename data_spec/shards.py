@@ -23,6 +23,7 @@ import h5py
 import numpy as np
 
 from data_spec.atomic import atomic_path, write_text_atomic
+from data_spec.material import OgdenMaterial
 from data_spec.xdmf import shard_xdmf
 
 SHARD_FORMAT = "liver-fem-shard"
@@ -42,27 +43,6 @@ def geometry_path(directory: str | Path, geometry_id: str) -> Path:
 def list_shards(directory: str | Path) -> list[Path]:
     """Shard files of a dataset directory, sorted by simulation index."""
     return sorted((Path(directory) / "sims").glob("sim_*.h5"))
-
-
-@dataclass
-class Material:
-    """Ogden parameters of one simulation: c_k (MPa), m_k, bulk modulus K (MPa)."""
-
-    c: np.ndarray
-    m: np.ndarray
-    K: float
-    law: str = "ogden"
-    volumetric: str = "log"
-
-    def __post_init__(self):
-        self.c = np.atleast_1d(np.asarray(self.c, dtype=np.float64))
-        self.m = np.atleast_1d(np.asarray(self.m, dtype=np.float64))
-        self.K = float(self.K)
-
-    @property
-    def mu(self) -> float:
-        """Small-strain shear modulus sum(c)/2, MPa."""
-        return 0.5 * float(self.c.sum())
 
 
 @dataclass
@@ -106,7 +86,7 @@ class Shard:
     load_kind: str
     load_nodes: np.ndarray
     forces: np.ndarray
-    material: Material
+    material: OgdenMaterial
     fixed_nodes: np.ndarray
     load_fractions: np.ndarray
     output_nodes: np.ndarray
@@ -202,6 +182,17 @@ def write_shard(directory: str | Path, shard: Shard) -> Path:
     return h5_path
 
 
+def _material(path, group) -> OgdenMaterial:
+    law = str(group.attrs["law"])
+    if law != OgdenMaterial.law:
+        raise ValueError(f"{path}: material law {law!r}; this code reads {OgdenMaterial.law!r}")
+    try:
+        return OgdenMaterial(c=group["c"][...], m=group["m"][...], K=float(group["K"][()]),
+                             volumetric=str(group.attrs["volumetric"]))
+    except ValueError as exc:
+        raise ValueError(f"{path}: /material: {exc}") from None
+
+
 def read_shard(path: str | Path) -> Shard:
     """Read one shard file into a :class:`Shard` (plain numpy arrays)."""
     with h5py.File(path, "r") as f:
@@ -218,10 +209,7 @@ def read_shard(path: str | Path) -> Shard:
             load_kind=str(f["load"].attrs["kind"]),
             patch_radius=float(f["load"].attrs["patch_radius"]),
             load_nodes=f["load/nodes"][...], forces=f["load/forces"][...],
-            material=Material(c=f["material/c"][...], m=f["material/m"][...],
-                              K=float(f["material/K"][()]),
-                              law=str(f["material"].attrs["law"]),
-                              volumetric=str(f["material"].attrs["volumetric"])),
+            material=_material(path, f["material"]),
             fixed_nodes=f["fixed_nodes"][...], load_fractions=f["load_fractions"][...],
             output_nodes=f["output_nodes"][...], displacement=f["displacement"][...],
             stats=SolverStats(

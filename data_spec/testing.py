@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from data_spec.geometry import Geometry, boundary_triangles, write_geometry
-from data_spec.shards import Material, Shard, SolverStats, geometry_path, write_shard
+from data_spec.shards import OgdenMaterial, Shard, SolverStats, geometry_path, write_shard
 
 
 def box_mesh(n: int = 4, size: tuple[float, float, float] = (1.0, 1.0, 1.0)) -> Geometry:
@@ -60,7 +60,7 @@ def synthetic_shard(geometry: Geometry, index: int, *, n_steps: int = 3, seed: i
     return Shard(
         scene_name=scene_name, scene_hash=scene_hash, sim_index=index, seed=seed,
         geometry_id=geometry.geometry_id, load_kind="nodal", load_nodes=[node],
-        forces=force[None], material=Material(c=[4.1e-3], m=[10.06], K=0.41),
+        forces=force[None], material=OgdenMaterial(c=[4.1e-3], m=[10.06], K=0.41),
         fixed_nodes=fixed, load_fractions=fr, output_nodes=np.arange(geometry.n_nodes),
         displacement=disp,
         stats=SolverStats(newton_iterations=np.full(n_steps, 3), residual_norms=np.full(

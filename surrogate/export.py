@@ -15,46 +15,27 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from flax import traverse_util
 
 from surrogate.features import FeatureSpec, node_features, static_node_features
+from surrogate.normalise import Normaliser
 
 MODEL_FORMAT = "liverfem-surrogate"
 MODEL_VERSION = 1
 log = logging.getLogger(__name__)
 
 
-def _flatten(tree, prefix=""):
-    out = {}
-    for k, v in tree.items():
-        key = f"{prefix}{k}"
-        if isinstance(v, dict):
-            out.update(_flatten(v, key + "/"))
-        else:
-            out[key] = np.asarray(v)
-    return out
-
-
-def _unflatten(flat):
-    tree: dict = {}
-    for key, v in flat.items():
-        node = tree
-        parts = key.split("/")
-        for p in parts[:-1]:
-            node = node.setdefault(p, {})
-        node[parts[-1]] = v
-    return tree
-
-
-def export_model(directory, params, stats, cfg, ds) -> Path:
-    """Write a model directory from a trained network and its dataset."""
+def export_model(directory, params, norm: Normaliser, cfg, ds) -> Path:
+    """Write a model directory from a trained network, its normaliser and its dataset."""
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
-    np.savez(d / "params.npz", **_flatten(params))
+    flat = traverse_util.flatten_dict(params, sep="/")
+    np.savez(d / "params.npz", **{k: np.asarray(v) for k, v in flat.items()})
     fnorm = np.linalg.norm(ds.forces, axis=-1)
     meta = {
         "format": MODEL_FORMAT, "version": MODEL_VERSION, "scene": ds.scene_name,
         "config": cfg, "feature_spec": ds.spec.to_dict(), "feature_names": ds.spec.names(),
-        "stats": {k: np.asarray(v).tolist() for k, v in stats.items()},
+        "stats": norm.to_dict(),
         "training_range": {
             "force_norm_max": float(fnorm.max()),
             "extra_min": ds.extra.min(axis=0).tolist() if ds.extra.size else [],
@@ -95,10 +76,10 @@ class Predictor:
         self.meta = meta
         self.spec = FeatureSpec(**meta["feature_spec"])
         with np.load(d / "params.npz", allow_pickle=False) as z:
-            params = _unflatten({k: z[k] for k in z.files})
+            params = traverse_util.unflatten_dict({k: z[k] for k in z.files}, sep="/")
         self.params = jax.tree_util.tree_map(jnp.asarray, params)
-        self.stats = {k: jnp.asarray(np.asarray(v, dtype=np.float32))
-                      for k, v in meta["stats"].items()}
+        self.norm = Normaliser.from_dict(meta.get("stats"), self.spec.dim,
+                                         where=f"{d}/model.json: stats")
         geo = d / "geometry.npz"
         if geo.exists():
             with np.load(geo, allow_pickle=False) as z:
@@ -109,15 +90,12 @@ class Predictor:
             self.points = self.fixed = self.static = None
         cfg = meta["config"]
         model = NodeMLP(hidden=tuple(cfg["hidden"]), dropout=cfg["dropout"])
-        stats = self.stats
 
-        def one_case(params, static, forces, load_points, extra):
-            raw = node_features(static, forces, load_points, extra, xp=jnp)
-            feats = (raw - stats["x_mean"]) / stats["x_std"]
-            y = model.apply({"params": params}, feats, train=False)
-            return y * stats["y_std"] + stats["y_mean"]
+        def one_case(params, norm, static, forces, load_points, extra):
+            x = norm.inputs(node_features(static, forces, load_points, extra, xp=jnp))
+            return norm.outputs(model.apply({"params": params}, x, train=False))
 
-        self._batched = jax.jit(jax.vmap(one_case, in_axes=(None, None, 0, 0, 0)))
+        self._batched = jax.jit(jax.vmap(one_case, in_axes=(None, None, None, 0, 0, 0)))
 
     def __call__(self, forces, load_nodes, nodes=None, material=None, geometry=None):
         import jax.numpy as jnp
@@ -174,7 +152,7 @@ class Predictor:
             warnings.warn(f"force magnitude {fmax:.3g} N exceeds the training range "
                           f"({self.meta['training_range']['force_norm_max']:.3g} N): "
                           "extrapolating", stacklevel=2)
-        out = self._batched(self.params, static, jnp.asarray(forces, dtype=jnp.float32),
+        out = self._batched(self.params, self.norm, static, jnp.asarray(forces, dtype=jnp.float32),
                             jnp.asarray(points[load_nodes], dtype=jnp.float32),
                             jnp.asarray(extra, dtype=jnp.float32))
         out = np.asarray(out)

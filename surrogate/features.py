@@ -85,28 +85,35 @@ def static_node_features(points: np.ndarray, fixed: np.ndarray) -> np.ndarray:
 
 
 def node_features(static, forces, load_points, extra, xp=np):
-    """Features of nodes for one load case.
+    """Features of nodes: the one feature function of training and inference.
+
+    Leading dimensions broadcast, so the same function builds the features of all nodes of
+    one load case (the predictor: static (n, 11), forces (n_loads, 3)) and of a batch of
+    examples from different cases (training: static (B, 11), forces (B, n_loads, 3)).
 
     Args:
-        static: (n, 11) static node features (coordinates first).
-        forces: (n_loads, 3) force vectors at this load step, N.
-        load_points: (n_loads, 3) coordinates of the load nodes, mm.
-        extra: (e,) material parameters and/or shape coefficients (may be empty).
+        static: (..., 11) static node features (coordinates first).
+        forces: (..., n_loads, 3) force vectors at this load step, N.
+        load_points: (..., n_loads, 3) coordinates of the load nodes, mm.
+        extra: (..., e) material parameters and/or shape coefficients (e may be 0).
         xp: numpy or jax.numpy.
 
     Returns:
-        (n, dim) features.
+        (..., dim) features, laid out as :meth:`FeatureSpec.names`.
     """
-    n = static.shape[0]
-    x = static[:, :3]
-    blocks = [static]
-    for j in range(forces.shape[0]):
-        d = load_points[j][None, :] - x
-        blocks += [xp.broadcast_to(forces[j][None, :], (n, 3)), d,
-                   xp.sqrt(xp.sum(d * d, axis=1, keepdims=True))]
-    if extra.shape[0]:
-        blocks.append(xp.broadcast_to(extra[None, :], (n, extra.shape[0])))
-    return xp.concatenate(blocks, axis=1)
+    lead = xp.broadcast_shapes(static.shape[:-1], forces.shape[:-2], extra.shape[:-1])
+
+    def full(a):
+        return xp.broadcast_to(a, lead + a.shape[-1:])
+
+    d = load_points - static[..., None, :3]  # (..., n_loads, 3)
+    dist = xp.sqrt(xp.sum(d * d, axis=-1, keepdims=True))
+    blocks = [full(static)]
+    for j in range(forces.shape[-2]):
+        blocks += [full(forces[..., j, :]), full(d[..., j, :]), full(dist[..., j, :])]
+    if extra.shape[-1]:
+        blocks.append(full(extra))
+    return xp.concatenate(blocks, axis=-1)
 
 
 def material_vector(c, m, K) -> np.ndarray:

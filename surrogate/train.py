@@ -7,6 +7,7 @@ rule, so the reported metrics come from folds the model never saw in any way.
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import sys
@@ -17,11 +18,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
+from flax import traverse_util
 from flax.training import train_state
 
 from surrogate.data import Dataset, kfold_groups, load_dataset
+from surrogate.features import node_features
 from surrogate.metrics import displacement_metrics, metrics_table
 from surrogate.model import NodeMLP
+from surrogate.normalise import Normaliser
 
 log = logging.getLogger(__name__)
 
@@ -29,65 +33,62 @@ EVAL_CHUNK = 65536
 
 
 def batch_features(data: dict, rows, samples, flip=None):
-    """Raw features of examples (static row, sample) inside jit. ``flip`` (B,) swaps the two
-    force blocks (the paper's augmentation for two simultaneous forces).
+    """Raw features of examples (static row, sample) inside jit, through
+    :func:`surrogate.features.node_features`. ``flip`` (B,) swaps the two force blocks (the
+    paper's augmentation for two simultaneous forces).
     """
-    st = data["static"][rows]
     f = data["forces"][samples]
     lp = data["load_points"][samples]
     if flip is not None:
         f = jnp.where(flip[:, None, None], f[:, ::-1], f)
         lp = jnp.where(flip[:, None, None], lp[:, ::-1], lp)
-    d = lp - st[:, None, :3]
-    dist = jnp.sqrt(jnp.sum(d * d, axis=-1, keepdims=True))
-    blocks = [st]
-    for j in range(f.shape[1]):
-        blocks += [f[:, j], d[:, j], dist[:, j]]
-    if data["extra"].shape[1]:
-        blocks.append(data["extra"][samples])
-    return jnp.concatenate(blocks, axis=1)
+    return node_features(data["static"][rows], f, lp, data["extra"][samples], xp=jnp)
 
 
-def make_fns(model: NodeMLP, cfg: dict, n_loads: int):
-    """Pure jitted functions: train_step(state, data, batch, key) and predict(params, data,
-    rows, samples) -> mm.
+def make_fns(cfg: dict, n_loads: int):
+    """Pure jitted functions ``train_step(state, norm, data, rows, samples, targets, key)``,
+    ``eval_loss(params, norm, data, rows, samples, targets)`` and
+    ``predict(params, norm, data, rows, samples) -> mm``, built (and compiled) once per
+    network and loss settings, not once per fold.
     """
+    return _fns(tuple(cfg["hidden"]), float(cfg["dropout"]), float(cfg["input_noise"]),
+                float(cfg["l2"]), int(n_loads))
 
-    def normalised_inputs(data, rows, samples, flip=None):
-        x = batch_features(data, rows, samples, flip)
-        return (x - data["x_mean"]) / data["x_std"]
 
-    def loss_fn(params, data, rows, samples, targets, key, train):
+@functools.lru_cache(maxsize=8)
+def _fns(hidden: tuple, dropout: float, input_noise: float, l2: float, n_loads: int):
+    model = NodeMLP(hidden=hidden, dropout=dropout)
+
+    def loss_fn(params, norm, data, rows, samples, targets, key, train):
         k_noise, k_drop, k_flip = jax.random.split(key, 3)
         flip = (jax.random.bernoulli(k_flip, 0.5, (rows.shape[0],))
                 if (train and n_loads == 2) else None)
-        x = normalised_inputs(data, rows, samples, flip)
-        if train and cfg["input_noise"] > 0:
-            x = x + cfg["input_noise"] * jax.random.normal(k_noise, x.shape)
-        y = (targets - data["y_mean"]) / data["y_std"]
+        x = norm.inputs(batch_features(data, rows, samples, flip))
+        if train and input_noise > 0:
+            x = x + input_noise * jax.random.normal(k_noise, x.shape)
         pred = model.apply({"params": params}, x, train=train, rngs={"dropout": k_drop})
-        mse = jnp.mean((pred - y) ** 2)
-        if cfg["l2"] > 0:
-            l2 = sum(jnp.sum(w**2) for p, w in jax.tree_util.tree_leaves_with_path(params)
-                     if "kernel" in jax.tree_util.keystr(p))
-            return mse + 0.5 * cfg["l2"] * l2, mse
+        mse = jnp.mean((pred - norm.targets(targets)) ** 2)
+        if l2 > 0:
+            flat = traverse_util.flatten_dict(params)
+            penalty = sum(jnp.sum(w**2) for k, w in flat.items() if k[-1] == "kernel")
+            return mse + 0.5 * l2 * penalty, mse
         return mse, mse
 
     @jax.jit
-    def train_step(state, data, rows, samples, targets, key):
+    def train_step(state, norm, data, rows, samples, targets, key):
         grad_fn = jax.value_and_grad(loss_fn, has_aux=True)
-        (_, mse), grads = grad_fn(state.params, data, rows, samples, targets, key, True)
+        (_, mse), grads = grad_fn(state.params, norm, data, rows, samples, targets, key, True)
         return state.apply_gradients(grads=grads), mse
 
     @jax.jit
-    def eval_loss(params, data, rows, samples, targets):
-        return loss_fn(params, data, rows, samples, targets, jax.random.PRNGKey(0), False)[1]
+    def eval_loss(params, norm, data, rows, samples, targets):
+        return loss_fn(params, norm, data, rows, samples, targets, jax.random.PRNGKey(0),
+                       False)[1]
 
     @jax.jit
-    def predict(params, data, rows, samples):
-        x = normalised_inputs(data, rows, samples)
-        y = model.apply({"params": params}, x, train=False)
-        return y * data["y_std"] + data["y_mean"]
+    def predict(params, norm, data, rows, samples):
+        x = norm.inputs(batch_features(data, rows, samples))
+        return norm.outputs(model.apply({"params": params}, x, train=False))
 
     return train_step, eval_loss, predict
 
@@ -105,31 +106,22 @@ def example_index(ds: Dataset, samples: np.ndarray) -> tuple[np.ndarray, np.ndar
     return np.concatenate(rows), np.concatenate(smp), np.concatenate(tgt)
 
 
-def normalisation(ds: Dataset, rows, smp, tgt, rng, n_max: int = 200_000) -> dict:
-    """Feature and target mean/std from (a random subset of) the training examples."""
+def normalisation(ds: Dataset, rows, smp, tgt, rng, n_max: int = 200_000) -> Normaliser:
+    """Feature and target statistics from (a random subset of) the training examples."""
     pick = rng.choice(rows.size, size=min(n_max, rows.size), replace=False)
-    data = {"static": ds.static, "forces": ds.forces, "load_points": ds.load_points,
-            "extra": ds.extra}
-    x = np.asarray(batch_features(data, rows[pick], smp[pick]))
-    y = ds.targets[tgt[pick]]
-    std = x.std(axis=0)
-    return {"x_mean": x.mean(axis=0).astype(np.float32),
-            "x_std": np.where(std > 1e-8 * (np.abs(x).max(axis=0) + 1e-30), std, 1.0)
-            .astype(np.float32),
-            "y_mean": y.mean(axis=0).astype(np.float32),
-            "y_std": np.maximum(y.std(axis=0), 1e-12).astype(np.float32)}
+    x = np.asarray(batch_features(device_data(ds), rows[pick], smp[pick]))
+    return Normaliser.fit(x, ds.targets[tgt[pick]])
 
 
-def device_data(ds: Dataset, stats: dict) -> dict:
+def device_data(ds: Dataset) -> dict:
     return {"static": jnp.asarray(ds.static), "forces": jnp.asarray(ds.forces),
-            "load_points": jnp.asarray(ds.load_points), "extra": jnp.asarray(ds.extra),
-            **{k: jnp.asarray(v) for k, v in stats.items()}}
+            "load_points": jnp.asarray(ds.load_points), "extra": jnp.asarray(ds.extra)}
 
 
 def fit(ds: Dataset, train_samples: np.ndarray, cfg: dict, seed: int, label: str = "",
         log_fn=print) -> tuple[dict, dict, list[dict]]:
     """Train on ``train_samples`` (a slice held out for early stopping). Returns
-    (params, normalisation stats, per-epoch history).
+    (params, normaliser, per-epoch history).
     """
     rng = np.random.default_rng(seed)
     unit = ds.sample_geo if ds.spec.geometry_dim else ds.sample_sim
@@ -139,15 +131,15 @@ def fit(ds: Dataset, train_samples: np.ndarray, cfg: dict, seed: int, label: str
     is_val = np.isin(unit[train_samples], val_units)
     tr, va = train_samples[~is_val], train_samples[is_val]
     rows, smp, tgt = example_index(ds, tr)
-    stats = normalisation(ds, rows, smp, tgt, rng)
-    data = device_data(ds, stats)
+    norm = normalisation(ds, rows, smp, tgt, rng)
+    data = device_data(ds)
     model = NodeMLP(hidden=tuple(cfg["hidden"]), dropout=cfg["dropout"])
     key = jax.random.PRNGKey(seed)
     key, k_init = jax.random.split(key)
     params = model.init(k_init, jnp.zeros((1, ds.spec.dim)))["params"]
     tx = optax.inject_hyperparams(optax.adam)(learning_rate=cfg["learning_rate"])
     state = train_state.TrainState.create(apply_fn=model.apply, params=params, tx=tx)
-    train_step, eval_loss, _ = make_fns(model, cfg, ds.spec.n_loads)
+    train_step, eval_loss, _ = make_fns(cfg, ds.spec.n_loads)
     if va.size:
         vrows, vsmp, vtgt = example_index(ds, va)
         if vrows.size > 200_000:
@@ -164,12 +156,12 @@ def fit(ds: Dataset, train_samples: np.ndarray, cfg: dict, seed: int, label: str
         for i in range(0, n_per_epoch, B):
             b = order[i:i + B]
             key, k = jax.random.split(key)
-            state, mse = train_step(state, data, jnp.asarray(rows[b]), jnp.asarray(smp[b]),
-                                    jnp.asarray(ds.targets[tgt[b]]), k)
+            state, mse = train_step(state, norm, data, jnp.asarray(rows[b]),
+                                    jnp.asarray(smp[b]), jnp.asarray(ds.targets[tgt[b]]), k)
             losses.append(mse)
         train_loss = float(np.mean(jax.device_get(losses)))
-        val_loss = float(eval_loss(state.params, data, jnp.asarray(vrows), jnp.asarray(vsmp),
-                                   vtargets)) if va.size else train_loss
+        val_loss = float(eval_loss(state.params, norm, data, jnp.asarray(vrows),
+                                   jnp.asarray(vsmp), vtargets)) if va.size else train_loss
         dt = time.perf_counter() - t0
         history.append({"epoch": epoch + 1, "train_loss": train_loss, "val_loss": val_loss,
                         "lr": lr, "seconds": dt, "examples_per_s": n_per_epoch / dt})
@@ -186,14 +178,13 @@ def fit(ds: Dataset, train_samples: np.ndarray, cfg: dict, seed: int, label: str
         state.opt_state.hyperparams["learning_rate"] = jnp.asarray(lr)
         if since >= cfg["early_stopping"]:
             break
-    return jax.device_get(best_params), stats, history
+    return jax.device_get(best_params), norm, history
 
 
-def predict_samples(ds: Dataset, params, stats: dict, cfg: dict, samples: np.ndarray):
+def predict_samples(ds: Dataset, params, norm: Normaliser, cfg: dict, samples: np.ndarray):
     """Predicted and true displacement (mm) of every output node of ``samples``."""
-    model = NodeMLP(hidden=tuple(cfg["hidden"]), dropout=cfg["dropout"])
-    _, _, predict = make_fns(model, cfg, ds.spec.n_loads)
-    data = device_data(ds, stats)
+    _, _, predict = make_fns(cfg, ds.spec.n_loads)
+    data = device_data(ds)
     rows, smp, tgt = example_index(ds, samples)
     out = np.empty((rows.size, 3), dtype=np.float32)
     for i in range(0, rows.size, EVAL_CHUNK):
@@ -202,7 +193,8 @@ def predict_samples(ds: Dataset, params, stats: dict, cfg: dict, samples: np.nda
         pad = EVAL_CHUNK - n  # one compiled shape for every chunk
         r = np.concatenate([r, np.repeat(r[:1], pad)])
         s = np.concatenate([s, np.repeat(s[:1], pad)])
-        out[i:i + n] = np.asarray(predict(params, data, jnp.asarray(r), jnp.asarray(s)))[:n]
+        out[i:i + n] = np.asarray(predict(params, norm, data, jnp.asarray(r),
+                                          jnp.asarray(s)))[:n]
     return out, ds.targets[tgt], smp
 
 
@@ -233,12 +225,12 @@ def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
     for k, held in enumerate(folds):
         train_samples = np.setdiff1d(np.arange(ds.n_samples), held)
         t = time.perf_counter()
-        params, stats, hist = fit(ds, train_samples, cfg, cfg["seed"] + 1 + k,
+        params, norm, hist = fit(ds, train_samples, cfg, cfg["seed"] + 1 + k,
                                   f"fold {k + 1}/{len(folds)} ", say)
         train_time += time.perf_counter() - t
         examples += sum(h["examples_per_s"] * h["seconds"] for h in hist)
         history[f"fold{k}"] = hist
-        p, y, s = predict_samples(ds, params, stats, cfg, held)
+        p, y, s = predict_samples(ds, params, norm, cfg, held)
         _, _, tr_tgt = example_index(ds, train_samples)
         mean_disp = ds.targets[tr_tgt].mean(axis=0)
         preds.append(p)
@@ -265,10 +257,10 @@ def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
     say("\n" + table + f"\nskill = MEE_NN / MEE_naive = {result['skill']:.4f}")
     error_plots(run, pred, true, result)
     if cfg["final_fit"]:
-        params, stats, hist = fit(ds, np.arange(ds.n_samples), cfg, cfg["seed"], "final ",
-                                  say)
+        params, norm, hist = fit(ds, np.arange(ds.n_samples), cfg, cfg["seed"], "final ",
+                                 say)
         history["final"] = hist
-        export_model(run / "model", params, stats, cfg, ds)
+        export_model(run / "model", params, norm, cfg, ds)
         say(f"model exported to {run / 'model'}")
     result["total_seconds"] = time.perf_counter() - t0
     (run / "metrics.json").write_text(json.dumps(result, indent=1))

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from data_spec import Geometry, Material, Scene
+from data_spec import Geometry, OgdenMaterial, Scene
 
 _MATERIAL_TABLE_STREAM = 2**31 - 1  # rng stream of the scene-wide material table
 
@@ -29,7 +29,7 @@ class Case:
     load_kind: str
     load_nodes: np.ndarray       # (n_loads,) source node ids (patch centres for patch loads)
     forces: np.ndarray           # (n_loads, 3) N at load fraction 1
-    material: Material
+    material: OgdenMaterial
     patch_radius: float = 0.0
 
 
@@ -97,7 +97,7 @@ def _draw(rng: np.random.Generator, spec) -> float:
     return float(rng.uniform(spec[0], spec[1])) if isinstance(spec, list) else float(spec)
 
 
-def material_table(scene: Scene) -> list[Material] | None:
+def material_table(scene: Scene) -> list[OgdenMaterial] | None:
     """The scene-wide table of materials cases pick from (None if each case draws its own or
     the material is fixed).
     """
@@ -114,26 +114,26 @@ def material_table(scene: Scene) -> list[Material] | None:
     return [_uniform_material(rng, s, vol) for _ in range(s["n_sets"])]
 
 
-def _uniform_material(rng, s: dict, vol: str) -> Material:
+def _uniform_material(rng, s: dict, vol: str) -> OgdenMaterial:
     c = [rng.uniform(lo, hi) for lo, hi in s["c"]]
     m = [rng.uniform(lo, hi) for lo, hi in s["m"]]
     k_over_mu = _draw(rng, s.get("K_over_mu", 200.0))
-    return Material(c=c, m=m, K=k_over_mu * 0.5 * sum(c), volumetric=vol)
+    return OgdenMaterial(c=c, m=m, K=k_over_mu * 0.5 * sum(c), volumetric=vol)
 
 
-def _material_from_params(p: dict, vol: str) -> Material:
+def _material_from_params(p: dict, vol: str) -> OgdenMaterial:
     c = p["c"]
     K = p["K"] if "K" in p else p.get("K_over_mu", 200.0) * 0.5 * sum(c)
-    return Material(c=c, m=p["m"], K=K, volumetric=vol)
+    return OgdenMaterial(c=c, m=p["m"], K=K, volumetric=vol)
 
 
-def base_material(scene: Scene) -> Material:
+def base_material(scene: Scene) -> OgdenMaterial:
     mat = scene["material"]
     return _material_from_params(mat, mat["volumetric"])
 
 
 def make_case(scene: Scene, index: int, g: Geometry, fixed: np.ndarray,
-              table: list[Material] | None = None, eligible: np.ndarray | None = None) -> Case:
+              table: list[OgdenMaterial] | None = None, eligible: np.ndarray | None = None) -> Case:
     """Case ``index`` of the scene on geometry ``g`` (deterministic in (scene.seed, index))."""
     ld = scene["loads"]
     rng = np.random.default_rng([scene.seed, index])
@@ -167,7 +167,7 @@ def make_case(scene: Scene, index: int, g: Geometry, fixed: np.ndarray,
     return Case(index, geometry_index, ld["kind"], nodes, d * mags[:, None], mat, patch)
 
 
-def _case_material(scene: Scene, rng, table: list[Material] | None) -> Material:
+def _case_material(scene: Scene, rng, table: list[OgdenMaterial] | None) -> OgdenMaterial:
     s = scene["material"].get("sample")
     if s is None:
         return base_material(scene)

@@ -182,7 +182,6 @@ def _warm_jit_cache(degree: int, qdeg: int) -> None:
 def run_case(problem, scene: Scene, case: cs.Case, g: Geometry, fixed: np.ndarray,
              out_nodes: np.ndarray, geometry_id: str) -> Shard | None:
     """Solve one case on the group (collective); the shard on the group's rank 0."""
-    from fem_sim.material.ogden import OgdenMaterial
     from fem_sim.solver.problem import Constraint, NodalLoad, PatchLoad
 
     if case.load_kind == "patch":
@@ -193,7 +192,7 @@ def run_case(problem, scene: Scene, case: cs.Case, g: Geometry, fixed: np.ndarra
     fractions = np.asarray(scene.load_fractions)
     t0 = time.perf_counter()
     try:
-        sol = problem.solve(OgdenMaterial.from_data(case.material), [Constraint(fixed)], loads,
+        sol = problem.solve(case.material, [Constraint(fixed)], loads,
                             fractions)
         status, reason = sol.status, sol.failure_reason
     except Exception as exc:  # a crash of one case is recorded, never kills the batch

@@ -95,7 +95,7 @@ def test_material_model_warns_outside_the_training_range(tmp_path):
     leaves the range it was trained on (by more than 5 %)."""
     import dataclasses
 
-    from data_spec import Material, geometry_path, write_geometry, write_shard
+    from data_spec import OgdenMaterial, geometry_path, write_geometry, write_shard
     from data_spec.testing import box_mesh, synthetic_shard
     from tests.surrogate.conftest import ROOT
 
@@ -105,7 +105,7 @@ def test_material_model_warns_outside_the_training_range(tmp_path):
     for i in range(12):
         c, m = rng.uniform(2e-3, 8e-3), rng.uniform(6.0, 14.0)
         shard = synthetic_shard(geo, i)
-        shard = dataclasses.replace(shard, material=Material(c=[c], m=[m], K=100 * c),
+        shard = dataclasses.replace(shard, material=OgdenMaterial(c=[c], m=[m], K=100 * c),
                                     displacement=shard.displacement * 4.1e-3 / c)
         write_shard(tmp_path, shard)
     scene = (ROOT / "data_spec" / "scenes" / "scene3_materials.toml").read_text()
@@ -163,3 +163,33 @@ def test_streaming_leaves_nothing_behind_when_a_shard_is_unreadable(synth_dir, t
     with pytest.raises(Exception):  # noqa: B017 (h5py's error type depends on the damage)
         load_dataset(d, stream=True, spill_dir=spill)
     assert list(spill.iterdir()) == []
+
+
+@pytest.mark.parametrize("key, value, message", [
+    ("y_std", [-1e30, 1.0, 1.0], r"stats\.y_std: scales must be > 0"),
+    ("x_std", None, r"stats\.x_std: expected \d+ values"),
+    ("x_mean", "nan", r"stats\.x_mean: contains NaN"),
+    ("y_mean", "missing", r"stats\.y_mean: missing"),
+])
+def test_tampered_normalisation_statistics_are_refused_at_load(run, tmp_path, key, value,
+                                                               message):
+    """The normaliser is checked when a model is loaded, with the file and the key named:
+    a model with a negative scale, a wrong size, a NaN or a missing entry never predicts."""
+    import shutil
+
+    d = tmp_path / "model"
+    shutil.copytree(run[0] / "model", d)
+    meta = json.loads((d / "model.json").read_text())
+    stats = meta["stats"]
+    if value == "nan":
+        stats[key][0] = float("nan")
+    elif value == "missing":
+        del stats[key]
+    elif value is None:
+        stats[key] = stats[key][:-1]
+    else:
+        stats[key] = value
+    (d / "model.json").write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match=message) as err:
+        load_predictor(d)
+    assert str(d / "model.json") in str(err.value)
