@@ -65,3 +65,21 @@ def test_training_and_inference_build_the_same_features():
     got = np.asarray(batch_features(data, jnp.asarray(rows), jnp.full(9, 1)))
     want = node_features(st, forces[1], lp[1], extra[1])
     np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-6)
+
+
+def test_learning_rate_rules_follow_the_config():
+    """plateau: x0.1 once ``lr_patience`` epochs pass without a relative improvement of 1e-4
+    (counted again from zero after each reduction); decay: / 1.5 per epoch."""
+    import jax.numpy as jnp
+
+    from surrogate.config import get_config
+    from surrogate.train import LearningRateRule
+
+    rule = LearningRateRule(get_config("small", learning_rate=1e-3, lr_patience=2),
+                            {"w": jnp.zeros(2)})
+    lrs = [rule.update(v) for v in (1.0, 0.9, 0.95, 0.95, 0.95, 0.95, 0.8)]
+    np.testing.assert_allclose(lrs, [1e-3, 1e-3, 1e-3, 1e-4, 1e-4, 1e-5, 1e-5], rtol=1e-6)
+    decay = LearningRateRule(get_config("small", learning_rate=1e-3, lr_rule="decay"),
+                             {"w": jnp.zeros(2)})
+    np.testing.assert_allclose([decay.update(1.0) for _ in range(3)],
+                               [1e-3 / 1.5, 1e-3 / 1.5**2, 1e-3 / 1.5**3])
