@@ -1,9 +1,9 @@
 """The compiled Ogden point kernel (``ogden_kernel.c``), built with cffi at first use.
 
 Same formulas and the same outputs as :func:`fem_sim.material.ogden.ogden_point_kernel` (the numpy
-reference, which the tests compare it with), about 10x faster: one pass per point instead of
-~40 batched numpy operations, a 3x3 Jacobi eigen-solver instead of LAPACK's per-matrix calls.
-Measured at 75k points on this machine: ``bench/bench_kernel.py``.
+reference, which the tests compare it with), several times faster: one pass per point instead
+of ~40 batched numpy operations, a 3x3 Jacobi eigen-solver instead of LAPACK's per-matrix
+calls (``bench/bench_kernel.py``).
 
 The extension is built and cached by :mod:`fem_sim.cext`; if no C compiler is available,
 :func:`load` returns None and callers use the numpy kernel (with a warning).

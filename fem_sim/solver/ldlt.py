@@ -1,13 +1,12 @@
 """Serial sparse LDL^T (MUMPS through its C interface) with METIS ordering, in double or
 single precision, and GMRES refinement to double-precision accuracy.
 
-Why (measured on the Jacobian of the real liver at 14,581 nodes / 43,743 dofs, one core,
-``bench/bench_jacobian.py``): PETSc's MUMPS LDL^T with Debian's build can only order with PORD
-(or AMD/AMF/QAMD, all worse here): 31.4 GFlop and 1.26 s per factorisation. METIS nested
-dissection on the node graph cuts that to 24.6 GFlop (1.06 s), and single-precision factors run
-at about 1.6x the flop rate (0.65 s). One solve with float32 factors leaves a relative residual
-of 1.6e-3 there (same bench), so the Newton systems are solved by GMRES preconditioned with it
-(2-4 iterations to 1e-10); chord steps and tangent predictors, approximate by nature, use one
+Why: PETSc's MUMPS LDL^T with Debian's build can only order with PORD (or AMD/AMF/QAMD), which
+need more operations than METIS nested dissection on the node graph, and single-precision
+factors run at a higher flop rate (``bench/bench_jacobian.py`` prints both on the real liver;
+the figures are in the README). One solve with float32 factors leaves a relative residual of
+order 1e-3, so the Newton systems are solved by GMRES preconditioned with them (a few
+iterations to 1e-10); chord steps and tangent predictors, approximate by nature, use one
 back-solve. This is not a petsc4py python PC on purpose: PETSc objects holding Python contexts
 crashed at interpreter exit.
 

@@ -310,8 +310,8 @@ def _rigid_body_modes(A, x: np.ndarray, comm):
 def factorization_mode(settings: SolverSettings, comm_size: int) -> str | None:
     """"single"/"double" when the serial METIS LDL^T applies, else None (PETSc's KSP).
 
-    ``auto`` is "single" on one process (float32 factors: 0.65 s instead of PETSc's 1.26 s per
-    factorisation at 15k nodes, ``bench/bench_jacobian.py``) and PETSc's MUMPS on several.
+    ``auto`` is "single" on one process (float32 factors with METIS ordering, faster than
+    PETSc's MUMPS: ``bench/bench_jacobian.py``) and PETSc's MUMPS on several.
     """
     s = settings
     mode = s.factorization
