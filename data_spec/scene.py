@@ -339,10 +339,6 @@ class Scene:
             raise SceneError(self.source, problems)
 
 
-def _mu(c: list[float]) -> float:
-    return 0.5 * sum(c)
-
-
 def _check_section(section: str, raw: Any, schema: dict[str, Key], problems: list[str],
                    where: str | None = None) -> dict:
     """Check one table against its schema; return it with defaults filled in."""

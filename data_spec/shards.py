@@ -24,12 +24,21 @@ import numpy as np
 
 from data_spec.atomic import atomic_path, write_text_atomic
 from data_spec.material import OgdenMaterial
+from data_spec.shard_layout import (
+    LAYOUT,
+    SHARD_FORMAT,
+    SHARD_SCHEMA_VERSION,
+    STATUSES,
+    UNITS,
+    get,
+    missing,
+    read_entry,
+    write_entry,
+)
 from data_spec.xdmf import shard_xdmf
 
-SHARD_FORMAT = "liver-fem-shard"
-SHARD_SCHEMA_VERSION = 1
-UNITS = {"units_length": "mm", "units_force": "N", "units_stress": "MPa", "units_time": "s"}
-STATUSES = ("ok", "failed")
+__all__ = ["SHARD_FORMAT", "SHARD_SCHEMA_VERSION", "STATUSES", "UNITS", "Shard", "SolverStats",
+           "geometry_path", "list_shards", "read_shard", "shard_path", "write_shard"]
 
 
 def shard_path(directory: str | Path, index: int) -> Path:
@@ -68,6 +77,17 @@ class SolverStats:
     @classmethod
     def empty(cls) -> SolverStats:
         return cls(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), [])
+
+    @property
+    def history_flat(self) -> np.ndarray:
+        """The residual histories of all steps, concatenated (as stored)."""
+        h = self.residual_history
+        return np.concatenate(h) if h else np.zeros(0)
+
+    @property
+    def history_offsets(self) -> np.ndarray:
+        """Step i's history is ``history_flat[off[i]:off[i + 1]]``."""
+        return np.cumsum([0] + [len(h) for h in self.residual_history]).astype(np.int64)
 
 
 @dataclass
@@ -136,87 +156,45 @@ def write_shard(directory: str | Path, shard: Shard) -> Path:
     write_text_atomic(h5_path.with_suffix(".xdmf"), xdmf)
 
     with atomic_path(h5_path) as tmp, h5py.File(tmp, "w") as f:
-        a = f.attrs
-        a["format"] = SHARD_FORMAT
-        a["schema_version"] = SHARD_SCHEMA_VERSION
+        f.attrs["format"] = SHARD_FORMAT
+        f.attrs["schema_version"] = SHARD_SCHEMA_VERSION
         for k, v in UNITS.items():
-            a[k] = v
-        a["scene_name"] = shard.scene_name
-        a["scene_hash"] = shard.scene_hash
-        a["sim_index"] = shard.sim_index
-        a["seed"] = shard.seed
-        a["geometry_id"] = shard.geometry_id
-        a["geometry_file"] = rel_geo
-        a["status"] = shard.status
-        a["failure_reason"] = shard.failure_reason
-        load = f.create_group("load")
-        load.attrs["kind"] = shard.load_kind
-        load.attrs["patch_radius"] = float(shard.patch_radius)
-        load["nodes"] = shard.load_nodes
-        load["forces"] = shard.forces
-        mat = f.create_group("material")
-        mat.attrs["law"] = shard.material.law
-        mat.attrs["volumetric"] = shard.material.volumetric
-        mat["c"] = shard.material.c
-        mat["m"] = shard.material.m
-        mat["K"] = shard.material.K
-        f["fixed_nodes"] = shard.fixed_nodes
-        f["load_fractions"] = shard.load_fractions
-        f["output_nodes"] = shard.output_nodes
-        # One chunk per load step: a reader of one step decompresses only that step.
-        packed = dict(chunks=(1, *shard.displacement.shape[1:]), compression="gzip",
-                      compression_opts=4, shuffle=True) if shard.n_done else {}
-        f.create_dataset("displacement", data=shard.displacement, **packed)
-        s = f.create_group("solver")
-        s["newton_iterations"] = shard.stats.newton_iterations
-        s["residual_norms"] = shard.stats.residual_norms
-        s["cutbacks"] = shard.stats.cutbacks
-        s["wall_time"] = shard.stats.wall_time
-        hist = shard.stats.residual_history
-        s["residual_history"] = np.concatenate(hist) if hist else np.zeros(0)
-        s["residual_offsets"] = np.cumsum([0] + [len(h) for h in hist]).astype(np.int64)
+            f.attrs[k] = v
+        for e in LAYOUT:
+            write_entry(f, e, get(shard, e.source))
         for k, v in shard.stats.info.items():
-            s.attrs[k] = v
+            f["solver"].attrs[k] = v
         if not output_is_all:
             f["xdmf/points"] = points[shard.output_nodes]
     return h5_path
 
 
-def _material(path, group) -> OgdenMaterial:
-    law = str(group.attrs["law"])
-    if law != OgdenMaterial.law:
-        raise ValueError(f"{path}: material law {law!r}; this code reads {OgdenMaterial.law!r}")
-    try:
-        return OgdenMaterial(c=group["c"][...], m=group["m"][...], K=float(group["K"][()]),
-                             volumetric=str(group.attrs["volumetric"]))
-    except ValueError as exc:
-        raise ValueError(f"{path}: /material: {exc}") from None
-
-
 def read_shard(path: str | Path) -> Shard:
     """Read one shard file into a :class:`Shard` (plain numpy arrays)."""
     with h5py.File(path, "r") as f:
-        a = f.attrs
-        if a.get("format") != SHARD_FORMAT:
+        if f.attrs.get("format") != SHARD_FORMAT:
             raise ValueError(f"{path}: not a {SHARD_FORMAT} file")
-        s = f["solver"]
-        offsets = s["residual_offsets"][...]
-        flat = s["residual_history"][...]
-        return Shard(
-            scene_name=str(a["scene_name"]), scene_hash=str(a["scene_hash"]),
-            sim_index=int(a["sim_index"]), seed=int(a["seed"]),
-            geometry_id=str(a["geometry_id"]), geometry_file=str(a["geometry_file"]),
-            load_kind=str(f["load"].attrs["kind"]),
-            patch_radius=float(f["load"].attrs["patch_radius"]),
-            load_nodes=f["load/nodes"][...], forces=f["load/forces"][...],
-            material=_material(path, f["material"]),
-            fixed_nodes=f["fixed_nodes"][...], load_fractions=f["load_fractions"][...],
-            output_nodes=f["output_nodes"][...], displacement=f["displacement"][...],
-            stats=SolverStats(
-                newton_iterations=s["newton_iterations"][...],
-                residual_norms=s["residual_norms"][...], cutbacks=s["cutbacks"][...],
-                wall_time=s["wall_time"][...],
-                residual_history=[flat[i:j] for i, j in zip(offsets[:-1], offsets[1:])],
-                info=dict(s.attrs)),
-            status=str(a["status"]), failure_reason=str(a["failure_reason"]),
-        )
+        absent = missing(f)
+        if absent:
+            raise ValueError(f"{path}: missing {', '.join(absent)}")
+        values: dict = {}
+        for e in LAYOUT:  # nested by source: {"material": {...}, "stats": {...}, ...}
+            *parents, leaf = e.source.split(".")
+            node = values
+            for part in parents:
+                node = node.setdefault(part, {})
+            node[leaf] = read_entry(f, e)
+        info = dict(f["solver"].attrs)
+    mat = values.pop("material")
+    law = mat.pop("law")
+    if law != OgdenMaterial.law:
+        raise ValueError(f"{path}: material law {law!r}; this code reads {OgdenMaterial.law!r}")
+    try:
+        material = OgdenMaterial(**mat)
+    except ValueError as exc:
+        raise ValueError(f"{path}: /material: {exc}") from None
+    st = values.pop("stats")
+    flat, offsets = st.pop("history_flat"), st.pop("history_offsets")
+    history = [flat[i:j] for i, j in zip(offsets[:-1], offsets[1:])]
+    return Shard(material=material, stats=SolverStats(**st, residual_history=history, info=info),
+                 **values)

@@ -74,9 +74,6 @@ class SolverSettings:
             raise ValueError("; ".join(found))
         return cls(**values)
 
-    def as_dict(self) -> dict:
-        return dataclasses.asdict(self)
-
 
 def fields(scene_only: bool = False) -> list[dataclasses.Field]:
     return [f for f in dataclasses.fields(SolverSettings)

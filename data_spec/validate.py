@@ -14,14 +14,15 @@ import numpy as np
 
 from data_spec.atomic import leftover_temporaries
 from data_spec.geometry import GEOMETRY_FORMAT
-from data_spec.shards import SHARD_FORMAT, SHARD_SCHEMA_VERSION, STATUSES, UNITS, list_shards
-
-_ATTRS = ("format", "schema_version", "scene_name", "scene_hash", "sim_index", "seed",
-          "geometry_id", "geometry_file", "status", "failure_reason", *UNITS)
-_DATASETS = ("load/nodes", "load/forces", "material/c", "material/m", "material/K",
-             "fixed_nodes", "load_fractions", "output_nodes", "displacement",
-             "solver/newton_iterations", "solver/residual_norms", "solver/cutbacks",
-             "solver/wall_time", "solver/residual_history", "solver/residual_offsets")
+from data_spec.shard_layout import (
+    DATASETS,
+    SHARD_FORMAT,
+    SHARD_SCHEMA_VERSION,
+    STATUSES,
+    missing,
+    shape_problems,
+)
+from data_spec.shards import list_shards
 
 
 def _geometry_facts(path: Path, cache: dict) -> tuple[int, str] | str:
@@ -54,19 +55,14 @@ def shard_problems(path: str | Path, geometry_cache: dict | None = None) -> list
         if f.attrs.get("format") != SHARD_FORMAT:
             return [f"{path}: attribute 'format' is {f.attrs.get('format')!r}, expected "
                     f"{SHARD_FORMAT!r}"]
-        for name in _ATTRS:
-            if name not in f.attrs:
-                p.append(f"{path}: missing attribute '{name}'")
-        for name in _DATASETS:
-            if name not in f:
-                p.append(f"{path}: missing dataset '{name}'")
+        p += [f"{path}: missing {what}" for what in missing(f)]
         if p:
             return p
         if f.attrs["schema_version"] != SHARD_SCHEMA_VERSION:
             p.append(f"{path}: schema_version {f.attrs['schema_version']}, expected "
                      f"{SHARD_SCHEMA_VERSION}")
         try:
-            arr = {name: f[name][()] for name in _DATASETS}
+            arr = {e.path: f[e.path][()] for e in DATASETS}
         except OSError as exc:
             return p + [f"{path}: data cannot be read (truncated or corrupt?): {exc}"]
         status = str(f.attrs["status"])
@@ -74,47 +70,29 @@ def shard_problems(path: str | Path, geometry_cache: dict | None = None) -> list
         geo_rel = str(f.attrs["geometry_file"])
         geo_id = str(f.attrs["geometry_id"])
 
-    def shape_is(name, expected):
-        got = np.shape(arr[name])
-        ok = len(got) == len(expected) and all(e is None or e == g
-                                                for e, g in zip(expected, got))
-        if not ok:
-            exp = "(" + ", ".join("n" if e is None else str(e) for e in expected) + ")"
-            p.append(f"{path}: '{name}' has shape {got}, expected {exp}")
-        return ok
-
-    n_loads = np.shape(arr["load/nodes"])[0] if np.ndim(arr["load/nodes"]) == 1 else None
-    shape_is("load/nodes", (None,))
-    shape_is("load/forces", (n_loads, 3))
-    shape_is("material/c", (None,))
-    shape_is("material/m", (np.shape(arr["material/c"])[0] if np.ndim(arr["material/c"]) == 1
-                            else None,))
-    shape_is("material/K", ())
-    shape_is("fixed_nodes", (None,))
-    shape_is("load_fractions", (None,))
-    shape_is("output_nodes", (None,))
-    n_steps = np.size(arr["load_fractions"])
-    n_out = np.size(arr["output_nodes"])
-    if shape_is("displacement", (None, n_out, 3)):
-        n_done = arr["displacement"].shape[0]
+    shapes, dims = shape_problems(arr)
+    p += [f"{path}: {msg}" for msg in shapes]
+    if not shapes:
+        n_done, n_steps = dims["n_done"], dims["n_steps"]
         if n_done > n_steps:
-            p.append(f"{path}: 'displacement' has {n_done} steps but only {n_steps} load "
+            p.append(f"{path}: '/displacement' has {n_done} steps but only {n_steps} load "
                      "fractions")
-        for name in ("newton_iterations", "residual_norms", "cutbacks", "wall_time"):
-            shape_is(f"solver/{name}", (n_done,))
-        shape_is("solver/residual_offsets", (n_done + 1,))
         if status == "ok" and n_done != n_steps:
             p.append(f"{path}: status 'ok' but {n_done} of {n_steps} load steps stored")
-    for name in ("load/forces", "material/c", "material/m", "material/K", "load_fractions",
-                 "displacement", "solver/residual_norms", "solver/wall_time"):
-        bad = ~np.isfinite(np.asarray(arr[name], dtype=np.float64))
-        if bad.any():
-            p.append(f"{path}: '{name}' contains {int(bad.sum())} NaN/inf value(s)")
+        off = np.asarray(arr["/solver/residual_offsets"])
+        if off[0] != 0 or off[-1] != dims["n_history"] or np.any(np.diff(off) < 0):
+            p.append(f"{path}: '/solver/residual_offsets' must rise from 0 to the length of "
+                     f"'/solver/residual_history' ({dims['n_history']})")
+    for e in DATASETS:
+        if e.finite:
+            bad = ~np.isfinite(np.asarray(arr[e.path], dtype=np.float64))
+            if bad.any():
+                p.append(f"{path}: '{e.path}' contains {int(bad.sum())} NaN/inf value(s)")
     if status not in STATUSES:
         p.append(f"{path}: status {status!r}, expected one of {STATUSES}")
     if status == "failed" and not reason:
         p.append(f"{path}: status 'failed' without a failure_reason")
-    if np.size(arr["fixed_nodes"]) == 0:
+    if np.size(arr["/fixed_nodes"]) == 0:
         p.append(f"{path}: 'fixed_nodes' is empty (the problem has rigid-body modes)")
 
     facts = _geometry_facts((path.parent / geo_rel).resolve(), geometry_cache)
@@ -124,7 +102,7 @@ def shard_problems(path: str | Path, geometry_cache: dict | None = None) -> list
         n_nodes, real_id = facts
         if real_id != geo_id:
             p.append(f"{path}: geometry_id {geo_id!r} but {geo_rel} holds {real_id!r}")
-        for name in ("load/nodes", "fixed_nodes", "output_nodes"):
+        for name in ("/load/nodes", "/fixed_nodes", "/output_nodes"):
             ids = np.asarray(arr[name])
             if ids.size and (ids.min() < 0 or ids.max() >= n_nodes):
                 p.append(f"{path}: '{name}' has node ids outside [0, {n_nodes})")

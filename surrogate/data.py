@@ -51,11 +51,6 @@ class Dataset:
     def n_samples(self) -> int:
         return self.sample_geo.shape[0]
 
-    def sample_rows(self, s: np.ndarray) -> np.ndarray:
-        """Static-feature rows of all examples of the given samples, concatenated."""
-        return np.concatenate([np.arange(self.geo_offset[g], self.geo_offset[g + 1])
-                               for g in self.sample_geo[s]])
-
 
 def available_memory() -> int:
     """Bytes of memory available to this process (Linux MemAvailable; else physical pages)."""

@@ -13,7 +13,6 @@ import math
 
 import numpy as np
 from mpi4py import MPI
-from petsc4py import PETSc
 
 from fem_sim.material.ogden import OgdenMaterial
 from fem_sim.solver import dolfinx_compat as dc
@@ -108,9 +107,6 @@ class Equations:
     def set_rhs_to_minus_residual(self) -> None:
         self.b.copy(self.rhs)
         self.rhs.scale(-1.0)
-
-    def ghost_update(self, vec) -> None:
-        vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
 
     # ------------------------------------------------------------------------------------------
     def save(self) -> tuple:

@@ -203,11 +203,6 @@ class SerialLDLT:
         """Floating-point operations of the last factorisation (MUMPS' RINFOG(3))."""
         return float(self.lib.ldlt_rinfo(self._h, 3))
 
-    @property
-    def factor_entries(self) -> int:
-        """Entries in the factors (INFOG(29))."""
-        return int(self.lib.ldlt_info(self._h, 29))
-
 
 def csr(indptr, indices, values):
     import scipy.sparse as sp

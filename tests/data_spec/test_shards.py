@@ -79,7 +79,7 @@ def test_missing_field(dataset):
         with h5py.File(p, "a") as f:
             del f["load/forces"]
     problems = _problems_after(dataset, edit)
-    assert problems == [f"{shard_path(dataset, 1)}: missing dataset 'load/forces'"]
+    assert problems == [f"{shard_path(dataset, 1)}: missing dataset '/load/forces'"]
 
 
 def test_wrong_shape(dataset):
@@ -90,7 +90,7 @@ def test_wrong_shape(dataset):
             f["displacement"] = d[:, :-1, :]
     problems = _problems_after(dataset, edit)
     assert len(problems) == 1
-    assert "'displacement' has shape (3, 63, 3), expected (n, 64, 3)" in problems[0]
+    assert "'/displacement' has shape (3, 63, 3), expected (n_done, 64, 3)" in problems[0]
 
 
 def test_nan_displacement(dataset):
@@ -98,7 +98,7 @@ def test_nan_displacement(dataset):
         with h5py.File(p, "a") as f:
             f["displacement"][1, 5, 2] = np.nan
     problems = _problems_after(dataset, edit)
-    assert problems == [f"{shard_path(dataset, 1)}: 'displacement' contains 1 NaN/inf value(s)"]
+    assert problems == [f"{shard_path(dataset, 1)}: '/displacement' contains 1 NaN/inf value(s)"]
 
 
 def test_missing_geometry_file(dataset):
@@ -162,3 +162,16 @@ def test_leftover_temporary_is_reported(dataset):
 
 def test_empty_directory(tmp_path):
     assert "no shards found" in validate_dataset(tmp_path)[0]
+
+
+def test_every_layout_entry_is_documented():
+    """The shard layout is declared once (data_spec/shard_layout.py); its README table must
+    name every dataset and attribute of it."""
+    from pathlib import Path
+
+    from data_spec.shard_layout import LAYOUT
+
+    readme = (Path(__file__).parents[2] / "data_spec" / "README.md").read_text()
+    shard_doc = readme[readme.index("## Shard"):]
+    for e in LAYOUT:
+        assert f"`{e.name}`" in shard_doc, e.path
