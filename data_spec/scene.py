@@ -8,7 +8,8 @@ Validation collects *every* problem (file, key, what was expected, what was foun
 standard library are used here (``tomllib``), so the solver and the trainer interpreters both
 import it.
 
-The schema itself is the ``_SCHEMA`` table below; ``data_spec/README.md`` documents it key by key.
+The schema itself is the table in :mod:`data_spec.scene_schema`; this module applies it and adds
+the checks that span several keys.
 """
 
 from __future__ import annotations
@@ -17,18 +18,24 @@ import copy
 import dataclasses
 import hashlib
 import json
-import math
-import re
 import tomllib
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from data_spec import solver_settings
-
-SCENE_SCHEMA_VERSION = 1
-
-_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+from data_spec.scene_schema import (  # noqa: F401  (SCENE_SCHEMA_VERSION, schema_table: API)
+    _CASE_KEYS,
+    _PARAM_SET_KEYS,
+    _SCHEMA,
+    _TOP_LEVEL,
+    REQUIRED,
+    SCENE_SCHEMA_VERSION,
+    Key,
+    _fractions,
+    _is_int,
+    _node_ids,
+    _vec3,
+    schema_table,
+)
 
 
 class SceneError(ValueError):
@@ -39,240 +46,6 @@ class SceneError(ValueError):
         self.problems = list(problems)
         lines = "\n".join(f"  - {p}" for p in self.problems)
         super().__init__(f"{source}: {len(self.problems)} problem(s) in scene:\n{lines}")
-
-
-# ----------------------------------------------------------------------------------------------
-# Value checkers. Each returns None when the value is acceptable, else a description of what was
-# expected. They are tiny pure functions so the schema below reads as a table.
-# ----------------------------------------------------------------------------------------------
-Check = Callable[[Any], "str | None"]
-
-
-def _is_int(v: Any) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
-
-
-def _is_num(v: Any) -> bool:
-    return (isinstance(v, (int, float)) and not isinstance(v, bool)) and math.isfinite(v)
-
-
-def _int(lo: int | None = None, hi: int | None = None) -> Check:
-    def check(v):
-        if not _is_int(v) or (lo is not None and v < lo) or (hi is not None and v > hi):
-            rng = f" >= {lo}" if hi is None and lo is not None else (
-                f" in [{lo}, {hi}]" if lo is not None else "")
-            return f"an integer{rng}"
-        return None
-    return check
-
-
-def _num(lo: float | None = None, *, strict: bool = True) -> Check:
-    def check(v):
-        if not _is_num(v):
-            return "a finite number"
-        if lo is not None and (v <= lo if strict else v < lo):
-            return f"a number {'>' if strict else '>='} {lo}"
-        return None
-    return check
-
-
-def _positive_or_range(v: Any) -> str | None:
-    """A number > 0, or a range [lo, hi] with 0 < lo <= hi."""
-    if _is_num(v) and v > 0:
-        return None
-    if (isinstance(v, list) and len(v) == 2 and all(_is_num(x) for x in v)
-            and 0 < v[0] <= v[1]):
-        return None
-    return "a number > 0 or a range [lo, hi] with 0 < lo <= hi"
-
-
-def _choice(*options: str) -> Check:
-    def check(v):
-        return None if v in options else "one of " + ", ".join(repr(o) for o in options)
-    return check
-
-
-def _string(v: Any) -> str | None:
-    return None if isinstance(v, str) else "a string"
-
-
-def _name(v: Any) -> str | None:
-    ok = isinstance(v, str) and _NAME_RE.match(v)
-    return None if ok else "a name of letters, digits, '_', '-', '.' (no spaces)"
-
-
-def _vec3(v: Any) -> str | None:
-    ok = isinstance(v, list) and len(v) == 3 and all(_is_num(x) for x in v)
-    return None if ok else "a list of 3 finite numbers [x, y, z]"
-
-
-def _node_ids(v: Any) -> str | None:
-    ok = isinstance(v, list) and len(v) > 0 and all(_is_int(x) and x >= 0 for x in v)
-    return None if ok else "a non-empty list of node ids (integers >= 0)"
-
-
-def _num_list(positive: bool = False, nonzero: bool = False) -> Check:
-    def check(v):
-        if not (isinstance(v, list) and len(v) > 0 and all(_is_num(x) for x in v)):
-            return "a non-empty list of finite numbers"
-        if positive and any(x <= 0 for x in v):
-            return "a list of numbers > 0"
-        if nonzero and any(x == 0 for x in v):
-            return "a list of non-zero numbers"
-        return None
-    return check
-
-
-def _table(v: Any) -> str | None:
-    return None if isinstance(v, dict) else "a table"
-
-
-def _output_nodes(v: Any) -> str | None:
-    if v in ("all", "surface"):
-        return None
-    return None if _node_ids(v) is None else "'all', 'surface' or a list of node ids"
-
-
-def _direction(v: Any) -> str | None:
-    if v == "uniform":
-        return None
-    if _vec3(v) is None and any(x != 0 for x in v):
-        return None
-    return "'uniform' or a non-zero vector [x, y, z]"
-
-
-def _fractions(v: Any) -> str | None:
-    ok = (isinstance(v, list) and len(v) > 0 and all(_is_num(x) for x in v)
-          and all(0 < x <= 1 for x in v) and all(a < b for a, b in zip(v, v[1:]))
-          and v[-1] == 1.0)
-    return None if ok else "a strictly increasing list of numbers in (0, 1] ending at 1.0"
-
-
-@dataclasses.dataclass(frozen=True)
-class Key:
-    """One key of a section: its check, default (``REQUIRED`` if none) and a one-line doc."""
-
-    check: Check
-    default: Any
-    doc: str
-
-
-REQUIRED = object()
-OPTIONAL = None  # a key with default None is optional and only checked when present
-
-def _solver_keys() -> dict[str, Key]:
-    """The scene's solver keys: the ``scene=True`` fields of :class:`SolverSettings`, with their
-    defaults, checks and documentation (one source for the scene and the solver).
-    """
-    return {f.name: Key(lambda v, f=f: solver_settings.check(f, v), solver_settings.default(f),
-                        f.metadata["doc"]) for f in solver_settings.fields(scene_only=True)}
-
-
-_SCHEMA: dict[str, dict[str, Key]] = {
-    "scene": {
-        "name": Key(_name, REQUIRED, "scene name, used in file names and shards"),
-        "description": Key(_string, "", "free text"),
-        "n_simulations": Key(_int(1), OPTIONAL,
-                             "number of simulations (default: the number of [[cases]])"),
-        "seed": Key(_int(0), 0, "master seed; case i's draws depend only on (seed, i)"),
-    },
-    "geometry": {
-        "source": Key(_choice("phantom", "file", "population"), REQUIRED,
-                      "phantom: the embedded liver; file: a mesh/surface; population: many"),
-        "mesh_size": Key(_num(0.0), 8.0, "target tetrahedron edge length, mm"),
-        "phantom_seed": Key(_int(0), 0, "shape seed of the embedded phantom"),
-        "path": Key(_string, OPTIONAL, "mesh or surface file (relative to the scene file)"),
-        "scale_to_mm": Key(_num(0.0), 1.0, "factor from the file's length unit to mm"),
-        "population_size": Key(_int(1), OPTIONAL, "number of livers (population)"),
-        "population_seed": Key(_int(0), 0, "first phantom seed of the population"),
-        "pca_components": Key(_int(1), 27, "shape coefficients per liver (population)"),
-        "spacing": Key(_vec3, OPTIONAL, "voxel size (mm) of a .npy segmentation mask"),
-    },
-    "fixed": {
-        "kind": Key(_choice("region", "sphere", "box", "cylinder", "nodes"), "region",
-                    "how the zero-displacement nodes are chosen"),
-        "name": Key(_name, "vena_cava", "named region of the geometry (kind = region)"),
-        "center": Key(_vec3, OPTIONAL, "sphere/cylinder centre, mm"),
-        "radius": Key(_num(0.0), OPTIONAL, "sphere/cylinder radius, mm"),
-        "axis": Key(_vec3, OPTIONAL, "cylinder axis direction"),
-        "length": Key(_num(0.0), OPTIONAL, "cylinder length along the axis, mm"),
-        "min": Key(_vec3, OPTIONAL, "box lower corner, mm"),
-        "max": Key(_vec3, OPTIONAL, "box upper corner, mm"),
-        "nodes": Key(_node_ids, OPTIONAL, "explicit node ids (kind = nodes)"),
-    },
-    "material": {
-        "law": Key(_choice("ogden"), "ogden", "uncoupled first-order Ogden (FEBio convention)"),
-        "volumetric": Key(_choice("log", "quadratic"), "log",
-                          "log: K/2 (ln J)^2, quadratic: K/2 (J-1)^2"),
-        "c": Key(_num_list(positive=True), [4.1e-3], "Ogden c_k, MPa"),
-        "m": Key(_num_list(nonzero=True), [10.06], "Ogden m_k (dimensionless)"),
-        "K": Key(_num(0.0), OPTIONAL, "bulk modulus, MPa (default: K_over_mu * mu)"),
-        "K_over_mu": Key(_num(0.0), 200.0, "K / mu with mu = sum(c)/2 (K = 100 c1 for one term)"),
-        "sample": Key(_table, OPTIONAL, "sampled materials: see [material.sample]"),
-    },
-    "material.sample": {
-        "kind": Key(_choice("uniform", "table"), REQUIRED,
-                    "uniform: draw from ranges; table: pick one of the listed sets"),
-        "c": Key(lambda v: None if _ranges(v) else "a list of [lo, hi] ranges, one per term",
-                 OPTIONAL, "ranges of c_k, MPa (uniform)"),
-        "m": Key(lambda v: None if _ranges(v, positive=False) else
-                 "a list of [lo, hi] ranges, one per term", OPTIONAL, "ranges of m_k (uniform)"),
-        "K_over_mu": Key(_positive_or_range, OPTIONAL, "K/mu, a value or a range (uniform)"),
-        "n_sets": Key(_int(1), OPTIONAL,
-                      "draw this many sets once, then each simulation picks one (uniform)"),
-        "sets": Key(lambda v: None if isinstance(v, list) and v and all(
-            isinstance(x, dict) for x in v) else "a non-empty array of tables {c, m, K or "
-            "K_over_mu}", OPTIONAL, "explicit parameter sets (table)"),
-    },
-    "loads": {
-        "count": Key(_int(1), 1, "simultaneous forces per simulation"),
-        "kind": Key(_choice("nodal", "patch"), "nodal",
-                    "nodal: on one node; patch: spread over the surface within patch_radius"),
-        "magnitude": Key(_positive_or_range, REQUIRED, "force magnitude, N (value or [lo, hi])"),
-        "direction": Key(_direction, "uniform", "'uniform' on the sphere, or a fixed vector"),
-        "eligible": Key(_choice("surface", "all"), "surface", "nodes a load may act on"),
-        "min_distance_to_fixed": Key(_num(0.0, strict=False), 0.0,
-                                     "eligible nodes are at least this far from fixed nodes, mm"),
-        "min_separation": Key(_num(0.0, strict=False), 0.0,
-                              "minimum distance between simultaneous load nodes, mm"),
-        "patch_radius": Key(_num(0.0), OPTIONAL, "patch radius, mm (kind = patch)"),
-    },
-    "steps": {
-        "n": Key(_int(1), 10, "number of equal load steps (ignored if fractions is given)"),
-        "fractions": Key(_fractions, OPTIONAL, "explicit output load fractions"),
-    },
-    "output": {
-        "nodes": Key(_output_nodes, "all", "'all', 'surface' or a list of node ids"),
-    },
-    "solver": {
-        "degree": Key(_int(1, 2), 1, "Lagrange degree of the displacement (1 or 2)"),
-        "quadrature_degree": Key(_int(1), OPTIONAL, "default: 1 for P1 (FEBio tet4), 2 for P2"),
-        **_solver_keys(),
-    },
-    "surrogate": {
-        "node_fraction": Key(lambda v: None if _is_num(v) and 0 < v <= 1 else
-                             "a number in (0, 1]", 1.0, "fraction of nodes sampled per step"),
-        "folds": Key(_int(2), 10, "k of k-fold cross-validation"),
-        "config": Key(_name, "paper_scene1", "trainer config name (surrogate/configs)"),
-    },
-}
-
-_CASE_KEYS = {
-    "load_nodes": Key(_node_ids, REQUIRED, "load node ids (or patch centres), one per force"),
-    "forces": Key(lambda v: None if isinstance(v, list) and v and all(
-        _vec3(f) is None for f in v) else "a list of [fx, fy, fz] vectors", REQUIRED,
-        "full force vectors at load fraction 1, N"),
-    "material": Key(_table, OPTIONAL, "{c, m, K or K_over_mu}, overrides [material]"),
-    "geometry_index": Key(_int(0), 0, "liver index in a population"),
-}
-
-_TOP_LEVEL = ["schema_version", *[s for s in _SCHEMA if "." not in s], "cases"]
-
-
-def _ranges(v: Any, positive: bool = True) -> bool:
-    return (isinstance(v, list) and len(v) > 0 and all(
-        isinstance(r, list) and len(r) == 2 and all(_is_num(x) for x in r) and r[0] <= r[1]
-        and (not positive or r[0] > 0) for r in v))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -486,14 +259,6 @@ def _check_material(mat: dict, raw: dict, problems: list[str]) -> None:
                     problems.append(f"material.sample.{key}: only used when kind = 'uniform'")
 
 
-_PARAM_SET_KEYS = {
-    "c": Key(_num_list(positive=True), REQUIRED, "Ogden c_k, MPa"),
-    "m": Key(_num_list(nonzero=True), REQUIRED, "Ogden m_k"),
-    "K": Key(_num(0.0), OPTIONAL, "bulk modulus, MPa"),
-    "K_over_mu": Key(_num(0.0), OPTIONAL, "K / mu"),
-}
-
-
 def _check_param_set(where: str, item: Any, problems: list[str]) -> dict:
     out = _check_section(where, item, _PARAM_SET_KEYS, problems, where=where)
     if "K" in out and "K_over_mu" in out:
@@ -608,14 +373,3 @@ def load_scene(path: str | Path) -> Scene:
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(str(path), [f"not valid TOML: {exc}"]) from None
     return parse_scene(raw, str(path), base_dir=path.parent)
-
-
-def schema_table() -> list[tuple[str, str, str]]:
-    """(section.key, default, doc) rows for documentation and ``--help`` texts."""
-    rows = []
-    for section, keys in _SCHEMA.items():
-        for key, spec in keys.items():
-            default = "required" if spec.default is REQUIRED else (
-                "-" if spec.default is None else json.dumps(spec.default))
-            rows.append((f"{section}.{key}", default, spec.doc))
-    return rows
