@@ -170,3 +170,29 @@ def owned_size(V) -> int:
 
 def global_block_indices(V, local_blocks: np.ndarray) -> np.ndarray:
     return V.dofmap.index_map.local_to_global(np.asarray(local_blocks, dtype=np.int32))
+
+
+def evaluate_at_points(u, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Values (n, value_size) of ``u`` at ``points`` (n, 3) on this process, and a mask of the
+    points found in a local cell. Points in no local cell get the value of the closest local
+    cell's polynomial (a short extrapolation across a boundary that another mesh of the same
+    surface resolves differently); they are marked False in the mask.
+    """
+    from dolfinx import geometry
+
+    msh = u.function_space.mesh
+    tdim = msh.topology.dim
+    x = np.ascontiguousarray(points, dtype=np.float64)
+    tree = geometry.BoundingBoxTree(msh, tdim)
+    colliding = geometry.compute_colliding_cells(msh, geometry.compute_collisions(tree, x), x)
+    cells = np.full(x.shape[0], -1, dtype=np.int32)
+    for i in range(x.shape[0]):
+        found = colliding.links(i)
+        if found.size:
+            cells[i] = found[0]
+    inside = cells >= 0
+    if (~inside).any():
+        n_local = num_local_cells(msh)
+        mid = geometry.create_midpoint_tree(msh, tdim, np.arange(n_local, dtype=np.int32))
+        cells[~inside] = geometry.compute_closest_entity(tree, mid, msh, x[~inside])
+    return u.eval(x, cells), inside

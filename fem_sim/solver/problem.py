@@ -95,3 +95,23 @@ class OgdenProblem:
         is constrained (collective; the same value on every rank).
         """
         return self.equations.reaction(nodes)
+
+    def displacement_at(self, points: np.ndarray) -> np.ndarray:
+        """Current displacement (n, 3) at arbitrary points (mm), the finite-element field
+        evaluated there, on every rank (collective). Points outside the mesh get the closest
+        cell's polynomial (for comparing meshes of the same surface at different sizes).
+        """
+        from mpi4py import MPI
+
+        from fem_sim.solver import dolfinx_compat as dc
+
+        vals, inside = dc.evaluate_at_points(self.disc.u, np.asarray(points, dtype=np.float64))
+        comm = self.comm
+        if comm.size == 1:
+            return vals
+        # Collective: average the ranks that own a point; extrapolate only if no rank does.
+        w = inside.astype(np.float64)
+        hits = comm.allreduce(w, op=MPI.SUM)
+        total = comm.allreduce(vals * w[:, None], op=MPI.SUM)
+        fallback = comm.allreduce(np.nan_to_num(vals), op=MPI.SUM) / comm.size
+        return np.where(hits[:, None] > 0, total / np.maximum(hits, 1)[:, None], fallback)

@@ -305,3 +305,20 @@ def test_petsc_path_counts_every_factorisation():
         assert counted[pred] == sols[pred].factorizations, (pred, counted[pred])
     ref = sols["tangent"].displacement[-1]
     assert np.abs(sols["hermite"].displacement[-1] - ref).max() <= 1e-8 * np.abs(ref).max()
+
+
+@pytest.mark.parametrize("degree", [1, 2])
+def test_displacement_at_points_reproduces_a_linear_field(degree):
+    """u(x) = G x + c is in the P1 and P2 spaces: evaluating it at random points inside the
+    unit cube gives G x + c to round-off, and so does the closest-cell extrapolation at points
+    just outside (used to compare meshes of one surface at different sizes)."""
+    g = box_mesh(3)
+    prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, degree=degree)
+    G = np.array([[0.1, -0.2, 0.05], [0.3, 0.0, -0.1], [0.02, 0.04, -0.3]])
+    c = np.array([0.5, -1.0, 2.0])
+    X = prob.disc.V.tabulate_dof_coordinates()
+    prob.equations.set_state((X @ G.T + c).ravel())
+    rng = np.random.default_rng(2)
+    pts = np.concatenate([rng.uniform(0.0, 1.0, size=(50, 3)),
+                          [[1.02, 0.5, 0.5], [-0.01, 0.3, 0.7]]])
+    np.testing.assert_allclose(prob.displacement_at(pts), pts @ G.T + c, rtol=0, atol=1e-12)

@@ -1,0 +1,382 @@
+"""FEM price list: what each speed knob costs in accuracy, measured on this software.
+
+For a liver (the embedded phantom, and the real liver ``shared/data/livers/sofa_liver.vtk``
+when present) and a 0.4 N load far from the fixed region, as a patch load (a bump traction on a
+15 mm disc: it has a converged limit under refinement) and as the paper's nodal load, each run
+changes one knob from the defaults: mesh size and element degree (P1 / P2), load steps, Newton
+tolerance, factorisation / linear solver, predictor, and K/mu (P1 against P2, with a reference
+per K/mu). Every run records seconds per simulation, Newton iterations, factorisations and peak
+memory, and its displacement at the vertices of the reference mesh (the finest P2 solution that
+fits), from which the report computes mean and max errors. For the nodal load, which has no
+converged limit at the load node, the error is measured outside a ball of radius 2 h around the
+load point and reported inside it separately.
+
+    .venv-solver/bin/python bench/tradeoff_fem.py            # run what is missing, then report
+    .venv-solver/bin/python bench/tradeoff_fem.py --report   # report only
+    make tradeoff-fem
+
+Resumable: each run is a subprocess (a clean peak-memory figure, and a crash costs one run);
+its result is appended to ``bench/results/tradeoff_fem/runs.jsonl`` as it finishes, and runs
+already there are skipped. The report goes to ``docs/tradeoff_fem.md`` and
+``docs/tradeoff_fem.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+SOFA = ROOT.parent / "shared" / "data" / "livers" / "sofa_liver.vtk"
+RESULTS = ROOT / "bench" / "results" / "tradeoff_fem"
+DOCS = ROOT / "docs"
+FORCE = [0.0, 0.0, -0.4]  # N
+PATCH_RADIUS = 15.0  # mm
+DEFAULTS = {"degree": 1, "steps": 10, "rtol": 1e-9, "factorization": "auto",
+            "linear_solver": "mumps", "predictor": "hermite", "K_over_mu": 200.0}
+
+# Mesh sizes (mm): P1 from ~1k to ~30k vertices; P2 on the coarser ones; the reference is P2
+# on the finest mesh that fits in time and memory here.
+SIZES = {
+    "phantom": {"p1": [12.0, 8.0, 6.0, 5.0, 4.0, 3.5], "p2": [16.0, 12.0, 10.0, 8.0],
+                "ref": 5.0, "default": 8.0, "kmu": [12.0, 8.0]},
+    "sofa": {"p1": [16.0, 10.0, 8.0, 6.0, 5.0, 4.0], "p2": [16.0, 12.0, 10.0, 8.0],
+             "ref": 6.0, "default": 8.0, "kmu": [16.0, 8.0]},
+}
+
+
+def key_of(spec: dict) -> str:
+    return json.dumps(spec, sort_keys=True)
+
+
+def plan(livers: list[str]) -> list[dict]:
+    """Every run of the study, references first."""
+    runs = []
+
+    def add(**kw):
+        spec = {**DEFAULTS, **kw}
+        if spec not in runs:
+            runs.append(spec)
+
+    for liver in livers:
+        s = SIZES[liver]
+        for kmu in (10.0, 100.0, 200.0, 1000.0):  # references (patch load), one per K/mu
+            add(liver=liver, load="patch", h=s["ref"], degree=2, K_over_mu=kmu,
+                role="reference")
+        add(liver=liver, load="nodal", h=s["ref"], degree=2, role="reference")
+        for load in ("patch", "nodal"):
+            for h in s["p1"]:
+                add(liver=liver, load=load, h=h, degree=1, role="mesh")
+            for h in s["p2"]:
+                add(liver=liver, load=load, h=h, degree=2, role="mesh")
+        d = s["default"]
+        for n in (1, 2, 5, 20):
+            add(liver=liver, load="patch", h=d, steps=n, role="steps")
+        for rtol in (1e-4, 1e-6, 1e-8, 1e-10):
+            add(liver=liver, load="patch", h=d, rtol=rtol, role="tolerance")
+        for fac in ("double", "petsc"):
+            add(liver=liver, load="patch", h=d, factorization=fac, role="linear solver")
+        add(liver=liver, load="patch", h=d, linear_solver="gamg", role="linear solver")
+        for pred in ("tangent", "extrapolate", "previous"):
+            add(liver=liver, load="patch", h=d, predictor=pred, role="predictor")
+        for kmu in (10.0, 100.0, 1000.0):
+            for h in s["kmu"]:
+                for degree in (1, 2):
+                    add(liver=liver, load="patch", h=h, degree=degree, K_over_mu=kmu,
+                        role="K/mu")
+    return runs
+
+
+# ----------------------------------------------------------------------------------------------
+# One run (in its own process)
+# ----------------------------------------------------------------------------------------------
+def mesh(liver: str, h: float):
+    if liver == "phantom":
+        from fem_sim.geometry.phantom import make_phantom
+
+        g = make_phantom(0, h)
+        return g, g.regions["vena_cava"]
+    from fem_sim.geometry.surfaces import mesh_surface_file
+
+    g = mesh_surface_file(SOFA, h)
+    return g, g.regions["vena_cava"]
+
+
+def load_point(liver: str) -> np.ndarray:
+    """The surface vertex of the coarsest mesh farthest from the fixed region: the same
+    physical point for every mesh of the liver."""
+    g, fixed = mesh(liver, 16.0)
+    surf = np.setdiff1d(g.surface_nodes, fixed)
+    d = np.linalg.norm(g.points[surf][:, None] - g.points[fixed][None], axis=2).min(axis=1)
+    return g.points[surf[np.argmax(d)]]
+
+
+def run_one(spec: dict, eval_points: np.ndarray | None, out_npz: Path) -> dict:
+    from mpi4py import MPI
+
+    from fem_sim import Constraint, NodalLoad, OgdenMaterial, OgdenProblem, PatchLoad
+
+    t0 = time.perf_counter()
+    g, fixed = mesh(spec["liver"], spec["h"])
+    p_star = np.asarray(spec["load_point"])
+    if spec["load"] == "patch":
+        loads = [PatchLoad(p_star, FORCE, PATCH_RADIUS)]
+        node = -1
+    else:
+        surf = np.setdiff1d(g.surface_nodes, fixed)
+        node = int(surf[np.argmin(np.linalg.norm(g.points[surf] - p_star, axis=1))])
+        loads = [NodalLoad([node], [FORCE])]
+    settings = {"rtol": spec["rtol"], "factorization": spec["factorization"],
+                "linear_solver": spec["linear_solver"], "predictor": spec["predictor"]}
+    if spec["linear_solver"] == "gamg":
+        settings.update(max_krylov=1000, krylov_rtol=1e-12)
+    prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, degree=spec["degree"],
+                        settings=settings)
+    c1 = 4.1e-3
+    mat = OgdenMaterial((c1,), (10.06,), spec["K_over_mu"] * c1 / 2)
+    setup = time.perf_counter() - t0
+    fractions = np.arange(1, spec["steps"] + 1) / spec["steps"]
+    t1 = time.perf_counter()
+    sol = prob.solve(mat, [Constraint(fixed)], loads, fractions)
+    secs = time.perf_counter() - t1
+    ev = eval_points if eval_points is not None else g.points
+    u_eval = prob.displacement_at(ev) if sol.status == "ok" else np.full(ev.shape, np.nan)
+    np.savez(out_npz, u=u_eval, points=ev, u_nodes=sol.displacement[-1] if sol.n_done else
+             np.zeros((0, 3)), nodes=g.points)
+    return {"status": sol.status, "reason": sol.failure_reason, "seconds": secs,
+            "setup_seconds": setup, "n_vertices": int(g.n_nodes),
+            "n_dofs": int(prob.disc.V.dofmap.index_map.size_global * 3),
+            "newton_iterations": sol.newton_iterations, "factorizations": sol.factorizations,
+            "chord_steps": sol.chord_steps, "cutbacks": sol.cutbacks,
+            "max_u": float(np.abs(sol.displacement[-1]).max()) if sol.n_done else None,
+            "load_node": node,
+            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+
+
+# ----------------------------------------------------------------------------------------------
+# The study
+# ----------------------------------------------------------------------------------------------
+def results() -> dict[str, dict]:
+    path = RESULTS / "runs.jsonl"
+    out = {}
+    if path.exists():
+        for line in path.read_text().splitlines():
+            if line.strip():
+                r = json.loads(line)
+                out[r["key"]] = r
+    return out
+
+
+def npz_name(key: str) -> Path:
+    import hashlib
+
+    return RESULTS / f"{hashlib.sha1(key.encode()).hexdigest()[:16]}.npz"
+
+
+def reference_of(spec: dict) -> dict:
+    load = spec["load"]
+    return {**DEFAULTS, "liver": spec["liver"], "load": load, "h": SIZES[spec["liver"]]["ref"],
+            "degree": 2, "K_over_mu": spec["K_over_mu"] if load == "patch" else 200.0,
+            "role": "reference"}
+
+
+def study(livers: list[str], timeout: float) -> None:
+    from tqdm import tqdm
+
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    points = {}
+    for liver in livers:
+        f = RESULTS / f"load_point_{liver}.json"
+        if not f.exists():
+            f.write_text(json.dumps(load_point(liver).tolist()))
+        points[liver] = json.loads(f.read_text())
+    done = results()
+    todo = [s for s in plan(livers) if key_of(s) not in done]
+    bar = tqdm(todo, desc="tradeoff-fem", unit="run")
+    for spec in bar:
+        key = key_of(spec)
+        bar.set_postfix_str(f"{spec['liver']} {spec['load']} P{spec['degree']} h={spec['h']} "
+                            f"{spec['role']}")
+        ref_key = key_of(reference_of(spec))
+        ref_npz = npz_name(ref_key) if spec["role"] != "reference" else None
+        if ref_npz is not None and not ref_npz.exists():
+            record = {"status": "skipped", "reason": "its reference did not run"}
+        else:
+            job = {"spec": {**spec, "load_point": points[spec["liver"]]},
+                   "eval": str(ref_npz) if ref_npz else None, "out": str(npz_name(key))}
+            t0 = time.perf_counter()
+            try:
+                proc = subprocess.run([sys.executable, __file__, "--one", json.dumps(job)],
+                                      capture_output=True, text=True, timeout=timeout,
+                                      env={**os.environ, "OPENBLAS_NUM_THREADS": "1",
+                                           "OMP_NUM_THREADS": "1"})
+                lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
+                record = (json.loads(lines[-1]) if proc.returncode == 0 and lines else
+                          {"status": "crashed", "reason": proc.stderr.strip()[-500:]})
+            except subprocess.TimeoutExpired:
+                record = {"status": "timeout", "reason": f"over {timeout:.0f} s"}
+            record["wall_seconds"] = time.perf_counter() - t0
+        with open(RESULTS / "runs.jsonl", "a") as fh:
+            fh.write(json.dumps({"key": key, "spec": spec, **record}) + "\n")
+
+
+# ----------------------------------------------------------------------------------------------
+# The report
+# ----------------------------------------------------------------------------------------------
+def errors(spec: dict, rec: dict, h: float) -> dict | None:
+    """Mean/max displacement error (mm and relative to max |u_ref|) against the reference."""
+    ref = results().get(key_of(reference_of(spec)))
+    if ref is None or rec.get("status") != "ok" or not npz_name(key_of(
+            reference_of(spec))).exists():
+        return None
+    with np.load(npz_name(key_of(reference_of(spec)))) as z:
+        u_ref, pts = z["u_nodes"], z["nodes"]
+    with np.load(npz_name(rec["key"])) as z:
+        u = z["u"]
+    if spec["role"] == "reference":
+        u = u_ref
+    e = np.linalg.norm(u - u_ref, axis=1)
+    scale = np.abs(u_ref).max()
+    out = {}
+    if spec["load"] == "nodal":
+        p = np.asarray(json.loads((RESULTS / f"load_point_{spec['liver']}.json").read_text()))
+        near = np.linalg.norm(pts - p, axis=1) <= 2 * h
+        out["inside_mean"] = float(e[near].mean()) if near.any() else float("nan")
+        out["inside_max"] = float(e[near].max()) if near.any() else float("nan")
+        e = e[~near]
+    out.update(mean=float(e.mean()), max=float(e.max()), rel_mean=float(e.mean() / scale),
+               rel_max=float(e.max() / scale), u_ref_max=float(scale))
+    return out
+
+
+def report() -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    res = results()
+    rows = []
+    for key, rec in res.items():
+        spec = rec["spec"]
+        err = errors(spec, rec, spec["h"]) if rec.get("status") == "ok" else None
+        rows.append((spec, rec, err))
+    order = ["reference", "mesh", "steps", "tolerance", "linear solver", "predictor", "K/mu"]
+    rows.sort(key=lambda r: (r[0]["liver"], order.index(r[0]["role"]), r[0]["load"],
+                             r[0]["K_over_mu"], r[0]["degree"], -r[0]["h"]))
+    lines = ["# FEM price list: speed against accuracy", "",
+             "Generated by `make tradeoff-fem` (`bench/tradeoff_fem.py`); do not edit by hand.",
+             f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+             "one MPI rank, OPENBLAS_NUM_THREADS=1.", "",
+             "Setting: 0.4 N along -z at the surface point farthest from the fixed region, "
+             f"as a patch load (bump traction, radius {PATCH_RADIUS:g} mm) or a nodal load; "
+             "Ogden c1 = 4.1e-3 MPa, m1 = 10.06; defaults: "
+             + ", ".join(f"{k} = {v}" for k, v in DEFAULTS.items()) + ".",
+             "Errors are against the reference of the same liver, load and K/mu (P2 on the "
+             "finest mesh), at the reference mesh's vertices, relative to the reference's "
+             "max |u|. Nodal load: error outside a ball of radius 2h around the load point; "
+             "inside it in the last column.", "",
+             "| liver | load | knob | P | h mm | vertices | K/mu | steps | rtol | solver | "
+             "predictor | s/sim | Newton its | fact. | RSS MB | mean err mm | max err mm | "
+             "mean rel | max rel | inside 2h (mean/max mm) |",
+             "|" + "---|" * 20]
+    for spec, rec, err in rows:
+        solver = (spec["linear_solver"] if spec["linear_solver"] != "mumps"
+                  else spec["factorization"])
+        base = (f"| {spec['liver']} | {spec['load']} | {spec['role']} | {spec['degree']} | "
+                f"{spec['h']:g} | {rec.get('n_vertices', '-')} | {spec['K_over_mu']:g} | "
+                f"{spec['steps']} | {spec['rtol']:.0e} | {solver} | {spec['predictor']} | ")
+        if rec.get("status") != "ok":
+            lines.append(base + f"{rec.get('status')}: {rec.get('reason', '')[:80]} |" +
+                         " |" * 9)
+            continue
+        its = sum(rec["newton_iterations"])
+        e = err or {}
+        inside = (f"{e['inside_mean']:.2f} / {e['inside_max']:.2f}"
+                  if "inside_mean" in e else "")
+        lines.append(base + f"{rec['seconds']:.2f} | {its} | {rec['factorizations']} | "
+                     f"{rec['peak_rss_mb']:.0f} | "
+                     + (f"{e['mean']:.3f} | {e['max']:.3f} | {e['rel_mean']:.2%} | "
+                        f"{e['rel_max']:.2%} | {inside} |" if e else "- | - | - | - | |"))
+    DOCS.mkdir(exist_ok=True)
+    (DOCS / "tradeoff_fem.md").write_text("\n".join(lines) + "\n")
+    # Plot: error against seconds, one series per knob, the Pareto front marked.
+    livers = sorted({s["liver"] for s, _, _ in rows})
+    fig, axes = plt.subplots(1, max(1, len(livers)), figsize=(7 * max(1, len(livers)), 5.5),
+                             squeeze=False)
+    markers = {"mesh": "o", "steps": "s", "tolerance": "^", "linear solver": "D",
+               "predictor": "v", "K/mu": "x"}
+    for ax, liver in zip(axes[0], livers):
+        pts = []
+        for spec, rec, err in rows:
+            if spec["liver"] != liver or spec["load"] != "patch" or not err or \
+                    spec["role"] == "reference" or spec["K_over_mu"] != 200.0:
+                continue
+            label = f"{spec['role']} P{spec['degree']}" if spec["role"] == "mesh" else \
+                spec["role"]
+            x, y = rec["seconds"], max(err["rel_mean"], 1e-6)
+            pts.append((x, y))
+            ax.scatter(x, y, marker=markers.get(spec["role"], "o"), label=label,
+                       color={"mesh P1": "C0", "mesh P2": "C1"}.get(label, None))
+            if spec["role"] == "mesh":
+                ax.annotate(f"{spec['h']:g}", (x, y), textcoords="offset points",
+                            xytext=(4, 3), fontsize=7)
+        front = sorted(pts)
+        pareto, best = [], np.inf
+        for x, y in front:
+            if y < best:
+                pareto.append((x, y))
+                best = y
+        if pareto:
+            ax.plot(*zip(*pareto), "k--", lw=1, label="Pareto front")
+        handles, labels = ax.get_legend_handles_labels()
+        uniq = dict(zip(labels, handles))
+        ax.legend(uniq.values(), uniq.keys(), fontsize=7)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("seconds per simulation (1 rank)")
+        ax.set_ylabel("mean displacement error / max |u_ref|")
+        ax.set_title(f"{liver}: patch load, K/mu = 200 (labels: h in mm)")
+        ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(DOCS / "tradeoff_fem.png", dpi=110)
+    print(f"wrote {DOCS / 'tradeoff_fem.md'} and {DOCS / 'tradeoff_fem.png'}")
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--liver", choices=["phantom", "sofa", "both"], default="both")
+    ap.add_argument("--report", action="store_true", help="only write the report")
+    ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per run")
+    ap.add_argument("--one", help=argparse.SUPPRESS)
+    a = ap.parse_args()
+    if a.one:
+        import logging
+
+        logging.getLogger().setLevel(logging.WARNING)
+        job = json.loads(a.one)
+        ev = None
+        if job["eval"]:
+            with np.load(job["eval"]) as z:
+                ev = z["nodes"]
+        print(json.dumps(run_one(job["spec"], ev, Path(job["out"]))))
+        return 0
+    livers = ["phantom", "sofa"] if a.liver == "both" else [a.liver]
+    livers = [v for v in livers if v != "sofa" or SOFA.exists()]
+    if not a.report:
+        study(livers, a.timeout)
+    report()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
