@@ -27,7 +27,7 @@ export OMP_NUM_THREADS ?= 1
 MPIRUN := mpirun -n $(NP)
 
 .PHONY: help setup setup-system setup-solver setup-trainer demo test test-solver test-trainer \
-        dataset train population bench docs lint clean lock-trainer
+        dataset train population bench tradeoff-fem docs lint clean lock-trainer
 
 help:
 	@echo "make demo     set up, generate a small dataset on the embedded liver, train, report"
@@ -37,6 +37,7 @@ help:
 	@echo "make train    SCENE=... DATA=... RUN=...       train the surrogate on a dataset"
 	@echo "make population SCENE=... OUT=...  CPD + PCA shape coefficients (scene 4)"
 	@echo "make bench    run the benchmarks in bench/ (long)"
+	@echo "make tradeoff-fem   FEM speed/accuracy price list -> docs/tradeoff_fem.md (long, resumable)"
 	@echo "make docs     regenerate docs/phantoms.png"
 	@echo "make lint     ruff";  echo "make clean    remove environments and outputs"
 
@@ -107,6 +108,10 @@ test-trainer: setup-trainer $(TEST_DATA)/.done
 
 bench: setup
 	@bash scripts/bench.sh "$(SPY)" "$(TPY)"
+
+# FEM price list (resumable: re-run to continue): docs/tradeoff_fem.{md,png}
+tradeoff-fem: setup-solver
+	$(SPY) bench/tradeoff_fem.py
 
 population: setup-solver
 	$(SPY) -m fem_sim population $(SCENE) --out $(OUT)

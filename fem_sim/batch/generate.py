@@ -36,6 +36,7 @@ from data_spec import (
     write_shard,
 )
 from fem_sim.batch import cases as cs
+from fem_sim.geometry.quality import mesh_problems
 from fem_sim.geometry.source import GeometryError, scene_geometries
 
 log = logging.getLogger(__name__)
@@ -112,6 +113,10 @@ def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool,
         for gi, g in enumerate(livers):
             scene.check_mesh(g.n_nodes)
             fixed = cs.fixed_nodes(scene, g, scene_file)
+            bad = mesh_problems(g.points, g.cells, fixed)
+            if bad:
+                raise GeometryError(f"{scene_file}: geometry {gi} ({g.description}): "
+                                    + "; ".join(bad))
             if not scene.cases:
                 eligible = cs.eligible_load_nodes(scene, g, fixed)
                 if eligible.size < scene["loads"]["count"]:

@@ -13,6 +13,7 @@ import numpy as np
 from data_spec import Geometry, Scene, read_geometry
 from data_spec.geometry import boundary_triangles, geometry_problems
 from fem_sim.geometry.errors import GeometryError
+from fem_sim.geometry.quality import mesh_problems, orient
 from fem_sim.geometry.regions import default_vena_cava
 
 
@@ -82,9 +83,13 @@ def read_mesh_file(path: str | Path, scale_to_mm: float = 1.0) -> Geometry:
     path = Path(path)
     if path.suffix in (".h5", ".hdf5"):
         try:
-            return read_geometry(path)
+            g = read_geometry(path)
         except (OSError, KeyError, ValueError) as exc:
             raise GeometryError(f"{path}: cannot read geometry: {exc}") from None
+        problems = mesh_problems(g.points, g.cells)
+        if problems:
+            raise GeometryError(f"{path}: " + "; ".join(problems))
+        return g
     import meshio
 
     try:
@@ -98,13 +103,14 @@ def read_mesh_file(path: str | Path, scale_to_mm: float = 1.0) -> Geometry:
                             "remeshing, which is not implemented yet")
     cells = np.concatenate(tets).astype(np.int64)
     points = np.asarray(m.points, dtype=np.float64)[:, :3] * scale_to_mm
-    e = points[cells[:, 1:]] - points[cells[:, :1]]
-    det = np.linalg.det(e)
-    if np.any(np.abs(det) < 1e-12 * np.abs(det).max()):
-        raise GeometryError(f"{path}: {int(np.sum(np.abs(det) < 1e-12 * np.abs(det).max()))} "
-                            "degenerate (zero-volume) tetrahedra")
-    neg = det < 0
-    cells[neg] = cells[neg][:, [0, 2, 1, 3]]
+    if not np.all(np.isfinite(points)):
+        raise GeometryError(f"{path}: points contain NaN or inf")
+    if cells.min() < 0 or cells.max() >= points.shape[0]:
+        raise GeometryError(f"{path}: cells refer to node ids outside [0, {points.shape[0]})")
+    cells = orient(points, cells, str(path))  # node-order conventions differ between files
+    problems = mesh_problems(points, cells)
+    if problems:
+        raise GeometryError(f"{path}: " + "; ".join(problems))
     g = Geometry(points=points, cells=cells,
                  surface_triangles=boundary_triangles(cells, points),
                  description=f"from {path.name}")

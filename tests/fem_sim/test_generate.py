@@ -151,3 +151,26 @@ def test_directory_of_another_scene_is_refused(reference, tmp_path):
     other.write_text(TINY.read_text().replace("seed = 1\n", "seed = 7\n"))
     res = generate(other, reference, n=1)
     assert res.returncode == 2 and "holds a dataset of another scene" in res.stderr
+
+
+def test_mesh_with_a_floating_piece_is_refused_before_any_work(tmp_path):
+    """A volume mesh with a piece that touches no fixed node would make every simulation
+    singular: generate refuses it on every rank, names the file and the reason, and writes
+    no shard."""
+    import meshio
+
+    from fem_sim.geometry.phantom import make_phantom
+
+    g = make_phantom(0, 20.0)
+    far = np.array([[500.0, 0, 0], [510, 0, 0], [500, 10, 0], [500, 0, 10]])
+    meshio.write(tmp_path / "liver.vtu",
+                 meshio.Mesh(np.concatenate([g.points, far]),
+                             [("tetra", np.concatenate([g.cells, [np.arange(4) + g.n_nodes]]))]))
+    scene = tmp_path / "floating.toml"
+    scene.write_text(TINY.read_text().replace(
+        'source = "phantom"      # the embedded liver phantom: no external file needed\n'
+        "phantom_seed = 0\n", 'source = "file"\npath = "liver.vtu"\n'))
+    res = generate(scene, tmp_path / "d", n=2)
+    assert res.returncode == 2, res.stderr
+    assert "touch no fixed node" in res.stderr and "liver.vtu" in res.stderr
+    assert not (tmp_path / "d" / "sims").exists() or not list((tmp_path / "d" / "sims").iterdir())

@@ -103,3 +103,49 @@ def test_surface_files_are_remeshed(tmp_path, suffix):
     out = read_any(path, mesh_size=12.0)
     assert check_geometry(out) == pytest.approx(mesh_volume(g), rel=0.02)
     assert out.regions["vena_cava"].size > 0
+
+
+def _write_tets(path, points, cells):
+    import meshio
+
+    meshio.write(path, meshio.Mesh(points, [("tetra", cells)]))
+
+
+def test_tangled_degenerate_and_floating_meshes_are_refused(tmp_path):
+    """A volume mesh is checked before any simulation: an element folded over its neighbour
+    (a node pushed through a face), a duplicated element, a flat element and a piece that
+    touches no fixed node are refused with the file and the reason; a mesh whose files only
+    disagree on node order is accepted."""
+    from fem_sim.geometry.quality import folded_faces, mesh_problems
+    from fem_sim.geometry.source import read_any
+
+    g = make_phantom(1, 20.0)
+    assert mesh_problems(g.points, g.cells, g.regions["vena_cava"]) == []
+    assert folded_faces(g.cells) == (0, 0)
+    # fold: move an interior node through the opposite face of one of its tetrahedra
+    interior = np.setdiff1d(np.arange(g.n_nodes), g.surface_nodes)
+    n = int(interior[0])
+    c = g.cells[np.flatnonzero((g.cells == n).any(axis=1))[0]]
+    others = g.points[c[c != n]]
+    pts = g.points.copy()
+    pts[n] = others.mean(axis=0) + 1.5 * (others.mean(axis=0) - g.points[n])
+    _write_tets(tmp_path / "folded.vtu", pts, g.cells)
+    with pytest.raises(GeometryError, match=r"folded.vtu: .*tangled"):
+        read_any(tmp_path / "folded.vtu", mesh_size=8.0)
+    # a duplicated element
+    _write_tets(tmp_path / "dup.vtu", g.points, np.concatenate([g.cells, g.cells[:1]]))
+    with pytest.raises(GeometryError, match=r"dup.vtu: .*shared by more than two"):
+        read_any(tmp_path / "dup.vtu", mesh_size=8.0)
+    # a flat element: one tetrahedron's fourth node moved onto its opposite face
+    pts = g.points.copy()
+    c = g.cells[0]
+    pts[c[3]] = pts[c[:3]].mean(axis=0)
+    _write_tets(tmp_path / "flat.vtu", pts, g.cells)
+    with pytest.raises(GeometryError, match=r"flat.vtu: .*(degenerate|zero or negative)"):
+        read_any(tmp_path / "flat.vtu", mesh_size=8.0)
+    # a floating piece: a separate tetrahedron far away touches no fixed node
+    far = np.array([[500.0, 0, 0], [510, 0, 0], [500, 10, 0], [500, 0, 10]])
+    pts = np.concatenate([g.points, far])
+    cells = np.concatenate([g.cells, [np.arange(4) + g.n_nodes]])
+    problems = mesh_problems(pts, cells, g.regions["vena_cava"])
+    assert len(problems) == 1 and "touch no fixed node" in problems[0] and "[1]" in problems[0]
