@@ -27,11 +27,13 @@ export OMP_NUM_THREADS ?= 1
 MPIRUN := mpirun -n $(NP)
 
 .PHONY: help setup setup-system setup-solver setup-trainer demo test test-solver test-trainer \
+        test-extremes extremes-doc \
         dataset train population bench tradeoff-fem docs lint clean lock-trainer
 
 help:
 	@echo "make demo     set up, generate a small dataset on the embedded liver, train, report"
 	@echo "make test     set up and run the whole test suite"
+	@echo "make test-extremes   stability at the extremes (part of make test)"
 	@echo "make setup    install Debian packages (root) and create $(SOLVER_VENV), $(TRAIN_VENV)"
 	@echo "make dataset  SCENE=... NP=... R=... OUT=...   generate a dataset with mpirun"
 	@echo "make train    SCENE=... DATA=... RUN=...       train the surrogate on a dataset"
@@ -90,10 +92,17 @@ dataset: setup-solver
 train: setup-trainer
 	$(TPY) -m surrogate train --data $(DATA) --run $(RUN)
 
-test: setup test-solver test-trainer
+test: setup test-solver test-extremes test-trainer
 
 test-solver: setup-solver
 	bash scripts/run_pytest.sh $(SPY) tests/common tests/data_spec tests/fem_sim -q $(TESTS)
+
+# Stability at the extremes: every case must converge with a physically right answer.
+test-extremes: setup-solver
+	bash scripts/run_pytest.sh $(SPY) tests/extremes -q $(TESTS)
+
+extremes-doc: setup-solver
+	$(SPY) scripts/extremes_doc.py docs/extremes.md
 
 # A small real dataset (fem_sim) for the trainer's end-to-end test; regenerated only if missing.
 TEST_DATA := runs/test-data/ci_scene1
