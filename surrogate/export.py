@@ -132,19 +132,18 @@ class Predictor:
             mat = np.asarray(material, dtype=np.float64).reshape(-1, self.spec.material_dim)
             if not np.all(np.isfinite(mat)):
                 raise ValueError("material: contains NaN or inf")
-            rng = self.meta["training_range"]
-            lo = np.asarray(rng["extra_min"][: self.spec.material_dim])
-            hi = np.asarray(rng["extra_max"][: self.spec.material_dim])
-            span = np.maximum(hi - lo, 1e-12 * np.abs(hi))
-            if np.any(mat < lo - 0.05 * span) or np.any(mat > hi + 0.05 * span):
-                warnings.warn(f"material {mat.tolist()} is outside the training range "
-                              f"[{lo.tolist()}, {hi.tolist()}]: extrapolating", stacklevel=2)
+            self._check_range("material", mat, 0, self.spec.material_dim)
             blocks.append(np.broadcast_to(mat, (forces.shape[0], self.spec.material_dim)))
         if self.spec.geometry_dim:
             shape = np.asarray(geometry[2] if geometry is not None else [], dtype=np.float64)
             if shape.shape != (self.spec.geometry_dim,):
                 raise ValueError(f"geometry: expected {self.spec.geometry_dim} shape "
                                  f"coefficients, got {shape.shape}")
+            if not np.all(np.isfinite(shape)):
+                raise ValueError("geometry: shape coefficients contain NaN or inf")
+            m0 = self.spec.material_dim
+            self._check_range("shape coefficients", shape[None], m0,
+                              m0 + self.spec.geometry_dim)
             blocks.append(np.broadcast_to(shape, (forces.shape[0], shape.size)))
         extra = np.concatenate(blocks, axis=1) if blocks else np.zeros((forces.shape[0], 0))
         fmax = np.linalg.norm(forces, axis=-1).max()
@@ -158,6 +157,18 @@ class Predictor:
         out = np.asarray(out)
         return out[0] if single else out
 
+
+    def _check_range(self, what: str, values: np.ndarray, start: int, stop: int) -> None:
+        """Warn when inputs leave the range seen in training (by more than 5 % of it):
+        the network extrapolates there.
+        """
+        rng = self.meta["training_range"]
+        lo = np.asarray(rng["extra_min"][start:stop])
+        hi = np.asarray(rng["extra_max"][start:stop])
+        span = np.maximum(hi - lo, 1e-12 * np.abs(hi))
+        if np.any(values < lo - 0.05 * span) or np.any(values > hi + 0.05 * span):
+            warnings.warn(f"{what} {values.tolist()} outside the training range "
+                          f"[{lo.tolist()}, {hi.tolist()}]: extrapolating", stacklevel=3)
 
     def _geometry(self, geometry):
         """(static node features, points) of the liver to predict on."""

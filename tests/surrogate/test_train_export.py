@@ -193,3 +193,53 @@ def test_tampered_normalisation_statistics_are_refused_at_load(run, tmp_path, ke
     with pytest.raises(ValueError, match=message) as err:
         load_predictor(d)
     assert str(d / "model.json") in str(err.value)
+
+
+def test_predictor_is_finite_at_the_corners_and_flags_inputs_outside_its_range(tmp_path):
+    """A model whose scene varies material and geometry (an exported model built directly):
+    finite predictions at every corner of the training ranges of force, material and shape
+    coefficients, no warning there; a warning for each kind of input outside the range."""
+    from types import SimpleNamespace
+
+    import jax
+
+    from surrogate.export import export_model
+    from surrogate.features import FeatureSpec
+    from surrogate.model import NodeMLP
+    from surrogate.normalise import Normaliser
+
+    spec = FeatureSpec(n_loads=1, material_dim=3, geometry_dim=2)
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-50, 50, size=(40, 3))
+    extra = np.array([[2e-3, 6.0, 0.2, -1.0, 0.0], [8e-3, 14.0, 0.8, 1.0, 2.0]])
+    params = NodeMLP(hidden=(16,)).init(jax.random.PRNGKey(0), np.zeros((1, spec.dim)))
+    norm = Normaliser(x_mean=np.zeros(spec.dim, np.float32),
+                      x_std=np.full(spec.dim, 50.0, np.float32),
+                      y_mean=np.zeros(3, np.float32), y_std=np.ones(3, np.float32))
+    ds = SimpleNamespace(forces=np.array([[[0.0, 0.0, 0.4]]]), extra=extra, scene_name="t",
+                         spec=spec, points=[pts, pts], fixed=[np.arange(5)] * 2,
+                         out_nodes=[np.arange(40)] * 2)
+    export_model(tmp_path / "m", jax.device_get(params["params"]), norm,
+                 get_config("small", hidden=[16]), ds)
+    predict = load_predictor(tmp_path / "m")
+    geometry = (pts, np.arange(5))
+
+    def run(force, material, shape):
+        with warnings.catch_warnings(record=True) as w:
+            warnings.simplefilter("always")
+            out = predict([force], [7], material=material, geometry=(*geometry, shape))
+        return out, [str(x.message) for x in w]
+
+    corners = [(f, m, s) for f in ([0, 0, 0.4], [0.4, 0, 0])
+               for m in (extra[0, :3], extra[1, :3]) for s in (extra[0, 3:], extra[1, 3:])]
+    for force, material, shape in corners:
+        out, warned = run(force, material, shape)
+        assert np.isfinite(out).all() and out.shape == (40, 3) and not warned, warned
+    _, warned = run([0, 0, 0.8], extra[0, :3], extra[0, 3:])
+    assert any("force magnitude" in m for m in warned)
+    _, warned = run([0, 0, 0.4], [2e-2, 10.0, 0.5], extra[0, 3:])
+    assert any(m.startswith("material") for m in warned)
+    _, warned = run([0, 0, 0.4], extra[0, :3], [3.0, 0.0])
+    assert any(m.startswith("shape coefficients") for m in warned)
+    with pytest.raises(ValueError, match="shape coefficients contain NaN"):
+        run([0, 0, 0.4], extra[0, :3], [np.nan, 0.0])
