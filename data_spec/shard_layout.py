@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 SHARD_FORMAT = "liver-fem-shard"
-SHARD_SCHEMA_VERSION = 1
+SHARD_SCHEMA_VERSION = 2  # 2: a sha256 checksum of every entry (attribute "checksum")
 UNITS = {"units_length": "mm", "units_force": "N", "units_stress": "MPa", "units_time": "s"}
 STATUSES = ("ok", "failed")
 
@@ -84,6 +84,31 @@ def get(obj, source: str):
     return obj
 
 
+def _canonical(e: Entry, value) -> bytes:
+    if e.is_attr:
+        return repr({"str": str, "int": int, "float": float}[e.dtype](value)).encode()
+    a = np.ascontiguousarray(np.asarray(value, dtype=e.dtype))
+    return repr(a.shape).encode() + a.tobytes()
+
+
+def checksum(values: dict) -> str:
+    """sha256 over every entry (path, shape and bytes in the layout's order): written into the
+    file as the attribute ``checksum``, recomputed by the reader and the validator, so one
+    flipped bit in a label is caught (uncompressed datasets have no checksum of their own).
+    """
+    import hashlib
+
+    h = hashlib.sha256()
+    for e in LAYOUT:
+        h.update(e.path.encode() + b"\0" + _canonical(e, values[e.path]) + b"\0")
+    return h.hexdigest()
+
+
+def read_values(f) -> dict:
+    """Every entry of an open shard file, by path (after :func:`missing` found none absent)."""
+    return {e.path: read_entry(f, e) for e in LAYOUT}
+
+
 def write_entry(f, e: Entry, value) -> None:
     """Write one entry's value into an open HDF5 file (groups are created as needed)."""
     if e.is_attr:
@@ -108,7 +133,8 @@ def read_entry(f, e: Entry):
 
 def missing(f) -> list[str]:
     """Entries (and constant attributes) absent from an open shard file."""
-    out = [f"attribute '{k}'" for k in ("format", "schema_version", *UNITS) if k not in f.attrs]
+    out = [f"attribute '{k}'" for k in ("format", "schema_version", "checksum", *UNITS)
+           if k not in f.attrs]
     for e in LAYOUT:
         if e.is_attr:
             holder = f.get(e.group) if e.group != "/" else f

@@ -30,9 +30,10 @@ from data_spec.shard_layout import (
     SHARD_SCHEMA_VERSION,
     STATUSES,
     UNITS,
+    checksum,
     get,
     missing,
-    read_entry,
+    read_values,
     write_entry,
 )
 from data_spec.xdmf import shard_xdmf
@@ -160,8 +161,10 @@ def write_shard(directory: str | Path, shard: Shard) -> Path:
         f.attrs["schema_version"] = SHARD_SCHEMA_VERSION
         for k, v in UNITS.items():
             f.attrs[k] = v
+        values = {e.path: get(shard, e.source) for e in LAYOUT}
         for e in LAYOUT:
-            write_entry(f, e, get(shard, e.source))
+            write_entry(f, e, values[e.path])
+        f.attrs["checksum"] = checksum(values)
         for k, v in shard.stats.info.items():
             f["solver"].attrs[k] = v
         if not output_is_all:
@@ -177,14 +180,18 @@ def read_shard(path: str | Path) -> Shard:
         absent = missing(f)
         if absent:
             raise ValueError(f"{path}: missing {', '.join(absent)}")
-        values: dict = {}
-        for e in LAYOUT:  # nested by source: {"material": {...}, "stats": {...}, ...}
-            *parents, leaf = e.source.split(".")
-            node = values
-            for part in parents:
-                node = node.setdefault(part, {})
-            node[leaf] = read_entry(f, e)
+        flat = read_values(f)
+        if checksum(flat) != str(f.attrs["checksum"]):
+            raise ValueError(f"{path}: checksum mismatch: the file was changed or corrupted "
+                             "after it was written")
         info = dict(f["solver"].attrs)
+    values: dict = {}
+    for e in LAYOUT:  # nested by source: {"material": {...}, "stats": {...}, ...}
+        *parents, leaf = e.source.split(".")
+        node = values
+        for part in parents:
+            node = node.setdefault(part, {})
+        node[leaf] = flat[e.path]
     mat = values.pop("material")
     law = mat.pop("law")
     if law != OgdenMaterial.law:

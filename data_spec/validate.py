@@ -19,7 +19,9 @@ from data_spec.shard_layout import (
     SHARD_FORMAT,
     SHARD_SCHEMA_VERSION,
     STATUSES,
+    checksum,
     missing,
+    read_values,
     shape_problems,
 )
 from data_spec.shards import list_shards
@@ -62,9 +64,13 @@ def shard_problems(path: str | Path, geometry_cache: dict | None = None) -> list
             p.append(f"{path}: schema_version {f.attrs['schema_version']}, expected "
                      f"{SHARD_SCHEMA_VERSION}")
         try:
-            arr = {e.path: f[e.path][()] for e in DATASETS}
+            values = read_values(f)
         except OSError as exc:
             return p + [f"{path}: data cannot be read (truncated or corrupt?): {exc}"]
+        if checksum(values) != str(f.attrs["checksum"]):
+            p.append(f"{path}: checksum mismatch: the file was changed or corrupted after it "
+                     "was written")
+        arr = {e.path: values[e.path] for e in DATASETS}
         status = str(f.attrs["status"])
         reason = str(f.attrs["failure_reason"])
         geo_rel = str(f.attrs["geometry_file"])

@@ -65,8 +65,22 @@ def test_xdmf_is_well_formed_and_points_at_existing_data(dataset):
                 assert f[dset].shape == dims
 
 
-def _problems_after(dataset, edit):
+def _reseal(path):
+    """Recompute the checksum after an edit: the file then looks as a faulty writer would
+    have written it, so the validator's other checks are what is tested."""
+    from data_spec.shard_layout import checksum, read_values
+
+    with h5py.File(path, "a") as f:
+        f.attrs["checksum"] = checksum(read_values(f))
+
+
+def _problems_after(dataset, edit, reseal=True):
     edit(shard_path(dataset, 1))
+    if reseal and h5py.is_hdf5(shard_path(dataset, 1)):
+        try:
+            _reseal(shard_path(dataset, 1))
+        except (KeyError, OSError):  # an entry deleted, or the file truncated: no seal
+            pass
     problems = validate_dataset(dataset)
     out = subprocess.run([sys.executable, "-m", "data_spec", "validate", str(dataset)],
                          capture_output=True, text=True)
@@ -99,6 +113,21 @@ def test_nan_displacement(dataset):
             f["displacement"][1, 5, 2] = np.nan
     problems = _problems_after(dataset, edit)
     assert problems == [f"{shard_path(dataset, 1)}: '/displacement' contains 1 NaN/inf value(s)"]
+
+
+def test_one_flipped_bit_is_caught_by_the_checksum(dataset):
+    """Uncompressed data has no HDF5 checksum of its own: one flipped bit in a label would
+    pass every shape and finiteness check and train the model on a wrong value."""
+    def edit(p):
+        with h5py.File(p, "a") as f:
+            forces = f["load/forces"][...]
+            forces.view(np.uint64)[0, 0] ^= np.uint64(1) << np.uint64(40)
+            f["load/forces"][...] = forces
+    problems = _problems_after(dataset, edit, reseal=False)
+    assert problems == [f"{shard_path(dataset, 1)}: checksum mismatch: the file was changed or "
+                        "corrupted after it was written"]
+    with pytest.raises(ValueError, match="checksum mismatch"):
+        read_shard(shard_path(dataset, 1))
 
 
 def test_missing_geometry_file(dataset):
