@@ -18,9 +18,33 @@ with the meshes in DIR/geometry. Run it under mpirun: the N ranks form N/R group
 each group solves whole simulations (domain decomposition inside a group) and takes the next
 case dynamically. The same dataset comes out for any N and R. Re-running the same command skips
 valid shards and redoes missing or corrupt ones; failed simulations are kept (with their reason
-and converged steps) and only retried with --retry-failed. Exit code 2: bad scene or mesh
-(nothing was computed); 0 otherwise, also when some simulations failed (see the summary).
+and converged steps) and only retried with --retry-failed. One run at a time per directory (a
+lock). Exit code 2: bad scene or mesh, or the directory is in use (nothing was computed); 3:
+more than --max-failure-rate of the simulations failed (a broken set-up: the most common
+reasons are printed); 1: a rank failed and all ranks were aborted; 0 otherwise.
 """
+
+
+def _collective(run) -> int:
+    """Run an MPI-collective command so that an error on any rank ends every rank: the rank
+    prints what happened and calls MPI_Abort (no rank waits forever for a message that will
+    never come). Covers SystemExit raised inside libraries too (meshio calls sys.exit).
+    """
+    try:
+        return run()
+    except BaseException as exc:
+        from mpi4py import MPI
+
+        world = MPI.COMM_WORLD
+        if world.size == 1 or (isinstance(exc, SystemExit) and exc.code in (0, None)):
+            raise
+        import traceback
+
+        print(f"fem_sim: rank {world.rank}: fatal {type(exc).__name__}: {exc}; aborting all "
+              f"{world.size} ranks", file=sys.stderr, flush=True)
+        traceback.print_exc()
+        world.Abort(1)
+        raise  # not reached
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -44,6 +68,9 @@ def main(argv: list[str] | None = None) -> int:
     g.add_argument("--retry-failed", action="store_true",
                    help="also redo simulations recorded as failed")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
+    g.add_argument("--max-failure-rate", type=float, default=0.5, metavar="F",
+                   help="exit with code 3 when more than this fraction of the simulations "
+                        "fail (default 0.5; 1 for sweeps of extremes)")
     sub.add_parser("population", help="scene 4: CPD + PCA shape coefficients of a liver "
                    "population, with the IoU/Dice report (see population --help)")
     s = sub.add_parser("summary", help="print counts and statistics of a dataset")
@@ -54,10 +81,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "generate":
         if args.ranks_per_sim < 1:
             parser.error("--ranks-per-sim must be >= 1")
+        if not 0.0 <= args.max_failure_rate <= 1.0:
+            parser.error("--max-failure-rate must be in [0, 1]")
         from fem_sim.batch.generate import generate
 
-        return generate(args.scene, args.out, args.ranks_per_sim, args.only,
-                        args.retry_failed, progress=not args.no_progress)
+        return _collective(lambda: generate(
+            args.scene, args.out, args.ranks_per_sim, args.only, args.retry_failed,
+            progress=not args.no_progress, max_failure_rate=args.max_failure_rate))
     from fem_sim.batch.summary import summary
 
     return summary(args.directory, png=args.png)

@@ -35,7 +35,9 @@ from data_spec import (
     write_geometry,
     write_shard,
 )
+from data_spec.atomic import leftover_temporaries
 from fem_sim.batch import cases as cs
+from fem_sim.batch.lock import DirectoryLock, LockedError
 from fem_sim.geometry.quality import mesh_problems
 from fem_sim.geometry.source import GeometryError, scene_geometries
 
@@ -81,12 +83,21 @@ def _shard_is_done(path: Path, scene_hash: str, retry_failed: bool) -> bool:
         return not (retry_failed and str(f.attrs["status"]) == "failed")
 
 
+_LOCK: DirectoryLock | None = None  # held by world rank 0 for the whole run
+
+
 def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool,
-              progress: bool = False) -> tuple[Plan,
-                                                                                        Scene]:
-    """Rank 0 only: validate everything and decide the work. Errors go into Plan.error."""
+              progress: bool = False) -> tuple[Plan, Scene | None]:
+    """Rank 0 only: validate everything, lock the directory and decide the work. Any error
+    goes into Plan.error (so it is broadcast, and no rank waits for a plan that never comes).
+    """
+    global _LOCK
     try:
         scene = load_scene(scene_file)
+        _LOCK = DirectoryLock(out).acquire()
+        for tmp in leftover_temporaries(out):  # we hold the lock: no writer is running
+            log.info("removing %s, left by an interrupted writer", tmp)
+            tmp.unlink()
         copy = out / "scene.toml"
         if copy.exists() and any((out / "sims").glob("sim_*.h5")):
             try:
@@ -136,8 +147,11 @@ def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool,
         n_geo = len(ids)
         tasks.sort(key=lambda i: (i % n_geo, i))  # cases of one liver together: fewer rebuilds
         return Plan(tasks=tasks, skipped=len(todo) - len(tasks), geometry_ids=ids), scene
-    except (SceneError, GeometryError, cs.CaseError, ValueError, OSError) as exc:
+    except (SceneError, GeometryError, cs.CaseError, LockedError, ValueError, OSError) as exc:
         return Plan(error=str(exc)), None
+    except Exception as exc:  # unexpected: still a message on every rank, never a hang
+        log.exception("planning failed")
+        return Plan(error=f"{type(exc).__name__}: {exc}"), None
 
 
 class _Counter:
@@ -236,8 +250,11 @@ def run_case(problem, scene: Scene, case: cs.Case, g: Geometry, fixed: np.ndarra
 
 
 def generate(scene_file: str, out: str | Path, ranks_per_sim: int = 1, only: str | None = None,
-             retry_failed: bool = False, progress: bool = True) -> int:
-    """Run (or resume) a batch; returns the process exit code. Collective on COMM_WORLD."""
+             retry_failed: bool = False, progress: bool = True,
+             max_failure_rate: float = 0.5) -> int:
+    """Run (or resume) a batch; returns the process exit code (0; 2 bad input, nothing done;
+    3 more than ``max_failure_rate`` of the simulations failed). Collective on COMM_WORLD.
+    """
     from mpi4py import MPI
 
     from fem_sim.solver.problem import OgdenProblem
@@ -320,4 +337,31 @@ def generate(scene_file: str, out: str | Path, ranks_per_sim: int = 1, only: str
               f"{plan.skipped} skipped (already valid), {elapsed:.1f} s, "
               f"{rate:.0f} simulations/hour on {world.size} rank(s), "
               f"{n_groups} group(s) of {ranks_per_sim}", flush=True)
+        if done and failed / done > max_failure_rate:
+            print(f"fem_sim generate: error: {failed} of {done} simulations failed, more than "
+                  f"--max-failure-rate {max_failure_rate:g}: a broken set-up rather than hard "
+                  f"cases. Most common reasons:\n{_failure_summary(out, plan.tasks)}",
+                  file=sys.stderr, flush=True)
+            return 3
     return 0
+
+
+def _failure_summary(out: Path, tasks: list[int], top: int = 3) -> str:
+    """The most common failure reasons among the shards of ``tasks`` (rank 0), numbers
+    replaced by # so that the same failure at other loads counts once.
+    """
+    import re
+    from collections import Counter
+
+    import h5py
+
+    reasons: Counter = Counter()
+    for i in tasks:
+        try:
+            with h5py.File(shard_path(out, i), "r") as f:
+                if str(f.attrs["status"]) == "failed":
+                    why = str(f.attrs["failure_reason"])
+                    reasons[re.sub(r"[-+]?\d[\d.e+-]*", "#", why)[:160]] += 1
+        except (OSError, KeyError):
+            continue
+    return "\n".join(f"  {n} x {why}" for why, n in reasons.most_common(top))

@@ -94,7 +94,7 @@ def read_mesh_file(path: str | Path, scale_to_mm: float = 1.0) -> Geometry:
 
     try:
         m = meshio.read(path)
-    except Exception as exc:  # meshio raises many types for unreadable files
+    except (Exception, SystemExit) as exc:  # meshio raises many types, even SystemExit
         raise GeometryError(f"{path}: meshio cannot read it: {exc}") from None
     tets = [c.data for c in m.cells if c.type == "tetra"]
     if not tets:

@@ -25,10 +25,11 @@ ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONF
        "PYTHONPATH": str(ROOT)}
 
 
-def generate(scene, out, n=1, r=1, extra=(), **kw):
+def generate(scene, out, n=1, r=1, extra=(), timeout=600, **kw):
+    """Run generate under mpirun; a hang fails the test at ``timeout`` seconds."""
     cmd = ["mpirun", "-n", str(n), sys.executable, "-m", "fem_sim", "generate", str(scene),
            "--out", str(out), "--ranks-per-sim", str(r), "--no-progress", *extra]
-    return subprocess.run(cmd, env=ENV, capture_output=True, text=True, timeout=600, **kw)
+    return subprocess.run(cmd, env=ENV, capture_output=True, text=True, timeout=timeout, **kw)
 
 
 def displacements(d):
@@ -118,7 +119,8 @@ def test_failing_case_is_recorded_and_batch_finishes(tmp_path):
     text = TINY.read_text().replace("magnitude = 0.4", "magnitude = 40.0")
     text = text.replace('linear_solver = "mumps"', 'linear_solver = "mumps"\nmax_cutbacks = 2')
     scene.write_text(text)
-    res = generate(scene, tmp_path / "d", n=2)
+    sweep = ("--max-failure-rate", "1")  # a sweep of extremes may fail often: exit 0
+    res = generate(scene, tmp_path / "d", n=2, extra=sweep)
     assert res.returncode == 0, res.stderr
     assert "failed)" in res.stdout and "(0 failed)" not in res.stdout
     shards = [read_shard(p) for p in list_shards(tmp_path / "d")]
@@ -129,8 +131,14 @@ def test_failing_case_is_recorded_and_batch_finishes(tmp_path):
     # failed shards are kept on a re-run, and redone only on request
     again = generate(scene, tmp_path / "d", n=2)
     assert "0 simulated (0 failed), 4 skipped" in again.stdout
-    retry = generate(scene, tmp_path / "d", n=2, extra=("--retry-failed",))
+    retry = generate(scene, tmp_path / "d", n=2, extra=("--retry-failed", *sweep))
     assert f"{len(failed)} simulated ({len(failed)} failed)" in retry.stdout
+    # with the default threshold, a batch where most simulations fail is an error
+    assert len(failed) == 3  # of 4: seeded draws, the same on every machine
+    strict = generate(scene, tmp_path / "d", n=2, extra=("--retry-failed",))
+    assert strict.returncode == 3, strict.stderr
+    assert "3 of 3 simulations failed, more than --max-failure-rate 0.5" in strict.stderr
+    assert " x Newton did not converge in # iterations" in strict.stderr
 
 
 def test_bad_scene_exits_nonzero_on_every_rank_before_any_work(tmp_path):
@@ -174,3 +182,51 @@ def test_mesh_with_a_floating_piece_is_refused_before_any_work(tmp_path):
     assert res.returncode == 2, res.stderr
     assert "touch no fixed node" in res.stderr and "liver.vtu" in res.stderr
     assert not (tmp_path / "d" / "sims").exists() or not list((tmp_path / "d" / "sims").iterdir())
+
+
+def test_a_second_run_on_the_same_directory_is_refused(tmp_path):
+    """Two generate runs on one --out would overwrite each other: the directory is locked
+    (flock, released by the kernel when the holder dies) and the second run names the first."""
+    from fem_sim.batch.lock import DirectoryLock
+
+    lock = DirectoryLock(tmp_path / "d").acquire()
+    try:
+        res = generate(TINY, tmp_path / "d", n=2)
+        assert res.returncode == 2
+        assert "another generate run is using this directory" in res.stderr
+        assert f"pid {os.getpid()}" in res.stderr
+    finally:
+        lock.release()
+    assert generate(TINY, tmp_path / "d", n=2).returncode == 0
+
+
+@pytest.mark.parametrize("content", [b"", b"garbage, not a mesh\n"])
+def test_unreadable_mesh_file_ends_every_rank_with_a_message(tmp_path, content):
+    """meshio calls sys.exit on some unreadable files; that must not leave ranks waiting."""
+    (tmp_path / "liver.vtu").write_bytes(content)
+    scene = tmp_path / "s.toml"
+    scene.write_text(TINY.read_text().replace(
+        'source = "phantom"      # the embedded liver phantom: no external file needed\n'
+        "phantom_seed = 0\n", 'source = "file"\npath = "liver.vtu"\n'))
+    res = generate(scene, tmp_path / "d", n=2, timeout=120)
+    assert res.returncode == 2, res.stderr
+    assert "liver.vtu" in res.stderr
+
+
+def test_a_rank_that_fails_after_planning_aborts_all_ranks(tmp_path):
+    """A shard that cannot be written on one rank (a directory where its XDMF file should
+    go) ends the whole run with the rank's message instead of a hang."""
+    (tmp_path / "d" / "sims" / "sim_000003.xdmf").mkdir(parents=True)
+    res = generate(TINY, tmp_path / "d", n=2, timeout=120)
+    assert res.returncode != 0
+    assert "aborting all 2 ranks" in res.stderr
+
+
+def test_leftover_temporaries_are_removed_on_resume(reference, tmp_path):
+    d = tmp_path / "d"
+    shutil.copytree(reference, d)
+    (d / "sims" / "sim_000001.h5.tmp-12345").write_bytes(b"half a shard")
+    assert validate_dataset(d) != []
+    res = generate(TINY, d, n=1)
+    assert res.returncode == 0, res.stderr
+    assert validate_dataset(d) == []
