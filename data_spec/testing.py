@@ -69,12 +69,29 @@ def synthetic_shard(geometry: Geometry, index: int, *, n_steps: int = 3, seed: i
     )
 
 
-def synthetic_dataset(directory: str | Path, n_sims: int = 3, n: int = 3,
-                      n_steps: int = 3) -> Path:
-    """Write a geometry and ``n_sims`` synthetic shards into ``directory``."""
+TEST_SCENE = Path(__file__).with_name("scenes") / "tiny_scene1.toml"
+
+
+def write_test_scene(directory: str | Path, scene_file: str | Path = TEST_SCENE):
+    """Copy a scene into a dataset directory as its ``scene.toml``; returns the Scene."""
+    from data_spec.scene import load_scene
+
     directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    (directory / "scene.toml").write_text(Path(scene_file).read_text())
+    return load_scene(directory / "scene.toml")
+
+
+def synthetic_dataset(directory: str | Path, n_sims: int = 3, n: int = 3,
+                      n_steps: int = 3, scene_file: str | Path = TEST_SCENE) -> Path:
+    """Write a scene, a geometry and ``n_sims`` synthetic shards into ``directory`` (the
+    shards carry the scene's name and hash, so the dataset validates).
+    """
+    directory = Path(directory)
+    scene = write_test_scene(directory, scene_file)
     geo = box_mesh(n)
     write_geometry(geometry_path(directory, geo.geometry_id), geo)
     for i in range(n_sims):
-        write_shard(directory, synthetic_shard(geo, i, n_steps=n_steps))
+        write_shard(directory, synthetic_shard(geo, i, n_steps=n_steps, scene_name=scene.name,
+                                               scene_hash=scene.hash))
     return directory

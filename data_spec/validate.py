@@ -117,6 +117,23 @@ def shard_problems(path: str | Path, geometry_cache: dict | None = None) -> list
     return p
 
 
+def _scene_problems(path: Path, shard_hashes: set[str]) -> list[str]:
+    """The dataset's scene.toml: present, valid, and the scene its shards were made from."""
+    from data_spec.scene import SceneError, load_scene
+
+    if not path.exists():
+        return [f"{path}: missing (every dataset keeps the scene that produced it)"]
+    try:
+        scene = load_scene(path)
+    except SceneError as exc:
+        return [f"{path}: not a valid scene: {'; '.join(exc.problems)}"]
+    if shard_hashes and scene.hash not in shard_hashes:
+        return [f"{path}: its hash {scene.hash[:12]}... is not the shards' scene_hash "
+                f"({', '.join(h[:12] + '...' for h in sorted(shard_hashes))}): the scene was "
+                "edited after the dataset was made"]
+    return []
+
+
 def validate_dataset(directory: str | Path) -> list[str]:
     """Every problem of a dataset directory (empty list if valid)."""
     directory = Path(directory)
@@ -138,6 +155,7 @@ def validate_dataset(directory: str | Path) -> list[str]:
     if len(hashes) > 1:
         problems.append(f"{directory}: shards come from {len(hashes)} different scenes "
                         "(scene_hash differs)")
+    problems += _scene_problems(directory / "scene.toml", hashes)
     for tmp in leftover_temporaries(directory):
         problems.append(f"{tmp}: leftover temporary file of an interrupted writer")
     return problems

@@ -19,7 +19,7 @@ from data_spec import (
     write_shard,
 )
 from data_spec.atomic import atomic_path
-from data_spec.testing import box_mesh, synthetic_dataset, synthetic_shard
+from data_spec.testing import box_mesh, synthetic_dataset, synthetic_shard, write_test_scene
 
 
 @pytest.fixture
@@ -158,7 +158,8 @@ def test_failed_status_needs_reason_and_ok_needs_all_steps(dataset):
 def test_failed_shard_with_partial_steps_is_valid(tmp_path):
     geo = box_mesh(2)
     write_geometry(geometry_path(tmp_path, geo.geometry_id), geo)
-    s = synthetic_shard(geo, 0, n_steps=4)
+    scene = write_test_scene(tmp_path)
+    s = synthetic_shard(geo, 0, n_steps=4, scene_name=scene.name, scene_hash=scene.hash)
     s.displacement = s.displacement[:2]
     s.stats.newton_iterations = s.stats.newton_iterations[:2]
     s.stats.residual_norms = s.stats.residual_norms[:2]
@@ -187,6 +188,16 @@ def test_leftover_temporary_is_reported(dataset):
     (dataset / "sims" / f"sim_000009.h5.tmp-{os.getpid()}").write_bytes(b"x")
     problems = validate_dataset(dataset)
     assert len(problems) == 1 and "leftover temporary file" in problems[0]
+
+
+def test_scene_file_must_be_there_and_unchanged(dataset):
+    (dataset / "scene.toml").write_text((dataset / "scene.toml").read_text().replace(
+        "n_simulations = 4", "n_simulations = 5"))
+    problems = validate_dataset(dataset)
+    assert len(problems) == 1 and "the scene was edited after the dataset was made" in problems[0]
+    (dataset / "scene.toml").unlink()
+    assert validate_dataset(dataset) == [f"{dataset / 'scene.toml'}: missing (every dataset "
+                                         "keeps the scene that produced it)"]
 
 
 def test_empty_directory(tmp_path):

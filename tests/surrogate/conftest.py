@@ -1,4 +1,3 @@
-import shutil
 from pathlib import Path
 
 import pytest
@@ -13,5 +12,4 @@ def synth_dir(tmp_path_factory):
     """A synthetic scene-1-like dataset (40 simulations on a 5^3 box, 3 load steps)."""
     d = tmp_path_factory.mktemp("synth")
     synthetic_dataset(d, n_sims=40, n=5, n_steps=3)
-    shutil.copyfile(ROOT / "data_spec" / "scenes" / "tiny_scene1.toml", d / "scene.toml")
     return d
