@@ -153,7 +153,7 @@ _SCHEMA: dict[str, dict[str, Key]] = {
     "scene": {
         "name": Key(_name, REQUIRED, "scene name, used in file names and shards"),
         "description": Key(_string, "", "free text"),
-        "n_simulations": Key(_int(1), OPTIONAL,
+        "n_simulations": Key(_int(1, 10_000_000), OPTIONAL,
                              "number of simulations (default: the number of [[cases]])"),
         "seed": Key(_int(0), 0, "master seed; case i's draws depend only on (seed, i)"),
     },

@@ -20,7 +20,11 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from data_spec.geometry import Geometry, boundary_triangles
-from fem_sim.geometry.meshing import gmsh_tetrahedra, mesh_volume  # noqa: F401  (re-exported)
+from fem_sim.geometry.meshing import (  # noqa: F401  (mesh_volume re-exported)
+    check_mesh_size,
+    gmsh_tetrahedra,
+    mesh_volume,
+)
 
 log = logging.getLogger(__name__)
 
@@ -57,6 +61,8 @@ def make_phantom(seed: int = 0, mesh_size: float = 8.0) -> Geometry:
     import gmsh
 
     prm = phantom_parameters(seed)
+    lobes = (np.prod(prm.right_axes) + np.prod(prm.left_axes)) * 4.0 / 3.0 * np.pi
+    check_mesh_size(lobes, mesh_size, f"phantom {seed}")  # an upper bound of its volume
     gmsh.initialize([], readConfigFiles=False)
     try:
         gmsh.option.setNumber("General.Terminal", 0)

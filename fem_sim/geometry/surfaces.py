@@ -14,7 +14,7 @@ import numpy as np
 
 from data_spec.geometry import Geometry, boundary_triangles
 from fem_sim.geometry.errors import GeometryError
-from fem_sim.geometry.meshing import gmsh_tetrahedra
+from fem_sim.geometry.meshing import check_mesh_size, gmsh_tetrahedra
 from fem_sim.geometry.regions import default_vena_cava
 
 
@@ -113,6 +113,9 @@ def mesh_closed_surface(points, tris, mesh_size: float, description: str = "") -
     """Tetrahedral mesh of the solid bounded by a clean closed surface (gmsh)."""
     import gmsh
 
+    x = np.asarray(points, dtype=float)[np.asarray(tris)]
+    enclosed = abs(np.einsum("ij,ij->", x[:, 0], np.cross(x[:, 1], x[:, 2]))) / 6.0
+    check_mesh_size(enclosed, mesh_size, description or "surface")
 
     gmsh.initialize([], readConfigFiles=False)
     try:

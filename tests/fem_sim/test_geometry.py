@@ -149,3 +149,20 @@ def test_tangled_degenerate_and_floating_meshes_are_refused(tmp_path):
     cells = np.concatenate([g.cells, [np.arange(4) + g.n_nodes]])
     problems = mesh_problems(pts, cells, g.regions["vena_cava"])
     assert len(problems) == 1 and "touch no fixed node" in problems[0] and "[1]" in problems[0]
+
+
+def test_a_mesh_too_fine_for_this_machine_is_refused_before_meshing():
+    """mesh_size = 0.01 mm would make gmsh run for minutes and gigabytes: the estimate (from
+    the volume) refuses it at once and says which mesh size would do."""
+    import time
+
+    t0 = time.perf_counter()
+    with pytest.raises(GeometryError, match=r"phantom 0: mesh_size 0.01 mm would give about "
+                                            r".* nodes .*use mesh_size >= "):
+        make_phantom(0, 0.01)
+    assert time.perf_counter() - t0 < 5.0  # refused before gmsh starts: no meshing at all
+    from fem_sim.geometry.meshing import check_mesh_size
+
+    # the estimate is within 2x of gmsh's count on the phantom (3,077 nodes at 8 mm)
+    g = make_phantom(0, 8.0)
+    assert 0.5 < check_mesh_size(mesh_volume(g), 8.0, "x") / g.n_nodes < 2.0
