@@ -29,12 +29,17 @@ def main(argv=None) -> int:
 
     from data_spec import SceneError, load_scene
     from surrogate.config import get_config
+    from surrogate.data import DataError
     from surrogate.train import train_and_evaluate
 
     try:
         scene = load_scene(Path(args.data) / "scene.toml")
     except SceneError as exc:
         print(f"surrogate train: {exc}", file=sys.stderr)
+        return 2
+    bad = [kv for kv in args.overrides if "=" not in kv]
+    if bad:
+        print(f"surrogate train: overrides are key=value, got {bad}", file=sys.stderr)
         return 2
     overrides = dict(kv.split("=", 1) for kv in args.overrides)
     overrides = {k: _value(v) for k, v in overrides.items()}
@@ -43,10 +48,17 @@ def main(argv=None) -> int:
     overrides.setdefault("node_fraction", scene["surrogate"]["node_fraction"])
     try:
         cfg = get_config(name, **overrides)
-    except KeyError as exc:
-        print(f"surrogate train: {exc.args[0]}", file=sys.stderr)
+    except ValueError as exc:
+        print(f"surrogate train: {exc}", file=sys.stderr)
         return 2
-    result = train_and_evaluate(args.data, args.run, cfg)
+    if Path(args.run).exists() and not Path(args.run).is_dir():
+        print(f"surrogate train: --run {args.run} is a file, not a directory", file=sys.stderr)
+        return 2
+    try:
+        result = train_and_evaluate(args.data, args.run, cfg)
+    except DataError as exc:
+        print(f"surrogate train: {exc}", file=sys.stderr)
+        return 2
     print(json.dumps({k: result[k] for k in ("scene", "skill", "training_seconds")}))
     return 0
 

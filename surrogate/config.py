@@ -7,6 +7,7 @@ scene 4 five layers of 500. "small" is the CI/demo size.
 from __future__ import annotations
 
 import copy
+import math
 
 BASE = {
     "hidden": [128, 128, 128],
@@ -43,15 +44,51 @@ CONFIGS = {
 }
 
 
+def _is_int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _is_num(v) -> bool:
+    return (isinstance(v, (int, float)) and not isinstance(v, bool)) and math.isfinite(v)
+
+
+# key -> (check, what is expected): every value is checked before training starts.
+CHECKS = {
+    "hidden": (lambda v: isinstance(v, list) and v and all(_is_int(w) and w > 0 for w in v),
+               "a non-empty list of layer widths > 0"),
+    "dropout": (lambda v: _is_num(v) and 0 <= v < 1, "a number in [0, 1)"),
+    "l2": (lambda v: _is_num(v) and v >= 0, "a finite number >= 0"),
+    "input_noise": (lambda v: _is_num(v) and v >= 0, "a finite number >= 0"),
+    "batch_size": (lambda v: _is_int(v) and v >= 1, "an integer >= 1"),
+    "learning_rate": (lambda v: _is_num(v) and v > 0, "a finite number > 0"),
+    "lr_rule": (lambda v: v in ("plateau", "decay"), "'plateau' or 'decay'"),
+    "lr_patience": (lambda v: _is_int(v) and v >= 1, "an integer >= 1"),
+    "epochs": (lambda v: _is_int(v) and v >= 1, "an integer >= 1"),
+    "early_stopping": (lambda v: _is_int(v) and v >= 1, "an integer >= 1"),
+    "node_fraction": (lambda v: _is_num(v) and 0 < v <= 1, "a number in (0, 1]"),
+    "inner_val_fraction": (lambda v: _is_num(v) and 0 <= v < 1, "a number in [0, 1)"),
+    "folds": (lambda v: _is_int(v) and v >= 2, "an integer >= 2 (k-fold cross-validation)"),
+    "final_fit": (lambda v: isinstance(v, bool), "true or false"),
+    "seed": (lambda v: _is_int(v) and v >= 0, "an integer >= 0"),
+    "dtype": (lambda v: v == "float32", "'float32' (the only training precision)"),
+    "stream": (lambda v: v in (True, False, "auto"), "true, false or 'auto'"),
+}
+
+
 def get_config(name: str = "small", **overrides) -> dict:
-    """A copy of config ``name`` with ``overrides`` applied. Unknown names/keys raise."""
+    """A copy of config ``name`` with ``overrides`` applied. ValueError listing every problem:
+    an unknown name or key, or a value out of its range.
+    """
     if name not in CONFIGS:
-        raise KeyError(f"unknown trainer config {name!r}; expected one of {sorted(CONFIGS)}")
+        raise ValueError(f"unknown trainer config {name!r}; expected one of {sorted(CONFIGS)}")
     cfg = copy.deepcopy(BASE)
     cfg.update(copy.deepcopy(CONFIGS[name]))
-    unknown = set(overrides) - set(BASE)
-    if unknown:
-        raise KeyError(f"unknown config keys {sorted(unknown)}; expected some of {sorted(BASE)}")
-    cfg.update(overrides)
+    problems = [f"unknown config key {k!r}; expected one of {sorted(BASE)}"
+                for k in overrides if k not in BASE]
+    cfg.update({k: v for k, v in overrides.items() if k in BASE})
+    problems += [f"{k}: expected {what}, got {cfg[k]!r}" for k, (ok, what) in CHECKS.items()
+                 if not ok(cfg[k])]
+    if problems:
+        raise ValueError("trainer config: " + "; ".join(problems))
     cfg["name"] = name
     return cfg

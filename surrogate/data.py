@@ -72,6 +72,10 @@ def _estimated_target_bytes(paths) -> int:
     return per * len(paths)
 
 
+class DataError(ValueError):
+    """A dataset that cannot be trained on; the message names the directory or shard."""
+
+
 def load_dataset(directory: str | Path, stream: bool | str = "auto",
                  spill_dir: str | Path | None = None) -> Dataset:
     """Read every shard of ``directory`` (ok shards and the converged steps of failed ones).
@@ -83,10 +87,13 @@ def load_dataset(directory: str | Path, stream: bool | str = "auto",
     when the targets would take more than half of the available memory.
     """
     directory = Path(directory)
-    scene = load_scene(directory / "scene.toml")
+    try:
+        scene = load_scene(directory / "scene.toml")
+    except ValueError as exc:  # SceneError
+        raise DataError(str(exc)) from None
     paths = list_shards(directory)
     if not paths:
-        raise FileNotFoundError(f"{directory}: no shards (expected {directory}/sims/sim_*.h5)")
+        raise DataError(f"{directory}: no shards (expected {directory}/sims/sim_*.h5)")
     if stream == "auto":
         stream = _estimated_target_bytes(paths) > 0.5 * available_memory()
     spill, final = None, None
@@ -103,7 +110,11 @@ def load_dataset(directory: str | Path, stream: bool | str = "auto",
     failed = 0
     with stack:  # on leaving: the spill file is closed, then renamed (last in, first out)
         for p in paths:
-            sh = read_shard(p)
+            try:
+                sh = read_shard(p)
+            except (OSError, ValueError, KeyError) as exc:
+                raise DataError(f"{p}: cannot be read ({exc}); run `python -m data_spec "
+                                f"validate {directory}` and regenerate it") from None
             if sh.status != "ok":
                 failed += 1
             if sh.n_done == 0:
@@ -134,6 +145,9 @@ def load_dataset(directory: str | Path, stream: bool | str = "auto",
                     targets.append(np.empty((t.shape[0], 0), np.float32))  # size only
                 else:
                     targets.append(t)
+    if not s_geo:
+        raise DataError(f"{directory}: none of the {len(paths)} shards has a converged load "
+                        f"step ({failed} failed): nothing to train on")
     n_shape = shapes[0].size if shapes else 0
     spec = FeatureSpec.from_scene(scene, n_shape)
     extra = np.asarray(s_extra)[:, : spec.material_dim] if spec.material_dim else np.zeros(

@@ -10,6 +10,7 @@ from __future__ import annotations
 import functools
 import json
 import logging
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -237,6 +238,7 @@ def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
     from surrogate.plots import error_plots
 
     run = Path(run_dir)
+    created = not run.exists()
     run.mkdir(parents=True, exist_ok=True)
     lines = []
 
@@ -245,7 +247,12 @@ def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
         (log_fn or (lambda m: print(m, file=sys.stderr, flush=True)))(msg)
 
     t0 = time.perf_counter()
-    ds = load_dataset(data_dir, stream=cfg.get("stream", "auto"), spill_dir=run)
+    try:
+        ds = load_dataset(data_dir, stream=cfg.get("stream", "auto"), spill_dir=run)
+    except Exception:
+        if created:  # leave no empty run directory behind a dataset that cannot be read
+            shutil.rmtree(run, ignore_errors=True)
+        raise
     say(f"dataset {data_dir}: {ds.n_samples} samples ({np.unique(ds.sample_sim).size} "
         f"simulations, {ds.failed_sims} failed), {ds.targets.shape[0]:,} node examples, "
         f"{ds.spec.dim} features: {', '.join(ds.spec.names())}"
