@@ -42,11 +42,56 @@ def export_model(directory, params, norm: Normaliser, cfg, ds) -> Path:
             "extra_max": ds.extra.max(axis=0).tolist() if ds.extra.size else []},
         "units": {"length": "mm", "force": "N", "stress": "MPa"},
     }
-    if len(ds.points) == 1:
+    meta["embedded_geometry"] = len(ds.points) == 1
+    if meta["embedded_geometry"]:
         np.savez(d / "geometry.npz", points=ds.points[0], fixed=ds.fixed[0],
                  output_nodes=ds.out_nodes[0])
     (d / "model.json").write_text(json.dumps(meta, indent=1))
     return d
+
+
+def _read_meta(path: Path) -> dict:
+    try:
+        meta = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ValueError(f"{path}: missing (not a model directory?)") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(meta, dict):
+        raise ValueError(f"{path}: expected a JSON object, got {type(meta).__name__}")
+    if meta.get("format") != MODEL_FORMAT:
+        raise ValueError(f"{path}: not a {MODEL_FORMAT} model")
+    if meta.get("version") != MODEL_VERSION:
+        raise ValueError(f"{path}: version {meta.get('version')!r}, this code reads "
+                         f"{MODEL_VERSION!r}")
+    return meta
+
+
+def _read_params(path: Path, dim: int, hidden: tuple[int, ...]) -> dict:
+    """The network's parameters, checked against the architecture in the config: every layer
+    present with the right shapes, every value finite.
+    """
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            flat = {k: z[k] for k in z.files}
+    except FileNotFoundError:
+        raise ValueError(f"{path}: missing") from None
+    except (OSError, ValueError) as exc:  # truncated, not an npz, or a pickled array
+        raise ValueError(f"{path}: cannot be read without executing code ({exc})") from None
+    widths = (dim, *hidden, 3)
+    want = {}
+    for i in range(len(widths) - 1):
+        want[f"Dense_{i}/kernel"] = (widths[i], widths[i + 1])
+        want[f"Dense_{i}/bias"] = (widths[i + 1],)
+    problems = [f"'{k}' has shape {flat[k].shape}, the config says {shape}"
+                for k, shape in want.items() if k in flat and flat[k].shape != shape]
+    problems += [f"'{k}' is missing" for k in want if k not in flat]
+    problems += [f"'{k}' is not part of the network" for k in flat if k not in want]
+    problems += [f"'{k}' contains NaN or inf" for k in want
+                 if k in flat and not np.all(np.isfinite(flat[k]))]
+    if problems:
+        raise ValueError(f"{path}: " + "; ".join(problems))
+    return traverse_util.unflatten_dict(flat, sep="/")
 
 
 class Predictor:
@@ -67,29 +112,34 @@ class Predictor:
         from surrogate.model import NodeMLP
 
         d = Path(directory)
-        meta = json.loads((d / "model.json").read_text())
-        if meta.get("format") != MODEL_FORMAT:
-            raise ValueError(f"{d}/model.json: not a {MODEL_FORMAT} model")
-        if meta.get("version") != MODEL_VERSION:
-            raise ValueError(f"{d}/model.json: version {meta.get('version')}, this code reads "
-                             f"{MODEL_VERSION}")
+        meta = _read_meta(d / "model.json")
         self.meta = meta
-        self.spec = FeatureSpec(**meta["feature_spec"])
-        with np.load(d / "params.npz", allow_pickle=False) as z:
-            params = traverse_util.unflatten_dict({k: z[k] for k in z.files}, sep="/")
+        try:
+            self.spec = FeatureSpec(**meta["feature_spec"])
+            cfg = meta["config"]
+            hidden = tuple(int(w) for w in cfg["hidden"])
+            dropout = float(cfg["dropout"])
+            meta["training_range"]["force_norm_max"]
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"{d / 'model.json'}: incomplete or malformed ({exc!r})") from None
+        params = _read_params(d / "params.npz", self.spec.dim, hidden)
         self.params = jax.tree_util.tree_map(jnp.asarray, params)
         self.norm = Normaliser.from_dict(meta.get("stats"), self.spec.dim,
-                                         where=f"{d}/model.json: stats")
+                                         where=f"{d / 'model.json'}: stats")
         geo = d / "geometry.npz"
         if geo.exists():
-            with np.load(geo, allow_pickle=False) as z:
-                self.points, self.fixed = z["points"], z["fixed"]
+            try:
+                with np.load(geo, allow_pickle=False) as z:
+                    self.points, self.fixed = z["points"], z["fixed"]
+            except (OSError, KeyError, ValueError) as exc:
+                raise ValueError(f"{geo}: cannot be read ({exc})") from None
             self.static = jnp.asarray(static_node_features(self.points, self.fixed),
                                       dtype=jnp.float32)
+        elif meta.get("embedded_geometry"):
+            raise ValueError(f"{geo}: missing (the model was exported with its liver)")
         else:
             self.points = self.fixed = self.static = None
-        cfg = meta["config"]
-        model = NodeMLP(hidden=tuple(cfg["hidden"]), dropout=cfg["dropout"])
+        model = NodeMLP(hidden=hidden, dropout=dropout)
 
         def one_case(params, norm, static, forces, load_points, extra):
             x = norm.inputs(node_features(static, forces, load_points, extra, xp=jnp))
@@ -109,9 +159,11 @@ class Predictor:
         if forces.ndim != 3 or forces.shape[1:] != (L, 3):
             raise ValueError(f"forces: expected shape ({L}, 3) or (n_cases, {L}, 3), got "
                              f"{np.shape(forces) if not single else forces.shape[1:]}")
+        if forces.shape[0] == 0:
+            raise ValueError("forces: no case given (shape (0, n_loads, 3))")
         if load_nodes.shape != forces.shape[:2]:
-            raise ValueError(f"load_nodes: expected shape {forces.shape[1:2]} per case, got "
-                             f"{load_nodes.shape[1:]}")
+            raise ValueError(f"load_nodes: expected shape {forces.shape[:2]} for forces of "
+                             f"shape {forces.shape}, got {load_nodes.shape}")
         if not np.all(np.isfinite(forces)):
             raise ValueError("forces: contain NaN or inf")
         static, points = self._geometry(geometry)
@@ -126,6 +178,9 @@ class Predictor:
                 raise ValueError(f"nodes: expected a 1-D array of node ids in [0, {n_nodes})")
             static = static[jnp.asarray(nodes)]
         blocks = []
+        if material is not None and not self.spec.material_dim:
+            raise ValueError("material: this model was trained on one material and takes "
+                             "none (its scene did not vary the material)")
         if self.spec.material_dim:
             if material is None:
                 raise ValueError("material: this model needs (c, m, K) for each case")

@@ -67,9 +67,12 @@ def parse_range(text: str | None, n: int) -> range:
         return range(n)
     try:
         lo, hi = text.split("..")
-        return range(int(lo) if lo else 0, min(int(hi) if hi else n, n))
+        lo, hi = int(lo) if lo else 0, min(int(hi) if hi else n, n)
     except ValueError:
         raise ValueError(f"--only: expected I..J (e.g. 0..100), got {text!r}") from None
+    if lo < 0 or hi <= lo:
+        raise ValueError(f"--only {text}: expected 0 <= I < J <= {n} (n_simulations)")
+    return range(lo, hi)
 
 
 def _shard_is_done(path: Path, scene_hash: str, retry_failed: bool) -> bool:
@@ -94,6 +97,7 @@ def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool,
     global _LOCK
     try:
         scene = load_scene(scene_file)
+        todo = parse_range(only, scene.n_simulations)  # a bad --only writes nothing
         _LOCK = DirectoryLock(out).acquire()
         for tmp in leftover_temporaries(out):  # we hold the lock: no writer is running
             log.info("removing %s, left by an interrupted writer", tmp)
@@ -141,7 +145,6 @@ def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool,
         # Everything checked: record the scene (a directory without shards takes a new one).
         if not (copy.exists() and load_scene(copy).hash == scene.hash):
             shutil.copyfile(scene_file, copy)
-        todo = parse_range(only, scene.n_simulations)
         tasks = [i for i in todo if not _shard_is_done(shard_path(out, i), scene.hash,
                                                        retry_failed)]
         n_geo = len(ids)
@@ -262,11 +265,13 @@ def generate(scene_file: str, out: str | Path, ranks_per_sim: int = 1, only: str
     world = MPI.COMM_WORLD
     out = Path(out)
     t_start = time.perf_counter()
-    plan, scene = make_plan(scene_file, out, only, retry_failed, progress) if world.rank == 0 else (
-        None, None)
-    if world.rank == 0 and not plan.error and world.size % ranks_per_sim:
-        plan = Plan(error=f"--ranks-per-sim {ranks_per_sim} does not divide the "
-                          f"{world.size} MPI ranks")
+    plan, scene = Plan(), None
+    if world.rank == 0:
+        if world.size % ranks_per_sim:  # checked before anything is written
+            plan = Plan(error=f"--ranks-per-sim {ranks_per_sim} does not divide the "
+                              f"{world.size} MPI ranks")
+        else:
+            plan, scene = make_plan(scene_file, out, only, retry_failed, progress)
     plan = world.bcast(plan, root=0)  # collective
     if plan.error:
         if world.rank == 0:

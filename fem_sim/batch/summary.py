@@ -68,7 +68,9 @@ def summary(directory: str | Path, out=sys.stdout, png: str | Path | None = None
             items.append((g, u, s.load_nodes, f"sim {s.sim_index}: |F| = "
                           f"{np.linalg.norm(s.forces, axis=1).max():.2f} N, max |u| = "
                           f"{np.linalg.norm(u, axis=1).max():.1f} mm"))
-        target = render_shards(items, png or directory / "summary.png",
+        png = Path(png or directory / "summary.png")
+        png.parent.mkdir(parents=True, exist_ok=True)
+        target = render_shards(items, png,
                                f"{directory.name}: deformed livers at full load")
         pr(f"  picture: {target}")
     return 0 if not problems else 1

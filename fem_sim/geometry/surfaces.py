@@ -8,6 +8,7 @@ and remeshes the volume with gmsh at the requested size (the surface is re-trian
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,8 @@ from data_spec.geometry import Geometry, boundary_triangles
 from fem_sim.geometry.errors import GeometryError
 from fem_sim.geometry.meshing import check_mesh_size, gmsh_tetrahedra
 from fem_sim.geometry.regions import default_vena_cava
+
+log = logging.getLogger(__name__)
 
 
 def read_vtk_polydata(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
@@ -92,7 +95,13 @@ def clean_surface(points, tris, source: str = "surface") -> tuple[np.ndarray, np
     e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
     g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
     _, label = connected_components(g, directed=False)
-    keep = np.bincount(label[tris[:, 0]]).argmax()
+    sizes = np.bincount(label[tris[:, 0]])
+    keep = sizes.argmax()
+    dropped = sorted((int(k) for k in sizes[sizes > 0] if k != sizes[keep]), reverse=True)
+    if len(sizes[sizes > 0]) > 1:
+        log.warning("%s: %d separate surface pieces; kept the largest (%d triangles), dropped "
+                    "pieces of %s triangles", source, int(np.sum(sizes > 0)), int(sizes[keep]),
+                    dropped[:10])
     tris = tris[label[tris[:, 0]] == keep]
     edges = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
     _, counts = np.unique(edges, axis=0, return_counts=True)

@@ -230,3 +230,13 @@ def test_leftover_temporaries_are_removed_on_resume(reference, tmp_path):
     res = generate(TINY, d, n=1)
     assert res.returncode == 0, res.stderr
     assert validate_dataset(d) == []
+
+
+@pytest.mark.parametrize("extra, n, message", [
+    (("--only=-2..1",), 2, "--only -2..1: expected 0 <= I < J"),
+    (("--ranks-per-sim", "3"), 2, "--ranks-per-sim 3 does not divide the 2 MPI ranks"),
+])
+def test_bad_command_line_is_refused_before_anything_is_written(tmp_path, extra, n, message):
+    res = generate(TINY, tmp_path / "d", n=n, extra=extra, timeout=120)
+    assert res.returncode == 2 and message in res.stderr, res.stderr
+    assert not (tmp_path / "d" / "scene.toml").exists()

@@ -166,3 +166,14 @@ def test_a_mesh_too_fine_for_this_machine_is_refused_before_meshing():
     # the estimate is within 2x of gmsh's count on the phantom (3,077 nodes at 8 mm)
     g = make_phantom(0, 8.0)
     assert 0.5 < check_mesh_size(mesh_volume(g), 8.0, "x") / g.n_nodes < 2.0
+
+
+def test_a_surface_in_several_pieces_keeps_the_largest_and_says_so(caplog):
+    g = make_phantom(1, 20.0)
+    box = np.array([[400.0, 0, 0], [410, 0, 0], [400, 10, 0], [400, 0, 10]])
+    pts = np.concatenate([g.points, box])
+    extra = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]) + g.n_nodes
+    with caplog.at_level("WARNING"):
+        _, tris = clean_surface(pts, np.concatenate([g.surface_triangles, extra]), "two.stl")
+    assert tris.shape[0] == g.surface_triangles.shape[0]
+    assert "two.stl: 2 separate surface pieces" in caplog.text and "[4]" in caplog.text

@@ -66,6 +66,13 @@ def test_predictor_rejects_bad_input(run):
         predict([[0, 0, 0.1]], [9999])
     with pytest.raises(ValueError, match="nodes: expected"):
         predict([[0, 0, 0.1]], [3], nodes=[-1])
+    with pytest.raises(ValueError, match=r"load_nodes: expected shape \(4, 1\) for forces of "
+                                         r"shape \(4, 1, 3\), got \(3, 1\)"):
+        predict(np.zeros((4, 1, 3)), np.zeros((3, 1), int))
+    with pytest.raises(ValueError, match="forces: no case given"):
+        predict(np.zeros((0, 1, 3)), np.zeros((0, 1), int))
+    with pytest.raises(ValueError, match="material: this model was trained on one material"):
+        predict([[0, 0, 0.1]], [3], material=[4e-3, 10.0, 0.4])
     with warnings.catch_warnings(record=True) as w:
         warnings.simplefilter("always")
         predict([[0, 0, 4.0]], [3])
@@ -243,3 +250,43 @@ def test_predictor_is_finite_at_the_corners_and_flags_inputs_outside_its_range(t
     assert any(m.startswith("shape coefficients") for m in warned)
     with pytest.raises(ValueError, match="shape coefficients contain NaN"):
         run([0, 0, 0.4], extra[0, :3], [np.nan, 0.0])
+
+
+@pytest.mark.parametrize("tamper, message", [
+    ("nan_weight", r"params.npz: 'Dense_0/kernel' contains NaN"),
+    ("wrong_shape", r"params.npz: 'Dense_1/kernel' has shape .* the config says"),
+    ("truncated_json", r"model.json: not valid JSON"),
+    ("array_json", r"model.json: expected a JSON object, got list"),
+    ("string_version", r"model.json: version '1', this code reads 1"),
+    ("no_params", r"params.npz: missing"),
+    ("no_geometry", r"geometry.npz: missing \(the model was exported with its liver\)"),
+])
+def test_tampered_model_files_are_refused_at_load(run, tmp_path, tamper, message):
+    """Every file of a model is checked when it is loaded, not at the first call: a NaN or
+    misshapen weight, broken JSON, a wrong version type, a missing file; errors name it."""
+    import shutil
+
+    d = tmp_path / "model"
+    shutil.copytree(run[0] / "model", d)
+    meta = json.loads((d / "model.json").read_text())
+    if tamper in ("nan_weight", "wrong_shape"):
+        with np.load(d / "params.npz") as z:
+            flat = {k: z[k] for k in z.files}
+        if tamper == "nan_weight":
+            flat["Dense_0/kernel"][0, 0] = np.nan
+        else:
+            flat["Dense_1/kernel"] = flat["Dense_1/kernel"][:, :-1]
+        np.savez(d / "params.npz", **flat)
+    elif tamper == "truncated_json":
+        (d / "model.json").write_text((d / "model.json").read_text()[:100])
+    elif tamper == "array_json":
+        (d / "model.json").write_text("[1, 2]")
+    elif tamper == "string_version":
+        meta["version"] = "1"
+        (d / "model.json").write_text(json.dumps(meta))
+    elif tamper == "no_params":
+        (d / "params.npz").unlink()
+    else:
+        (d / "geometry.npz").unlink()
+    with pytest.raises(ValueError, match=message):
+        load_predictor(d)
