@@ -165,7 +165,6 @@ class PetscSolver(LinearSolver):
         self.direct = s.linear_solver == "mumps" and not s.lag_factorization
         self.solves_near = self.direct and "ksp_type" not in s.petsc_options
         self._ksp = None
-        self._A = None
         self._Pmat = None
         self._factorized = False
         self._refactor_next = False
@@ -212,7 +211,6 @@ class PetscSolver(LinearSolver):
     def solve(self, J: Jacobian, rhs, du, rtol: float) -> None:
         s = self.settings
         A = J.petsc()
-        self._A = A
         ksp = self._get_ksp(A)
         ksp.setTolerances(rtol=rtol, atol=0.0, max_it=s.max_krylov)
         refactor = not self.lagged or self._Pmat is None or self._refactor_next
