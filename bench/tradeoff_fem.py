@@ -347,8 +347,10 @@ def report() -> None:
                 spec["role"]
             x, y = rec["seconds"], max(err["rel_mean"], 1e-6)
             pts.append((x, y))
+            colours = {"mesh P1": "C0", "mesh P2": "C1", "steps": "C2", "tolerance": "C3",
+                       "linear solver": "C4", "predictor": "C5", "K/mu": "C6"}
             ax.scatter(x, y, marker=markers.get(spec["role"], "o"), label=label,
-                       color={"mesh P1": "C0", "mesh P2": "C1"}.get(label, None))
+                       color=colours.get(label, "C7"))
             if spec["role"] == "mesh":
                 ax.annotate(f"{spec['h']:g}", (x, y), textcoords="offset points",
                             xytext=(4, 3), fontsize=7)

@@ -365,9 +365,12 @@ def load_scene(path: str | Path) -> Scene:
     """Read and validate a scene TOML file. Raises SceneError naming the file and every problem."""
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise SceneError(str(path), [f"cannot read the file: {exc.strerror or exc}"]) from None
+    except UnicodeDecodeError as exc:
+        raise SceneError(str(path), [f"not UTF-8 text (byte {exc.start}): TOML files are "
+                                     "UTF-8"]) from None
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -75,6 +75,16 @@ def parse_range(text: str | None, n: int) -> range:
     return range(lo, hi)
 
 
+def _geometry_file_ok(path: Path, g: Geometry) -> bool:
+    if not path.exists():
+        return False
+    try:
+        return read_geometry(path).content_hash == g.content_hash
+    except Exception as exc:  # truncated or corrupt: it is written again
+        log.warning("%s cannot be read (%s); writing it again", path, exc)
+        return False
+
+
 def _shard_is_done(path: Path, scene_hash: str, retry_failed: bool) -> bool:
     if not path.exists() or shard_problems(path):
         return False
@@ -139,7 +149,7 @@ def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool,
                                        "eligible load nodes (loads.eligible, "
                                        "min_distance_to_fixed)")
             path = geometry_path(out, g.geometry_id)
-            if not path.exists():
+            if not _geometry_file_ok(path, g):  # missing, truncated or another mesh: rewrite
                 write_geometry(path, g)
             ids.append(g.geometry_id)
         # Everything checked: record the scene (a directory without shards takes a new one).

@@ -164,3 +164,10 @@ def test_absurd_simulation_count_is_refused():
     with pytest.raises(SceneError, match=r"scene.n_simulations: expected an integer in "
                                          r"\[1, 10000000\]"):
         parse_scene(raw)
+
+
+def test_non_utf8_scene_file_is_named(tmp_path):
+    path = tmp_path / "latin1.toml"
+    path.write_bytes("[scene]\nname = \"f\u00e9e\"\n".encode("latin-1"))
+    with pytest.raises(SceneError, match=r"(?s)latin1.toml.*not UTF-8 text"):
+        load_scene(path)

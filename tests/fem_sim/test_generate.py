@@ -240,3 +240,14 @@ def test_bad_command_line_is_refused_before_anything_is_written(tmp_path, extra,
     res = generate(TINY, tmp_path / "d", n=n, extra=extra, timeout=120)
     assert res.returncode == 2 and message in res.stderr, res.stderr
     assert not (tmp_path / "d" / "scene.toml").exists()
+
+
+def test_truncated_geometry_file_is_rewritten_on_resume(reference, tmp_path):
+    d = tmp_path / "d"
+    shutil.copytree(reference, d)
+    geo = next((d / "geometry").glob("*.h5"))
+    geo.write_bytes(geo.read_bytes()[:1000])
+    assert validate_dataset(d) != []
+    res = generate(TINY, d, n=2)
+    assert res.returncode == 0, res.stderr
+    assert validate_dataset(d) == []
