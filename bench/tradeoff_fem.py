@@ -109,7 +109,15 @@ def mesh(liver: str, h: float):
     from fem_sim.geometry.surfaces import mesh_surface_file
 
     g = mesh_surface_file(SOFA, h)
-    return g, g.regions["vena_cava"]
+    # The default region (surface nodes within 25 mm of the most posterior surface node)
+    # moves with the mesh; the study fixes the same physical region on every mesh: surface
+    # nodes within 25 mm of the most posterior point of the surface file itself.
+    from fem_sim.geometry.surfaces import clean_surface, read_vtk_polydata
+
+    pts, _ = clean_surface(*read_vtk_polydata(SOFA), str(SOFA))
+    top = pts[np.argmax(pts[:, 1])]
+    surf = g.surface_nodes
+    return g, surf[np.linalg.norm(g.points[surf] - top, axis=1) <= 25.0]
 
 
 def load_point(liver: str) -> np.ndarray:
@@ -190,7 +198,7 @@ def reference_of(spec: dict) -> dict:
             "role": "reference"}
 
 
-def study(livers: list[str], timeout: float) -> None:
+def study(livers: list[str], timeout: float, loads=("patch", "nodal")) -> None:
     from tqdm import tqdm
 
     RESULTS.mkdir(parents=True, exist_ok=True)
@@ -201,7 +209,7 @@ def study(livers: list[str], timeout: float) -> None:
             f.write_text(json.dumps(load_point(liver).tolist()))
         points[liver] = json.loads(f.read_text())
     done = results()
-    todo = [s for s in plan(livers) if key_of(s) not in done]
+    todo = [s for s in plan(livers) if key_of(s) not in done and s["load"] in loads]
     bar = tqdm(todo, desc="tradeoff-fem", unit="run")
     for spec in bar:
         key = key_of(spec)
@@ -381,6 +389,8 @@ def main() -> int:
     ap.add_argument("--liver", choices=["phantom", "sofa", "both"], default="both")
     ap.add_argument("--report", action="store_true", help="only write the report")
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per run")
+    ap.add_argument("--load", choices=["patch", "nodal", "both"], default="both",
+                    help="only these runs (two processes can share the study)")
     ap.add_argument("--one", help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.one:
@@ -397,7 +407,7 @@ def main() -> int:
     livers = ["phantom", "sofa"] if a.liver == "both" else [a.liver]
     livers = [v for v in livers if v != "sofa" or SOFA.exists()]
     if not a.report:
-        study(livers, a.timeout)
+        study(livers, a.timeout, ("patch", "nodal") if a.load == "both" else (a.load,))
     report()
     return 0
 
