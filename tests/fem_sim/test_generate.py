@@ -251,3 +251,16 @@ def test_truncated_geometry_file_is_rewritten_on_resume(reference, tmp_path):
     res = generate(TINY, d, n=2)
     assert res.returncode == 0, res.stderr
     assert validate_dataset(d) == []
+
+
+def test_an_option_petsc_does_not_know_fails_the_batch_with_the_reason(tmp_path):
+    """Every simulation fails on an unknown PETSc preconditioner: the batch must not exit 0
+    as if the dataset were fine; it exits 3 and shows PETSc's complaint."""
+    scene = tmp_path / "s.toml"
+    scene.write_text(TINY.read_text().replace(
+        'linear_solver = "mumps"',
+        'linear_solver = "mumps"\npetsc_options = { pc_type = "no_such_pc" }'))
+    res = generate(scene, tmp_path / "d", n=2, timeout=120)
+    assert res.returncode == 3, res.stderr
+    assert "4 of 4 simulations failed" in res.stderr and "PCSetFromOptions" in res.stderr
+    assert validate_dataset(tmp_path / "d") == []  # failures recorded, nothing half-written
