@@ -22,6 +22,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+from data_spec.checks import is_int
 from data_spec.scene_schema import (  # noqa: F401  (SCENE_SCHEMA_VERSION, schema_table: API)
     _CASE_KEYS,
     _PARAM_SET_KEYS,
@@ -31,7 +32,6 @@ from data_spec.scene_schema import (  # noqa: F401  (SCENE_SCHEMA_VERSION, schem
     SCENE_SCHEMA_VERSION,
     Key,
     _fractions,
-    _is_int,
     _node_ids,
     _vec3,
     schema_table,
@@ -281,7 +281,7 @@ def _check_steps(st: dict, problems: list[str]) -> None:
         if _fractions(st["fractions"]) is None:
             st["fractions"] = [float(x) for x in st["fractions"]]
             st["n"] = len(st["fractions"])
-    elif _is_int(st.get("n")) and st["n"] >= 1:
+    elif is_int(st.get("n")) and st["n"] >= 1:
         n = st["n"]
         st["fractions"] = [(i + 1) / n for i in range(n)]
 
@@ -306,7 +306,7 @@ def _check_cases(raw_cases: Any, data: dict, problems: list[str]) -> list[dict]:
         nodes, forces = case.get("load_nodes"), case.get("forces")
         if isinstance(nodes, list) and isinstance(forces, list) and len(nodes) != len(forces):
             problems.append(f"{where}: {len(nodes)} load_nodes but {len(forces)} forces")
-        if _is_int(count) and isinstance(nodes, list) and len(nodes) != count:
+        if is_int(count) and isinstance(nodes, list) and len(nodes) != count:
             problems.append(f"{where}.load_nodes: {len(nodes)} given, loads.count = {count}")
         if isinstance(case.get("material"), dict):
             case["material"] = _check_param_set(f"{where}.material", case["material"], problems)

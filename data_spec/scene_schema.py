@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import re
 from collections.abc import Callable
 from typing import Any
 
 from data_spec import solver_settings
+from data_spec.checks import is_int, is_num
 
 SCENE_SCHEMA_VERSION = 1
 
@@ -29,17 +29,9 @@ _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 Check = Callable[[Any], "str | None"]
 
 
-def _is_int(v: Any) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
-
-
-def _is_num(v: Any) -> bool:
-    return (isinstance(v, (int, float)) and not isinstance(v, bool)) and math.isfinite(v)
-
-
 def _int(lo: int | None = None, hi: int | None = None) -> Check:
     def check(v):
-        if not _is_int(v) or (lo is not None and v < lo) or (hi is not None and v > hi):
+        if not is_int(v) or (lo is not None and v < lo) or (hi is not None and v > hi):
             rng = f" >= {lo}" if hi is None and lo is not None else (
                 f" in [{lo}, {hi}]" if lo is not None else "")
             return f"an integer{rng}"
@@ -49,7 +41,7 @@ def _int(lo: int | None = None, hi: int | None = None) -> Check:
 
 def _num(lo: float | None = None, *, strict: bool = True) -> Check:
     def check(v):
-        if not _is_num(v):
+        if not is_num(v):
             return "a finite number"
         if lo is not None and (v <= lo if strict else v < lo):
             return f"a number {'>' if strict else '>='} {lo}"
@@ -59,9 +51,9 @@ def _num(lo: float | None = None, *, strict: bool = True) -> Check:
 
 def _positive_or_range(v: Any) -> str | None:
     """A number > 0, or a range [lo, hi] with 0 < lo <= hi."""
-    if _is_num(v) and v > 0:
+    if is_num(v) and v > 0:
         return None
-    if (isinstance(v, list) and len(v) == 2 and all(_is_num(x) for x in v)
+    if (isinstance(v, list) and len(v) == 2 and all(is_num(x) for x in v)
             and 0 < v[0] <= v[1]):
         return None
     return "a number > 0 or a range [lo, hi] with 0 < lo <= hi"
@@ -83,18 +75,18 @@ def _name(v: Any) -> str | None:
 
 
 def _vec3(v: Any) -> str | None:
-    ok = isinstance(v, list) and len(v) == 3 and all(_is_num(x) for x in v)
+    ok = isinstance(v, list) and len(v) == 3 and all(is_num(x) for x in v)
     return None if ok else "a list of 3 finite numbers [x, y, z]"
 
 
 def _node_ids(v: Any) -> str | None:
-    ok = isinstance(v, list) and len(v) > 0 and all(_is_int(x) and x >= 0 for x in v)
+    ok = isinstance(v, list) and len(v) > 0 and all(is_int(x) and x >= 0 for x in v)
     return None if ok else "a non-empty list of node ids (integers >= 0)"
 
 
 def _num_list(positive: bool = False, nonzero: bool = False) -> Check:
     def check(v):
-        if not (isinstance(v, list) and len(v) > 0 and all(_is_num(x) for x in v)):
+        if not (isinstance(v, list) and len(v) > 0 and all(is_num(x) for x in v)):
             return "a non-empty list of finite numbers"
         if positive and any(x <= 0 for x in v):
             return "a list of numbers > 0"
@@ -123,7 +115,7 @@ def _direction(v: Any) -> str | None:
 
 
 def _fractions(v: Any) -> str | None:
-    ok = (isinstance(v, list) and len(v) > 0 and all(_is_num(x) for x in v)
+    ok = (isinstance(v, list) and len(v) > 0 and all(is_num(x) for x in v)
           and all(0 < x <= 1 for x in v) and all(a < b for a, b in zip(v, v[1:]))
           and v[-1] == 1.0)
     return None if ok else "a strictly increasing list of numbers in (0, 1] ending at 1.0"
@@ -231,7 +223,7 @@ _SCHEMA: dict[str, dict[str, Key]] = {
         **_solver_keys(),
     },
     "surrogate": {
-        "node_fraction": Key(lambda v: None if _is_num(v) and 0 < v <= 1 else
+        "node_fraction": Key(lambda v: None if is_num(v) and 0 < v <= 1 else
                              "a number in (0, 1]", 1.0, "fraction of nodes sampled per step"),
         "folds": Key(_int(2), 10, "k of k-fold cross-validation"),
         "config": Key(_name, "paper_scene1", "trainer config name (surrogate/configs)"),
@@ -252,7 +244,7 @@ _TOP_LEVEL = ["schema_version", *[s for s in _SCHEMA if "." not in s], "cases"]
 
 def _ranges(v: Any, positive: bool = True) -> bool:
     return (isinstance(v, list) and len(v) > 0 and all(
-        isinstance(r, list) and len(r) == 2 and all(_is_num(x) for x in r) and r[0] <= r[1]
+        isinstance(r, list) and len(r) == 2 and all(is_num(x) for x in r) and r[0] <= r[1]
         and (not positive or r[0] > 0) for r in v))
 
 

@@ -10,9 +10,10 @@ them never changes a scene's hash.
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass, field
 from typing import Any
+
+from data_spec.checks import is_int, is_num
 
 
 def _setting(default: Any, doc: str, *, choices: tuple[str, ...] | None = None,
@@ -99,10 +100,9 @@ def check(f: dataclasses.Field, v: Any) -> str | None:
             if not isinstance(x, (str, int, float, bool)):
                 return f"a string/number/boolean value for PETSc option {k!r}"
         return None
-    is_int = isinstance(v, int) and not isinstance(v, bool)
-    if kind is int and not is_int:
+    if kind is int and not is_int(v):
         return "an integer" + (f" >= {m['lo']}" if m["lo"] is not None else "")
-    if kind is float and not ((is_int or isinstance(v, float)) and math.isfinite(v)):
+    if kind is float and not is_num(v):
         return "a finite number"
     lo = m["lo"]
     if lo is not None and (v <= lo if m["strict"] else v < lo):

@@ -7,7 +7,8 @@ scene 4 five layers of 500. "small" is the CI/demo size.
 from __future__ import annotations
 
 import copy
-import math
+
+from data_spec.checks import is_int, is_num
 
 BASE = {
     "hidden": [128, 128, 128],
@@ -44,32 +45,24 @@ CONFIGS = {
 }
 
 
-def _is_int(v) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool)
-
-
-def _is_num(v) -> bool:
-    return (isinstance(v, (int, float)) and not isinstance(v, bool)) and math.isfinite(v)
-
-
 # key -> (check, what is expected): every value is checked before training starts.
 CHECKS = {
-    "hidden": (lambda v: isinstance(v, list) and v and all(_is_int(w) and w > 0 for w in v),
+    "hidden": (lambda v: isinstance(v, list) and v and all(is_int(w) and w > 0 for w in v),
                "a non-empty list of layer widths > 0"),
-    "dropout": (lambda v: _is_num(v) and 0 <= v < 1, "a number in [0, 1)"),
-    "l2": (lambda v: _is_num(v) and v >= 0, "a finite number >= 0"),
-    "input_noise": (lambda v: _is_num(v) and v >= 0, "a finite number >= 0"),
-    "batch_size": (lambda v: _is_int(v) and v >= 1, "an integer >= 1"),
-    "learning_rate": (lambda v: _is_num(v) and v > 0, "a finite number > 0"),
+    "dropout": (lambda v: is_num(v) and 0 <= v < 1, "a number in [0, 1)"),
+    "l2": (lambda v: is_num(v) and v >= 0, "a finite number >= 0"),
+    "input_noise": (lambda v: is_num(v) and v >= 0, "a finite number >= 0"),
+    "batch_size": (lambda v: is_int(v) and v >= 1, "an integer >= 1"),
+    "learning_rate": (lambda v: is_num(v) and v > 0, "a finite number > 0"),
     "lr_rule": (lambda v: v in ("plateau", "decay"), "'plateau' or 'decay'"),
-    "lr_patience": (lambda v: _is_int(v) and v >= 1, "an integer >= 1"),
-    "epochs": (lambda v: _is_int(v) and v >= 1, "an integer >= 1"),
-    "early_stopping": (lambda v: _is_int(v) and v >= 1, "an integer >= 1"),
-    "node_fraction": (lambda v: _is_num(v) and 0 < v <= 1, "a number in (0, 1]"),
-    "inner_val_fraction": (lambda v: _is_num(v) and 0 <= v < 1, "a number in [0, 1)"),
-    "folds": (lambda v: _is_int(v) and v >= 2, "an integer >= 2 (k-fold cross-validation)"),
+    "lr_patience": (lambda v: is_int(v) and v >= 1, "an integer >= 1"),
+    "epochs": (lambda v: is_int(v) and v >= 1, "an integer >= 1"),
+    "early_stopping": (lambda v: is_int(v) and v >= 1, "an integer >= 1"),
+    "node_fraction": (lambda v: is_num(v) and 0 < v <= 1, "a number in (0, 1]"),
+    "inner_val_fraction": (lambda v: is_num(v) and 0 <= v < 1, "a number in [0, 1)"),
+    "folds": (lambda v: is_int(v) and v >= 2, "an integer >= 2 (k-fold cross-validation)"),
     "final_fit": (lambda v: isinstance(v, bool), "true or false"),
-    "seed": (lambda v: _is_int(v) and v >= 0, "an integer >= 0"),
+    "seed": (lambda v: is_int(v) and v >= 0, "an integer >= 0"),
     "dtype": (lambda v: v == "float32", "'float32' (the only training precision)"),
     "stream": (lambda v: v in (True, False, "auto"), "true, false or 'auto'"),
 }
