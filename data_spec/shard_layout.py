@@ -104,6 +104,14 @@ def checksum(values: dict) -> str:
     return h.hexdigest()
 
 
+CHECKSUM_MISMATCH = "checksum mismatch: the file was changed or corrupted after it was written"
+
+
+def checksum_ok(f, values: dict) -> bool:
+    """Whether the ``values`` read from the open shard ``f`` match its stored checksum."""
+    return checksum(values) == str(f.attrs["checksum"])
+
+
 def read_values(f) -> dict:
     """Every entry of an open shard file, by path (after :func:`missing` found none absent)."""
     return {e.path: read_entry(f, e) for e in LAYOUT}

@@ -25,12 +25,14 @@ import numpy as np
 from data_spec.atomic import atomic_path, write_text_atomic
 from data_spec.material import OgdenMaterial
 from data_spec.shard_layout import (
+    CHECKSUM_MISMATCH,
     LAYOUT,
     SHARD_FORMAT,
     SHARD_SCHEMA_VERSION,
     STATUSES,
     UNITS,
     checksum,
+    checksum_ok,
     get,
     missing,
     read_values,
@@ -181,9 +183,8 @@ def read_shard(path: str | Path) -> Shard:
         if absent:
             raise ValueError(f"{path}: missing {', '.join(absent)}")
         flat = read_values(f)
-        if checksum(flat) != str(f.attrs["checksum"]):
-            raise ValueError(f"{path}: checksum mismatch: the file was changed or corrupted "
-                             "after it was written")
+        if not checksum_ok(f, flat):
+            raise ValueError(f"{path}: {CHECKSUM_MISMATCH}")
         info = dict(f["solver"].attrs)
     values: dict = {}
     for e in LAYOUT:  # nested by source: {"material": {...}, "stats": {...}, ...}

@@ -15,11 +15,12 @@ import numpy as np
 from data_spec.atomic import leftover_temporaries
 from data_spec.geometry import GEOMETRY_FORMAT
 from data_spec.shard_layout import (
+    CHECKSUM_MISMATCH,
     DATASETS,
     SHARD_FORMAT,
     SHARD_SCHEMA_VERSION,
     STATUSES,
-    checksum,
+    checksum_ok,
     missing,
     read_values,
     shape_problems,
@@ -67,9 +68,8 @@ def shard_problems(path: str | Path, geometry_cache: dict | None = None) -> list
             values = read_values(f)
         except OSError as exc:
             return p + [f"{path}: data cannot be read (truncated or corrupt?): {exc}"]
-        if checksum(values) != str(f.attrs["checksum"]):
-            p.append(f"{path}: checksum mismatch: the file was changed or corrupted after it "
-                     "was written")
+        if not checksum_ok(f, values):
+            p.append(f"{path}: {CHECKSUM_MISMATCH}")
         arr = {e.path: values[e.path] for e in DATASETS}
         status = str(f.attrs["status"])
         reason = str(f.attrs["failure_reason"])
