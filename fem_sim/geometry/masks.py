@@ -147,7 +147,6 @@ def mask_surface(mask, spacing, origin=(0.0, 0.0, 0.0), *, voxel: float = 1.0,
     from scipy import ndimage
     from skimage.measure import marching_cubes
 
-
     m, sp = clean_mask(mask, spacing, voxel, radius)
     f = np.pad(m.astype(np.float32), 2)
     if sigma > 0:

@@ -6,6 +6,7 @@ import numpy as np
 
 from data_spec.geometry import Geometry
 from fem_sim.geometry.errors import GeometryError
+from fem_sim.geometry.quality import orient, signed_volumes
 
 # Above this the solver cannot run on a machine of this class (a P1 factorisation alone needs
 # several GB), and gmsh would spend minutes and gigabytes before anyone is told.
@@ -28,16 +29,12 @@ def gmsh_tetrahedra() -> tuple[np.ndarray, np.ndarray]:
     renum = np.full(tags.size, -1, dtype=np.int64)
     renum[used] = np.arange(used.size)
     points, cells = coords[used], renum[tets]
-    e = points[cells[:, 1:]] - points[cells[:, :1]]
-    neg = np.linalg.det(e) < 0
-    cells[neg] = cells[neg][:, [0, 2, 1, 3]]
-    return points, cells
+    return points, orient(points, cells, "gmsh")
 
 
 def mesh_volume(g: Geometry) -> float:
     """Volume (mm^3) from the tetrahedra."""
-    p, c = g.points, g.cells
-    return float(np.abs(np.linalg.det(p[c[:, 1:]] - p[c[:, :1]])).sum() / 6.0)
+    return float(np.abs(signed_volumes(g.points, g.cells)).sum())
 
 
 def check_mesh_size(volume: float, mesh_size: float, where: str,

@@ -75,6 +75,14 @@ def read_surface(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(m.points, dtype=np.float64)[:, :3], np.concatenate(tris).astype(np.int64)
 
 
+def enclosed_volume(points, tris) -> float:
+    """Signed volume (mm^3) enclosed by a closed triangle surface (divergence theorem):
+    positive when the triangles face outward.
+    """
+    x = np.asarray(points, dtype=float)[np.asarray(tris)]
+    return float(np.einsum("ij,ij->", x[:, 0], np.cross(x[:, 1], x[:, 2])) / 6.0)
+
+
 def clean_surface(points, tris, source: str = "surface") -> tuple[np.ndarray, np.ndarray]:
     """Largest closed component, outward orientation, no duplicates or degenerate triangles."""
     from scipy.sparse import coo_matrix
@@ -97,8 +105,8 @@ def clean_surface(points, tris, source: str = "surface") -> tuple[np.ndarray, np
     _, label = connected_components(g, directed=False)
     sizes = np.bincount(label[tris[:, 0]])
     keep = sizes.argmax()
-    dropped = sorted((int(k) for k in sizes[sizes > 0] if k != sizes[keep]), reverse=True)
-    if len(sizes[sizes > 0]) > 1:
+    dropped = sorted((int(sizes[i]) for i in np.flatnonzero(sizes) if i != keep), reverse=True)
+    if dropped:
         log.warning("%s: %d separate surface pieces; kept the largest (%d triangles), dropped "
                     "pieces of %s triangles", source, int(np.sum(sizes > 0)), int(sizes[keep]),
                     dropped[:10])
@@ -112,8 +120,7 @@ def clean_surface(points, tris, source: str = "surface") -> tuple[np.ndarray, np
     renum = np.full(n, -1)
     renum[used] = np.arange(used.size)
     pts, tris = pts[used], renum[tris]
-    vol = np.einsum("ij,ij->", pts[tris[:, 0]], np.cross(pts[tris[:, 1]], pts[tris[:, 2]])) / 6
-    if vol < 0:
+    if enclosed_volume(pts, tris) < 0:
         tris = tris[:, [0, 2, 1]]
     return pts, tris
 
@@ -122,9 +129,7 @@ def mesh_closed_surface(points, tris, mesh_size: float, description: str = "") -
     """Tetrahedral mesh of the solid bounded by a clean closed surface (gmsh)."""
     import gmsh
 
-    x = np.asarray(points, dtype=float)[np.asarray(tris)]
-    enclosed = abs(np.einsum("ij,ij->", x[:, 0], np.cross(x[:, 1], x[:, 2]))) / 6.0
-    check_mesh_size(enclosed, mesh_size, description or "surface")
+    check_mesh_size(abs(enclosed_volume(points, tris)), mesh_size, description or "surface")
 
     gmsh.initialize([], readConfigFiles=False)
     try:
