@@ -93,8 +93,7 @@ class Equations:
         """
         if not self.assembler.tangent_fresh:
             self.assembler.update_points(tangent=True)  # the tangent only when needed
-        self.b.copy(self.rhs)
-        self.rhs.scale(-1.0)
+        self.set_rhs_to_minus_residual()
         if lift:
             return self.assembler.jacobian(self.cons, self.rhs, self.lift)
         return self.assembler.jacobian(self.cons)
@@ -124,7 +123,7 @@ class Equations:
         is constrained (same value on every rank).
         """
         self.assembler.update_points(tangent=False)
-        dc.assemble_vector(self.b, self.disc.L)
+        self.assembler.internal_forces(self.b)
         fint = self.b.array.reshape(-1, 3)
         blocks = self.disc.node_blocks(nodes)
         local = fint[blocks].sum(axis=0) if blocks.size else np.zeros(3)
