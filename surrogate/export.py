@@ -119,7 +119,7 @@ class Predictor:
             cfg = meta["config"]
             hidden = tuple(int(w) for w in cfg["hidden"])
             dropout = float(cfg["dropout"])
-            meta["training_range"]["force_norm_max"]
+            self.force_norm_max = float(meta["training_range"]["force_norm_max"])
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"{d / 'model.json'}: incomplete or malformed ({exc!r})") from None
         params = _read_params(d / "params.npz", self.spec.dim, hidden)
@@ -202,9 +202,9 @@ class Predictor:
             blocks.append(np.broadcast_to(shape, (forces.shape[0], shape.size)))
         extra = np.concatenate(blocks, axis=1) if blocks else np.zeros((forces.shape[0], 0))
         fmax = np.linalg.norm(forces, axis=-1).max()
-        if fmax > 1.05 * self.meta["training_range"]["force_norm_max"]:
+        if fmax > 1.05 * self.force_norm_max:
             warnings.warn(f"force magnitude {fmax:.3g} N exceeds the training range "
-                          f"({self.meta['training_range']['force_norm_max']:.3g} N): "
+                          f"({self.force_norm_max:.3g} N): "
                           "extrapolating", stacklevel=2)
         out = self._batched(self.params, self.norm, static, jnp.asarray(forces, dtype=jnp.float32),
                             jnp.asarray(points[load_nodes], dtype=jnp.float32),

@@ -108,10 +108,13 @@ def example_index(ds: Dataset, samples: np.ndarray) -> tuple[np.ndarray, np.ndar
     return np.concatenate(rows), np.concatenate(smp), np.concatenate(tgt)
 
 
-def normalisation(ds: Dataset, rows, smp, tgt, rng, n_max: int = 200_000) -> Normaliser:
-    """Feature and target statistics from (a random subset of) the training examples."""
+def normalisation(ds: Dataset, data: dict, rows, smp, tgt, rng,
+                  n_max: int = 200_000) -> Normaliser:
+    """Feature and target statistics from (a random subset of) the training examples;
+    ``data`` is :func:`device_data` of ``ds``.
+    """
     pick = rng.choice(rows.size, size=min(n_max, rows.size), replace=False)
-    x = np.asarray(batch_features(device_data(ds), rows[pick], smp[pick]))
+    x = np.asarray(batch_features(data, rows[pick], smp[pick]))
     return Normaliser.fit(x, ds.targets[tgt[pick]])
 
 
@@ -133,8 +136,8 @@ def fit(ds: Dataset, train_samples: np.ndarray, cfg: dict, seed: int, label: str
     is_val = np.isin(unit[train_samples], val_units)
     tr, va = train_samples[~is_val], train_samples[is_val]
     rows, smp, tgt = example_index(ds, tr)
-    norm = normalisation(ds, rows, smp, tgt, rng)
     data = device_data(ds)
+    norm = normalisation(ds, data, rows, smp, tgt, rng)
     model = NodeMLP(hidden=tuple(cfg["hidden"]), dropout=cfg["dropout"])
     key = jax.random.PRNGKey(seed)
     key, k_init = jax.random.split(key)
