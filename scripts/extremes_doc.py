@@ -25,7 +25,7 @@ def main(out: str = "docs/extremes.md") -> int:
     for case in extremes():
         t0 = time.perf_counter()
         try:
-            sol = simulate(case)
+            _, sol = simulate(case)
             status = sol.status if sol.status == "ok" else f"failed: {sol.failure_reason}"
             umax = float(np.abs(sol.displacement).max()) if sol.n_done else float("nan")
             rows.append((case, status, f"{sol.n_done}/{len(case.fractions)}",

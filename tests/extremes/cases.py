@@ -159,10 +159,12 @@ def extremes() -> list[Extreme]:
 
 
 def simulate(case: Extreme):
+    """(problem, Solution) of one case: the problem keeps the final state (reactions)."""
     from mpi4py import MPI
 
     from fem_sim import Constraint, OgdenProblem
 
     g, fixed = liver(case.liver)
     prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, degree=case.degree)
-    return prob.solve(case.material, [Constraint(fixed)], loads(case), list(case.fractions))
+    return prob, prob.solve(case.material, [Constraint(fixed)], loads(case),
+                            list(case.fractions))

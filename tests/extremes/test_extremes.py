@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.extremes.cases import extremes, liver, loads
+from tests.extremes.cases import extremes, liver, loads, simulate
 
 pytestmark = pytest.mark.extremes
 CASES = {c.name: c for c in extremes()}
@@ -25,19 +25,13 @@ CASES = {c.name: c for c in extremes()}
 @pytest.fixture(scope="module")
 def outcome():
     """Solve each case once: name -> (Solution, reaction on the fixed region)."""
-    from mpi4py import MPI
-
-    from fem_sim import Constraint, OgdenProblem
-
     done = {}
 
     def get(name):
         if name not in done:
             case = CASES[name]
-            g, fixed = liver(case.liver)
-            prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, degree=case.degree)
-            sol = prob.solve(case.material, [Constraint(fixed)], loads(case),
-                             list(case.fractions))
+            prob, sol = simulate(case)
+            fixed = liver(case.liver)[1]
             done[name] = (sol, prob.reaction(fixed) if sol.n_done else None)
         return done[name]
 
