@@ -9,6 +9,7 @@ vector; features are assembled in jit (``surrogate.features``).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -169,6 +170,26 @@ def load_dataset(directory: str | Path, stream: bool | str = "auto",
         load_points=np.asarray(s_lp, dtype=np.float32), load_nodes=np.asarray(s_ln),
         extra=np.asarray(extra, dtype=np.float32), targets=all_targets,
         sample_offset=np.concatenate([[0], np.cumsum(sizes)]), failed_sims=failed)
+
+
+def restrict_nodes(ds: Dataset, keep: list[np.ndarray]) -> Dataset:
+    """The same dataset with fewer output nodes: ``keep[g]`` are the mesh node ids of geometry
+    g to keep (e.g. its surface nodes: a surface-only model, as a scene with
+    ``[output] nodes = "surface"`` would give). Ids that are not output nodes are ignored.
+    """
+    if len(keep) != len(ds.out_nodes):
+        raise ValueError(f"restrict_nodes: {len(keep)} node lists for {len(ds.out_nodes)} "
+                         "geometries")
+    masks = [np.isin(o, k) for o, k in zip(ds.out_nodes, keep)]
+    static = np.concatenate([ds.static[ds.geo_offset[g]:ds.geo_offset[g + 1]][m]
+                             for g, m in enumerate(masks)])
+    rows = [ds.sample_offset[s] + np.flatnonzero(masks[g]) for s, g in enumerate(ds.sample_geo)]
+    sizes = np.array([m.sum() for m in masks])[ds.sample_geo]
+    return dataclasses.replace(
+        ds, static=static, geo_offset=np.concatenate([[0], np.cumsum([m.sum() for m in masks])]),
+        out_nodes=[o[m] for o, m in zip(ds.out_nodes, masks)],
+        targets=np.asarray(ds.targets[np.concatenate(rows)]),
+        sample_offset=np.concatenate([[0], np.cumsum(sizes)]))
 
 
 def kfold_groups(ds: Dataset, k: int, seed: int) -> list[np.ndarray]:

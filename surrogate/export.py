@@ -22,6 +22,8 @@ from surrogate.normalise import Normaliser
 
 MODEL_FORMAT = "liverfem-surrogate"
 MODEL_VERSION = 1
+# Inference precisions: float32 (as trained), or the weights and activations cast to 16 bits.
+PRECISIONS = ("float32", "bfloat16", "float16")
 log = logging.getLogger(__name__)
 
 
@@ -103,14 +105,18 @@ class Predictor:
     ``nodes`` selects output nodes (default: all), e.g. the surface. ``material`` (c..., m...,
     K) is required when the scene varied the material; ``geometry`` = (points, fixed_nodes,
     shape_coefficients) when it varied the liver (or to predict on another mesh).
+    ``dtype``: the network's precision, one of :data:`PRECISIONS`.
     """
 
-    def __init__(self, directory):
+    def __init__(self, directory, dtype: str = "float32"):
         import jax
         import jax.numpy as jnp
 
         from surrogate.model import NodeMLP
 
+        if dtype not in PRECISIONS:
+            raise ValueError(f"dtype: expected one of {sorted(PRECISIONS)}, got {dtype!r}")
+        self.dtype = dtype
         d = Path(directory)
         meta = _read_meta(d / "model.json")
         self.meta = meta
@@ -123,7 +129,9 @@ class Predictor:
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"{d / 'model.json'}: incomplete or malformed ({exc!r})") from None
         params = _read_params(d / "params.npz", self.spec.dim, hidden)
-        self.params = jax.tree_util.tree_map(jnp.asarray, params)
+        # Reduced precision: the weights and the network's activations are cast; features,
+        # normalisation and the returned millimetres stay float32.
+        self.params = jax.tree_util.tree_map(lambda w: jnp.asarray(w, dtype=dtype), params)
         self.norm = Normaliser.from_dict(meta.get("stats"), self.spec.dim,
                                          where=f"{d / 'model.json'}: stats")
         geo = d / "geometry.npz"
@@ -143,7 +151,8 @@ class Predictor:
 
         def one_case(params, norm, static, forces, load_points, extra):
             x = norm.inputs(node_features(static, forces, load_points, extra, xp=jnp))
-            return norm.outputs(model.apply({"params": params}, x, train=False))
+            y = model.apply({"params": params}, x.astype(dtype), train=False)
+            return norm.outputs(y.astype(jnp.float32))
 
         self._batched = jax.jit(jax.vmap(one_case, in_axes=(None, None, None, 0, 0, 0)))
 
@@ -176,7 +185,13 @@ class Predictor:
             if not np.issubdtype(nodes.dtype, np.integer) or nodes.ndim != 1 or (
                     nodes.size and (nodes.min() < 0 or nodes.max() >= n_nodes)):
                 raise ValueError(f"nodes: expected a 1-D array of node ids in [0, {n_nodes})")
-            static = static[jnp.asarray(nodes)]
+            # The rows of the selected nodes, gathered once per (liver, node set): a caller
+            # that asks for the surface at every frame pays for the surface only.
+            key = (None if geometry is None else self._geo_key, nodes.dtype.str, nodes.shape,
+                   nodes.tobytes())
+            if getattr(self, "_sel_key", None) != key:
+                self._sel_key, self._sel = key, static[jnp.asarray(nodes)]
+            static = self._sel
         blocks = []
         if material is not None and not self.spec.material_dim:
             raise ValueError("material: this model was trained on one material and takes "
@@ -247,6 +262,8 @@ class Predictor:
         return self._geo_static, points
 
 
-def load_predictor(directory) -> Predictor:
-    """Load an exported model directory; see :class:`Predictor`."""
-    return Predictor(directory)
+def load_predictor(directory, dtype: str = "float32") -> Predictor:
+    """Load an exported model directory; see :class:`Predictor`. ``dtype`` "bfloat16" or
+    "float16" runs the network in 16 bits (docs/tradeoff_surrogate.md gives what it costs).
+    """
+    return Predictor(directory, dtype)

@@ -43,6 +43,8 @@ def test_metrics_by_hand():
     assert m["mae_z"] == pytest.approx((0.5 + 2 + 4) / 3)
     assert m["pct_ee_lt_1mm"] == pytest.approx(100 / 3)
     assert m["pct_ee_lt_3mm"] == pytest.approx(200 / 3)
+    # 95th percentile of (0.5, 2, 5), linear interpolation: rank 0.95 * 2 = 1.9 -> 2 + 0.9 * 3
+    assert m["ee_p95"] == pytest.approx(4.7)
     assert m["corr_x"] == pytest.approx(np.corrcoef(pred[:, 0], true[:, 0])[0, 1])
 
 

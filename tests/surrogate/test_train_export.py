@@ -79,6 +79,38 @@ def test_predictor_rejects_bad_input(run):
     assert any("exceeds the training range" in str(x.message) for x in w)
 
 
+@pytest.mark.parametrize("dtype, rel", [("bfloat16", 0.05), ("float16", 0.01)])
+def test_reduced_precision_predictor_is_close_to_float32(run, dtype, rel):
+    """16-bit weights and activations: bfloat16 keeps 8 significand bits (relative rounding
+    2^-9 ~ 2e-3 per operation), float16 11 bits (2^-12 ~ 2.4e-4); through three layers the
+    prediction must stay within a few of those of the float32 one, relative to max |u|, and
+    never bit-equal to it (else the cast did not happen)."""
+    predict32 = load_predictor(run[0] / "model")
+    predict16 = load_predictor(run[0] / "model", dtype=dtype)
+    forces = np.array([[[0.1, -0.2, 0.3]], [[0.0, 0.0, -0.4]]])
+    nodes = np.array([[5], [17]])
+    a, b = predict32(forces, nodes), predict16(forces, nodes)
+    assert b.dtype == np.float32 and np.all(np.isfinite(b))
+    scale = np.abs(a).max()
+    assert np.abs(a - b).max() < rel * scale
+    assert not np.array_equal(a, b)
+    with pytest.raises(ValueError, match="dtype: expected one of"):
+        load_predictor(run[0] / "model", dtype="int8")
+
+
+def test_node_subsets_follow_each_request(run):
+    """The predictor keeps the last node set's features; every new set (another length,
+    another integer type with the same bytes, back to an earlier one) gives its own rows."""
+    predict = load_predictor(run[0] / "model")
+    f, n = np.array([[0.1, 0.0, -0.3]]), np.array([11])
+    full = predict(f, n)
+    scale = np.abs(full).max()
+    for sel in ([0, 7, 9], [3, 4], np.array([1, 0], np.int32), np.array([1], np.int64),
+                [0, 7, 9]):
+        got = predict(f, n, nodes=sel)
+        np.testing.assert_allclose(got, full[np.asarray(sel)], rtol=1e-5, atol=1e-6 * scale)
+
+
 def test_model_files_are_plain(run):
     d = run[0] / "model"
     with np.load(d / "params.npz", allow_pickle=False) as z:
@@ -290,3 +322,25 @@ def test_tampered_model_files_are_refused_at_load(run, tmp_path, tamper, message
         (d / "geometry.npz").unlink()
     with pytest.raises(ValueError, match=message):
         load_predictor(d)
+
+
+def test_restrict_nodes_keeps_the_targets_of_the_kept_nodes(synth_dir):
+    """A surface-only view of a dataset: every sample keeps exactly its rows at the kept nodes
+    (checked against the full dataset by node id), and training examples index into it."""
+    from surrogate.data import load_dataset, restrict_nodes
+    from surrogate.train import example_index
+
+    ds = load_dataset(synth_dir, stream=False)
+    keep = ds.out_nodes[0][::3][:40]
+    sub = restrict_nodes(ds, [np.concatenate([keep, [10**7]])])  # unknown ids are ignored
+    assert np.array_equal(sub.out_nodes[0], keep)
+    pos = np.searchsorted(ds.out_nodes[0], keep)
+    for s in (0, ds.n_samples // 2, ds.n_samples - 1):
+        full = ds.targets[ds.sample_offset[s]:ds.sample_offset[s + 1]]
+        part = sub.targets[sub.sample_offset[s]:sub.sample_offset[s + 1]]
+        np.testing.assert_array_equal(part, full[pos])
+    np.testing.assert_array_equal(sub.static, ds.static[pos])
+    rows, _, tgt = example_index(sub, np.arange(sub.n_samples))
+    assert rows.max() < sub.static.shape[0] and tgt.max() == sub.targets.shape[0] - 1
+    with pytest.raises(ValueError, match="2 node lists for 1 geometries"):
+        restrict_nodes(ds, [keep, keep])
