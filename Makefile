@@ -28,7 +28,7 @@ MPIRUN := mpirun -n $(NP)
 
 .PHONY: help setup setup-system setup-solver setup-trainer demo test test-solver test-trainer \
         test-extremes extremes-doc \
-        dataset train population bench tradeoff-fem docs lint clean lock-trainer
+        dataset train population bench tradeoff-fem tradeoff-surrogate docs lint clean lock-trainer
 
 help:
 	@echo "make demo     set up, generate a small dataset on the embedded liver, train, report"
@@ -40,6 +40,7 @@ help:
 	@echo "make population SCENE=... OUT=...  CPD + PCA shape coefficients (scene 4)"
 	@echo "make bench    run the benchmarks in bench/ (long)"
 	@echo "make tradeoff-fem   FEM speed/accuracy price list -> docs/tradeoff_fem.md (long, resumable)"
+	@echo "make tradeoff-surrogate   surrogate price list + error budget -> docs/ (long, resumable)"
 	@echo "make docs     regenerate docs/phantoms.png"
 	@echo "make lint     ruff";  echo "make clean    remove environments and outputs"
 
@@ -121,6 +122,11 @@ bench: setup
 # FEM price list (resumable: re-run to continue): docs/tradeoff_fem.{md,png}
 tradeoff-fem: setup-solver
 	$(SPY) bench/tradeoff_fem.py
+
+# Surrogate price list + error budget (resumable): docs/tradeoff_surrogate.md, docs/*.png
+tradeoff-surrogate: setup
+	$(SPY) bench/budget_fem.py
+	$(TPY) bench/tradeoff_surrogate.py --np $(NP)
 
 population: setup-solver
 	$(SPY) -m fem_sim population $(SCENE) --out $(OUT)

@@ -138,12 +138,12 @@ def run_one(spec: dict, eval_points: np.ndarray | None, out_npz: Path) -> dict:
     g, fixed = mesh(spec["liver"], spec["h"])
     p_star = np.asarray(spec["load_point"])
     if spec["load"] == "patch":
-        loads = [PatchLoad(p_star, FORCE, PATCH_RADIUS)]
+        loads = [PatchLoad(p_star, spec.get("force", FORCE), PATCH_RADIUS)]
         node = -1
     else:
         surf = np.setdiff1d(g.surface_nodes, fixed)
         node = int(surf[np.argmin(np.linalg.norm(g.points[surf] - p_star, axis=1))])
-        loads = [NodalLoad([node], [FORCE])]
+        loads = [NodalLoad([node], [spec.get("force", FORCE)])]
     settings = {"rtol": spec["rtol"], "factorization": spec["factorization"],
                 "linear_solver": spec["linear_solver"], "predictor": spec["predictor"]}
     if spec["linear_solver"] == "gamg":
