@@ -96,7 +96,7 @@ train: setup-trainer
 test: setup test-solver test-extremes test-trainer
 
 test-solver: setup-solver
-	bash scripts/run_pytest.sh $(SPY) tests/common tests/data_spec tests/fem_sim -q $(TESTS)
+	bash scripts/run_pytest.sh $(SPY) tests/common tests/data_spec tests/fem_sim tests/reliability -q $(TESTS)
 
 # Stability at the extremes: every case must converge with a physically right answer.
 test-extremes: setup-solver
@@ -114,7 +114,7 @@ $(TEST_DATA)/.done: data_spec/scenes/ci_scene1.toml | setup-solver
 test-trainer: setup-trainer $(TEST_DATA)/.done
 	$(TRAIN_VENV)/bin/ruff check .
 	LIVERFEM_TEST_DATASET=$(TEST_DATA) \
-	    bash scripts/run_pytest.sh $(TPY) tests/data_spec tests/surrogate -q $(TESTS)
+	    bash scripts/run_pytest.sh $(TPY) tests/data_spec tests/surrogate tests/reliability -q $(TESTS)
 
 bench: setup
 	@bash scripts/bench.sh "$(SPY)" "$(TPY)"

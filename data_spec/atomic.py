@@ -30,6 +30,21 @@ def atomic_path(final: str | Path) -> Iterator[Path]:
             tmp.unlink()
 
 
+def check_writable(directory: str | Path) -> None:
+    """Create ``directory`` if needed and prove a file can be created in it; OSError naming
+    the directory otherwise (read-only directory or file system, immutable attribute), so
+    that a run fails before it spends any work, not at its first write.
+    """
+    d = Path(directory)
+    probe = d / f".write-probe{TMP_MARK}{os.getpid()}"
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise OSError(f"{d}: cannot create files there ({exc.strerror or exc})") from None
+
+
 def write_text_atomic(final: str | Path, text: str) -> None:
     with atomic_path(final) as tmp:
         tmp.write_text(text)

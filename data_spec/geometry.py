@@ -66,8 +66,20 @@ class Geometry:
         return "g" + self.content_hash[:16]
 
 
+def signed_volumes(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """Signed volume of each tetrahedron (mm^3): positive when nodes 1, 2, 3 turn
+    counter-clockwise seen from node 0's opposite side (the orientation every geometry file
+    stores).
+    """
+    e = points[cells[:, 1:]] - points[cells[:, :1]]
+    return np.linalg.det(e) / 6.0
+
+
 def geometry_problems(g: Geometry) -> list[str]:
-    """Everything wrong with a geometry's arrays (empty list if it is usable)."""
+    """Everything wrong with a geometry's arrays (empty list if it is usable): shapes, ids,
+    finite points, unused nodes, and cells that are not positively oriented (a tangled or
+    inverted mesh; fem_sim orients every mesh before writing it).
+    """
     p = []
     if g.points.ndim != 2 or g.points.shape[1] != 3 or g.points.shape[0] < 4:
         p.append(f"points: expected shape (n_nodes >= 4, 3), got {g.points.shape}")
@@ -87,6 +99,11 @@ def geometry_problems(g: Geometry) -> list[str]:
         used[g.cells.ravel()] = True
         if not used.all():
             p.append(f"cells: {int((~used).sum())} nodes belong to no cell")
+        vol = signed_volumes(g.points, g.cells)
+        bad = np.flatnonzero(vol <= 0)
+        if bad.size:
+            p.append(f"cells: {bad.size} of {vol.size} have a volume <= 0 (inverted or flat; "
+                     f"first: cell {bad[0]}, {vol[bad[0]]:.3g} mm^3)")
     return p
 
 

@@ -13,7 +13,7 @@ import h5py
 import numpy as np
 
 from data_spec.atomic import leftover_temporaries
-from data_spec.geometry import GEOMETRY_FORMAT
+from data_spec.geometry import GEOMETRY_FORMAT, geometry_problems, read_geometry
 from data_spec.shard_layout import (
     CHECKSUM_MISMATCH,
     DATASETS,
@@ -29,7 +29,10 @@ from data_spec.shards import list_shards
 
 
 def _geometry_facts(path: Path, cache: dict) -> tuple[int, str] | str:
-    """(n_nodes, geometry_id) of a geometry file, or a problem string. Cached per path."""
+    """(n_nodes, geometry_id) of a geometry file, or a problem string: unreadable, not a
+    geometry, arrays that fail :func:`geometry_problems` (e.g. inverted cells), or contents that
+    no longer match the stored hash. Cached per path: read once per dataset.
+    """
     if path not in cache:
         if not path.exists():
             cache[path] = f"geometry file {path} is missing"
@@ -40,7 +43,16 @@ def _geometry_facts(path: Path, cache: dict) -> tuple[int, str] | str:
                         cache[path] = f"geometry file {path} is not a {GEOMETRY_FORMAT} file"
                     else:
                         cache[path] = (int(g["points"].shape[0]), str(g.attrs["geometry_id"]))
-            except (OSError, KeyError) as exc:
+                        stored_hash = str(g.attrs.get("content_hash", ""))
+                if isinstance(cache[path], tuple):
+                    geo = read_geometry(path)
+                    bad = geometry_problems(geo)
+                    if geo.content_hash != stored_hash:
+                        bad.insert(0, "points or cells differ from the stored content hash "
+                                   "(corrupted or edited)")
+                    if bad:
+                        cache[path] = f"geometry file {path}: " + "; ".join(bad)
+            except (OSError, KeyError, ValueError) as exc:
                 cache[path] = f"geometry file {path} cannot be read: {exc}"
     return cache[path]
 

@@ -56,7 +56,7 @@ def main(argv=None) -> int:
         return 2
     try:
         result = train_and_evaluate(args.data, args.run, cfg)
-    except DataError as exc:
+    except (DataError, OSError) as exc:  # OSError: a run directory that cannot be written
         print(f"surrogate train: {exc}", file=sys.stderr)
         return 2
     print(json.dumps({k: result[k] for k in ("scene", "skill", "training_seconds")}))

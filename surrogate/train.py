@@ -23,6 +23,7 @@ from flax import traverse_util
 from flax.training import train_state
 from flax.training.early_stopping import EarlyStopping
 
+from data_spec.atomic import check_writable
 from surrogate.data import Dataset, kfold_groups, load_dataset
 from surrogate.features import node_features
 from surrogate.metrics import displacement_metrics, metrics_table
@@ -242,7 +243,7 @@ def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
 
     run = Path(run_dir)
     created = not run.exists()
-    run.mkdir(parents=True, exist_ok=True)
+    check_writable(run)  # a read-only run directory fails now, not after the training
     lines = []
 
     def say(msg):

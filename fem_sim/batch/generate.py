@@ -35,7 +35,7 @@ from data_spec import (
     write_geometry,
     write_shard,
 )
-from data_spec.atomic import leftover_temporaries
+from data_spec.atomic import check_writable, leftover_temporaries
 from fem_sim.batch import cases as cs
 from fem_sim.batch.lock import DirectoryLock, LockedError
 from fem_sim.geometry.quality import mesh_problems
@@ -121,7 +121,8 @@ def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool,
             if old is None or old.hash != scene.hash:
                 raise SceneError(str(out), [f"{out} holds a dataset of another scene "
                                             f"({copy}); use a new --out directory"])
-        out.mkdir(parents=True, exist_ok=True)
+        for d in (out, out / "sims", out / "geometry"):  # fail now, not at the first write
+            check_writable(d)
         ids = []
         bar = None
         if progress and scene["geometry"]["source"] == "population":

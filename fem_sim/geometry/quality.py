@@ -20,15 +20,12 @@ import logging
 
 import numpy as np
 
+from data_spec.geometry import signed_volumes
+
 log = logging.getLogger(__name__)
 
 MIN_QUALITY = 1e-4   # refuse: nearly flat
 WARN_QUALITY = 0.02  # warn: slivers
-
-
-def signed_volumes(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
-    e = points[cells[:, 1:]] - points[cells[:, :1]]
-    return np.linalg.det(e) / 6.0
 
 
 def mean_ratio(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
