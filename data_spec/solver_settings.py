@@ -65,6 +65,10 @@ class SolverSettings:
     chord_trigger: float = _setting(1e-2, "try chord steps after a Newton step that cut |R| "
                                     "this much", lo=0.0, strict=True)
     max_chord_steps: int = _setting(30, "chord steps per increment attempt", lo=0)
+    first_increment: float = _setting(0.25, "the first increment as a fraction of the first "
+                                      "output step (smaller: the stiffening start is taken in "
+                                      "sub-increments that double after easy ones)", lo=0.0,
+                                      strict=True)
 
     @classmethod
     def from_dict(cls, values: dict | None, where: str = "settings") -> SolverSettings:

@@ -45,7 +45,7 @@ class LoadStepper:
         sol = Solution(fractions=fractions, displacement=None)
         stored = []
         states: list[tuple[float, np.ndarray]] = [(0.0, eqs.state())]
-        lam, dlam = 0.0, float(fractions[0])
+        lam, dlam = 0.0, float(fractions[0]) * min(s.first_increment, 1.0)
         for target in fractions:
             t0 = time.perf_counter()
             iters, cutbacks, history, retry_plain = 0, 0, [], False
@@ -81,8 +81,10 @@ class LoadStepper:
                     lam = trial
                     states = (states + [(lam, eqs.state())])[-3:]
                     self.predictor.converged(lam, its)
-                    if its <= 3 and cutbacks:
-                        dlam *= 2.0  # easy step after a cut-back: let the increment grow
+                    if its <= 3:
+                        # An easy increment: let a cut-back or a small first increment grow
+                        # (capped by the distance to the next output fraction).
+                        dlam *= 2.0
             except StepFailure as exc:
                 sol.status, sol.failure_reason = "failed", str(exc)
                 eqs.set_state(states[-1][1])

@@ -178,9 +178,11 @@ def test_iterative_solver_and_lagged_factorisation_give_the_direct_answer():
 
 def test_chord_steps_and_predictors_reach_the_plain_newton_answer():
     """The default solver (Hermite predictor through three converged states and their
-    tangents, chord steps between Newton steps), the tangent-integration predictor, Euler, and
-    plain full Newton from the previous state converge to the same displacements at every
-    load step. (How many factorisations each needs is a benchmark: bench/bench_predictor.py.)"""
+    tangents, chord steps between Newton steps, the first step in sub-increments), the
+    tangent-integration predictor, Euler, the first step taken whole, and plain full Newton
+    from the previous state converge to the same displacements at every load step, and store
+    exactly the requested steps. (How many factorisations each needs is a benchmark:
+    bench/bench_predictor.py, bench/bench_hard.py.)"""
     g = make_phantom(0, 20.0)
     node = int(np.argmax(g.points[:, 0]))
     fractions = np.linspace(0.1, 1.0, 10)
@@ -188,7 +190,9 @@ def test_chord_steps_and_predictors_reach_the_plain_newton_answer():
     for name, st in {"default": {},
                      "tangent": {"predictor": "tangent"},
                      "euler": {"predictor_order": 1},
-                     "plain": {"predictor": "previous", "chord_contraction": 0.0}}.items():
+                     "whole first step": {"first_increment": 1.0},
+                     "plain": {"predictor": "previous", "chord_contraction": 0.0,
+                               "first_increment": 1.0}}.items():
         prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells,
                             settings={"rtol": 1e-10, **st}, prefix=f"pc_{name}_")
         s = prob.solve(MAT, [Constraint(g.regions["vena_cava"])],
@@ -197,8 +201,9 @@ def test_chord_steps_and_predictors_reach_the_plain_newton_answer():
         runs[name] = s
     ref = runs["plain"].displacement
     assert runs["plain"].chord_steps == 0
-    for name in ("default", "tangent", "euler"):
+    for name in ("default", "tangent", "euler", "whole first step"):
         u = runs[name].displacement
+        assert u.shape[0] == len(runs[name].newton_iterations) == fractions.size
         for k in range(fractions.size):
             assert np.abs(u[k] - ref[k]).max() <= 1e-8 * np.abs(ref[k]).max(), (name, k)
     assert runs["default"].chord_steps > 0  # the chord phase was exercised
@@ -209,7 +214,9 @@ def test_hermite_predictor_error_falls_with_the_polynomial_degree():
     over one increment h falls as h^(2m) for m points: halving h divides it by ~2^(2m)."""
     g = make_phantom(0, 20.0)
     node = int(np.argmax(g.points[:, 0]))
-    prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, settings={"rtol": 1e-12})
+    # The first step whole: the polynomial is built from the requested steps only.
+    prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells,
+                        settings={"rtol": 1e-12, "first_increment": 1.0})
     cons, load = [Constraint(g.regions["vena_cava"])], [NodalLoad([node], [[0.0, 0.0, -0.2]])]
 
     def path(fractions):
