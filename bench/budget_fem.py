@@ -15,10 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -73,19 +70,7 @@ def run(case: dict, k: int, degree: int, h: float, timeout: float) -> dict:
             "load_point": case["point"], "force": case["force"]}
     job = {"spec": spec, "out": str(npz_path(k, degree, h)),
            "eval_meshes": [[d, s] for d, s in MESHES] if (degree, h) == REFERENCE else []}
-    t0 = time.perf_counter()
-    try:
-        proc = subprocess.run([sys.executable, __file__, "--one", json.dumps(job)],
-                              capture_output=True, text=True, timeout=timeout,
-                              env={**os.environ, "OPENBLAS_NUM_THREADS": "1",
-                                   "OMP_NUM_THREADS": "1"})
-        lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
-        rec = (json.loads(lines[-1]) if proc.returncode == 0 and lines else
-               {"status": "crashed", "reason": proc.stderr.strip()[-500:]})
-    except subprocess.TimeoutExpired:
-        rec = {"status": "timeout", "reason": f"over {timeout:.0f} s"}
-    rec["wall_seconds"] = time.perf_counter() - t0
-    return rec
+    return tf.run_job(__file__, job, timeout)
 
 
 def one(job: dict) -> dict:

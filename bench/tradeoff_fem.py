@@ -174,15 +174,37 @@ def run_one(spec: dict, eval_points: np.ndarray | None, out_npz: Path) -> dict:
 # ----------------------------------------------------------------------------------------------
 # The study
 # ----------------------------------------------------------------------------------------------
-def results() -> dict[str, dict]:
-    path = RESULTS / "runs.jsonl"
+def read_jsonl(path: Path, key: str) -> dict[str, dict]:
+    """The records of a results file (one JSON object a line), by their ``key`` field."""
     out = {}
     if path.exists():
         for line in path.read_text().splitlines():
             if line.strip():
                 r = json.loads(line)
-                out[r["key"]] = r
+                out[r[key]] = r
     return out
+
+
+def results() -> dict[str, dict]:
+    return read_jsonl(RESULTS / "runs.jsonl", "key")
+
+
+def run_job(script: str, job: dict, timeout: float) -> dict:
+    """Run ``script --one JOB`` in a fresh process (a clean peak-memory figure; a crash costs
+    one run) and return the JSON record it prints last, or why there is none."""
+    t0 = time.perf_counter()
+    try:
+        proc = subprocess.run([sys.executable, script, "--one", json.dumps(job)],
+                              capture_output=True, text=True, timeout=timeout,
+                              env={**os.environ, "OPENBLAS_NUM_THREADS": "1",
+                                   "OMP_NUM_THREADS": "1"})
+        lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
+        record = (json.loads(lines[-1]) if proc.returncode == 0 and lines else
+                  {"status": "crashed", "reason": proc.stderr.strip()[-500:]})
+    except subprocess.TimeoutExpired:
+        record = {"status": "timeout", "reason": f"over {timeout:.0f} s"}
+    record["wall_seconds"] = time.perf_counter() - t0
+    return record
 
 
 def npz_name(key: str) -> Path:
@@ -222,18 +244,7 @@ def study(livers: list[str], timeout: float, loads=("patch", "nodal")) -> None:
         else:
             job = {"spec": {**spec, "load_point": points[spec["liver"]]},
                    "eval": str(ref_npz) if ref_npz else None, "out": str(npz_name(key))}
-            t0 = time.perf_counter()
-            try:
-                proc = subprocess.run([sys.executable, __file__, "--one", json.dumps(job)],
-                                      capture_output=True, text=True, timeout=timeout,
-                                      env={**os.environ, "OPENBLAS_NUM_THREADS": "1",
-                                           "OMP_NUM_THREADS": "1"})
-                lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
-                record = (json.loads(lines[-1]) if proc.returncode == 0 and lines else
-                          {"status": "crashed", "reason": proc.stderr.strip()[-500:]})
-            except subprocess.TimeoutExpired:
-                record = {"status": "timeout", "reason": f"over {timeout:.0f} s"}
-            record["wall_seconds"] = time.perf_counter() - t0
+            record = run_job(__file__, job, timeout)
         with open(RESULTS / "runs.jsonl", "a") as fh:
             fh.write(json.dumps({"key": key, "spec": spec, **record}) + "\n")
 

@@ -148,13 +148,7 @@ def plan() -> list[dict]:
 
 
 def read_jsonl(path: Path) -> dict[str, dict]:
-    out = {}
-    if path.exists():
-        for line in path.read_text().splitlines():
-            if line.strip():
-                r = json.loads(line)
-                out[r["id"]] = r
-    return out
+    return bf.tf.read_jsonl(path, "id")
 
 
 _DATA: dict[str, object] = {}
@@ -235,18 +229,11 @@ def train_one(spec: dict) -> dict:
 
 def latency(model_dir: Path, nodes, dtype: str, calls: int) -> float:
     """Median seconds of one jitted call for one load case, after warm-up."""
+    from bench_surrogate import latency as median_latency
+
     from surrogate import load_predictor
 
-    predict = load_predictor(model_dir, dtype=dtype)
-    f = np.array([[0.0, 0.0, -0.4]])
-    predict(f, [7], nodes=nodes)
-    times = []
-    for i in range(calls):
-        f[0, 2] = -0.4 + 1e-5 * i
-        t = time.perf_counter()
-        predict(f, [7], nodes=nodes)
-        times.append(time.perf_counter() - t)
-    return float(np.median(times))
+    return median_latency(load_predictor(model_dir, dtype=dtype), None, nodes, calls)
 
 
 def study(part: int, parts: int) -> None:
