@@ -9,6 +9,7 @@ factorisations relative to the easy case (the issue's bar: <= 1.5x at 1x force).
 
     .venv-solver/bin/python bench/bench_hard.py [--h 5] [--runs 1] [--settings '{"k": v}']
         [--textbook]   # also the textbook dolfinx solver on the easy case, side by side
+        [--elements 16 12]   # also P2 against P1 on the same meshes (easy load)
 
 ``--settings`` runs a solver variant (any OgdenProblem setting) against the defaults, both in
 the same run, so that the ratio between them is measured under the same machine load.
@@ -55,7 +56,7 @@ _MESHES: dict = {}
 def liver(kind: str, h: float):
     """(geometry, fixed nodes, load node) of a liver: the load on the free surface node
     farthest from the fixed region."""
-    if kind not in _MESHES:
+    if (kind, h) not in _MESHES:
         if kind == "thin":
             from fem_sim.geometry.phantom import make_phantom
 
@@ -65,15 +66,15 @@ def liver(kind: str, h: float):
         fixed = g.regions["vena_cava"]
         surf = np.setdiff1d(g.surface_nodes, fixed)
         d = np.linalg.norm(g.points[surf][:, None] - g.points[fixed][None], axis=2).min(axis=1)
-        _MESHES[kind] = (g, fixed, int(surf[np.argmax(d)]))
-    return _MESHES[kind]
+        _MESHES[kind, h] = (g, fixed, int(surf[np.argmax(d)]))
+    return _MESHES[kind, h]
 
 
-def run_case(name: str, h: float, settings: dict) -> dict:
+def run_case(name: str, h: float, settings: dict, degree: int = 1) -> dict:
     kind, scale, (c1, m1) = CASES[name]
     g, fixed, node = liver(kind, h)
     mat = OgdenMaterial((c1,), (m1,), 100 * c1)
-    prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, degree=1,
+    prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, degree=degree,
                         settings={"rtol": 1e-10, "atol": 1e-12, **settings})
     t0 = time.perf_counter()
     sol = prob.solve(mat, [Constraint(fixed)], [NodalLoad([node], [scale * NOMINAL])],
@@ -95,6 +96,8 @@ def main() -> int:
     ap.add_argument("--settings", default=None, help="JSON: a solver variant to compare")
     ap.add_argument("--cases", default=None, help="comma-separated case numbers (1-based)")
     ap.add_argument("--textbook", action="store_true")
+    ap.add_argument("--elements", type=float, nargs="*", default=None, metavar="H",
+                    help="also P2 against P1 on meshes of these sizes (mm)")
     a = ap.parse_args()
     variants = {"defaults": {}}
     if a.settings:
@@ -131,6 +134,20 @@ def main() -> int:
               f"{' '.join(map(str, r['its']))} | {r['factorizations']} | {ratio} | "
               f"{r['back_solves']} | {r['chord']} | {r['cutbacks']} | {r['seconds']:.1f} | "
               f"{diff} |")
+    if a.elements:
+        # The locking-free element's price: P2 against P1 on the same mesh (the issue's bar:
+        # at most 2x P1's factorisations). Accuracy of each: docs/tradeoff_fem.md.
+        print("\n| liver | h mm | element | Newton its per step | factorisations | x P1 | "
+              "back-solves | s / sim |")
+        print("|---|---|---|---|---|---|---|---|")
+        for name in ("easy: real liver", "phantom"):
+            for h in a.elements:
+                p1 = run_case(name, h, {})
+                for degree, r in ((1, p1), (2, run_case(name, h, {}, degree=2))):
+                    print(f"| {CASES[name][0]} | {h:g} | P{degree} | "
+                          f"{' '.join(map(str, r['its']))} | {r['factorizations']} | "
+                          f"{r['factorizations'] / p1['factorizations']:.2f} | "
+                          f"{r['back_solves']} | {r['seconds']:.1f} |", flush=True)
     if a.textbook:
         g, fixed, node = liver("sofa", a.h)
         mat = OgdenMaterial((C1,), (M1,), 100 * C1)
