@@ -282,12 +282,13 @@ EXCLUDE = 32.0  # mm: errors are measured outside this ball around the load poin
                 # coarsest h; a point load has no converged limit next to the load), on every mesh
 
 
-def simulation_seconds(name: str) -> float:
-    """Solver seconds of every shard of dataset ``name`` (one rank each: CPU-seconds)."""
+def simulation_seconds(name: str, n: int) -> float:
+    """Solver seconds of ``n`` simulations of dataset ``name`` (the mean over its shards; one
+    rank each: CPU-seconds)."""
     from data_spec import list_shards, read_shard
 
-    return float(sum(read_shard(p).stats.wall_time.sum()
-                     for p in list_shards(RESULTS / "data" / name)))
+    per = [read_shard(p).stats.wall_time.sum() for p in list_shards(RESULTS / "data" / name)]
+    return float(np.mean(per) * n)
 
 
 def budget() -> list[dict]:
@@ -309,7 +310,7 @@ def budget() -> list[dict]:
                if r["spec"]["group"] == "error budget" or "error budget" in
                r["spec"].get("also", [])}
     rows = []
-    for degree, h in bf.MESHES:
+    for degree, h in sorted(bf.MESHES, key=lambda m: (m[0], -m[1])):  # P1 then P2, coarse first
         name = bf.mesh_name(degree, h)
         if name not in trained:
             continue
@@ -348,7 +349,7 @@ def budget() -> list[dict]:
             e_tot_all.append(tot)
         if not e_fe:
             continue
-        sim_h = simulation_seconds(name) / 3600
+        sim_h = simulation_seconds(name, N_BUDGET) / 3600
         train_h = trained[name]["training_seconds"] / 3600
         cat = np.concatenate
         rows.append({"mesh": name, "degree": degree, "h": h, "vertices": ds.points[0].shape[0],
@@ -480,7 +481,9 @@ def report() -> None:
           "converged limit next to it), at full load: the FE error (mesh against reference), "
           "the surrogate's error (network against the FE answer of its own mesh: what "
           "training reports), and the total (network against the reference: what a user "
-          "gets). Cost: solver CPU-hours of the dataset plus training hours (this machine). "
+          "gets). Cost: solver CPU-hours of the dataset plus training hours (this machine; "
+          "both measured while up to five processes shared the two cores, so up to ~2.5x "
+          "what they cost alone). "
           "Each mesh loads its node nearest to the case's point (the load offset column: how "
           "far that node is from the reference's). A point load has no converged limit, and "
           "with this stiffening material the far field too depends on how a mesh resolves "
@@ -510,6 +513,7 @@ def plots(lc, nets, rows, lat, b, plt) -> None:
         ax[0].set_xscale("log")
         ax[0].set_yscale("log")
         ax[0].set_xticks(n, [str(v) for v in n])
+        ax[0].xaxis.set_minor_formatter(plt.NullFormatter())
         ax[0].set_xlabel("training simulations")
         ax[0].set_ylabel("error on held-out simulations (mm)")
         ax[0].set_title("learning curve (paper scene-1 net)")
