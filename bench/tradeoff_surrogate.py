@@ -309,6 +309,18 @@ def budget() -> list[dict]:
     trained = {r["spec"]["data"]: r for r in read_jsonl(RESULTS / "runs.jsonl").values()
                if r["spec"]["group"] == "error budget" or "error budget" in
                r["spec"].get("also", [])}
+    offsets: dict[int, dict] = {}
+
+    def ref_offsets(k: int) -> dict:
+        """Where each mesh's vertices start in case k's reference values (MESHES order)."""
+        if k not in offsets:
+            sizes = []
+            for d2, h2 in bf.MESHES:
+                with np.load(bf.npz_path(k, d2, h2)) as z:
+                    sizes.append(z["nodes"].shape[0])
+            offsets[k] = dict(zip(bf.MESHES, np.cumsum([0, *sizes[:-1]])))
+        return offsets[k]
+
     rows = []
     for degree, h in sorted(bf.MESHES, key=lambda m: (m[0], -m[1])):  # P1 then P2, coarse first
         name = bf.mesh_name(degree, h)
@@ -326,11 +338,7 @@ def budget() -> list[dict]:
                 u, pts = z["u_nodes"], z["nodes"]
             if pts.shape != ds.points[0].shape or not np.allclose(pts, ds.points[0]):
                 raise RuntimeError(f"{name}: the budget's mesh is not the dataset's mesh")
-            sizes = []
-            for d2, h2 in bf.MESHES:
-                with np.load(bf.npz_path(k, d2, h2)) as z:
-                    sizes.append(z["nodes"].shape[0])
-            start = sum(sizes[:bf.MESHES.index((degree, h))])
+            start = ref_offsets(k)[(degree, h)]
             with np.load(bf.npz_path(k, *bf.REFERENCE)) as z:
                 u_ref = z["u"][start:start + pts.shape[0]]
                 scale.append(np.abs(z["u_nodes"]).max())

@@ -33,27 +33,26 @@ def _geometry_facts(path: Path, cache: dict) -> tuple[int, str] | str:
     geometry, arrays that fail :func:`geometry_problems` (e.g. inverted cells), or contents that
     no longer match the stored hash. Cached per path: read once per dataset.
     """
-    if path not in cache:
-        if not path.exists():
-            cache[path] = f"geometry file {path} is missing"
-        else:
-            try:
-                with h5py.File(path, "r") as g:
-                    if g.attrs.get("format") != GEOMETRY_FORMAT:
-                        cache[path] = f"geometry file {path} is not a {GEOMETRY_FORMAT} file"
-                    else:
-                        cache[path] = (int(g["points"].shape[0]), str(g.attrs["geometry_id"]))
-                        stored_hash = str(g.attrs.get("content_hash", ""))
-                if isinstance(cache[path], tuple):
-                    geo = read_geometry(path)
-                    bad = geometry_problems(geo)
-                    if geo.content_hash != stored_hash:
-                        bad.insert(0, "points or cells differ from the stored content hash "
-                                   "(corrupted or edited)")
-                    if bad:
-                        cache[path] = f"geometry file {path}: " + "; ".join(bad)
-            except (OSError, KeyError, ValueError) as exc:
-                cache[path] = f"geometry file {path} cannot be read: {exc}"
+    if path in cache:
+        return cache[path]
+    if not path.exists():
+        cache[path] = f"geometry file {path} is missing"
+        return cache[path]
+    try:
+        with h5py.File(path, "r") as g:
+            if g.attrs.get("format") != GEOMETRY_FORMAT:
+                cache[path] = f"geometry file {path} is not a {GEOMETRY_FORMAT} file"
+                return cache[path]
+            facts = (int(g["points"].shape[0]), str(g.attrs["geometry_id"]))
+            stored_hash = str(g.attrs.get("content_hash", ""))
+        geo = read_geometry(path)
+        bad = geometry_problems(geo)
+        if geo.content_hash != stored_hash:
+            bad.insert(0, "points or cells differ from the stored content hash "
+                       "(corrupted or edited)")
+        cache[path] = f"geometry file {path}: " + "; ".join(bad) if bad else facts
+    except (OSError, KeyError, ValueError) as exc:
+        cache[path] = f"geometry file {path} cannot be read: {exc}"
     return cache[path]
 
 

@@ -180,16 +180,16 @@ def restrict_nodes(ds: Dataset, keep: list[np.ndarray]) -> Dataset:
     if len(keep) != len(ds.out_nodes):
         raise ValueError(f"restrict_nodes: {len(keep)} node lists for {len(ds.out_nodes)} "
                          "geometries")
-    masks = [np.isin(o, k) for o, k in zip(ds.out_nodes, keep)]
-    static = np.concatenate([ds.static[ds.geo_offset[g]:ds.geo_offset[g + 1]][m]
-                             for g, m in enumerate(masks)])
-    rows = [ds.sample_offset[s] + np.flatnonzero(masks[g]) for s, g in enumerate(ds.sample_geo)]
-    sizes = np.array([m.sum() for m in masks])[ds.sample_geo]
+    kept = [np.flatnonzero(np.isin(o, k)) for o, k in zip(ds.out_nodes, keep)]  # per geometry
+    counts = np.array([i.size for i in kept])
+    static = np.concatenate([ds.static[ds.geo_offset[g]:ds.geo_offset[g + 1]][i]
+                             for g, i in enumerate(kept)])
+    rows = [ds.sample_offset[s] + kept[g] for s, g in enumerate(ds.sample_geo)]
     return dataclasses.replace(
-        ds, static=static, geo_offset=np.concatenate([[0], np.cumsum([m.sum() for m in masks])]),
-        out_nodes=[o[m] for o, m in zip(ds.out_nodes, masks)],
+        ds, static=static, geo_offset=np.concatenate([[0], np.cumsum(counts)]),
+        out_nodes=[o[i] for o, i in zip(ds.out_nodes, kept)],
         targets=np.asarray(ds.targets[np.concatenate(rows)]),
-        sample_offset=np.concatenate([[0], np.cumsum(sizes)]))
+        sample_offset=np.concatenate([[0], np.cumsum(counts[ds.sample_geo])]))
 
 
 def kfold_groups(ds: Dataset, k: int, seed: int) -> list[np.ndarray]:
