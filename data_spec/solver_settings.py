@@ -17,8 +17,10 @@ from data_spec.checks import is_int, is_num
 
 
 def _setting(default: Any, doc: str, *, choices: tuple[str, ...] | None = None,
-             lo: float | None = None, strict: bool = False, scene: bool = False) -> Any:
-    meta = {"doc": doc, "choices": choices, "lo": lo, "strict": strict, "scene": scene}
+             lo: float | None = None, strict: bool = False, hi: float | None = None,
+             scene: bool = False) -> Any:
+    meta = {"doc": doc, "choices": choices, "lo": lo, "strict": strict, "hi": hi,
+            "scene": scene}
     if isinstance(default, dict):
         return field(default_factory=lambda: dict(default), metadata=meta)
     return field(default=default, metadata=meta)
@@ -68,7 +70,7 @@ class SolverSettings:
     first_increment: float = _setting(0.25, "the first increment as a fraction of the first "
                                       "output step (smaller: the stiffening start is taken in "
                                       "sub-increments that double after easy ones)", lo=0.0,
-                                      strict=True)
+                                      strict=True, hi=1.0)
 
     @classmethod
     def from_dict(cls, values: dict | None, where: str = "settings") -> SolverSettings:
@@ -108,9 +110,14 @@ def check(f: dataclasses.Field, v: Any) -> str | None:
         return "an integer" + (f" >= {m['lo']}" if m["lo"] is not None else "")
     if kind is float and not is_num(v):
         return "a finite number"
-    lo = m["lo"]
+    lo, hi = m["lo"], m["hi"]
+    what = "an integer" if kind is int else "a number"
     if lo is not None and (v <= lo if m["strict"] else v < lo):
-        return f"{'an integer' if kind is int else 'a number'} {'>' if m['strict'] else '>='} {lo}"
+        upper = f" and <= {hi}" if hi is not None else ""
+        return f"{what} {'>' if m['strict'] else '>='} {lo}{upper}"
+    if hi is not None and v > hi:
+        return f"{what} <= {hi}" + (f" and {'>' if m['strict'] else '>='} {lo}"
+                                    if lo is not None else "")
     return None
 
 

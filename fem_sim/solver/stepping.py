@@ -45,7 +45,7 @@ class LoadStepper:
         sol = Solution(fractions=fractions, displacement=None)
         stored = []
         states: list[tuple[float, np.ndarray]] = [(0.0, eqs.state())]
-        lam, dlam = 0.0, float(fractions[0]) * min(s.first_increment, 1.0)
+        lam, dlam = 0.0, float(fractions[0]) * s.first_increment
         for target in fractions:
             t0 = time.perf_counter()
             iters, cutbacks, history, retry_plain = 0, 0, [], False

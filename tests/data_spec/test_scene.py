@@ -1,6 +1,7 @@
 """Scene schema: shipped scenes load, malformed scenes are rejected with every problem listed."""
 
 import copy
+import re
 import tomllib
 from pathlib import Path
 
@@ -171,3 +172,14 @@ def test_non_utf8_scene_file_is_named(tmp_path):
     path.write_bytes("[scene]\nname = \"f\u00e9e\"\n".encode("latin-1"))
     with pytest.raises(SceneError, match=r"(?s)latin1.toml.*not UTF-8 text"):
         load_scene(path)
+
+
+def test_solver_settings_outside_their_bounds_are_refused():
+    """first_increment is a fraction of the first load step: (0, 1]."""
+    from data_spec.solver_settings import SolverSettings
+
+    assert SolverSettings.from_dict({"first_increment": 1.0}).first_increment == 1.0
+    for v, bound in ((0.0, "> 0.0"), (1.5, "<= 1.0")):
+        with pytest.raises(ValueError, match=f"settings.first_increment: expected a number.*"
+                                             f"{re.escape(bound)}.*got {v}"):
+            SolverSettings.from_dict({"first_increment": v})
