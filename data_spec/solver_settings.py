@@ -67,6 +67,14 @@ class SolverSettings:
     chord_trigger: float = _setting(1e-2, "try chord steps after a Newton step that cut |R| "
                                     "this much", lo=0.0, strict=True)
     max_chord_steps: int = _setting(30, "chord steps per increment attempt", lo=0)
+    local_relaxation: bool = _setting(True, "one rank: before each load step's global "
+                                      "Newton, relax the hot spot of the residual (largest "
+                                      "nodal residuals and their neighbours) by a small local "
+                                      "Newton iteration")
+    relax_rings: int = _setting(2, "local relaxation: rings of neighbours added around the "
+                                "nodes with the largest residuals", lo=0)
+    relax_max_nodes: int = _setting(1000, "local relaxation: skipped when the hot spot has "
+                                    "more nodes", lo=1)
     first_increment: float = _setting(0.25, "the first increment as a fraction of the first "
                                       "output step (smaller: the stiffening start is taken in "
                                       "sub-increments that double after easy ones)", lo=0.0,

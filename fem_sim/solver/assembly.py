@@ -4,8 +4,8 @@ One interface (:class:`Assembler`), two implementations:
 
 * :class:`DolfinxAssembler`: dolfinx's generic assembly of the compiled forms (any degree, any
   number of processes); the Jacobian is a PETSc matrix.
-* :class:`P1Assembler`: C routines for P1 cells with one quadrature point on one process
-  (:mod:`fem_sim.solver.p1`): F from u, internal forces and the Jacobian straight into a fixed
+* :class:`CAssembler`: C routines for P1 and P2 tetrahedra on one process
+  (:mod:`fem_sim.solver.tet`): F from u, internal forces and the Jacobian straight into a fixed
   CSR pattern (several times faster than the generic assembly: ``bench/bench_jacobian.py``).
 
 Both return a :class:`Jacobian` that gives its CSR arrays or a PETSc matrix, so the linear
@@ -23,7 +23,7 @@ from petsc4py import PETSc
 
 from fem_sim.material.ogden import OgdenMaterial, point_kernel
 from fem_sim.solver import dolfinx_compat as dc
-from fem_sim.solver import p1
+from fem_sim.solver import tet
 from fem_sim.solver.discretisation import Discretisation, DofConstraints
 
 
@@ -133,8 +133,10 @@ class DolfinxAssembler(Assembler):
         return Jacobian(mat=self.A)
 
 
-class P1Assembler(Assembler):
-    """C routines for P1 cells with one quadrature point (one process)."""
+class CAssembler(Assembler):
+    """C routines for P1/P2 tetrahedra at the quadrature points of the discretisation (one
+    process).
+    """
 
     def __init__(self, disc: Discretisation):
         super().__init__(disc)
@@ -142,34 +144,37 @@ class P1Assembler(Assembler):
         dc.assemble_matrix(A, disc.a)  # the pattern (an empty matrix has none)
         indptr, indices, _ = A.getValuesCSR()
         A.destroy()
-        cells = disc.V.dofmap.list.array.reshape(-1, 4)[: disc.n_cells]
-        self.c = p1.P1Assembler(cells, disc.V.tabulate_dof_coordinates(), indptr, indices)
+        X = disc.V.tabulate_dof_coordinates()
+        nn = 4 if disc.degree == 1 else 10
+        cells = disc.V.dofmap.list.array.reshape(-1, nn)[: disc.n_cells]
+        points, weights = dc.quadrature_rule(disc.qdeg)
+        self.c = tet.TetAssembler(cells, X[cells[:, :4]], disc.degree, points, weights,
+                                  indptr, indices)
 
     @staticmethod
     def available(disc: Discretisation) -> bool:
-        return (disc.comm.size == 1 and disc.degree == 1 and disc.qdeg == 1
-                and p1.load() is not None)
+        return disc.comm.size == 1 and disc.degree in (1, 2) and tet.load() is not None
 
     def deformation_gradients(self) -> np.ndarray:
         return self.c.deformation(self.disc.u.x.array.reshape(-1, 3))
 
     def internal_forces(self, b) -> None:
-        self.c.forces(self.disc.cell_values(self.disc.P_q, 9), b.array)
+        self.c.forces(self.disc.point_values(self.disc.P_q, 9), b.array)
 
     def strain_energy(self) -> float:
-        return float(self.c.vol @ self.disc.cell_values(self.disc.W_q, 1)[:, 0])
+        return self.c.integrate(self.disc.point_values(self.disc.W_q, 1))
 
     def jacobian(self, cons: DofConstraints, rhs=None, lift=None) -> Jacobian:
-        self.c.assemble(self.disc.cell_values(self.disc.A_q, 81))
+        self.c.assemble(self.disc.point_values(self.disc.A_q, 81))
         self.c.apply_dirichlet(cons.owned, rhs.array if lift is not None else None,
                                lift.array_r if lift is not None else None)
         return Jacobian(csr=(self.c.indptr, self.c.indices, self.c.values))
 
 
 def make_assembler(disc: Discretisation, csr_solver: bool) -> Assembler:
-    """The C assembly where it applies (P1, one point, one process) and the linear solver
-    takes CSR arrays (the serial factorisation); dolfinx's assembly otherwise.
+    """The C assembly where it applies (P1 or P2, one process) and the linear solver takes CSR
+    arrays (the serial factorisation); dolfinx's assembly otherwise.
     """
-    if csr_solver and P1Assembler.available(disc):
-        return P1Assembler(disc)
+    if csr_solver and CAssembler.available(disc):
+        return CAssembler(disc)
     return DolfinxAssembler(disc)

@@ -81,10 +81,12 @@ class Discretisation:
         """A PETSc vector laid out like the residual (collective)."""
         return dc.create_vector(self.L)
 
-    def cell_values(self, q, size: int) -> np.ndarray:
-        """Values of a one-point quadrature function, cell by cell: (ncells, size)."""
+    def point_values(self, q, size: int) -> np.ndarray:
+        """Values of a quadrature function at the local cells' points, cell-major:
+        (ncells * points per cell, size).
+        """
         arr = q.x.array.reshape(-1, size)
-        return arr[: self.n_cells] if self.q_contiguous else arr[self.q_dofs]
+        return arr[: self.q_dofs.size] if self.q_contiguous else arr[self.q_dofs]
 
     # ------------------------------------------------------------------------------------------
     # Source nodes -> dofs

@@ -79,7 +79,7 @@ def vertex_dof_source_ids(msh, V) -> tuple[np.ndarray, np.ndarray]:
     return blocks.astype(np.int32), src[first]
 
 
-_TET_EDGES = ((2, 3), (1, 3), (1, 2), (0, 3), (0, 2), (0, 1))  # basix/UFC edge numbering
+_TET_EDGES = ((2, 3), (1, 3), (1, 2), (0, 3), (0, 2), (0, 1))  # basix numbering, as tet.py
 
 
 def edge_dof_source_ids(msh, V) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -102,8 +102,15 @@ def edge_dof_source_ids(msh, V) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def quadrature_points(degree: int) -> np.ndarray:
     """Reference points of FFCx's default tetrahedron rule of this degree."""
-    pts, _ = basix.make_quadrature(basix.CellType.tetrahedron, degree)
-    return pts
+    return quadrature_rule(degree)[0]
+
+
+def quadrature_rule(degree: int) -> tuple[np.ndarray, np.ndarray]:
+    """(points (nq, 3), weights (nq,)) of FFCx's default tetrahedron rule of this degree, in
+    the order of the quadrature spaces' dofs within a cell.
+    """
+    pts, wts = basix.make_quadrature(basix.CellType.tetrahedron, degree)
+    return np.asarray(pts, dtype=np.float64), np.asarray(wts, dtype=np.float64)
 
 
 def quadrature_function(msh, degree: int, shape: tuple[int, ...]):

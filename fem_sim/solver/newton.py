@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 
+from fem_sim.solver import relaxation
 from fem_sim.solver.equations import Equations
 from fem_sim.solver.linear import LinearSolver
 from fem_sim.solver.results import StepFailure
@@ -30,11 +31,20 @@ class NewtonSolver:
     def __init__(self, settings: SolverSettings, eqs: Equations, linear: LinearSolver):
         self.settings, self.eqs, self.linear = settings, eqs, linear
         self.attempt_iterations = 0  # Newton iterations of the last attempt, failed or not
+        self.relax = (relaxation.LocalRelaxation(eqs, settings.relax_rings,
+                                                 settings.relax_max_nodes)
+                      if settings.local_relaxation and relaxation.available(eqs) else None)
         self.reset()
 
     def reset(self) -> None:
         self.chord_steps = 0
         self.chord_rejected = 0
+        if self.relax is not None:
+            self.relax.reset()
+
+    @property
+    def local_iterations(self) -> int:
+        return self.relax.iterations if self.relax is not None else 0
 
     @property
     def chord_allowed(self) -> bool:
@@ -57,6 +67,13 @@ class NewtonSolver:
         tol = max(s.atol, s.rtol * scale)
         gap_tol = 1e-12 * max(1.0, eqs.cons.value_norm * lam)
         history.append(r)
+        if self.relax is not None and r > tol and gap <= gap_tol and \
+                self.relax.relax(lam, tol) > 0:
+            if not eqs.update_points(tangent=False):
+                raise StepFailure(f"det F <= 0 after the local relaxation (min det F = "
+                                  f"{eqs.min_J:.3g})")
+            r = eqs.residual(lam)
+            history.append(r)
         # A chord step pays off only in Newton's fast phase: it contracts |R| about as much as
         # the last Newton step did, so it is tried after a Newton step that cut |R| by
         # ``chord_trigger`` or more, and kept up while each step contracts by

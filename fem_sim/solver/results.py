@@ -42,6 +42,7 @@ class Solution:
     chord_steps: int = 0       # accepted back-solves with an old factorisation
     chord_rejected: int = 0    # chord steps tried and undone (too little contraction)
     double_fallbacks: int = 0  # float32 factorisations that had to be redone in float64
+    local_iterations: int = 0  # local Newton iterations of the hot-spot relaxation
 
     @property
     def n_done(self) -> int:

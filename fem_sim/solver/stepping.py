@@ -103,6 +103,7 @@ class LoadStepper:
         sol.factorizations, sol.krylov_iterations = c.factorizations, c.krylov_iterations
         sol.back_solves, sol.double_fallbacks = c.back_solves, c.double_fallbacks
         sol.chord_steps, sol.chord_rejected = self.newton.chord_steps, self.newton.chord_rejected
+        sol.local_iterations = self.newton.local_iterations
         if eqs.disc.comm.rank == 0:
             sol.displacement = (np.stack(stored) if stored
                                 else np.zeros((0, eqs.disc.n_nodes, 3)))

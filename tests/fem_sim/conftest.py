@@ -9,7 +9,7 @@ logging.getLogger().setLevel(logging.WARNING)
 
 @pytest.fixture(scope="session")
 def compiled():
-    """``compiled(name)`` loads a C extension ("ogden", "p1", "ldlt") or skips with the reason
+    """``compiled(name)`` loads a C extension ("ogden", "tet", "ldlt") or skips with the reason
     when no C compiler is installed; with a compiler, a failed build fails the test.
     """
     import importlib
@@ -18,7 +18,7 @@ def compiled():
 
     from fem_sim import cext
 
-    modules = {"ogden": "fem_sim.material.ogden_c", "p1": "fem_sim.solver.p1",
+    modules = {"ogden": "fem_sim.material.ogden_c", "tet": "fem_sim.solver.tet",
                "ldlt": "fem_sim.solver.ldlt"}
 
     def load(name: str):

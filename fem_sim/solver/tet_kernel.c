@@ -1,0 +1,86 @@
+/* Lagrange tetrahedra (P1 or P2, affine geometry) with nq quadrature points per cell:
+ * deformation gradients, internal forces, and the stiffness assembled straight into the value
+ * array of a CSR matrix whose pattern is known. Built with cffi by fem_sim/solver/tet.py, which
+ * documents the measured gain and is tested against dolfinx's assembly.
+ *
+ * Layouts (cell-major, points within a cell in basix order):
+ *   dN[c][q][a][J]  gradient of the shape function of cell node a at point q (nn nodes);
+ *   w[c][q]         quadrature weight times |det| of the cell map;
+ *   A[c][q][iJ][kL] tangent dP_iJ / dF_kL (row-major 9 x 9); P[c][q][iJ] first Piola stress.
+ * The element matrix
+ *   K[(a,i),(b,k)] = sum_q w sum_J sum_L dN[q][a][J] A[q][iJ][kL] dN[q][b][L]
+ * is added at values[pos[c][(3a+i)*3nn + 3b+k]].
+ */
+#include <stdint.h>
+#include <string.h>
+
+#define MAXN 10 /* nodes per cell: P2 */
+
+int tet_stiffness(int ncells, int nn, int nq, const double *dN_all, const double *w_all,
+                  const double *A_all, const int32_t *pos_all, double *values) {
+  if (nn < 1 || nn > MAXN) return -1;
+  const int nd = 3 * nn;
+  for (int c = 0; c < ncells; c++) {
+    double K[3 * MAXN * 3 * MAXN];
+    memset(K, 0, sizeof(double) * nd * nd);
+    for (int q = 0; q < nq; q++) {
+      const int64_t cq = (int64_t)c * nq + q;
+      const double *dN = dN_all + cq * nd;
+      const double *A = A_all + 81 * cq;
+      const double wq = w_all[cq];
+      double T[9][3 * MAXN]; /* T[iJ][(b,k)] = sum_L A[iJ][kL] dN[b][L] */
+      for (int iJ = 0; iJ < 9; iJ++)
+        for (int b = 0; b < nn; b++)
+          for (int k = 0; k < 3; k++) {
+            const double *row = A + 9 * iJ + 3 * k;
+            T[iJ][3 * b + k] =
+                row[0] * dN[3 * b] + row[1] * dN[3 * b + 1] + row[2] * dN[3 * b + 2];
+          }
+      for (int a = 0; a < nn; a++)
+        for (int i = 0; i < 3; i++) {
+          const double g0 = wq * dN[3 * a], g1 = wq * dN[3 * a + 1], g2 = wq * dN[3 * a + 2];
+          const double *t0 = T[3 * i], *t1 = T[3 * i + 1], *t2 = T[3 * i + 2];
+          double *Krow = K + (3 * a + i) * nd;
+          for (int bk = 0; bk < nd; bk++) Krow[bk] += g0 * t0[bk] + g1 * t1[bk] + g2 * t2[bk];
+        }
+    }
+    const int32_t *pos = pos_all + (int64_t)c * nd * nd;
+    for (int e = 0; e < nd * nd; e++) values[pos[e]] += K[e];
+  }
+  return 0;
+}
+
+/* F = I + sum_a u_a (x) dN_a at every point (row-major 3 x 3); u is (nodes, 3). */
+void tet_deformation(int ncells, int nn, int nq, const int32_t *cells, const double *dN_all,
+                     const double *u, double *F_all) {
+  for (int c = 0; c < ncells; c++)
+    for (int q = 0; q < nq; q++) {
+      const int64_t cq = (int64_t)c * nq + q;
+      const double *dN = dN_all + cq * 3 * nn;
+      double *F = F_all + 9 * cq;
+      for (int k = 0; k < 9; k++) F[k] = (k % 4 == 0) ? 1.0 : 0.0;
+      for (int a = 0; a < nn; a++) {
+        const double *ua = u + 3 * (int64_t)cells[(int64_t)nn * c + a];
+        for (int i = 0; i < 3; i++)
+          for (int J = 0; J < 3; J++) F[3 * i + J] += ua[i] * dN[3 * a + J];
+      }
+    }
+}
+
+/* Internal forces: b[3 node_a + i] += sum_q w P[iJ] dN[a][J] (b is not zeroed here). */
+void tet_forces(int ncells, int nn, int nq, const int32_t *cells, const double *dN_all,
+                const double *w_all, const double *P_all, double *b) {
+  for (int c = 0; c < ncells; c++)
+    for (int q = 0; q < nq; q++) {
+      const int64_t cq = (int64_t)c * nq + q;
+      const double *dN = dN_all + cq * 3 * nn;
+      const double *P = P_all + 9 * cq;
+      const double wq = w_all[cq];
+      for (int a = 0; a < nn; a++) {
+        double *ba = b + 3 * (int64_t)cells[(int64_t)nn * c + a];
+        for (int i = 0; i < 3; i++)
+          ba[i] += wq * (P[3 * i] * dN[3 * a] + P[3 * i + 1] * dN[3 * a + 1]
+                         + P[3 * i + 2] * dN[3 * a + 2]);
+      }
+    }
+}
