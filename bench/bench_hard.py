@@ -143,11 +143,11 @@ def main() -> int:
         print("|---|---|---|---|---|---|---|---|---|")
         for name in ("easy: real liver", "phantom"):
             shipped = run_case(name, 8.0, {})
-            rows = [(8.0, 1, shipped, shipped)]
+            table = [(8.0, 1, shipped, shipped)]
             for h in a.elements:
                 p1 = run_case(name, h, {})
-                rows += [(h, 1, p1, p1), (h, 2, run_case(name, h, {}, degree=2), p1)]
-            for h, degree, r, p1 in rows:
+                table += [(h, 1, p1, p1), (h, 2, run_case(name, h, {}, degree=2), p1)]
+            for h, degree, r, p1 in table:
                 print(f"| {CASES[name][0]} | {h:g} | P{degree} | "
                       f"{' '.join(map(str, r['its']))} | {r['factorizations']} | "
                       f"{r['factorizations'] / p1['factorizations']:.2f} | "

@@ -1,5 +1,5 @@
 """One Newton step's linear algebra on the real liver (or the phantom): the Jacobian assembled
-by dolfinx and by fem_sim's C assembly for P1 (fem_sim/p1.py), then factorised by PETSc's
+by dolfinx and by fem_sim's C assembly for P1 (fem_sim/solver/tet.py), then factorised by PETSc's
 MUMPS LDL^T (PORD ordering, what Debian's MUMPS offers) and by fem_sim's serial LDL^T (MUMPS'
 C interface, METIS ordering) in float64 and float32.
 
