@@ -171,10 +171,19 @@ class CAssembler(Assembler):
         return Jacobian(csr=(self.c.indptr, self.c.indices, self.c.values))
 
 
-def make_assembler(disc: Discretisation, csr_solver: bool) -> Assembler:
+def make_assembler(disc: Discretisation, csr_solver: bool, element: str = "lagrange") -> Assembler:
     """The C assembly where it applies (P1 or P2, one process) and the linear solver takes CSR
-    arrays (the serial factorisation); dolfinx's assembly otherwise.
+    arrays (the serial factorisation); dolfinx's assembly otherwise. ``element="anp"``: the P1
+    tetrahedron with averaged nodal pressure (:mod:`fem_sim.solver.anp`).
     """
+    if element == "anp":
+        if not csr_solver:
+            raise ValueError("the ANP tetrahedron needs the serial factorisation (one rank)")
+        from fem_sim.solver.anp import ANPAssembler
+
+        return ANPAssembler(disc)
+    if element != "lagrange":
+        raise ValueError(f"element must be 'lagrange' or 'anp', got {element!r}")
     if csr_solver and CAssembler.available(disc):
         return CAssembler(disc)
     return DolfinxAssembler(disc)

@@ -46,11 +46,20 @@ __all__ = ["Constraint", "NodalLoad", "OgdenProblem", "PatchLoad", "Solution", "
 class OgdenProblem:
     """An Ogden body on a fixed mesh; :meth:`solve` runs one simulation (collective on
     ``comm``). ``settings``: overrides of :class:`SolverSettings` (a dict or the dataclass).
+    ``element``: "lagrange" (P1/P2 by ``degree``) or "anp" (experimental: P1 with averaged
+    nodal pressure, which does not lock; :mod:`fem_sim.solver.anp`).
     """
 
     def __init__(self, comm, points: np.ndarray | None, cells: np.ndarray | None, *,
                  degree: int = 1, quadrature_degree: int | None = None,
+                 element: str = "lagrange",
                  settings: dict | SolverSettings | None = None, prefix: str = "ogden_"):
+        if element not in ("lagrange", "anp"):
+            raise ValueError(f"OgdenProblem: element must be 'lagrange' or 'anp' (P1 with "
+                             f"averaged nodal pressure), got {element!r}")
+        if element == "anp" and (degree != 1 or comm.size != 1):
+            raise ValueError("OgdenProblem: element 'anp' is a P1 element on one process "
+                             f"(degree 1, one rank), got degree {degree} on {comm.size} ranks")
         if not isinstance(settings, SolverSettings):
             settings = SolverSettings.from_dict(settings)
         self.settings = settings
@@ -61,7 +70,7 @@ class OgdenProblem:
         self.disc = Discretisation(comm, points, cells, degree, self.qdeg)  # collective
         coords = self.disc.V.tabulate_dof_coordinates()[: self.disc.n_owned]
         self.linear = make_linear_solver(settings, comm, prefix, coords)
-        self.assembler = make_assembler(self.disc, csr_solver=self.linear.csr)
+        self.assembler = make_assembler(self.disc, csr_solver=self.linear.csr, element=element)
         self.equations = Equations(self.disc, self.assembler)
         self.newton = NewtonSolver(settings, self.equations, self.linear)
         self.predictor = make_predictor(settings, self.equations, self.linear)

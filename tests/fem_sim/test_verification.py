@@ -183,8 +183,8 @@ def test_chord_steps_and_predictors_reach_the_plain_newton_answer():
     tangents, chord steps between Newton steps, the first step in sub-increments), the
     tangent-integration predictor, Euler, the first step taken whole, no hot-spot relaxation,
     and plain full Newton from the previous state converge to the same displacements at every
-    load step, and store exactly the requested steps. (How many factorisations each needs is a benchmark:
-    bench/bench_predictor.py, bench/bench_hard.py.)"""
+    load step, and store exactly the requested steps. (How many factorisations each needs is a
+    benchmark: bench/bench_predictor.py, bench/bench_hard.py.)"""
     g = make_phantom(0, 20.0)
     node = int(np.argmax(g.points[:, 0]))
     fractions = np.linspace(0.1, 1.0, 10)

@@ -1,0 +1,162 @@
+"""A linear tetrahedron that does not lock: averaged nodal pressure (ANP, Bonet and Burton 1998).
+
+P1 tetrahedra with one point lock at K/mu = 200: every cell must keep its volume, and a mesh
+has ~5.5 cells per node, so the constraints outnumber the displacement dofs. ANP integrates
+the volumetric energy at the nodes instead: with V0_a = sum_(e at a) V0_e / 4 and
+
+    Jbar_a = sum_(e at a) (V0_e / 4) J_e / V0_a      (the volume ratio of node a's share)
+
+the potential energy is
+
+    Pi(u) = sum_e V0_e W_iso(F_e) + sum_a V0_a U(Jbar_a) - f . u,
+
+one volume constraint per node (3 dofs per node against 1 constraint: no locking). The isochoric
+part is the element's own (the uncoupled Ogden law splits exactly), so no stabilisation is
+needed. Writing sum_a V0_a U(Jbar_a) = sum_e V0_e mean_(a in e) U(Jbar_a), everything is still
+a per-cell quantity except one term of the tangent:
+
+    P_e = P_iso(F_e) + pbar_e J_e F_e^-T,            pbar_e = mean_(a in e) U'(Jbar_a)
+    A_e = A_iso(F_e) + pbar_e d(J F^-T)/dF           (cell-local)
+    K   = assembled A_e  +  sum_a V0_a U''(Jbar_a) g_a g_a^T,   g_a = dJbar_a/du
+
+and g_a couples the nodes of the cells around a, so the Jacobian's pattern reaches two rings of
+neighbours instead of one (its price: a denser factorisation). The cell-local parts are the full
+material point values with the cell's own volumetric terms swapped for the averaged ones, so
+the one compiled Ogden kernel serves both elements. For a homogeneous deformation Jbar = J and
+the element reproduces P1 exactly (the closed-form tests hold). One process, P1, C assembly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from fem_sim.solver import dolfinx_compat as dc
+from fem_sim.solver import tet
+from fem_sim.solver.assembly import CAssembler, Jacobian
+from fem_sim.solver.discretisation import Discretisation, DofConstraints
+
+
+def _volumetric(mat, J: np.ndarray):
+    """U(J), U'(J), U''(J) of the material's volumetric energy."""
+    K = mat.K
+    if mat.volumetric == "log":
+        lnJ = np.log(J)
+        return 0.5 * K * lnJ**2, K * lnJ / J, K * (1.0 - lnJ) / J**2
+    return 0.5 * K * (J - 1.0) ** 2, K * (J - 1.0), np.full_like(J, K)
+
+
+class ANPAssembler(CAssembler):
+    """P1 with averaged nodal pressure (see the module docstring); one process."""
+
+    def __init__(self, disc: Discretisation):
+        if not (disc.comm.size == 1 and disc.degree == 1 and disc.qdeg == 1
+                and tet.load() is not None):
+            raise ValueError("the ANP tetrahedron needs P1 with one quadrature point, one "
+                             "process and the compiled assembly")
+        if not disc.q_contiguous:
+            raise ValueError("the ANP tetrahedron needs the quadrature values numbered cell by "
+                             "cell")
+        super().__init__(disc)
+        c = self.c
+        cells = c.cells.astype(np.int64)
+        nc, nb = cells.shape[0], c.indptr.size // 3
+        # The two-ring pattern: block pairs that share a node's star.
+        star = sp.csr_matrix((np.ones(4 * nc), (cells.ravel(), np.repeat(np.arange(nc), 4))),
+                             shape=(nb, nc))
+        ring1 = (star @ star.T).tocsr()
+        ring2 = (ring1 @ ring1).tocsr()
+        ring2.data[:] = 1.0
+        pattern = sp.kron(ring2, np.ones((3, 3)), format="csr")
+        pattern.sort_indices()
+        points, weights = dc.quadrature_rule(1)
+        self.c = tet.TetAssembler(cells, c.vertices, 1, points, weights, pattern.indptr,
+                                  pattern.indices)
+        V0 = self.c.w[:, 0]                                  # cell volumes
+        self.V0_node = np.bincount(cells.ravel(), np.repeat(V0 / 4.0, 4), minlength=nb)
+        # Jbar = Mw @ J: Mw[a, e] = (V0_e / 4) / V0_a for a in e.
+        w_ae = (V0[:, None] / 4.0) / self.V0_node[cells]      # (nc, 4)
+        self.Mw = sp.csr_matrix((w_ae.ravel(), (cells.ravel(), np.repeat(np.arange(nc), 4))),
+                                shape=(nb, nc))
+        # g_a = sum_(e at a) w_ae dJ_e/du: entries (a, dof of (e, b, k)) for a, b in e. Their
+        # sum per (a, dof) has a fixed structure: `g_index` maps each term to its entry.
+        a_loc, b_loc, k = np.meshgrid(np.arange(4), np.arange(4), np.arange(3), indexing="ij")
+        a_loc, b_loc, k = a_loc.ravel(), b_loc.ravel(), k.ravel()      # 48 terms per cell
+        rows = cells[:, a_loc]                                         # (nc, 48)
+        cols = 3 * cells[:, b_loc] + k
+        self._g_term = (a_loc, b_loc, k)
+        keys = (rows * (3 * nb) + cols).ravel()
+        ukeys, self.g_index = np.unique(keys, return_inverse=True)
+        g_row, g_col = ukeys // (3 * nb), ukeys % (3 * nb)
+        ptr = np.searchsorted(g_row, np.arange(nb + 1))
+        # K_nl = sum_a d_a g_a g_a^T: every pair of entries of a row of g lands at a fixed
+        # position of the pattern's value array.
+        lengths = np.diff(ptr)
+        p_list, q_list = [], []
+        for L in np.unique(lengths):
+            rows_L = np.flatnonzero(lengths == L)
+            ii, jj = np.meshgrid(np.arange(L), np.arange(L), indexing="ij")
+            p_list.append((ptr[rows_L][:, None] + ii.ravel()[None]).ravel())
+            q_list.append((ptr[rows_L][:, None] + jj.ravel()[None]).ravel())
+        self.pair_p = np.concatenate(p_list).astype(np.int32)
+        self.pair_q = np.concatenate(q_list).astype(np.int32)
+        self.pair_node = g_row[self.pair_p].astype(np.int32)
+        n = 3 * nb
+        pkeys = np.repeat(np.arange(n, dtype=np.int64), np.diff(self.c.indptr)) * n \
+            + self.c.indices
+        want = g_col[self.pair_p] * n + g_col[self.pair_q]
+        pos = np.searchsorted(pkeys, want)
+        if np.any(pkeys[np.minimum(pos, pkeys.size - 1)] != want):
+            raise ValueError("ANPAssembler: the two-ring pattern misses coupled entries")
+        self.pair_pos = pos.astype(np.int32)
+        self.n_g = ukeys.size
+        self._nonlocal = None
+
+    # ------------------------------------------------------------------------------------------
+    def update_points(self, tangent: bool) -> bool:
+        if not super().update_points(tangent):
+            return False
+        d, mat = self.disc, self.material
+        F = self.deformation_gradients().reshape(-1, 3, 3)
+        J = np.linalg.det(F)
+        Jbar = self.Mw @ J
+        if not (np.all(Jbar > 0) and np.all(np.isfinite(Jbar))):
+            self.min_J = float(min(np.min(J), np.min(Jbar)))
+            return False
+        self.min_J = float(min(np.min(J), np.min(Jbar)))
+        cells = self.c.cells
+        U_e, Up_e, Upp_e = _volumetric(mat, J)
+        U_a, Up_a, Upp_a = _volumetric(mat, Jbar)
+        pbar = Up_a[cells].mean(axis=1)
+        Finv_T = np.linalg.inv(F).transpose(0, 2, 1)
+        JFinvT = J[:, None, None] * Finv_T                   # dJ/dF
+        dp = pbar - Up_e
+        W = d.point_values(d.W_q, 1)
+        P = d.point_values(d.P_q, 9)
+        W[:, 0] += U_a[cells].mean(axis=1) - U_e
+        P += (dp[:, None, None] * JFinvT).reshape(-1, 9)
+        if tangent:
+            A = d.point_values(d.A_q, 81).reshape(-1, 3, 3, 3, 3)
+            # d(J F^-T)_iJ / dF_kL = J (F^-T_iJ F^-T_kL - F^-T_iL F^-T_kJ)
+            outer = np.einsum("nij,nkl->nijkl", Finv_T, Finv_T)
+            swap = np.einsum("nil,nkj->nijkl", Finv_T, Finv_T)
+            A += (dp * J)[:, None, None, None, None] * (outer - swap)
+            A -= Upp_e[:, None, None, None, None] * np.einsum("nij,nkl->nijkl", JFinvT, JFinvT)
+            # g terms: w_ae dJ_e/du_(b,k) = w_ae J_e (F^-T dN_b)_k
+            a_loc, b_loc, k = self._g_term
+            dJdu = np.einsum("nkj,nbj->nbk", JFinvT, self.c.dN[:, 0])  # (nc, 4, 3)
+            w_ae = (self.c.w[:, 0, None] / 4.0) / self.V0_node[cells]
+            terms = w_ae[:, a_loc] * dJdu[:, b_loc, k]
+            g = np.bincount(self.g_index, terms.ravel(), minlength=self.n_g)
+            dnode = self.V0_node * Upp_a
+            self._nonlocal = np.bincount(
+                self.pair_pos, dnode[self.pair_node] * g[self.pair_p] * g[self.pair_q],
+                minlength=self.c.values.size)
+        return True
+
+    def jacobian(self, cons: DofConstraints, rhs=None, lift=None) -> Jacobian:
+        self.c.assemble(self.disc.point_values(self.disc.A_q, 81))
+        self.c.values += self._nonlocal
+        self.c.apply_dirichlet(cons.owned, rhs.array if lift is not None else None,
+                               lift.array_r if lift is not None else None)
+        return Jacobian(csr=(self.c.indptr, self.c.indices, self.c.values))
