@@ -28,7 +28,8 @@ MPIRUN := mpirun -n $(NP)
 
 .PHONY: help setup setup-system setup-solver setup-trainer demo test test-solver test-trainer \
         test-extremes extremes-doc \
-        dataset train population bench tradeoff-fem tradeoff-surrogate docs lint clean lock-trainer
+        dataset train population bench tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
+        clean lock-trainer
 
 help:
 	@echo "make demo     set up, generate a small dataset on the embedded liver, train, report"
@@ -41,6 +42,7 @@ help:
 	@echo "make bench    run the benchmarks in bench/ (long)"
 	@echo "make tradeoff-fem   FEM speed/accuracy price list -> docs/tradeoff_fem.md (long, resumable)"
 	@echo "make tradeoff-surrogate   surrogate price list + error budget -> docs/ (long, resumable)"
+	@echo "make bench-realtime   real-time surrogate designs -> docs/realtime.md (long, resumable)"
 	@echo "make docs     regenerate docs/phantoms.png"
 	@echo "make lint     ruff";  echo "make clean    remove environments and outputs"
 
@@ -127,6 +129,14 @@ tradeoff-fem: setup-solver
 tradeoff-surrogate: setup
 	$(SPY) bench/budget_fem.py
 	$(TPY) bench/tradeoff_surrogate.py --np $(NP)
+
+# Real-time designs side by side (long, resumable): scene 1 at the paper's size (400
+# simulations; generate skips what is done), each design trained on the same folds, latency at
+# ~15k nodes -> docs/realtime.md. RT_DATA=DIR uses another scene-1 dataset.
+RT_DATA ?= bench/results/realtime/data
+bench-realtime: setup
+	$(MPIRUN) $(SPY) -m fem_sim generate data_spec/scenes/scene1_base.toml --out $(RT_DATA)
+	$(TPY) bench/bench_realtime.py --data $(RT_DATA)
 
 population: setup-solver
 	$(SPY) -m fem_sim population $(SCENE) --out $(OUT)

@@ -11,6 +11,9 @@ import copy
 from data_spec.checks import is_int, is_num
 
 BASE = {
+    "design": "nodewise",      # "nodewise": the paper's MLP per node; "basis": a reduced basis
+                               # (surrogate/basis.py), one liver only
+    "modes": 64,               # basis: number of modes
     "hidden": [128, 128, 128],
     "dropout": 0.0,
     "l2": 0.0,                 # weight decay coefficient (added to the loss as l2 * |w|^2 / 2)
@@ -42,11 +45,17 @@ CONFIGS = {
                      "node_fraction": 0.25},
     "paper_scene4": {"hidden": [500, 500, 500, 500, 500], "epochs": 100, "folds": 10,
                      "node_fraction": 0.1},
+    # The real-time design (docs/realtime.md): 64 modes of the training fields, a 256 x 2
+    # network from the loads to their coefficients; trained on whole fields, not nodes.
+    "basis": {"design": "basis", "modes": 64, "hidden": [256, 256], "batch_size": 128,
+              "epochs": 400, "early_stopping": 30, "lr_patience": 8, "folds": 10},
 }
 
 
 # key -> (check, what is expected): every value is checked before training starts.
 CHECKS = {
+    "design": (lambda v: v in ("nodewise", "basis"), "'nodewise' or 'basis'"),
+    "modes": (lambda v: is_int(v) and v >= 1, "an integer >= 1"),
     "hidden": (lambda v: isinstance(v, list) and v and all(is_int(w) and w > 0 for w in v),
                "a non-empty list of layer widths > 0"),
     "dropout": (lambda v: is_num(v) and 0 <= v < 1, "a number in [0, 1)"),

@@ -21,14 +21,31 @@ from surrogate.features import FeatureSpec, node_features, static_node_features
 from surrogate.normalise import Normaliser
 
 MODEL_FORMAT = "liverfem-surrogate"
-MODEL_VERSION = 1
+MODEL_VERSION = 2          # 2: the design ("nodewise" or "basis") is recorded
+READABLE_VERSIONS = (1, 2)  # version 1 models are node-wise
+DESIGNS = ("nodewise", "basis")
 # Inference precisions: float32 (as trained), or the weights and activations cast to 16 bits.
 PRECISIONS = ("float32", "bfloat16", "float16")
 log = logging.getLogger(__name__)
 
 
 def export_model(directory, params, norm: Normaliser, cfg, ds) -> Path:
-    """Write a model directory from a trained network, its normaliser and its dataset."""
+    """Write a model directory from a trained node-wise network, its normaliser and its
+    dataset.
+    """
+    return _export(directory, params, {"design": "nodewise", "stats": norm.to_dict()}, cfg, ds)
+
+
+def export_basis(directory, model, cfg, ds) -> Path:
+    """Write a model directory from a trained :class:`surrogate.basis.BasisModel`: its network
+    in params.npz, its modes in basis.npz, its statistics in model.json.
+    """
+    d = _export(directory, model.params, {"design": "basis", "stats": model.stats()}, cfg, ds)
+    np.savez(d / "basis.npz", modes=model.modes)
+    return d
+
+
+def _export(directory, params, design: dict, cfg, ds) -> Path:
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     flat = traverse_util.flatten_dict(params, sep="/")
@@ -37,7 +54,7 @@ def export_model(directory, params, norm: Normaliser, cfg, ds) -> Path:
     meta = {
         "format": MODEL_FORMAT, "version": MODEL_VERSION, "scene": ds.scene_name,
         "config": cfg, "feature_spec": ds.spec.to_dict(), "feature_names": ds.spec.names(),
-        "stats": norm.to_dict(),
+        **design,
         "training_range": {
             "force_norm_max": float(fnorm.max()),
             "extra_min": ds.extra.min(axis=0).tolist() if ds.extra.size else [],
@@ -63,13 +80,16 @@ def _read_meta(path: Path) -> dict:
         raise ValueError(f"{path}: expected a JSON object, got {type(meta).__name__}")
     if meta.get("format") != MODEL_FORMAT:
         raise ValueError(f"{path}: not a {MODEL_FORMAT} model")
-    if meta.get("version") != MODEL_VERSION:
+    if meta.get("version") not in READABLE_VERSIONS:
         raise ValueError(f"{path}: version {meta.get('version')!r}, this code reads "
-                         f"{MODEL_VERSION!r}")
+                         f"{', '.join(map(str, READABLE_VERSIONS))}")
+    design = meta.setdefault("design", "nodewise")
+    if design not in DESIGNS:
+        raise ValueError(f"{path}: design {design!r}, expected one of {', '.join(DESIGNS)}")
     return meta
 
 
-def _read_params(path: Path, dim: int, hidden: tuple[int, ...]) -> dict:
+def _read_params(path: Path, dim: int, hidden: tuple[int, ...], out: int = 3) -> dict:
     """The network's parameters, checked against the architecture in the config: every layer
     present with the right shapes, every value finite.
     """
@@ -80,7 +100,7 @@ def _read_params(path: Path, dim: int, hidden: tuple[int, ...]) -> dict:
         raise ValueError(f"{path}: missing") from None
     except (OSError, ValueError) as exc:  # truncated, not an npz, or a pickled array
         raise ValueError(f"{path}: cannot be read without executing code ({exc})") from None
-    widths = (dim, *hidden, 3)
+    widths = (dim, *hidden, out)
     want = {}
     for i in range(len(widths) - 1):
         want[f"Dense_{i}/kernel"] = (widths[i], widths[i + 1])
@@ -128,25 +148,30 @@ class Predictor:
             self.force_norm_max = float(meta["training_range"]["force_norm_max"])
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"{d / 'model.json'}: incomplete or malformed ({exc!r})") from None
+        self.design = meta["design"]
+        geo = d / "geometry.npz"
+        if geo.exists():
+            try:
+                with np.load(geo, allow_pickle=False) as z:
+                    self.points, self.fixed = z["points"], z["fixed"]
+                    self.output_nodes = z["output_nodes"]
+            except (OSError, KeyError, ValueError) as exc:
+                raise ValueError(f"{geo}: cannot be read ({exc})") from None
+            self.static = jnp.asarray(static_node_features(self.points, self.fixed),
+                                      dtype=jnp.float32)
+        elif meta.get("embedded_geometry") or self.design == "basis":
+            raise ValueError(f"{geo}: missing (the model was exported with its liver)")
+        else:
+            self.points = self.fixed = self.static = self.output_nodes = None
+        if self.design == "basis":
+            self._init_basis(d, meta, hidden, dtype)
+            return
         params = _read_params(d / "params.npz", self.spec.dim, hidden)
         # Reduced precision: the weights and the network's activations are cast; features,
         # normalisation and the returned millimetres stay float32.
         self.params = jax.tree_util.tree_map(lambda w: jnp.asarray(w, dtype=dtype), params)
         self.norm = Normaliser.from_dict(meta.get("stats"), self.spec.dim,
                                          where=f"{d / 'model.json'}: stats")
-        geo = d / "geometry.npz"
-        if geo.exists():
-            try:
-                with np.load(geo, allow_pickle=False) as z:
-                    self.points, self.fixed = z["points"], z["fixed"]
-            except (OSError, KeyError, ValueError) as exc:
-                raise ValueError(f"{geo}: cannot be read ({exc})") from None
-            self.static = jnp.asarray(static_node_features(self.points, self.fixed),
-                                      dtype=jnp.float32)
-        elif meta.get("embedded_geometry"):
-            raise ValueError(f"{geo}: missing (the model was exported with its liver)")
-        else:
-            self.points = self.fixed = self.static = None
         model = NodeMLP(hidden=hidden, dropout=dropout)
 
         def one_case(params, norm, static, forces, load_points, extra):
@@ -175,6 +200,9 @@ class Predictor:
                              f"shape {forces.shape}, got {load_nodes.shape}")
         if not np.all(np.isfinite(forces)):
             raise ValueError("forces: contain NaN or inf")
+        if self.design == "basis" and geometry is not None:
+            raise ValueError("geometry: a reduced-basis model predicts on the liver it was "
+                             "trained on only (its modes live on those nodes)")
         static, points = self._geometry(geometry)
         n_nodes = points.shape[0]
         if not np.issubdtype(load_nodes.dtype, np.integer) or load_nodes.min() < 0 or \
@@ -190,8 +218,12 @@ class Predictor:
             key = (None if geometry is None else self._geo_key, nodes.dtype.str, nodes.shape,
                    nodes.tobytes())
             if getattr(self, "_sel_key", None) != key:
-                self._sel_key, self._sel = key, static[jnp.asarray(nodes)]
+                self._sel_key = key
+                self._sel = (self._basis_rows(nodes) if self.design == "basis"
+                             else static[jnp.asarray(nodes)])
             static = self._sel
+        elif self.design == "basis":
+            static = self._modes
         blocks = []
         if material is not None and not self.spec.material_dim:
             raise ValueError("material: this model was trained on one material and takes "
@@ -221,12 +253,81 @@ class Predictor:
             warnings.warn(f"force magnitude {fmax:.3g} N exceeds the training range "
                           f"({self.force_norm_max:.3g} N): "
                           "extrapolating", stacklevel=2)
-        out = self._batched(self.params, self.norm, static, jnp.asarray(forces, dtype=jnp.float32),
-                            jnp.asarray(points[load_nodes], dtype=jnp.float32),
-                            jnp.asarray(extra, dtype=jnp.float32))
+        args = (jnp.asarray(forces, dtype=jnp.float32),
+                jnp.asarray(points[load_nodes], dtype=jnp.float32),
+                jnp.asarray(extra, dtype=jnp.float32))
+        if self.design == "basis":
+            out = self._batched_basis(self.params, static, *args)
+        else:
+            out = self._batched(self.params, self.norm, static, *args)
         out = np.asarray(out)
         return out[0] if single else out
 
+
+    # ------------------------------------------------------------------------------------------
+    # The reduced-basis design (surrogate/basis.py)
+    # ------------------------------------------------------------------------------------------
+    def _init_basis(self, d: Path, meta: dict, hidden: tuple, dtype: str) -> None:
+        import jax
+        import jax.numpy as jnp
+
+        from surrogate.basis import LOAD_FEATURES, load_features, network
+
+        where = d / "basis.npz"
+        try:
+            with np.load(where, allow_pickle=False) as z:
+                modes = np.asarray(z["modes"], dtype=np.float32)
+        except FileNotFoundError:
+            raise ValueError(f"{where}: missing (a reduced-basis model needs its modes)") \
+                from None
+        except (OSError, KeyError, ValueError) as exc:
+            raise ValueError(f"{where}: cannot be read ({exc})") from None
+        n_out = self.output_nodes.size
+        if modes.ndim != 2 or modes.shape[1] != 3 * n_out or not np.all(np.isfinite(modes)):
+            raise ValueError(f"{where}: modes must be a finite (k, {3 * n_out}) array for the "
+                             f"{n_out} output nodes, got shape {modes.shape}")
+        L, e = self.spec.n_loads, self.spec.material_dim + self.spec.geometry_dim
+        dim = LOAD_FEATURES * L + e
+        k = modes.shape[0]
+        params = _read_params(d / "params.npz", dim, hidden, out=3 * k * L)
+        st = meta.get("stats")
+        try:
+            x_mean = np.asarray(st["x_mean"], dtype=np.float32)
+            x_std = np.asarray(st["x_std"], dtype=np.float32)
+            c_scale, f_scale = float(st["c_scale"]), float(st["f_scale"])
+        except (KeyError, TypeError, ValueError):
+            raise ValueError(f"{d / 'model.json'}: stats: expected x_mean, x_std, c_scale, "
+                             "f_scale") from None
+        if x_mean.shape != (dim,) or x_std.shape != (dim,) or not (
+                np.all(np.isfinite(x_mean)) and np.all(x_std > 0) and c_scale > 0
+                and f_scale > 0 and np.isfinite(c_scale) and np.isfinite(f_scale)):
+            raise ValueError(f"{d / 'model.json'}: stats: {dim} finite means, positive scales "
+                             "and positive finite c_scale, f_scale expected")
+        # The modes are stored per output node; a node set picks its 3 rows.
+        self._out_row = {int(n): i for i, n in enumerate(self.output_nodes.tolist())}
+        self._modes_np = modes.reshape(k, n_out, 3)
+        self._modes = jnp.asarray(modes, dtype=dtype)
+        self.params = jax.tree_util.tree_map(lambda w: jnp.asarray(w, dtype=dtype), params)
+        self.norm = None
+        net = network(hidden, k, L)
+
+        def one_case(params, modes, forces, load_points, extra):
+            x = (load_features(forces, load_points, extra, xp=jnp) - x_mean) / x_std
+            c = net.apply({"params": params}, x.astype(dtype), (forces / f_scale).astype(dtype))
+            u = (c * c_scale).astype(dtype) @ modes
+            return u.astype(jnp.float32).reshape(-1, 3)
+
+        self._batched_basis = jax.jit(jax.vmap(one_case, in_axes=(None, None, 0, 0, 0)))
+
+    def _basis_rows(self, nodes: np.ndarray):
+        import jax.numpy as jnp
+
+        rows = [self._out_row.get(int(n)) for n in nodes.tolist()]
+        if any(r is None for r in rows):
+            raise ValueError("nodes: a reduced-basis model predicts its scene's output nodes "
+                             f"only ({self.output_nodes.size} of {self.points.shape[0]})")
+        k = self._modes_np.shape[0]
+        return jnp.asarray(self._modes_np[:, rows].reshape(k, -1), dtype=self._modes.dtype)
 
     def _check_range(self, what: str, values: np.ndarray, start: int, stop: int) -> None:
         """Warn when inputs leave the range seen in training (by more than 5 % of it):

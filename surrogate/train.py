@@ -24,6 +24,7 @@ from flax.training import train_state
 from flax.training.early_stopping import EarlyStopping
 
 from data_spec.atomic import check_writable
+from surrogate import basis
 from surrogate.data import Dataset, kfold_groups, load_dataset
 from surrogate.features import node_features
 from surrogate.metrics import displacement_metrics, metrics_table
@@ -124,18 +125,25 @@ def device_data(ds: Dataset) -> dict:
             "load_points": jnp.asarray(ds.load_points), "extra": jnp.asarray(ds.extra)}
 
 
+def inner_split(ds: Dataset, train_samples: np.ndarray, cfg: dict, rng):
+    """(training, early-stopping) samples: ``inner_val_fraction`` of the simulations (of the
+    livers when the geometry varies) of ``train_samples`` held out.
+    """
+    unit = ds.sample_geo if ds.spec.geometry_dim else ds.sample_sim
+    units = np.unique(unit[train_samples])
+    n_val = max(1, int(round(cfg["inner_val_fraction"] * units.size))) if units.size > 1 else 0
+    val_units = rng.choice(units, size=n_val, replace=False) if n_val else np.array([])
+    is_val = np.isin(unit[train_samples], val_units)
+    return train_samples[~is_val], train_samples[is_val]
+
+
 def fit(ds: Dataset, train_samples: np.ndarray, cfg: dict, seed: int, label: str = "",
         log_fn=print) -> tuple[dict, dict, list[dict]]:
     """Train on ``train_samples`` (a slice held out for early stopping). Returns
     (params, normaliser, per-epoch history).
     """
     rng = np.random.default_rng(seed)
-    unit = ds.sample_geo if ds.spec.geometry_dim else ds.sample_sim
-    units = np.unique(unit[train_samples])
-    n_val = max(1, int(round(cfg["inner_val_fraction"] * units.size))) if units.size > 1 else 0
-    val_units = rng.choice(units, size=n_val, replace=False) if n_val else np.array([])
-    is_val = np.isin(unit[train_samples], val_units)
-    tr, va = train_samples[~is_val], train_samples[is_val]
+    tr, va = inner_split(ds, train_samples, cfg, rng)
     rows, smp, tgt = example_index(ds, tr)
     data = device_data(ds)
     norm = normalisation(ds, data, rows, smp, tgt, rng)
@@ -235,10 +243,27 @@ def predict_samples(ds: Dataset, params, norm: Normaliser, cfg: dict, samples: n
     return out, ds.targets[tgt], smp
 
 
+def fit_design(ds: Dataset, train_samples: np.ndarray, cfg: dict, seed: int, label: str,
+               log_fn) -> tuple:
+    """(model, history) of the config's design: (params, normaliser) for the node-wise MLP,
+    a :class:`surrogate.basis.BasisModel` for the reduced basis.
+    """
+    if cfg["design"] == "basis":
+        return basis.fit(ds, train_samples, cfg, seed, label, log_fn)
+    params, norm, hist = fit(ds, train_samples, cfg, seed, label, log_fn)
+    return (params, norm), hist
+
+
+def predict_design(ds: Dataset, model, cfg: dict, samples: np.ndarray):
+    if cfg["design"] == "basis":
+        return basis.predict_samples(ds, model, samples)
+    return predict_samples(ds, *model, cfg, samples)
+
+
 def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
                        log_fn=None) -> dict:
     """k-fold CV + metrics + plots + (optionally) a final model exported to RUN/model."""
-    from surrogate.export import export_model
+    from surrogate.export import export_basis, export_model
     from surrogate.plots import error_plots
 
     run = Path(run_dir)
@@ -261,6 +286,8 @@ def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
         f"simulations, {ds.failed_sims} failed), {ds.targets.shape[0]:,} node examples, "
         f"{ds.spec.dim} features: {', '.join(ds.spec.names())}"
         + ("; targets streamed from disk" if isinstance(ds.targets, np.memmap) else ""))
+    if cfg["design"] == "basis":
+        basis.check_dataset(ds)
     (run / "config.json").write_text(json.dumps(cfg, indent=1))
     folds = kfold_groups(ds, cfg["folds"], cfg["seed"])
     preds, trues, smps, naive, history = [], [], [], [], {}
@@ -268,12 +295,12 @@ def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
     for k, held in enumerate(folds):
         train_samples = np.setdiff1d(np.arange(ds.n_samples), held)
         t = time.perf_counter()
-        params, norm, hist = fit(ds, train_samples, cfg, cfg["seed"] + 1 + k,
-                                  f"fold {k + 1}/{len(folds)} ", say)
+        model, hist = fit_design(ds, train_samples, cfg, cfg["seed"] + 1 + k,
+                                 f"fold {k + 1}/{len(folds)} ", say)
         train_time += time.perf_counter() - t
         examples += sum(h["examples_per_s"] * h["seconds"] for h in hist)
         history[f"fold{k}"] = hist
-        p, y, s = predict_samples(ds, params, norm, cfg, held)
+        p, y, s = predict_design(ds, model, cfg, held)
         _, _, tr_tgt = example_index(ds, train_samples)
         mean_disp = ds.targets[tr_tgt].mean(axis=0)
         preds.append(p)
@@ -300,10 +327,12 @@ def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
     say("\n" + table + f"\nskill = MEE_NN / MEE_naive = {result['skill']:.4f}")
     error_plots(run, pred, true, result)
     if cfg["final_fit"]:
-        params, norm, hist = fit(ds, np.arange(ds.n_samples), cfg, cfg["seed"], "final ",
-                                 say)
+        model, hist = fit_design(ds, np.arange(ds.n_samples), cfg, cfg["seed"], "final ", say)
         history["final"] = hist
-        export_model(run / "model", params, norm, cfg, ds)
+        if cfg["design"] == "basis":
+            export_basis(run / "model", model, cfg, ds)
+        else:
+            export_model(run / "model", *model, cfg, ds)
         say(f"model exported to {run / 'model'}")
     result["total_seconds"] = time.perf_counter() - t0
     (run / "metrics.json").write_text(json.dumps(result, indent=1))

@@ -116,7 +116,29 @@ def test_model_files_are_plain(run):
     with np.load(d / "params.npz", allow_pickle=False) as z:
         assert all(z[k].dtype == np.float32 for k in z.files)
     meta = json.loads((d / "model.json").read_text())
-    assert meta["format"] == "liverfem-surrogate" and meta["version"] == 1
+    assert meta["format"] == "liverfem-surrogate" and meta["version"] == 2
+    assert meta["design"] == "nodewise"
+
+
+def test_version_1_models_still_load_as_nodewise(run, tmp_path):
+    """Models exported before the design was recorded (version 1, no "design") load and
+    predict as node-wise models; an unknown design or version is refused by name."""
+    import shutil
+
+    d = tmp_path / "v1"
+    shutil.copytree(run[0] / "model", d)
+    meta = json.loads((d / "model.json").read_text())
+    meta.pop("design")
+    meta["version"] = 1
+    (d / "model.json").write_text(json.dumps(meta))
+    f = np.array([[0.0, 0.1, -0.3]])
+    np.testing.assert_allclose(load_predictor(d)(f, [3]), load_predictor(run[0] / "model")(f, [3]),
+                               rtol=1e-6, atol=1e-7)
+    for key, value, message in (("design", "graph", "design 'graph'"),
+                                ("version", 3, "version 3")):
+        (d / "model.json").write_text(json.dumps({**meta, key: value}))
+        with pytest.raises(ValueError, match=message):
+            load_predictor(d)
 
 
 def test_predictor_on_an_explicit_geometry_matches_the_embedded_one(run):

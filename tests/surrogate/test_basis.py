@@ -1,0 +1,113 @@
+"""The reduced-basis design (surrogate/basis.py): its modes, its training, its export and
+reload through the one ``load_predictor`` call, and what it refuses."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from surrogate import load_predictor
+from surrogate.basis import (
+    BasisDesignError,
+    check_dataset,
+    compute_modes,
+    predict_samples,
+    projection_mee,
+)
+from surrogate.config import get_config
+from surrogate.data import load_dataset
+from surrogate.train import fit_design, train_and_evaluate
+
+
+@pytest.fixture(scope="module")
+def ds(synth_dir):
+    return load_dataset(synth_dir)
+
+
+@pytest.fixture(scope="module")
+def run(synth_dir, tmp_path_factory):
+    out = tmp_path_factory.mktemp("basis_run")
+    cfg = get_config("basis", folds=4, epochs=60, modes=24, hidden=[64, 64], batch_size=16)
+    result = train_and_evaluate(synth_dir, out, cfg, log_fn=lambda m: None)
+    return out, result
+
+
+def test_randomised_modes_span_the_exact_ones():
+    """A field matrix of rank 12 plus noise: the randomised range finder (used for long
+    fields) finds the same leading subspace as the exact SVD."""
+    rng = np.random.default_rng(0)
+    U = rng.standard_normal((400, 12)) @ rng.standard_normal((12, 3300))
+    U += 1e-6 * rng.standard_normal(U.shape)
+    exact = np.linalg.svd(U, full_matrices=False)[2][:12]
+    fast = compute_modes(np.vstack([U] * 8), 12)  # 3200 x 3300: the randomised path
+    assert fast.shape == (12, 3300)
+    np.testing.assert_allclose(fast @ fast.T, np.eye(12), atol=1e-10)
+    # every exact mode lies in the span of the randomised ones
+    assert np.abs(exact - exact @ fast.T @ fast).max() < 1e-6
+
+
+def test_projection_error_falls_with_the_modes(ds):
+    from surrogate.basis import fields
+
+    U = fields(ds, np.arange(ds.n_samples))
+    errs = [projection_mee(U, compute_modes(U, k)) for k in (2, 8, 32)]
+    assert errs[0] > errs[1] > errs[2] >= 0, errs
+    full = compute_modes(U, min(U.shape))
+    assert projection_mee(U, full) < 1e-9
+
+
+def test_basis_beats_naive_and_reports_like_the_nodewise_design(run):
+    out, result = run
+    assert result["skill"] < 0.5, result["skill"]
+    meta = json.loads((out / "model" / "model.json").read_text())
+    assert meta["design"] == "basis" and meta["version"] == 2
+    assert (out / "model" / "basis.npz").stat().st_size > 0
+
+
+def test_exported_basis_model_agrees_with_the_model_in_memory(ds, tmp_path):
+    """Train in memory, export, reload through load_predictor: the same displacements (float32
+    tolerance), for whole fields, node subsets and batches; no load gives no displacement."""
+    from surrogate.export import export_basis
+
+    cfg = get_config("basis", epochs=40, modes=16, hidden=[32])
+    model, _ = fit_design(ds, np.arange(ds.n_samples - 6), cfg, 0, "", lambda m: None)
+    export_basis(tmp_path / "m", model, cfg, ds)
+    predict = load_predictor(tmp_path / "m")
+    held = np.arange(ds.n_samples - 6, ds.n_samples)
+    mine, _, _ = predict_samples(ds, model, held)
+    mine = mine.reshape(held.size, -1, 3)
+    theirs = predict(ds.forces[held], ds.load_nodes[held])
+    scale = np.abs(mine).max()
+    assert theirs.shape == mine.shape and scale > 0
+    np.testing.assert_allclose(theirs, mine, rtol=1e-4, atol=1e-5 * scale)
+    one = predict(ds.forces[held[2]], ds.load_nodes[held[2]], nodes=np.array([3, 0, 11]))
+    np.testing.assert_allclose(one, mine[2][[3, 0, 11]], rtol=1e-4, atol=1e-5 * scale)
+    assert np.abs(predict(np.zeros((1, 3)), [5])).max() == 0.0
+
+
+def test_basis_model_refuses_what_it_cannot_do(run, tmp_path):
+    out, _ = run
+    predict = load_predictor(out / "model")
+    pts = predict.points
+    with pytest.raises(ValueError, match="geometry"):
+        predict(np.array([[0.0, 0.0, -0.3]]), [4], geometry=(pts, predict.fixed, []))
+    bad = tmp_path / "bad"
+    shutil.copytree(out / "model", bad)
+    with np.load(bad / "basis.npz") as z:
+        modes = z["modes"].copy()
+    modes[0, 0] = np.nan
+    np.savez(bad / "basis.npz", modes=modes)
+    with pytest.raises(ValueError, match="basis.npz"):
+        load_predictor(bad)
+    (bad / "basis.npz").unlink()
+    with pytest.raises(ValueError, match="basis.npz: missing"):
+        load_predictor(bad)
+
+
+def test_basis_design_needs_one_liver(ds):
+    import dataclasses
+
+    two = dataclasses.replace(ds, points=ds.points * 2, fixed=ds.fixed * 2)
+    with pytest.raises(BasisDesignError, match="one liver"):
+        check_dataset(two)
