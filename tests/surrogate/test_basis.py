@@ -111,3 +111,14 @@ def test_basis_design_needs_one_liver(ds):
     two = dataclasses.replace(ds, points=ds.points * 2, fixed=ds.fixed * 2)
     with pytest.raises(BasisDesignError, match="one liver"):
         check_dataset(two)
+
+
+@pytest.mark.parametrize("dtype, rel", [("bfloat16", 0.03), ("float16", 0.01)])
+def test_reduced_precision_basis_is_close_to_float32(run, dtype, rel):
+    out, _ = run
+    f = np.array([[[0.0, 0.1, -0.3]], [[0.2, 0.0, 0.1]]])
+    nodes = np.array([[4], [40]])
+    full = load_predictor(out / "model")(f, nodes)
+    low = load_predictor(out / "model", dtype=dtype)(f, nodes)
+    assert low.dtype == np.float32
+    assert np.abs(low - full).max() <= rel * np.abs(full).max()
