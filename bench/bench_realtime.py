@@ -159,8 +159,12 @@ def main() -> int:
                      f"{net['ee_p95']:.3f} | {net['pct_ee_lt_1mm']:.1f} | {m['skill']:.3f} | "
                      f"{1e3 * med:.2f} | {1e3 * p99:.2f} | {1 / med:,.0f} |")
     lines.append("")
-    lines.append("MEE, p95 and % < 1 mm are those of the float32 model (bfloat16 changes them "
-                 "by < 0.5 % on this data: docs/tradeoff_surrogate.md).")
+    lines.append("MEE, p95 and % < 1 mm are those of the float32 models. bfloat16 changes the "
+                 "node-wise net's MEE by < 0.5 % (docs/tradeoff_surrogate.md); for the basis it "
+                 "was not measured on the folds (tests keep it within 3 % of float32), and it "
+                 "is slower than float32 on this CPU. Configs: "
+                 + "; ".join(f"{n}: `{c}` {o or ''}".strip() for n, (c, o) in DESIGNS.items())
+                 + " (surrogate/config.py).")
     # The verdict: the fastest design on the whole liver whose MEE is no worse than the paper
     # net's.
     whole = [r for r in rows if r[2] == "whole liver" and r[1] == "float32"]
