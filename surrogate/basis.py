@@ -130,7 +130,7 @@ def fit(ds: Dataset, train_samples: np.ndarray, cfg: dict, seed: int, label: str
     from flax.training import train_state
     from flax.training.early_stopping import EarlyStopping
 
-    from surrogate.train import LearningRateRule, inner_split, with_learning_rate
+    from surrogate.train import LearningRateRule, end_of_epoch, inner_split
 
     check_dataset(ds)
     rng = np.random.default_rng(seed)
@@ -189,11 +189,7 @@ def fit(ds: Dataset, train_samples: np.ndarray, cfg: dict, seed: int, label: str
             # coefficient loss x c_scale^2 = mean squared field error summed over dofs, mm^2
             log_fn(f"{label}epoch {epoch + 1:3d}  train {train_loss:.4e}  val {val_loss:.4e}  "
                    f"lr {lr_rule.value:.1e}")
-        stop = stop.update(val_loss)
-        if stop.has_improved:
-            best = state.params
-        state = state.replace(opt_state=with_learning_rate(state.opt_state,
-                                                           lr_rule.update(val_loss)))
+        state, stop, best = end_of_epoch(state, stop, lr_rule, best, val_loss)
         if stop.should_stop:
             break
     log_fn(f"{label}stopped after {len(history)} epochs; {modes.shape[0]} modes, projection "

@@ -184,14 +184,22 @@ def fit(ds: Dataset, train_samples: np.ndarray, cfg: dict, seed: int, label: str
                         "lr": lr, "seconds": dt, "examples_per_s": n_per_epoch / dt})
         log_fn(f"{label}epoch {epoch + 1:3d}  train {train_loss:.4e}  val {val_loss:.4e}  "
                f"lr {lr:.1e}  {n_per_epoch / dt:,.0f} examples/s")
-        stop = stop.update(val_loss)
-        if stop.has_improved:
-            best_params = state.params
-        state = state.replace(opt_state=with_learning_rate(state.opt_state,
-                                                           lr_rule.update(val_loss)))
+        state, stop, best_params = end_of_epoch(state, stop, lr_rule, best_params, val_loss)
         if stop.should_stop:
             break
     return jax.device_get(best_params), norm, history
+
+
+def end_of_epoch(state, stop, lr_rule, best, val_loss: float):
+    """Early stopping and the learning-rate rule after one epoch: (state with the next
+    learning rate, stopping state, best parameters so far).
+    """
+    stop = stop.update(val_loss)
+    if stop.has_improved:
+        best = state.params
+    state = state.replace(opt_state=with_learning_rate(state.opt_state,
+                                                       lr_rule.update(val_loss)))
+    return state, stop, best
 
 
 class LearningRateRule:
