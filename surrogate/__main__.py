@@ -51,6 +51,11 @@ def main(argv=None) -> int:
     except ValueError as exc:
         print(f"surrogate train: {exc}", file=sys.stderr)
         return 2
+    if cfg["design"] == "basis" and scene.varies["geometry"]:
+        print(f"surrogate train: config {name!r} (design 'basis') needs a scene with one liver; "
+              f"{args.data}/scene.toml varies the geometry: use a node-wise config",
+              file=sys.stderr)
+        return 2
     if Path(args.run).exists() and not Path(args.run).is_dir():
         print(f"surrogate train: --run {args.run} is a file, not a directory", file=sys.stderr)
         return 2

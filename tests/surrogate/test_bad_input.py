@@ -70,3 +70,16 @@ def test_corrupt_or_all_failed_dataset_is_named_and_leaves_no_run(synth_dir, tmp
     assert main(["train", "--data", str(data), "--run", str(tmp_path / "r")]) == 2
     assert "has a converged load step" in capsys.readouterr().err
     assert not (tmp_path / "r").exists()
+
+
+def test_basis_design_on_a_many_liver_scene_is_refused_before_any_work(tmp_path, capsys):
+    from pathlib import Path
+
+    data = tmp_path / "data"
+    data.mkdir()
+    scenes = Path(__file__).parents[2] / "data_spec" / "scenes"
+    shutil.copy(scenes / "scene4_livers.toml", data / "scene.toml")
+    assert main(["train", "--data", str(data), "--run", str(tmp_path / "r"),
+                 "--config", "basis"]) == 2
+    assert "design 'basis') needs a scene with one liver" in capsys.readouterr().err
+    assert not (tmp_path / "r").exists()
