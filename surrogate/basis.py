@@ -201,8 +201,11 @@ def fit(ds: Dataset, train_samples: np.ndarray, cfg: dict, seed: int, label: str
     return model, history
 
 
-def coefficients(model: BasisModel, forces, load_points, extra, xp=np, apply=None):
-    """Mode coefficients (..., k) in mm of load cases (pure; ``apply`` is the network's)."""
+def coefficients(model: BasisModel, forces, load_points, extra, *, apply, xp=np):
+    """Mode coefficients (..., k) in mm of load cases: the one definition of training,
+    evaluation and the exported predictor (pure; ``apply(x, f)`` is the network, only the
+    model's statistics are read here).
+    """
     x = (load_features(forces, load_points, extra, xp) - model.x_mean) / model.x_std
     return apply(x, forces / model.f_scale) * model.c_scale
 

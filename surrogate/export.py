@@ -271,7 +271,7 @@ class Predictor:
         import jax
         import jax.numpy as jnp
 
-        from surrogate.basis import LOAD_FEATURES, load_features, network
+        from surrogate.basis import LOAD_FEATURES, BasisModel, coefficients, network
 
         where = d / "basis.npz"
         try:
@@ -309,13 +309,16 @@ class Predictor:
         self._modes = jnp.asarray(modes, dtype=dtype)
         self.params = jax.tree_util.tree_map(lambda w: jnp.asarray(w, dtype=dtype), params)
         self.norm = None
+        stats = BasisModel(params=None, modes=None, x_mean=x_mean, x_std=x_std,
+                           c_scale=c_scale, f_scale=f_scale, hidden=hidden, n_loads=L)
         net = network(hidden, k, L)
 
         def one_case(params, modes, forces, load_points, extra):
-            x = (load_features(forces, load_points, extra, xp=jnp) - x_mean) / x_std
-            c = net.apply({"params": params}, x.astype(dtype), (forces / f_scale).astype(dtype))
-            u = (c * c_scale).astype(dtype) @ modes
-            return u.astype(jnp.float32).reshape(-1, 3)
+            def apply(x, f):
+                return net.apply({"params": params}, x.astype(dtype), f.astype(dtype))
+
+            c = coefficients(stats, forces, load_points, extra, xp=jnp, apply=apply)
+            return (c.astype(dtype) @ modes).astype(jnp.float32).reshape(-1, 3)
 
         self._batched_basis = jax.jit(jax.vmap(one_case, in_axes=(None, None, 0, 0, 0)))
 

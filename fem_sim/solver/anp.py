@@ -31,6 +31,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from fem_sim.material.ogden import _volumetric as volumetric_energy
 from fem_sim.solver import dolfinx_compat as dc
 from fem_sim.solver import tet
 from fem_sim.solver.assembly import CAssembler, Jacobian
@@ -38,16 +39,18 @@ from fem_sim.solver.discretisation import Discretisation, DofConstraints
 
 
 def _volumetric(mat, J: np.ndarray):
-    """U(J), U'(J), U''(J) of the material's volumetric energy."""
-    K = mat.K
-    if mat.volumetric == "log":
-        lnJ = np.log(J)
-        return 0.5 * K * lnJ**2, K * lnJ / J, K * (1.0 - lnJ) / J**2
-    return 0.5 * K * (J - 1.0) ** 2, K * (J - 1.0), np.full_like(J, K)
+    """U(J), U'(J), U''(J) of the material's volumetric energy (from the material module's
+    U, U' J, (U'' J + U') J).
+    """
+    U, UpJ, UppJ = volumetric_energy(mat, J)
+    Up = UpJ / J
+    return U, Up, (UppJ / J - Up) / J
 
 
 class ANPAssembler(CAssembler):
     """P1 with averaged nodal pressure (see the module docstring); one process."""
+
+    relaxable = False  # the hot-spot relaxation solves the plain P1 equations, not these
 
     def __init__(self, disc: Discretisation):
         if not (disc.comm.size == 1 and disc.degree == 1 and disc.qdeg == 1

@@ -52,6 +52,8 @@ class Assembler:
     displacement and reports the smallest det F; the other methods use those values.
     """
 
+    relaxable = False  # the hot-spot relaxation (relaxation.py) can solve its equations
+
     def __init__(self, disc: Discretisation):
         self.disc = disc
         self.material: OgdenMaterial | None = None
@@ -138,6 +140,8 @@ class CAssembler(Assembler):
     process).
     """
 
+    relaxable = True
+
     def __init__(self, disc: Discretisation):
         super().__init__(disc)
         A = dc.create_matrix(disc.a)
@@ -176,14 +180,10 @@ def make_assembler(disc: Discretisation, csr_solver: bool, element: str = "lagra
     arrays (the serial factorisation); dolfinx's assembly otherwise. ``element="anp"``: the P1
     tetrahedron with averaged nodal pressure (:mod:`fem_sim.solver.anp`).
     """
-    if element == "anp":
-        if not csr_solver:
-            raise ValueError("the ANP tetrahedron needs the serial factorisation (one rank)")
+    if element == "anp":  # OgdenProblem checked that it applies
         from fem_sim.solver.anp import ANPAssembler
 
         return ANPAssembler(disc)
-    if element != "lagrange":
-        raise ValueError(f"element must be 'lagrange' or 'anp', got {element!r}")
     if csr_solver and CAssembler.available(disc):
         return CAssembler(disc)
     return DolfinxAssembler(disc)

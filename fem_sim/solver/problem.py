@@ -57,13 +57,14 @@ class OgdenProblem:
         if element not in ("lagrange", "anp"):
             raise ValueError(f"OgdenProblem: element must be 'lagrange' or 'anp' (P1 with "
                              f"averaged nodal pressure), got {element!r}")
-        if element == "anp" and (degree != 1 or comm.size != 1):
-            raise ValueError("OgdenProblem: element 'anp' is a P1 element on one process "
-                             f"(degree 1, one rank), got degree {degree} on {comm.size} ranks")
         if not isinstance(settings, SolverSettings):
             settings = SolverSettings.from_dict(settings)
         self.settings = settings
-        factorization_mode(settings, comm.size)  # a bad combination fails before MPI work
+        serial = factorization_mode(settings, comm.size)  # a bad combination fails now
+        if element == "anp" and (degree != 1 or serial is None):
+            raise ValueError("OgdenProblem: element 'anp' is a P1 element for the serial "
+                             f"factorisation (degree 1, one rank), got degree {degree} on "
+                             f"{comm.size} ranks with factorization {settings.factorization!r}")
         self.comm = comm
         self.degree = degree
         self.qdeg = quadrature_degree or (1 if degree == 1 else 2)

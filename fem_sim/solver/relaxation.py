@@ -24,7 +24,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from fem_sim.material.ogden import point_kernel
-from fem_sim.solver import tet
+from fem_sim.solver import ldlt, tet
 
 log = logging.getLogger(__name__)
 
@@ -38,19 +38,15 @@ class LocalRelaxation:
         self.c = eqs.assembler.c  # the global TetAssembler
         self.rings, self.max_nodes = rings, max_nodes
         self.seed_fraction, self.share = seed_fraction, share
-        c = self.c
-        n = c.indptr.size - 1
-        rows = np.repeat(np.arange(n), np.diff(c.indptr))
-        keep = (rows % 3 == 0) & (c.indices % 3 == 0)
-        nb = n // 3
-        self.graph = sp.csr_matrix((np.ones(int(keep.sum())), (rows[keep] // 3,
-                                                                c.indices[keep] // 3)),
-                                   shape=(nb, nb))
+        xadj, adj = ldlt.block_graph(self.c.indptr, self.c.indices, 3)
+        nb = xadj.size - 1
+        # node adjacency with the diagonal (the sub-problems' patterns need it)
+        self.graph = (sp.csr_matrix((np.ones(adj.size), adj, xadj), shape=(nb, nb))
+                      + sp.identity(nb, format="csr")).tocsr()
         self.iterations = 0  # local Newton iterations of this simulation
-        self.relaxations = 0
 
     def reset(self) -> None:
-        self.iterations = self.relaxations = 0
+        self.iterations = 0
 
     def region(self) -> np.ndarray | None:
         """Blocks of the hot spot, or None when the residual is not concentrated there."""
@@ -144,12 +140,13 @@ class LocalRelaxation:
             u_all[dofs[free]] = u[free]
             eqs.assembler.tangent_fresh = False
             self.iterations += its
-            self.relaxations += 1
             log.debug("local relaxation at %.4g: %d nodes, %d iterations", lam,
                       region.size, its)
         return its
 
 
 def available(eqs) -> bool:
-    """The hot spot can be relaxed: the serial C assembly is in use."""
-    return isinstance(getattr(eqs.assembler, "c", None), tet.TetAssembler)
+    """The hot spot can be relaxed: the serial C assembly of a Lagrange element is in use (the
+    local problem is that element's; an assembler with another energy says no).
+    """
+    return eqs.assembler.relaxable
