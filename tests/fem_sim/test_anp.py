@@ -85,7 +85,8 @@ def test_anp_does_not_lock():
     assert abs(tip["ANP"] - tip["P2"]) < 0.5 * abs(tip["P1"] - tip["P2"]), tip
 
 
-@pytest.mark.parametrize("kw", [{"element": "anp4"}, {"element": "anp", "degree": 2}])
+@pytest.mark.parametrize("kw", [{"element": "anp4"}, {"element": "anp", "degree": 2},
+                                {"element": "anp", "settings": {"factorization": "petsc"}}])
 def test_bad_element_is_refused_before_any_mesh_work(kw):
     g = box_mesh(1)
     with pytest.raises(ValueError, match="element"):
