@@ -130,11 +130,10 @@ def fit(ds: Dataset, train_samples: np.ndarray, cfg: dict, seed: int, label: str
     from flax.training import train_state
     from flax.training.early_stopping import EarlyStopping
 
-    from surrogate.train import LearningRateRule, end_of_epoch, inner_split
+    from surrogate.train import LearningRateRule, early_stopping_split, end_of_epoch
 
     check_dataset(ds)
-    rng = np.random.default_rng(seed)
-    tr, va = inner_split(ds, train_samples, cfg, rng)
+    tr, va, rng = early_stopping_split(ds, train_samples, cfg, seed)
     U = fields(ds, tr)
     modes = compute_modes(U, cfg["modes"], seed).astype(np.float32)
     X = load_features(ds.forces, ds.load_points, ds.extra)

@@ -36,6 +36,7 @@ class Dataset:
     points: list[np.ndarray]    # per geometry: (n_nodes, 3)
     fixed: list[np.ndarray]     # per geometry: fixed node ids
     out_nodes: list[np.ndarray]  # per geometry: output node ids
+    triangles: list[np.ndarray]  # per geometry: outward surface triangles (node ids)
     shape_coeffs: list[np.ndarray]
     sample_geo: np.ndarray      # (S,) geometry of each sample
     sample_sim: np.ndarray      # (S,) simulation index
@@ -106,7 +107,7 @@ def load_dataset(directory: str | Path, stream: bool | str = "auto",
         spill = stack.enter_context(open(stack.enter_context(atomic_path(final)), "wb"))
         log.info("streaming targets to %s", final)
     geo_index: dict[str, int] = {}
-    points, fixed, out_nodes, shapes, statics = [], [], [], [], []
+    points, fixed, out_nodes, triangles, shapes, statics = [], [], [], [], [], []
     s_geo, s_sim, s_fr, s_f, s_lp, s_ln, s_extra, targets = [], [], [], [], [], [], [], []
     failed = 0
     with stack:  # on leaving: the spill file is closed, then renamed (last in, first out)
@@ -126,6 +127,7 @@ def load_dataset(directory: str | Path, stream: bool | str = "auto",
                 points.append(g.points)
                 fixed.append(sh.fixed_nodes)
                 out_nodes.append(sh.output_nodes)
+                triangles.append(g.surface_triangles)
                 shapes.append(g.shape_coefficients if g.shape_coefficients is not None
                               else np.zeros(0))
                 statics.append(static_node_features(g.points, sh.fixed_nodes)[sh.output_nodes])
@@ -165,6 +167,7 @@ def load_dataset(directory: str | Path, stream: bool | str = "auto",
         static=np.concatenate(statics).astype(np.float32),
         geo_offset=np.concatenate([[0], np.cumsum([s.shape[0] for s in statics])]),
         geo_ids=list(geo_index), points=points, fixed=fixed, out_nodes=out_nodes,
+        triangles=triangles,
         shape_coeffs=shapes, sample_geo=np.asarray(s_geo), sample_sim=np.asarray(s_sim),
         sample_fraction=np.asarray(s_fr), forces=np.asarray(s_f, dtype=np.float32),
         load_points=np.asarray(s_lp, dtype=np.float32), load_nodes=np.asarray(s_ln),

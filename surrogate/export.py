@@ -4,7 +4,8 @@ model never executes code. ``load_predictor(path)`` returns a jitted predictor i
     RUN/model/model.json     format, version, config, feature spec, normalisation statistics,
                              training ranges
     RUN/model/params.npz     network parameters, keys "Dense_0/kernel", ...
-    RUN/model/geometry.npz   the liver (points, fixed nodes) when the scene has one liver
+    RUN/model/geometry.npz   the liver (points, fixed nodes, output nodes, outward surface
+                             triangles) when the scene has one liver: enough to draw it
 """
 
 from __future__ import annotations
@@ -29,23 +30,25 @@ PRECISIONS = ("float32", "bfloat16", "float16")
 log = logging.getLogger(__name__)
 
 
-def export_model(directory, params, norm: Normaliser, cfg, ds) -> Path:
+def export_model(directory, params, norm: Normaliser, cfg, ds, unseen=()) -> Path:
     """Write a model directory from a trained node-wise network, its normaliser and its
-    dataset.
+    dataset. ``unseen``: the simulations the model never trained on (recorded for viewers).
     """
-    return _export(directory, params, {"design": "nodewise", "stats": norm.to_dict()}, cfg, ds)
+    return _export(directory, params, {"design": "nodewise", "stats": norm.to_dict()}, cfg, ds,
+                   unseen)
 
 
-def export_basis(directory, model, cfg, ds) -> Path:
+def export_basis(directory, model, cfg, ds, unseen=()) -> Path:
     """Write a model directory from a trained :class:`surrogate.basis.BasisModel`: its network
     in params.npz, its modes in basis.npz, its statistics in model.json.
     """
-    d = _export(directory, model.params, {"design": "basis", "stats": model.stats()}, cfg, ds)
+    d = _export(directory, model.params, {"design": "basis", "stats": model.stats()}, cfg, ds,
+                unseen)
     np.savez(d / "basis.npz", modes=model.modes)
     return d
 
 
-def _export(directory, params, design: dict, cfg, ds) -> Path:
+def _export(directory, params, design: dict, cfg, ds, unseen=()) -> Path:
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     flat = traverse_util.flatten_dict(params, sep="/")
@@ -60,11 +63,14 @@ def _export(directory, params, design: dict, cfg, ds) -> Path:
             "extra_min": ds.extra.min(axis=0).tolist() if ds.extra.size else [],
             "extra_max": ds.extra.max(axis=0).tolist() if ds.extra.size else []},
         "units": {"length": "mm", "force": "N", "stress": "MPa"},
+        # Simulations held out of the exported model's training (its early-stopping slice):
+        # the honest cases to compare it with the FE solution on (surrogate.viewer --compare).
+        "unseen_simulations": sorted(int(i) for i in unseen),
     }
     meta["embedded_geometry"] = len(ds.points) == 1
     if meta["embedded_geometry"]:
         np.savez(d / "geometry.npz", points=ds.points[0], fixed=ds.fixed[0],
-                 output_nodes=ds.out_nodes[0])
+                 output_nodes=ds.out_nodes[0], triangles=ds.triangles[0])
     (d / "model.json").write_text(json.dumps(meta, indent=1))
     return d
 
@@ -155,6 +161,8 @@ class Predictor:
                 with np.load(geo, allow_pickle=False) as z:
                     self.points, self.fixed = z["points"], z["fixed"]
                     self.output_nodes = z["output_nodes"]
+                    # Models exported before the triangles were stored have none.
+                    self.triangles = z["triangles"] if "triangles" in z.files else None
             except (OSError, KeyError, ValueError) as exc:
                 raise ValueError(f"{geo}: cannot be read ({exc})") from None
             self.static = jnp.asarray(static_node_features(self.points, self.fixed),
@@ -163,6 +171,7 @@ class Predictor:
             raise ValueError(f"{geo}: missing (the model was exported with its liver)")
         else:
             self.points = self.fixed = self.static = self.output_nodes = None
+            self.triangles = None
         if self.design == "basis":
             self._init_basis(d, meta, hidden, dtype)
             return

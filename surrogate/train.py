@@ -137,13 +137,21 @@ def inner_split(ds: Dataset, train_samples: np.ndarray, cfg: dict, rng):
     return train_samples[~is_val], train_samples[is_val]
 
 
+def early_stopping_split(ds: Dataset, train_samples: np.ndarray, cfg: dict, seed: int):
+    """(training samples, early-stopping samples, rng) of a fit with this seed: every design's
+    fit starts here, so the exported model's unseen simulations are known without training.
+    """
+    rng = np.random.default_rng(seed)
+    tr, va = inner_split(ds, train_samples, cfg, rng)
+    return tr, va, rng
+
+
 def fit(ds: Dataset, train_samples: np.ndarray, cfg: dict, seed: int, label: str = "",
         log_fn=print) -> tuple[dict, dict, list[dict]]:
     """Train on ``train_samples`` (a slice held out for early stopping). Returns
     (params, normaliser, per-epoch history).
     """
-    rng = np.random.default_rng(seed)
-    tr, va = inner_split(ds, train_samples, cfg, rng)
+    tr, va, rng = early_stopping_split(ds, train_samples, cfg, seed)
     rows, smp, tgt = example_index(ds, tr)
     data = device_data(ds)
     norm = normalisation(ds, data, rows, smp, tgt, rng)
@@ -337,10 +345,12 @@ def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
     if cfg["final_fit"]:
         model, hist = fit_design(ds, np.arange(ds.n_samples), cfg, cfg["seed"], "final ", say)
         history["final"] = hist
+        _, held, _ = early_stopping_split(ds, np.arange(ds.n_samples), cfg, cfg["seed"])
+        unseen = np.unique(ds.sample_sim[held])
         if cfg["design"] == "basis":
-            export_basis(run / "model", model, cfg, ds)
+            export_basis(run / "model", model, cfg, ds, unseen)
         else:
-            export_model(run / "model", *model, cfg, ds)
+            export_model(run / "model", *model, cfg, ds, unseen)
         say(f"model exported to {run / 'model'}")
     result["total_seconds"] = time.perf_counter() - t0
     (run / "metrics.json").write_text(json.dumps(result, indent=1))

@@ -11,8 +11,9 @@ from data_spec import geometry_path, list_shards, read_geometry, read_shard, val
 
 
 def summary(directory: str | Path, out=sys.stdout, png: str | Path | None = None) -> int:
-    """Print counts and statistics; render up to four deformed livers to ``png``
-    (default DIR/summary.png).
+    """Print counts and statistics; render three deformed livers to ``png`` (default
+    DIR/summary.png): the converged simulations with the largest, the median and the smallest
+    maximum displacement, so the picture shows the dataset's range.
     """
     directory = Path(directory)
     paths = list_shards(directory)
@@ -21,7 +22,7 @@ def summary(directory: str | Path, out=sys.stdout, png: str | Path | None = None
         return 1
     problems = validate_dataset(directory)
     ok, failed, reasons = 0, 0, {}
-    max_disp, iters, cut, wall, shown = [], [], [], [], []
+    max_disp, iters, cut, wall, candidates = [], [], [], [], []
     for p in paths:
         try:
             s = read_shard(p)
@@ -35,8 +36,8 @@ def summary(directory: str | Path, out=sys.stdout, png: str | Path | None = None
             reasons[key] = reasons.get(key, 0) + 1
         if s.n_done:
             max_disp.append(np.linalg.norm(s.displacement[-1], axis=1).max())
-            if s.status == "ok" and len(shown) < 4 and s.output_nodes.size:
-                shown.append(p)
+            if s.status == "ok" and s.output_nodes.size:
+                candidates.append((max_disp[-1], p))
             iters.extend(s.stats.newton_iterations.tolist())
             cut.extend(s.stats.cutbacks.tolist())
         wall.append(float(s.stats.info.get("total_wall_time", np.sum(s.stats.wall_time))))
@@ -56,21 +57,41 @@ def summary(directory: str | Path, out=sys.stdout, png: str | Path | None = None
         pr(f"  failed x{v}: {k}")
     for p in problems[:20]:
         pr(f"  problem: {p}")
+    shown = range_cases(candidates)
     if shown:
         from fem_sim.render import render_shards
 
         items = []
-        for p in shown:
+        for what, p in shown:
             s = read_shard(p)
             g = read_geometry(geometry_path(directory, s.geometry_id))
             u = np.zeros((g.n_nodes, 3))
             u[s.output_nodes] = s.displacement[-1]
-            items.append((g, u, s.load_nodes, f"sim {s.sim_index}: |F| = "
-                          f"{np.linalg.norm(s.forces, axis=1).max():.2f} N, max |u| = "
+            items.append((g, u, s.load_nodes, s.forces,
+                          f"{what}: sim {s.sim_index}, force "
+                          f"{np.linalg.norm(s.forces, axis=1).max():.2f} N\nmax displacement "
                           f"{np.linalg.norm(u, axis=1).max():.1f} mm"))
         png = Path(png or directory / "summary.png")
         png.parent.mkdir(parents=True, exist_ok=True)
         target = render_shards(items, png,
-                               f"{directory.name}: deformed livers at full load")
+                               f"{directory}: deformed livers at full load (largest, median, "
+                               "smallest maximum displacement)")
         pr(f"  picture: {target}")
     return 0 if not problems else 1
+
+
+def range_cases(candidates) -> list[tuple[str, Path]]:
+    """(label, shard) of the largest, median and smallest of (max |u|, shard) pairs; fewer
+    when there are fewer distinct shards.
+    """
+    if not candidates:
+        return []
+    order = sorted(candidates, key=lambda c: (c[0], str(c[1])))
+    picks = [("largest", order[-1]), ("median", order[(len(order) - 1) // 2]),
+             ("smallest", order[0])]
+    seen, out = set(), []
+    for what, (_, p) in picks:
+        if p not in seen:
+            seen.add(p)
+            out.append((what, p))
+    return out

@@ -1,0 +1,223 @@
+"""The liver manipulator's logic, without a window: which node a click picks, which force a
+drag sets (clamped to the training range), which inputs the model takes, and the prediction.
+
+:mod:`surrogate.viewer` draws it (pyvista); the tests drive it directly. A *handle* is one force
+of the model (two for a two-force model): a surface node and a force vector in N. Dragging a
+handle's sphere to ``tip`` sets the force ``f_max * (tip - x_node) / drag_length``, so a drag
+of ``drag_length`` mm (a quarter of the liver's size by default) asks for the largest force
+seen in training; longer drags are clamped to it.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from data_spec.pictures import Surface
+
+
+@dataclass
+class Handle:
+    """One force of the model: where it acts and what it is."""
+
+    node: int                                  # mesh node id of the load
+    force: np.ndarray = field(default_factory=lambda: np.zeros(3))  # N
+
+
+@dataclass
+class Input:
+    """One scalar model input a slider sets: a material parameter or a shape coefficient."""
+
+    name: str
+    lo: float
+    hi: float
+    value: float
+
+
+@dataclass
+class Frame:
+    """One prediction: displacement of the surface vertices (mm), of all predicted nodes, and
+    the seconds the surrogate took.
+    """
+
+    surface_u: np.ndarray
+    u: np.ndarray
+    seconds: float
+
+
+def material_names(material_dim: int) -> list[str]:
+    """Names of the material vector (c_1..c_n, m_1..m_n, K), as features.material_vector."""
+    n = (material_dim - 1) // 2
+    return ([f"c{k + 1} (MPa)" for k in range(n)] + [f"m{k + 1}" for k in range(n)]
+            + ["K (MPa)"])
+
+
+class Manipulator:
+    """State of the manipulator around a loaded :class:`surrogate.export.Predictor`.
+
+    ``nodes``: "surface" predicts the surface vertices only (what is drawn); "all" predicts
+    every node of the liver (the whole field, as a simulator would use it) and draws the
+    surface. ``geometry``: (points, fixed nodes, surface triangles, shape coefficients) for a
+    model trained on several livers (it has no liver of its own).
+    """
+
+    def __init__(self, predictor, *, nodes: str = "surface", geometry=None,
+                 drag_length: float | None = None):
+        if nodes not in ("surface", "all"):
+            raise ValueError(f"nodes: expected 'surface' or 'all', got {nodes!r}")
+        self.pred = predictor
+        spec = predictor.spec
+        if geometry is None:
+            if predictor.points is None:
+                raise ValueError("this model was trained on several livers: give the liver to "
+                                 "show (the viewer's --data DIR [--liver ID])")
+            if predictor.triangles is None:
+                raise ValueError("the model directory has no surface triangles (exported "
+                                 "before they were stored): retrain, or give --data DIR")
+            points, fixed, triangles = predictor.points, predictor.fixed, predictor.triangles
+            shape = np.zeros(0)
+            self._geometry = None
+        else:
+            points, fixed, triangles, shape = (np.asarray(a) for a in geometry)
+            self._geometry = (points, fixed)
+        self.points = np.asarray(points, dtype=np.float64)
+        self.fixed = np.asarray(fixed)
+        self.surface = Surface.from_mesh(self.points, triangles, self.fixed)
+        self.f_max = float(predictor.force_norm_max)
+        self.drag_length = float(drag_length or 0.25 * self.surface.size)
+        self.nodes_mode = nodes
+        self._predict_nodes, self._rows = self._node_plan(nodes)
+        rng = predictor.meta["training_range"]
+        lo, hi = np.asarray(rng["extra_min"], float), np.asarray(rng["extra_max"], float)
+        names = material_names(spec.material_dim) if spec.material_dim else []
+        names += [f"shape {k + 1}" for k in range(spec.geometry_dim)]
+        start = np.concatenate([0.5 * (lo + hi)[: spec.material_dim],
+                                np.asarray(shape, float).reshape(-1)[: spec.geometry_dim]])
+        if start.size != len(names):
+            start = 0.5 * (lo + hi)
+        self.inputs = [Input(n, float(a), float(b), float(v))
+                       for n, a, b, v in zip(names, lo, hi, start)]
+        self.handles = [Handle(node=n) for n in self.default_nodes(spec.n_loads)]
+        self.active = 0
+
+    # -- picking and dragging ------------------------------------------------------------------
+    def default_nodes(self, n: int) -> list[int]:
+        """Surface nodes farthest from the fixed region (and from each other): where a user
+        pulls first.
+        """
+        x = self.surface.points
+        d = np.full(x.shape[0], np.inf)
+        for a in self.points[self.fixed]:  # distance to the nearest fixed node
+            d = np.minimum(d, np.linalg.norm(x - a, axis=1))
+        out = []
+        for _ in range(n):
+            i = int(np.argmax(d))
+            out.append(int(self.surface.nodes[i]))
+            d = np.minimum(d, np.linalg.norm(x - x[i], axis=1))
+        return out
+
+    def nearest_surface_node(self, xyz) -> int:
+        """The surface node closest to a point (mm) in the undeformed liver."""
+        xyz = np.asarray(xyz, dtype=float).reshape(3)
+        if not np.all(np.isfinite(xyz)):
+            raise ValueError(f"pick: expected a finite point, got {xyz.tolist()}")
+        i = int(np.argmin(np.linalg.norm(self.surface.points - xyz, axis=1)))
+        return int(self.surface.nodes[i])
+
+    def pick(self, xyz, handle: int | None = None, deformed: np.ndarray | None = None) -> int:
+        """Move a handle (default: the active one) to the surface node nearest ``xyz``; its
+        force is kept. ``deformed``: the surface vertices as drawn, when the click was on the
+        deformed liver.
+        """
+        h = self._handle(handle)
+        if deformed is not None:
+            i = int(np.argmin(np.linalg.norm(np.asarray(deformed) - np.asarray(xyz), axis=1)))
+            node = int(self.surface.nodes[i])
+        else:
+            node = self.nearest_surface_node(xyz)
+        if int(node) in self.fixed.tolist():
+            return self.handles[h].node  # the fixed region cannot be loaded: keep the node
+        self.handles[h].node = node
+        return node
+
+    def drag(self, tip, handle: int | None = None) -> np.ndarray:
+        """Set a handle's force from its sphere's position ``tip`` (mm); returns it (N)."""
+        h = self._handle(handle)
+        tip = np.asarray(tip, dtype=float).reshape(3)
+        f = self.f_max * (tip - self.points[self.handles[h].node]) / self.drag_length
+        return self.set_force(f, h)
+
+    def handle_position(self, handle: int | None = None) -> np.ndarray:
+        """Where a handle's sphere sits for its current force (the inverse of ``drag``)."""
+        h = self.handles[self._handle(handle)]
+        return self.points[h.node] + h.force / self.f_max * self.drag_length
+
+    def set_force(self, force, handle: int | None = None) -> np.ndarray:
+        """Set a force (N), its magnitude clamped to the training range; returns it."""
+        h = self._handle(handle)
+        f = np.asarray(force, dtype=float).reshape(3)
+        if not np.all(np.isfinite(f)):
+            raise ValueError(f"force: expected finite components, got {f.tolist()}")
+        mag = float(np.linalg.norm(f))
+        if mag > self.f_max:
+            f = f * (self.f_max / mag)
+        self.handles[h].force = f
+        return f
+
+    def set_magnitude(self, magnitude: float, handle: int | None = None) -> np.ndarray:
+        """Scale a force to ``magnitude`` N (clamped), keeping its direction (default
+        direction for a zero force: into the liver along the inward normal).
+        """
+        h = self._handle(handle)
+        f = self.handles[h].force
+        n = float(np.linalg.norm(f))
+        if n > 0:
+            direction = f / n
+        else:
+            i = self.surface.local([self.handles[h].node])[0]
+            direction = -self.surface.normals()[i]
+        return self.set_force(direction * max(float(magnitude), 0.0), h)
+
+    def set_input(self, index: int, value: float) -> float:
+        """Set a material / shape input, clamped to the training range; returns it."""
+        inp = self.inputs[index]
+        inp.value = float(np.clip(value, inp.lo, inp.hi))
+        return inp.value
+
+    def _handle(self, handle: int | None) -> int:
+        h = self.active if handle is None else int(handle)
+        if not 0 <= h < len(self.handles):
+            raise ValueError(f"handle: this model has {len(self.handles)} force(s), got {h}")
+        return h
+
+    # -- prediction -----------------------------------------------------------------------------
+    def _node_plan(self, nodes: str):
+        """(node ids to predict or None for all, rows of the prediction for the surface
+        vertices). A reduced-basis model predicts its output nodes only.
+        """
+        surf = self.surface.nodes
+        if nodes == "surface":
+            return surf, np.arange(surf.size)
+        n_all = self.points.shape[0]
+        if self.pred.design == "basis" and self.pred.output_nodes.size != n_all:
+            raise ValueError(f"nodes='all': this reduced-basis model predicts its "
+                             f"{self.pred.output_nodes.size} output nodes, not all {n_all}")
+        return None, surf
+
+    def predict(self) -> Frame:
+        """The surrogate's displacement for the current handles and inputs."""
+        spec = self.pred.spec
+        forces = np.stack([h.force for h in self.handles])
+        nodes = np.array([h.node for h in self.handles])
+        values = np.array([i.value for i in self.inputs])
+        material = values[: spec.material_dim] if spec.material_dim else None
+        geometry = None
+        if self._geometry is not None:
+            geometry = (*self._geometry, values[spec.material_dim:])
+        t = time.perf_counter()
+        u = self.pred(forces, nodes, nodes=self._predict_nodes, material=material,
+                      geometry=geometry)
+        seconds = time.perf_counter() - t
+        return Frame(surface_u=u[self._rows], u=u, seconds=seconds)

@@ -1,0 +1,496 @@
+"""The liver manipulator (pyvista): pick a point on the liver, pull, watch the surrogate deform it.
+
+    python -m surrogate.viewer RUN_DIR                       a window (needs a display; Xvfb works)
+    python -m surrogate.viewer RUN_DIR --offscreen --out DIR [--script forces.json]
+                                                             frames + GIF, no display needed
+    python -m surrogate.viewer RUN_DIR --compare --data DATA [--sim N] [--offscreen --out DIR]
+                                                             FE beside surrogate, error coloured
+
+RUN_DIR is a training run (its ``model/``) or a model directory. In the window: right-click a
+surface point to move the active force there; drag the red sphere to set the force (its
+magnitude is clamped to the training range and shown on screen); the slider sets the magnitude;
+keys 1 / 2 choose the force of a two-force model, ``r`` sets the forces to zero. Sliders set the
+material / shape inputs when the model has them. The status line shows the surrogate's inference
+time and the frame time (inference + drawing).
+
+A script (``--script``) is JSON: ``{"fps": 10, "frames": [{"nodes": [id] or "points": [[x, y,
+z]], "forces": [[fx, fy, fz]], "steps": 12, "inputs": [...]}, ...]}``; each entry is reached
+from the previous one in ``steps`` frames (forces interpolated linearly), ``inputs`` sets the
+material / shape values. Without a script a default pull sequence is drawn.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from data_spec.pictures import (
+    FORCE,
+    LiverView,
+    Panel,
+    frame_camera,
+    pyvista,
+    render_panels,
+    write_gif,
+)
+
+log_prefix = "surrogate.viewer"
+
+
+class ViewerError(ValueError):
+    """Bad input to the viewer; the message names the file and the key."""
+
+
+def model_dir(run: Path) -> Path:
+    """The model directory of a run (RUN/model) or the directory itself."""
+    for d in (run / "model", run):
+        if (d / "model.json").exists():
+            return d
+    raise ViewerError(f"{run}: no model.json in it or in {run / 'model'} (train first: "
+                      "python -m surrogate train --data DATA --run RUN)")
+
+
+def dataset_liver(data: Path, liver: str | None):
+    """(points, fixed, triangles, shape coefficients) of a liver of a dataset (the first, or
+    geometry id ``liver``): what a model trained on several livers is shown on.
+    """
+    from data_spec import geometry_path, list_shards, read_geometry, read_shard
+
+    shards = list_shards(data)
+    if not shards:
+        raise ViewerError(f"{data}: no shards (expected {data}/sims/sim_*.h5)")
+    for p in shards:
+        s = read_shard(p)
+        if liver is None or s.geometry_id == liver:
+            g = read_geometry(geometry_path(data, s.geometry_id))
+            shape = g.shape_coefficients if g.shape_coefficients is not None else np.zeros(0)
+            return g.points, s.fixed_nodes, g.surface_triangles, shape
+    raise ViewerError(f"{data}: no simulation on liver {liver!r}")
+
+
+def load_script(path: Path | None, m) -> tuple[list[dict], float]:
+    """(frames, fps) of a force script: each frame gives nodes, forces (n_loads, 3) and inputs,
+    checked against the model; errors name the file and the key.
+    """
+    L = len(m.handles)
+    if path is None:  # the default: pull the far node outward, sweep the direction, let go
+        node = m.handles[0].node
+        i = m.surface.local([node])[0]
+        n = m.surface.normals()[i]
+        side = np.cross(n, [0.0, 0.0, 1.0])
+        side = side / max(np.linalg.norm(side), 1e-12)
+        f = m.f_max
+        keys = [(np.zeros(3), 1), (-f * n, 12), (f * side, 12), (f * n * 0.6, 12),
+                (-f * side, 12), (np.zeros(3), 10)]
+        frames, prev = [], np.zeros((L, 3))
+        for target, steps in keys:
+            tgt = np.zeros((L, 3))
+            tgt[0] = target
+            if L > 1:
+                tgt[1] = -target[[1, 2, 0]] * 0.5
+            for s in range(1, steps + 1):
+                frames.append({"nodes": [h.node for h in m.handles],
+                               "forces": prev + (tgt - prev) * s / steps, "inputs": None})
+            prev = tgt
+        return frames, 12.0
+    try:
+        spec = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise ViewerError(f"{path}: no such script file") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ViewerError(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(spec, dict) or not isinstance(spec.get("frames"), list) or \
+            not spec["frames"]:
+        raise ViewerError(f"{path}: expected an object with a non-empty list 'frames'")
+    unknown = set(spec) - {"fps", "frames"}
+    if unknown:
+        raise ViewerError(f"{path}: unknown key(s) {sorted(unknown)} (expected fps, frames)")
+    fps = spec.get("fps", 10)
+    if not isinstance(fps, (int, float)) or not 0 < fps <= 60:
+        raise ViewerError(f"{path}: fps: expected a number in (0, 60], got {fps!r}")
+    frames, prev = [], np.zeros((L, 3))
+    nodes = [h.node for h in m.handles]
+    inputs = None
+    for k, entry in enumerate(spec["frames"]):
+        where = f"{path}: frames[{k}]"
+        if not isinstance(entry, dict):
+            raise ViewerError(f"{where}: expected an object")
+        bad = set(entry) - {"nodes", "points", "forces", "steps", "inputs"}
+        if bad:
+            raise ViewerError(f"{where}: unknown key(s) {sorted(bad)} (expected nodes or "
+                              "points, forces, steps, inputs)")
+        try:
+            forces = np.asarray(entry.get("forces"), dtype=float)
+        except (TypeError, ValueError):
+            forces = np.zeros(0)
+        if forces.shape != (L, 3) or not np.all(np.isfinite(forces)):
+            raise ViewerError(f"{where}: forces: expected {L} finite [fx, fy, fz] in N, got "
+                              f"{entry.get('forces')!r}")
+        if "nodes" in entry and "points" in entry:
+            raise ViewerError(f"{where}: give nodes or points, not both")
+        if "nodes" in entry:
+            ids = entry["nodes"]
+            if not (isinstance(ids, list) and len(ids) == L and all(
+                    isinstance(i, int) and 0 <= i < m.points.shape[0] for i in ids)):
+                raise ViewerError(f"{where}: nodes: expected {L} node id(s) in "
+                                  f"[0, {m.points.shape[0]}), got {ids!r}")
+            nodes = list(ids)
+        elif "points" in entry:
+            try:
+                pts = np.asarray(entry["points"], dtype=float)
+            except (TypeError, ValueError):
+                pts = np.zeros(0)
+            if pts.shape != (L, 3) or not np.all(np.isfinite(pts)):
+                raise ViewerError(f"{where}: points: expected {L} finite [x, y, z] in mm")
+            nodes = [m.nearest_surface_node(p) for p in pts]
+        if "inputs" in entry:
+            vals = entry["inputs"]
+            if not (isinstance(vals, list) and len(vals) == len(m.inputs) and all(
+                    isinstance(v, (int, float)) and np.isfinite(v) for v in vals)):
+                names = [i.name for i in m.inputs]
+                raise ViewerError(f"{where}: inputs: expected {len(names)} numbers "
+                                  f"({', '.join(names) or 'this model takes none'})")
+            inputs = list(vals)
+        steps = entry.get("steps", 1)
+        if not isinstance(steps, int) or steps < 1:
+            raise ViewerError(f"{where}: steps: expected an integer >= 1, got {steps!r}")
+        for s in range(1, steps + 1):
+            frames.append({"nodes": nodes, "forces": prev + (forces - prev) * s / steps,
+                           "inputs": inputs})
+        prev = forces
+    return frames, float(fps)
+
+
+def apply_frame(m, frame: dict) -> None:
+    for j, h in enumerate(m.handles):
+        h.node = int(frame["nodes"][j])
+        m.set_force(frame["forces"][j], j)
+    if frame.get("inputs") is not None:
+        for i, v in enumerate(frame["inputs"]):
+            m.set_input(i, v)
+
+
+def display_range(m) -> float:
+    """A fixed colour range (mm) for a live view: the largest |u| of the surface under the
+    largest training force along +-x, +-y, +-z at each handle's node, rounded up.
+    """
+    saved = [h.force.copy() for h in m.handles]
+    top = 0.0
+    for j in range(len(m.handles)):
+        for axis in np.vstack([np.eye(3), -np.eye(3)]):
+            for k, h in enumerate(m.handles):
+                h.force = axis * m.f_max if k == j else np.zeros(3)
+            top = max(top, float(np.linalg.norm(m.predict().surface_u, axis=1).max()))
+    for h, f in zip(m.handles, saved):
+        h.force = f
+    return float(np.ceil(max(top, 1e-3) * 1.1))
+
+
+def status_text(m, inference_s: float, frame_s: float | None) -> str:
+    parts = []
+    for j, h in enumerate(m.handles):
+        mark = "*" if j == m.active and len(m.handles) > 1 else ""
+        parts.append(f"F{j + 1}{mark} = {np.linalg.norm(h.force):.3f} N (max {m.f_max:.2f}) "
+                     f"at node {h.node}")
+    for inp in m.inputs[:4]:
+        parts.append(f"{inp.name} = {inp.value:.4g}")
+    n = m.surface.nodes.size if m.nodes_mode == "surface" else m.points.shape[0]
+    timing = f"inference {inference_s * 1e3:.2f} ms ({n} nodes, {m.nodes_mode})"
+    if frame_s:
+        timing += f", frame {frame_s * 1e3:.1f} ms ({1 / frame_s:.0f} fps)"
+    return "\n".join(parts + [timing])
+
+
+class Scene:
+    """A plotter showing one manipulator: the liver, its arrows, its handles, the status."""
+
+    def __init__(self, plotter, m, clim: float):
+        self.p, self.m = plotter, m
+        plotter.set_background("white")
+        # Measured with Mesa's software OpenGL at 1000 x 760: multi-sample anti-aliasing took
+        # 37 of 61 ms per frame, and a corner annotation replaced per frame 90-220 ms; a text
+        # actor whose string changes costs ~1 ms.
+        plotter.disable_anti_aliasing()
+        self.view = LiverView(plotter, m.surface, clim=(0.0, clim), f_ref=m.f_max)
+        frame_camera(plotter, m.surface, [h.node for h in m.handles])
+        h = plotter.window_size[1]
+        self.status = plotter.add_text(" ", position=(10, h - 80), font_size=10, color="black")
+        self.last_frame_s = None
+        self.last = None
+
+    def draw(self) -> None:
+        """Predict, move the surface, redraw the arrows and the status line; render."""
+        t = time.perf_counter()
+        frame = self.m.predict()
+        self.last = frame
+        self.view.update(frame.surface_u, [h.force for h in self.m.handles],
+                         [h.node for h in self.m.handles])
+        self.status.input = status_text(self.m, frame.seconds, self.last_frame_s)
+        self.p.render()
+        self.last_frame_s = time.perf_counter() - t
+
+    def deformed(self) -> np.ndarray:
+        return self.m.surface.points + (self.last.surface_u if self.last is not None else 0.0)
+
+
+def run_window(m, clim: float, screenshot: Path | None, window_size) -> int:
+    """The interactive manipulator. With ``screenshot`` it draws the first frame (the default
+    script's strongest pull), saves it and closes: the check that a window opens.
+    """
+    pv = pyvista()
+    p = pv.Plotter(window_size=window_size, title="liverfem manipulator")
+    scene = Scene(p, m, clim)
+    r = 0.02 * m.surface.size
+    widgets = []
+
+    def move_widgets():
+        for j, w in enumerate(widgets):
+            w.SetCenter(*m.handle_position(j))
+
+    def on_drag(center, widget, j):
+        m.active = j
+        m.drag(center, j)
+        widget.SetCenter(*m.handle_position(j))  # a clamped force pulls the sphere back
+        slider.GetRepresentation().SetValue(float(np.linalg.norm(m.handles[j].force)))
+        scene.draw()
+
+    for j in range(len(m.handles)):
+        widgets.append(p.add_sphere_widget(
+            lambda c, w, j=j: on_drag(c, w, j), center=m.handle_position(j), radius=r,
+            color=FORCE if j == 0 else "darkorange", pass_widget=True,
+            interaction_event="always"))
+
+    def on_pick(point):
+        if point is None:
+            return
+        m.pick(np.asarray(point), deformed=scene.deformed())
+        move_widgets()
+        scene.draw()
+
+    p.enable_surface_point_picking(callback=on_pick, show_message=False, show_point=False,
+                                   left_clicking=False)
+
+    def on_magnitude(value):
+        m.set_magnitude(value)
+        move_widgets()
+        scene.draw()
+
+    slider = p.add_slider_widget(on_magnitude, (0.0, m.f_max), value=0.0,
+                                 title="force of the active handle (N)", pointa=(0.55, 0.92),
+                                 pointb=(0.95, 0.92), interaction_event="always",
+                                 style="modern", color="black", title_height=0.02)
+    for i, inp in enumerate(m.inputs[:4]):  # the leading inputs: more would not fit
+        def on_input(value, i=i):
+            m.set_input(i, value)
+            scene.draw()
+
+        y = 0.72 - 0.1 * i
+        p.add_slider_widget(on_input, (inp.lo, inp.hi), value=inp.value, title=inp.name,
+                            pointa=(0.02, y), pointb=(0.3, y), interaction_event="end",
+                            style="modern", color="black", title_height=0.02)
+
+    def choose(j):
+        if j < len(m.handles):
+            m.active = j
+            slider.GetRepresentation().SetValue(float(np.linalg.norm(m.handles[j].force)))
+            scene.draw()
+
+    def reset():
+        for j in range(len(m.handles)):
+            m.set_force(np.zeros(3), j)
+        move_widgets()
+        slider.GetRepresentation().SetValue(0.0)
+        scene.draw()
+
+    p.add_key_event("1", lambda: choose(0))
+    p.add_key_event("2", lambda: choose(1))
+    p.add_key_event("r", reset)
+    p.add_text("right-click: move the force; drag the sphere: pull; keys 1, 2: which force; "
+               "r: reset", position=(10, window_size[1] - 24), font_size=9, color="black")
+    if screenshot is not None:
+        frames, _ = load_script(None, m)
+        strongest = max(frames, key=lambda f: float(np.linalg.norm(f["forces"])))
+        apply_frame(m, strongest)
+        move_widgets()
+        p.show(interactive=False, auto_close=False)
+        scene.draw()
+        scene.draw()  # a second frame: its status line reports the first frame's time
+        screenshot.parent.mkdir(parents=True, exist_ok=True)
+        p.screenshot(str(screenshot))
+        p.close()
+        print(f"{log_prefix}: window opened, screenshot {screenshot}")
+        return 0
+    scene.draw()
+    p.show()
+    return 0
+
+
+def run_offscreen(m, clim: float, script: Path | None, out: Path, window_size) -> dict:
+    """Render a force script to PNG frames and an animated GIF; returns the timings."""
+    pv = pyvista()
+    frames, fps = load_script(script, m)
+    out.mkdir(parents=True, exist_ok=True)
+    p = pv.Plotter(off_screen=True, window_size=window_size)
+    scene = Scene(p, m, clim)
+    images, inference, frame_times = [], [], []
+    for k, fr in enumerate(frames):
+        apply_frame(m, fr)
+        scene.draw()
+        img = p.screenshot(str(out / f"frame_{k:04d}.png"), return_img=True)
+        images.append(img)
+        inference.append(scene.last.seconds)
+        frame_times.append(scene.last_frame_s)
+    p.close()
+    gif = write_gif(images, out / "manipulator.gif", fps)
+    timing = {"frames": len(frames), "nodes_mode": m.nodes_mode,
+              "nodes_predicted": int(m.surface.nodes.size if m.nodes_mode == "surface"
+                                     else m.points.shape[0]),
+              "inference_ms_median": float(np.median(inference) * 1e3),
+              "frame_ms_median": float(np.median(frame_times) * 1e3),
+              "fps_median": float(1 / np.median(frame_times)), "gif": str(gif)}
+    (out / "timings.json").write_text(json.dumps(timing, indent=1))
+    return timing
+
+
+def compare(m, pred, data: Path, sim: int | None, out: Path | None, window_size) -> Path | None:
+    """The FE solution of a simulation beside the surrogate's, and the error between them."""
+    from data_spec import list_shards, read_shard
+    from surrogate.features import material_vector
+
+    unseen = pred.meta.get("unseen_simulations")
+    shards = {read_shard(p).sim_index: p for p in list_shards(data)}
+    if not shards:
+        raise ViewerError(f"{data}: no shards (expected {data}/sims/sim_*.h5)")
+    if sim is None:
+        choices = [i for i in (unseen or []) if i in shards] or sorted(shards)
+        sim = choices[0]
+    if sim not in shards:
+        raise ViewerError(f"--sim {sim}: no such simulation in {data}")
+    if unseen is None:
+        print(f"{log_prefix}: this model does not record its unseen simulations (exported "
+              "before they were); sim {sim} may have been in its training", file=sys.stderr)
+    elif sim not in unseen:
+        print(f"{log_prefix}: sim {sim} was in the model's training set; unseen: "
+              f"{unseen[:10]}{' ...' if len(unseen) > 10 else ''}", file=sys.stderr)
+    s = read_shard(shards[sim])
+    if s.status != "ok" or s.n_done == 0:
+        raise ViewerError(f"{shards[sim]}: simulation {sim} did not converge "
+                          f"({s.failure_reason}): nothing to compare with")
+    if s.fixed_nodes.size != m.fixed.size or not np.array_equal(s.fixed_nodes, m.fixed):
+        raise ViewerError(f"{shards[sim]}: another liver than the model's (use --liver)")
+    for j in range(len(m.handles)):
+        m.handles[j].node = int(s.load_nodes[j])
+        m.handles[j].force = np.asarray(s.forces[j], float) * float(s.load_fractions[-1])
+    if pred.spec.material_dim:
+        vec = material_vector(s.material.c, s.material.m, s.material.K)
+        for i in range(pred.spec.material_dim):
+            m.inputs[i].value = float(vec[i])
+    u_fe = np.zeros((m.points.shape[0], 3))
+    u_fe[s.output_nodes] = s.displacement[-1]
+    fe = u_fe[m.surface.nodes]
+    nn = m.predict().surface_u
+    err = np.linalg.norm(nn - fe, axis=1)
+    top = float(max(np.linalg.norm(fe, axis=1).max(), np.linalg.norm(nn, axis=1).max()))
+    f_ref = float(np.linalg.norm(s.forces, axis=1).max())
+    common = {"surface": m.surface, "forces": s.forces * s.load_fractions[-1],
+              "load_nodes": s.load_nodes, "f_ref": f_ref, "clim": (0.0, top)}
+    what = "unseen by the model" if unseen and sim in unseen else "seen in training"
+    panels = [Panel(u=fe, label=f"FE (fem_sim), sim {sim}\nmax displacement "
+                    f"{np.linalg.norm(fe, axis=1).max():.1f} mm", **common),
+              Panel(u=nn, label=f"surrogate ({what})\nmax displacement "
+                    f"{np.linalg.norm(nn, axis=1).max():.1f} mm", **common),
+              Panel(**{**common, "clim": None}, u=nn, scalars=err, title="error (mm)",
+                    cmap="inferno", label=f"error: surrogate - FE, on the surface\nmean "
+                    f"{err.mean():.2f} mm, max {err.max():.2f} mm")]
+    print(f"{log_prefix}: sim {sim}: surface mean error {err.mean():.3f} mm, max "
+          f"{err.max():.3f} mm, FE max |u| {np.linalg.norm(fe, axis=1).max():.2f} mm")
+    if out is not None:
+        return render_panels(panels, out / f"compare_sim{sim}.png",
+                             title=f"{pred.meta.get('scene', '')}: FE against surrogate")
+    pv = pyvista()
+    p = pv.Plotter(shape=(1, 3), window_size=window_size, title="FE against surrogate")
+    for k, panel in enumerate(panels):
+        p.subplot(0, k)
+        v = LiverView(p, panel.surface, clim=panel.clim, title=panel.title, f_ref=f_ref,
+                      cmap=panel.cmap, label=panel.label)
+        v.update(panel.u, panel.forces, panel.load_nodes, scalars=panel.scalars)
+        frame_camera(p, panel.surface)
+    p.link_views()
+    p.show()
+    return None
+
+
+def build(args):
+    """(manipulator, predictor) from the command line's model and liver options."""
+    from surrogate.export import load_predictor
+    from surrogate.manipulator import Manipulator
+
+    mdir = model_dir(Path(args.run))
+    pred = load_predictor(mdir)
+    geometry = None
+    if pred.points is None or pred.triangles is None:
+        if args.data is None:
+            raise ViewerError(f"{mdir}: the model has no liver of its own (trained on several "
+                              "livers, or exported before surfaces were stored): give --data "
+                              "DATASET [--liver GEOMETRY_ID]")
+        geometry = dataset_liver(Path(args.data), args.liver)
+    return Manipulator(pred, nodes=args.nodes, geometry=geometry), pred
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m surrogate.viewer", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("run", help="training run directory (or its model/ directory)")
+    ap.add_argument("--nodes", choices=("surface", "all"), default="surface",
+                    help="predict the surface only (default) or every node of the liver")
+    ap.add_argument("--offscreen", action="store_true", help="render to files, no window")
+    ap.add_argument("--script", type=Path, help="force script (JSON) for --offscreen")
+    ap.add_argument("--out", type=Path, help="output directory for --offscreen")
+    ap.add_argument("--compare", action="store_true",
+                    help="FE beside surrogate for a simulation of --data")
+    ap.add_argument("--data", type=Path, help="dataset directory (for --compare, or the "
+                    "liver of a model trained on several livers)")
+    ap.add_argument("--sim", type=int, help="simulation to compare (default: the first the "
+                    "model never trained on)")
+    ap.add_argument("--liver", help="geometry id of --data's liver to show")
+    ap.add_argument("--screenshot", type=Path,
+                    help="open the window, draw one pull, save this PNG and close")
+    ap.add_argument("--size", type=int, nargs=2, default=(900, 700), metavar=("W", "H"))
+    args = ap.parse_args(argv)
+    if args.offscreen and args.out is None:
+        ap.error("--offscreen needs --out DIR")
+    if args.script is not None and not args.offscreen:
+        ap.error("--script is for --offscreen (the window is driven by the mouse)")
+    if args.compare and args.data is None:
+        ap.error("--compare needs --data DATASET (the FE solutions)")
+    try:
+        m, pred = build(args)
+        if args.compare:
+            png = compare(m, pred, args.data, args.sim, args.out if args.offscreen else None,
+                          tuple(args.size))
+            if png:
+                print(png)
+            return 0
+        clim = display_range(m)
+        if args.offscreen:
+            t = run_offscreen(m, clim, args.script, args.out, tuple(args.size))
+            print(f"{log_prefix}: {t['frames']} frames, {t['gif']}; median inference "
+                  f"{t['inference_ms_median']:.2f} ms, frame {t['frame_ms_median']:.1f} ms "
+                  f"({t['fps_median']:.0f} fps) for {t['nodes_predicted']} nodes")
+            return 0
+        return run_window(m, clim, args.screenshot, tuple(args.size))
+    except ViewerError as exc:
+        print(f"{log_prefix}: {exc}", file=sys.stderr)
+        return 2
+    except ValueError as exc:  # a model or liver that cannot be used, with its reason
+        print(f"{log_prefix}: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
