@@ -29,6 +29,7 @@ MPIRUN := mpirun -n $(NP)
 .PHONY: help setup setup-system setup-solver setup-trainer demo test test-solver test-trainer \
         test-extremes extremes-doc \
         dataset train population bench tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
+        bench-viewer docs-manipulator viewer \
         clean lock-trainer
 
 help:
@@ -43,7 +44,10 @@ help:
 	@echo "make tradeoff-fem   FEM speed/accuracy price list -> docs/tradeoff_fem.md (long, resumable)"
 	@echo "make tradeoff-surrogate   surrogate price list + error budget -> docs/ (long, resumable)"
 	@echo "make bench-realtime   real-time surrogate designs -> docs/realtime.md (long, resumable)"
+	@echo "make viewer   RUN=...   the liver manipulator on a trained run (a window)"
+	@echo "make bench-viewer   manipulator frame rate, whole liver and surface -> docs/viewer.md"
 	@echo "make docs     regenerate docs/phantoms.png"
+	@echo "make docs-manipulator   docs/manipulator.gif, docs/compare.png from make demo's run"
 	@echo "make lint     ruff";  echo "make clean    remove environments and outputs"
 
 setup: setup-solver setup-trainer
@@ -143,6 +147,35 @@ population: setup-solver
 
 docs: setup-solver
 	$(SPY) scripts/render_phantoms.py docs/phantoms.png
+
+viewer: setup-trainer
+	$(TPY) -m surrogate.viewer $(RUN)
+
+# The README's animation and comparison, from the run `make demo` trains (runs/demo).
+DEMO_RUN := runs/demo/train
+docs-manipulator: setup-trainer
+	@test -f $(DEMO_RUN)/model/model.json || { echo "run make demo first"; exit 2; }
+	rm -rf runs/docs-manipulator
+	$(TPY) -m surrogate.viewer $(DEMO_RUN) --offscreen --out runs/docs-manipulator --size 480 380
+	cp runs/docs-manipulator/manipulator.gif docs/manipulator.gif
+	$(TPY) -m surrogate.viewer $(DEMO_RUN) --compare --data runs/demo/data --offscreen \
+	    --out runs/docs-manipulator
+	cp runs/docs-manipulator/compare_sim*.png docs/compare.png
+
+# Manipulator frame rate: make demo's liver (1.1k nodes) and a 15k-node real liver (needs
+# ../shared/data/livers/sofa_liver.vtk; its small dataset and model are built first, resumable).
+VIEWER_DATA := bench/results/viewer/data
+VIEWER_RUN  := bench/results/viewer/train
+bench-viewer: setup
+	@test -f $(DEMO_RUN)/model/model.json || { echo "run make demo first"; exit 2; }
+	$(MPIRUN) $(SPY) -m fem_sim generate bench/viewer_sofa.toml --out $(VIEWER_DATA)
+	test -f $(VIEWER_RUN)/model/model.json || \
+	    $(TPY) -m surrogate train --data $(VIEWER_DATA) --run $(VIEWER_RUN) epochs=5
+	test -f $(VIEWER_RUN)_basis/model/model.json || \
+	    $(TPY) -m surrogate train --data $(VIEWER_DATA) --run $(VIEWER_RUN)_basis \
+	    --config basis epochs=30 folds=2
+	$(TPY) bench/bench_viewer.py --run $(DEMO_RUN) --run $(VIEWER_RUN) --run $(VIEWER_RUN)_basis \
+	    --md docs/viewer.md
 
 lint: setup-trainer
 	$(TRAIN_VENV)/bin/ruff check .

@@ -147,16 +147,17 @@ class LiverView:
                 self.mesh, scalars=title, cmap=cmap, clim=clim, smooth_shading=True,
                 show_scalar_bar=scalar_bar, specular=0.2,
                 scalar_bar_args={"title": title, "vertical": False, "fmt": "%.1f",
-                                 "position_x": 0.25, "position_y": 0.03, "height": 0.07,
+                                 "position_x": 0.25, "position_y": 0.02, "height": 0.1,
                                  "width": 0.5, "color": "black", "title_font_size": 16,
                                  "label_font_size": 14})
         bars = plotter.scalar_bars
         if scalar_bar and not solid and title in bars:
             bar = bars[title]
             bar.SetTextPositionToPrecedeScalarBar()  # labels below the bar, title above
-        if ghost:
-            plotter.add_mesh(surface.polydata(), style="wireframe", color="gray", opacity=0.12,
-                             line_width=1)
+        self.ghost_actor = None
+        if ghost:  # the undeformed outline; translucent, so it costs a render pass
+            self.ghost_actor = plotter.add_mesh(surface.polydata(), style="wireframe",
+                                                color="gray", opacity=0.12, line_width=1)
         if surface.fixed.size:
             plotter.add_mesh(pv.PolyData(surface.points[surface.fixed]), color=FIXED,
                              point_size=7, render_points_as_spheres=True)

@@ -376,3 +376,35 @@ def load_scene(path: str | Path) -> Scene:
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(str(path), [f"not valid TOML: {exc}"]) from None
     return parse_scene(raw, str(path), base_dir=path.parent)
+
+
+def dataset_copy_text(path: str | Path) -> str:
+    """The text of scene file ``path`` as a dataset directory keeps it (DIR/scene.toml): the
+    same scene, with a relative ``geometry.path`` made absolute, so the copy reads from its new
+    place (a relative path would point into the dataset directory). The scene must be valid.
+    """
+    import re
+
+    path = Path(path)
+    text = path.read_text(encoding="utf-8")
+    geom = tomllib.loads(text).get("geometry", {})
+    rel = geom.get("path")
+    if geom.get("source") != "file" or not isinstance(rel, str) or Path(rel).is_absolute():
+        return text
+    absolute = str((path.parent / rel).resolve())
+    lines = text.splitlines(keepends=True)
+    section, done = None, False
+    assign = re.compile(r"""^(\s*path\s*=\s*)("[^"]*"|'[^']*')""")
+    for k, line in enumerate(lines):
+        header = re.match(r"^\s*\[\s*([A-Za-z0-9_.\-]+)\s*\]", line)
+        if header:
+            section = header.group(1)
+        elif section == "geometry" and not done and assign.match(line):
+            lines[k] = assign.sub(lambda m: m.group(1) + json.dumps(absolute), line, count=1)
+            done = True
+    out = "".join(lines)
+    if not done or tomllib.loads(out)["geometry"].get("path") != absolute:
+        raise SceneError(str(path), ["geometry.path: cannot rewrite it as an absolute path in "
+                                     "the dataset's copy; write geometry.path as a plain "
+                                     "string on its own line under [geometry]"])
+    return out

@@ -9,7 +9,8 @@
 RUN_DIR is a training run (its ``model/``) or a model directory. In the window: right-click a
 surface point to move the active force there; drag the red sphere to set the force (its
 magnitude is clamped to the training range and shown on screen); the slider sets the magnitude;
-keys 1 / 2 choose the force of a two-force model, ``r`` sets the forces to zero. Sliders set the
+keys 1 / 2 choose the force of a two-force model, ``r`` sets the forces to zero, ``g`` shows
+the undeformed outline. Sliders set the
 material / shape inputs when the model has them. The status line shows the surrogate's inference
 time and the frame time (inference + drawing).
 
@@ -200,10 +201,10 @@ def status_text(m, inference_s: float, frame_s: float | None) -> str:
     for inp in m.inputs[:4]:
         parts.append(f"{inp.name} = {inp.value:.4g}")
     n = m.surface.nodes.size if m.nodes_mode == "surface" else m.points.shape[0]
-    timing = f"inference {inference_s * 1e3:.2f} ms ({n} nodes, {m.nodes_mode})"
+    lines = parts + [f"inference {inference_s * 1e3:.2f} ms ({n} nodes, {m.nodes_mode})"]
     if frame_s:
-        timing += f", frame {frame_s * 1e3:.1f} ms ({1 / frame_s:.0f} fps)"
-    return "\n".join(parts + [timing])
+        lines.append(f"frame {frame_s * 1e3:.1f} ms ({1 / frame_s:.0f} fps)")
+    return "\n".join(lines)
 
 
 class Scene:
@@ -217,9 +218,12 @@ class Scene:
         # actor whose string changes costs ~1 ms.
         plotter.disable_anti_aliasing()
         self.view = LiverView(plotter, m.surface, clim=(0.0, clim), f_ref=m.f_max)
-        frame_camera(plotter, m.surface, [h.node for h in m.handles])
+        # The translucent undeformed outline took 25 of 46 ms per frame at 15k nodes: off in
+        # live views (key g shows it), on in still pictures.
+        self.view.ghost_actor.SetVisibility(False)
+        frame_camera(plotter, m.surface, [h.node for h in m.handles], zoom=1.3)
         h = plotter.window_size[1]
-        self.status = plotter.add_text(" ", position=(10, h - 80), font_size=10, color="black")
+        self.status = plotter.add_text(" ", position=(10, h - 100), font_size=10, color="black")
         self.last_frame_s = None
         self.last = None
 
@@ -252,6 +256,17 @@ def run_window(m, clim: float, screenshot: Path | None, window_size) -> int:
         for j, w in enumerate(widgets):
             w.SetCenter(*m.handle_position(j))
 
+    def on_magnitude(value):
+        m.set_magnitude(value)
+        move_widgets()
+        scene.draw()
+
+    slider = p.add_slider_widget(on_magnitude, (0.0, m.f_max), value=0.0,
+                                 title="force of the active handle (N)", pointa=(0.64, 0.9),
+                                 pointb=(0.96, 0.9), interaction_event="always",
+                                 color="black", title_height=0.02, slider_width=0.02,
+                                 tube_width=0.006, fmt="%.2f")
+
     def on_drag(center, widget, j):
         m.active = j
         m.drag(center, j)
@@ -262,7 +277,7 @@ def run_window(m, clim: float, screenshot: Path | None, window_size) -> int:
     for j in range(len(m.handles)):
         widgets.append(p.add_sphere_widget(
             lambda c, w, j=j: on_drag(c, w, j), center=m.handle_position(j), radius=r,
-            color=FORCE if j == 0 else "darkorange", pass_widget=True,
+            color=FORCE if j == 0 else "darkorange", pass_widget=True, test_callback=False,
             interaction_event="always"))
 
     def on_pick(point):
@@ -275,15 +290,6 @@ def run_window(m, clim: float, screenshot: Path | None, window_size) -> int:
     p.enable_surface_point_picking(callback=on_pick, show_message=False, show_point=False,
                                    left_clicking=False)
 
-    def on_magnitude(value):
-        m.set_magnitude(value)
-        move_widgets()
-        scene.draw()
-
-    slider = p.add_slider_widget(on_magnitude, (0.0, m.f_max), value=0.0,
-                                 title="force of the active handle (N)", pointa=(0.55, 0.92),
-                                 pointb=(0.95, 0.92), interaction_event="always",
-                                 style="modern", color="black", title_height=0.02)
     for i, inp in enumerate(m.inputs[:4]):  # the leading inputs: more would not fit
         def on_input(value, i=i):
             m.set_input(i, value)
@@ -292,7 +298,8 @@ def run_window(m, clim: float, screenshot: Path | None, window_size) -> int:
         y = 0.72 - 0.1 * i
         p.add_slider_widget(on_input, (inp.lo, inp.hi), value=inp.value, title=inp.name,
                             pointa=(0.02, y), pointb=(0.3, y), interaction_event="end",
-                            style="modern", color="black", title_height=0.02)
+                            color="black", title_height=0.02, slider_width=0.02,
+                            tube_width=0.006, fmt="%.3g")
 
     def choose(j):
         if j < len(m.handles):
@@ -310,20 +317,39 @@ def run_window(m, clim: float, screenshot: Path | None, window_size) -> int:
     p.add_key_event("1", lambda: choose(0))
     p.add_key_event("2", lambda: choose(1))
     p.add_key_event("r", reset)
+
+    def toggle_ghost():
+        ghost = scene.view.ghost_actor
+        ghost.SetVisibility(not ghost.GetVisibility())
+        scene.draw()
+
+    p.add_key_event("g", toggle_ghost)
     p.add_text("right-click: move the force; drag the sphere: pull; keys 1, 2: which force; "
-               "r: reset", position=(10, window_size[1] - 24), font_size=9, color="black")
+               "r: reset; g: undeformed outline", position=(10, window_size[1] - 24),
+               font_size=9, color="black")
     if screenshot is not None:
-        frames, _ = load_script(None, m)
-        strongest = max(frames, key=lambda f: float(np.linalg.norm(f["forces"])))
-        apply_frame(m, strongest)
-        move_widgets()
+        # What a user does first, through the window's own callbacks: a right-click on the
+        # default node of the drawn liver, then a drag of its sphere 1.5 drag lengths along
+        # the default script's strongest pull (clamped to the training maximum).
         p.show(interactive=False, auto_close=False)
         scene.draw()
+        node = m.handles[0].node
+        on_pick(scene.deformed()[m.surface.local([node])[0]])
+        frames, _ = load_script(None, m)
+        pull = max((f["forces"][0] for f in frames), key=np.linalg.norm)
+        tip = m.points[node] + 1.5 * m.drag_length * pull / np.linalg.norm(pull)
+        widgets[0].SetCenter(*tip)
+        on_drag(tip, widgets[0], 0)
         scene.draw()  # a second frame: its status line reports the first frame's time
         screenshot.parent.mkdir(parents=True, exist_ok=True)
         p.screenshot(str(screenshot))
+        f = m.handles[0].force
+        print(f"{log_prefix}: window opened; picked node {m.handles[0].node}, dragged: force "
+              f"{np.linalg.norm(f):.4f} N (training max {m.f_max:.4f} N), slider "
+              f"{slider.GetRepresentation().GetValue():.4f} N, sphere at "
+              f"{np.linalg.norm(np.asarray(widgets[0].GetCenter()) - m.points[node]):.2f} mm "
+              f"(drag length {m.drag_length:.2f} mm); screenshot {screenshot}")
         p.close()
-        print(f"{log_prefix}: window opened, screenshot {screenshot}")
         return 0
     scene.draw()
     p.show()

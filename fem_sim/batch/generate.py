@@ -13,7 +13,6 @@ rank 0 before the split (FFCx waits only 10 s for another process compiling the 
 from __future__ import annotations
 
 import logging
-import shutil
 import sys
 import time
 from dataclasses import dataclass
@@ -35,7 +34,8 @@ from data_spec import (
     write_geometry,
     write_shard,
 )
-from data_spec.atomic import check_writable, leftover_temporaries
+from data_spec.atomic import atomic_path, check_writable, leftover_temporaries
+from data_spec.scene import dataset_copy_text
 from fem_sim.batch import cases as cs
 from fem_sim.batch.lock import DirectoryLock, LockedError
 from fem_sim.geometry.quality import mesh_problems
@@ -155,7 +155,8 @@ def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool,
             ids.append(g.geometry_id)
         # Everything checked: record the scene (a directory without shards takes a new one).
         if not (copy.exists() and load_scene(copy).hash == scene.hash):
-            shutil.copyfile(scene_file, copy)
+            with atomic_path(copy) as tmp:
+                tmp.write_text(dataset_copy_text(scene_file), encoding="utf-8")
         tasks = [i for i in todo if not _shard_is_done(shard_path(out, i), scene.hash,
                                                        retry_failed)]
         n_geo = len(ids)

@@ -183,3 +183,25 @@ def test_solver_settings_outside_their_bounds_are_refused():
         with pytest.raises(ValueError, match=f"settings.first_increment: expected a number.*"
                                              f"{re.escape(bound)}.*got {v}"):
             SolverSettings.from_dict({"first_increment": v})
+
+
+def test_the_datasets_copy_of_a_scene_with_a_relative_mesh_path_reads_the_same_scene(tmp_path):
+    from data_spec.scene import dataset_copy_text
+
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "liver.vtk").write_text("not read: only its existence is checked")
+    scenes = tmp_path / "scenes"
+    scenes.mkdir()
+    scene = scenes / "s.toml"
+    scene.write_text('schema_version = 1\n[scene]\nname = "s"\nn_simulations = 2\n'
+                     '[geometry]\nsource = "file"\npath = \'../meshes/liver.vtk\'  # relative\n'
+                     'mesh_size = 9.0\n[fixed]\nkind = "sphere"\ncenter = [0, 0, 0]\n'
+                     'radius = 5.0\n[loads]\nmagnitude = 0.4\n')
+    original = load_scene(scene)
+    kept = tmp_path / "dataset" / "scene.toml"
+    kept.parent.mkdir()
+    kept.write_text(dataset_copy_text(scene))
+    again = load_scene(kept)  # a verbatim copy would look for dataset/../meshes/liver.vtk
+    assert again.hash == original.hash
+    assert again["geometry"]["path"] == str((tmp_path / "meshes" / "liver.vtk").resolve())
+    assert "# relative" in kept.read_text()  # the rest of the file is kept as written

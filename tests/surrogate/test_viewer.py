@@ -217,6 +217,64 @@ def test_the_window_opens_and_closes_under_xvfb(run, xvfb, tmp_path):
                           timeout=300, cwd=ROOT, env=env)
     assert proc.returncode == 0, proc.stderr
     assert "window opened" in proc.stdout
+    # The window's callbacks: the pick kept the default node, the drag 1.5 drag lengths out
+    # was clamped to the training maximum, and the slider and the sphere followed.
+    pred = load_predictor(run / "model")
+    m = Manipulator(pred)
+    fmax = f"{pred.force_norm_max:.4f} N"
+    assert f"picked node {m.handles[0].node}," in proc.stdout
+    assert f"dragged: force {fmax} (training max {fmax}), slider {fmax}" in proc.stdout
+    assert f"sphere at {m.drag_length:.2f} mm (drag length {m.drag_length:.2f} mm)" \
+        in proc.stdout
+    assert "Traceback" not in proc.stderr and "issue in callback" not in proc.stderr, \
+        proc.stderr
     img = _frame(shot)
     assert img.shape == (480, 640, 3)
     assert np.any(np.abs(img - 255) > 30, axis=2).mean() > 0.05
+
+
+class _TwoForceMaterialModel:
+    """A stand-in predictor with two forces and a material input: u = (f1 + f2) * c1 at every
+    node, so what the manipulator hands over can be read off the prediction.
+    """
+
+    def __init__(self):
+        from data_spec.testing import box_mesh
+        from surrogate.features import FeatureSpec
+
+        g = box_mesh(3, (30.0, 20.0, 10.0))
+        self.spec = FeatureSpec(n_loads=2, material_dim=3)
+        self.points, self.fixed = g.points, g.regions["x0"]
+        self.triangles, self.output_nodes = g.surface_triangles, np.arange(g.n_nodes)
+        self.force_norm_max, self.design = 0.4, "nodewise"
+        self.meta = {"training_range": {"extra_min": [1e-3, 6.0, 0.2],
+                                        "extra_max": [5e-3, 12.0, 2.0]}}
+        self.calls = []
+
+    def __call__(self, forces, load_nodes, nodes=None, material=None, geometry=None):
+        self.calls.append((forces.copy(), load_nodes.copy(), material.copy()))
+        n = self.points.shape[0] if nodes is None else len(nodes)
+        return np.broadcast_to(forces.sum(axis=0) * material[0], (n, 3)).copy()
+
+
+def test_two_forces_and_a_material_reach_the_model_as_set():
+    pred = _TwoForceMaterialModel()
+    m = Manipulator(pred)
+    assert len(m.handles) == 2 and m.handles[0].node != m.handles[1].node
+    assert [i.name for i in m.inputs] == ["c1 (MPa)", "m1", "K (MPa)"]
+    assert [i.value for i in m.inputs] == pytest.approx([3e-3, 9.0, 1.1])  # mid-range
+    first = m.handles[0].node
+    s = m.surface
+    k = int(np.argmin(np.linalg.norm(s.points - [30.0, 0.0, 0.0], axis=1)))
+    assert m.pick(s.points[k], handle=1) == s.nodes[k] and m.handles[0].node == first
+    m.drag(m.points[s.nodes[k]] + [0.0, 0.0, m.drag_length], handle=1)  # f_max along z
+    m.set_force([0.1, 0.0, 0.0], handle=0)
+    assert m.set_input(0, 1.0) == 5e-3  # clamped to the training range
+    u = m.predict().surface_u
+    forces, nodes, material = pred.calls[-1]
+    assert np.allclose(forces, [[0.1, 0.0, 0.0], [0.0, 0.0, 0.4]])
+    assert nodes.tolist() == [first, s.nodes[k]]
+    assert np.allclose(material, [5e-3, 9.0, 1.1])
+    assert np.allclose(u, [0.1 * 5e-3, 0.0, 0.4 * 5e-3])
+    with pytest.raises(ValueError, match="2 force"):
+        m.set_force([0, 0, 0], handle=2)
