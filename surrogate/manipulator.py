@@ -3,9 +3,11 @@ drag sets (clamped to the training range), which inputs the model takes, and the
 
 :mod:`surrogate.viewer` draws it (pyvista); the tests drive it directly. A *handle* is one force
 of the model (two for a two-force model): a surface node and a force vector in N. Dragging a
-handle's sphere to ``tip`` sets the force ``f_max * (tip - x_node) / drag_length``, so a drag
-of ``drag_length`` mm (a quarter of the liver's size by default) asks for the largest force
-seen in training; longer drags are clamped to it.
+handle's sphere to ``tip`` sets the force ``f_max * (tip - x_node) / drag_length`` (mode
+"pull": the sphere is where the surface is pulled toward) or its opposite (mode "push": the
+sphere stands where the push comes from, outside the liver, so it stays visible and grabbable),
+so a drag of ``drag_length`` mm (a quarter of the liver's size by default) asks for the
+largest force seen in training; longer drags are clamped to it.
 """
 
 from __future__ import annotations
@@ -101,6 +103,7 @@ class Manipulator:
                        for n, a, b, v in zip(names, lo, hi, start)]
         self.handles = [Handle(node=n) for n in self.default_nodes(spec.n_loads)]
         self.active = 0
+        self.mode = "pull"
 
     # -- picking and dragging ------------------------------------------------------------------
     def default_nodes(self, n: int) -> list[int]:
@@ -146,13 +149,23 @@ class Manipulator:
         """Set a handle's force from its sphere's position ``tip`` (mm); returns it (N)."""
         h = self._handle(handle)
         tip = np.asarray(tip, dtype=float).reshape(3)
-        f = self.f_max * (tip - self.points[self.handles[h].node]) / self.drag_length
+        f = self._sign * self.f_max * (tip - self.points[self.handles[h].node]) / \
+            self.drag_length
         return self.set_force(f, h)
 
     def handle_position(self, handle: int | None = None) -> np.ndarray:
         """Where a handle's sphere sits for its current force (the inverse of ``drag``)."""
         h = self.handles[self._handle(handle)]
-        return self.points[h.node] + h.force / self.f_max * self.drag_length
+        return self.points[h.node] + self._sign * h.force / self.f_max * self.drag_length
+
+    def toggle_mode(self) -> str:
+        """Switch between pulling and pushing with the spheres; the forces stay."""
+        self.mode = "push" if self.mode == "pull" else "pull"
+        return self.mode
+
+    @property
+    def _sign(self) -> float:
+        return 1.0 if self.mode == "pull" else -1.0
 
     def set_force(self, force, handle: int | None = None) -> np.ndarray:
         """Set a force (N), its magnitude clamped to the training range; returns it."""
@@ -168,7 +181,8 @@ class Manipulator:
 
     def set_magnitude(self, magnitude: float, handle: int | None = None) -> np.ndarray:
         """Scale a force to ``magnitude`` N (clamped), keeping its direction (default
-        direction for a zero force: into the liver along the inward normal).
+        direction for a zero force: along the outward normal when pulling, the inward one when
+        pushing, so the sphere stays outside the liver).
         """
         h = self._handle(handle)
         f = self.handles[h].force
@@ -177,7 +191,7 @@ class Manipulator:
             direction = f / n
         else:
             i = self.surface.local([self.handles[h].node])[0]
-            direction = -self.surface.normals()[i]
+            direction = self._sign * self.surface.normals()[i]
         return self.set_force(direction * max(float(magnitude), 0.0), h)
 
     def set_input(self, index: int, value: float) -> float:

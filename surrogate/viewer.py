@@ -9,8 +9,9 @@
 RUN_DIR is a training run (its ``model/``) or a model directory. In the window: right-click a
 surface point to move the active force there; drag the red sphere to set the force (its
 magnitude is clamped to the training range and shown on screen); the slider sets the magnitude;
-keys 1 / 2 choose the force of a two-force model, ``r`` sets the forces to zero, ``g`` shows
-the undeformed outline. Sliders set the
+keys 1 / 2 choose the force of a two-force model, ``z`` sets the forces to zero, ``g`` shows
+the undeformed outline, ``m`` switches the spheres between pulling (the surface follows the
+sphere) and pushing (the sphere stands outside, where the push comes from). Sliders set the
 material / shape inputs when the model has them. The status line shows the surrogate's inference
 time and the frame time (inference + drawing).
 
@@ -192,7 +193,7 @@ def display_range(m) -> float:
     return float(np.ceil(max(top, 1e-3) * 1.1))
 
 
-def status_text(m, inference_s: float, frame_s: float | None) -> str:
+def status_text(m, inference_s: float, frame_s: float | None, spheres: bool = False) -> str:
     parts = []
     for j, h in enumerate(m.handles):
         mark = "*" if j == m.active and len(m.handles) > 1 else ""
@@ -201,7 +202,8 @@ def status_text(m, inference_s: float, frame_s: float | None) -> str:
     for inp in m.inputs[:4]:
         parts.append(f"{inp.name} = {inp.value:.4g}")
     n = m.surface.nodes.size if m.nodes_mode == "surface" else m.points.shape[0]
-    lines = parts + [f"inference {inference_s * 1e3:.2f} ms ({n} nodes, {m.nodes_mode})"]
+    lines = parts + ([f"spheres {m.mode} (key m)"] if spheres else [])
+    lines.append(f"inference {inference_s * 1e3:.2f} ms ({n} nodes, {m.nodes_mode})")
     if frame_s:
         lines.append(f"frame {frame_s * 1e3:.1f} ms ({1 / frame_s:.0f} fps)")
     return "\n".join(lines)
@@ -210,8 +212,8 @@ def status_text(m, inference_s: float, frame_s: float | None) -> str:
 class Scene:
     """A plotter showing one manipulator: the liver, its arrows, its handles, the status."""
 
-    def __init__(self, plotter, m, clim: float):
-        self.p, self.m = plotter, m
+    def __init__(self, plotter, m, clim: float, spheres: bool = False):
+        self.p, self.m, self.spheres = plotter, m, spheres
         plotter.set_background("white")
         # Measured with Mesa's software OpenGL at 1000 x 760: multi-sample anti-aliasing took
         # 37 of 61 ms per frame, and a corner annotation replaced per frame 90-220 ms; a text
@@ -223,7 +225,7 @@ class Scene:
         self.view.ghost_actor.SetVisibility(False)
         frame_camera(plotter, m.surface, [h.node for h in m.handles], zoom=1.3)
         h = plotter.window_size[1]
-        self.status = plotter.add_text(" ", position=(10, h - 100), font_size=10, color="black")
+        self.status = plotter.add_text(" ", position=(10, h - 118), font_size=10, color="black")
         self.last_frame_s = None
         self.last = None
 
@@ -234,7 +236,7 @@ class Scene:
         self.last = frame
         self.view.update(frame.surface_u, [h.force for h in self.m.handles],
                          [h.node for h in self.m.handles])
-        self.status.input = status_text(self.m, frame.seconds, self.last_frame_s)
+        self.status.input = status_text(self.m, frame.seconds, self.last_frame_s, self.spheres)
         self.p.render()
         self.last_frame_s = time.perf_counter() - t
 
@@ -248,7 +250,7 @@ def run_window(m, clim: float, screenshot: Path | None, window_size) -> int:
     """
     pv = pyvista()
     p = pv.Plotter(window_size=window_size, title="liverfem manipulator")
-    scene = Scene(p, m, clim)
+    scene = Scene(p, m, clim, spheres=True)
     r = 0.02 * m.surface.size
     widgets = []
 
@@ -316,7 +318,7 @@ def run_window(m, clim: float, screenshot: Path | None, window_size) -> int:
 
     p.add_key_event("1", lambda: choose(0))
     p.add_key_event("2", lambda: choose(1))
-    p.add_key_event("r", reset)
+    p.add_key_event("z", reset)
 
     def toggle_ghost():
         ghost = scene.view.ghost_actor
@@ -324,8 +326,15 @@ def run_window(m, clim: float, screenshot: Path | None, window_size) -> int:
         scene.draw()
 
     p.add_key_event("g", toggle_ghost)
-    p.add_text("right-click: move the force; drag the sphere: pull; keys 1, 2: which force; "
-               "r: reset; g: undeformed outline", position=(10, window_size[1] - 24),
+
+    def toggle_mode():
+        m.toggle_mode()
+        move_widgets()
+        scene.draw()
+
+    p.add_key_event("m", toggle_mode)
+    p.add_text("right-click: move the force; drag the sphere: set it; keys 1, 2: which force; "
+               "z: zero; m: pull/push; g: outline", position=(10, window_size[1] - 24),
                font_size=9, color="black")
     if screenshot is not None:
         # What a user does first, through the window's own callbacks: a right-click on the
@@ -352,6 +361,7 @@ def run_window(m, clim: float, screenshot: Path | None, window_size) -> int:
         p.close()
         return 0
     scene.draw()
+    scene.last_frame_s = None  # nothing was on screen yet: not a frame time
     p.show()
     return 0
 

@@ -79,6 +79,22 @@ def test_a_drag_sets_the_force_and_is_clamped_to_the_training_range(m):
         m.drag(x, handle=1)
 
 
+def test_pushing_puts_the_sphere_on_the_other_side_of_the_node(m):
+    x = m.points[m.handles[0].node]
+    m.set_force([0.0, 0.0, 0.2 * m.f_max])
+    above = m.handle_position()
+    assert m.toggle_mode() == "push"
+    assert np.allclose(m.handle_position() - x, -(above - x))  # the force is kept
+    f = m.drag(x + [0.5 * m.drag_length, 0.0, 0.0])  # the push comes from +x: force along -x
+    assert np.allclose(f, [-0.5 * m.f_max, 0.0, 0.0])
+    m.set_force([0.0, 0.0, 0.0])
+    i = m.surface.local([m.handles[0].node])[0]
+    inward = -m.surface.normals()[i]
+    assert np.allclose(m.set_magnitude(0.1), 0.1 * inward)  # a push goes into the liver
+    assert np.dot(m.handle_position() - x, inward) < 0  # its sphere stands outside
+    assert m.toggle_mode() == "pull"
+
+
 def test_the_manipulators_prediction_is_the_predictors(run, m):
     pred = load_predictor(run / "model")
     node = m.handles[0].node
