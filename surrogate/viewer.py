@@ -395,30 +395,30 @@ def run_offscreen(m, clim: float, script: Path | None, out: Path, window_size) -
 
 def compare(m, pred, data: Path, sim: int | None, out: Path | None, window_size) -> Path | None:
     """The FE solution of a simulation beside the surrogate's, and the error between them."""
-    from data_spec import list_shards, read_shard
+    from data_spec import list_shards, read_shard, shard_path
     from surrogate.features import material_vector
 
     unseen = pred.meta.get("unseen_simulations")
-    shards = {read_shard(p).sim_index: p for p in list_shards(data)}
-    if not shards:
+    if not list_shards(data):
         raise ViewerError(f"{data}: no shards (expected {data}/sims/sim_*.h5)")
-    if sim is None:
-        choices = [i for i in (unseen or []) if i in shards] or sorted(shards)
-        sim = choices[0]
-    if sim not in shards:
+    if sim is None:  # the first simulation the model never trained on (by file name: no reads)
+        found = [i for i in (unseen or []) if shard_path(data, i).exists()]
+        sim = found[0] if found else read_shard(list_shards(data)[0]).sim_index
+    if not shard_path(data, sim).exists():
         raise ViewerError(f"--sim {sim}: no such simulation in {data}")
     if unseen is None:
         print(f"{log_prefix}: this model does not record its unseen simulations (exported "
-              "before they were); sim {sim} may have been in its training", file=sys.stderr)
+              f"before they were); sim {sim} may have been in its training", file=sys.stderr)
     elif sim not in unseen:
         print(f"{log_prefix}: sim {sim} was in the model's training set; unseen: "
               f"{unseen[:10]}{' ...' if len(unseen) > 10 else ''}", file=sys.stderr)
-    s = read_shard(shards[sim])
+    path = shard_path(data, sim)
+    s = read_shard(path)
     if s.status != "ok" or s.n_done == 0:
-        raise ViewerError(f"{shards[sim]}: simulation {sim} did not converge "
+        raise ViewerError(f"{path}: simulation {sim} did not converge "
                           f"({s.failure_reason}): nothing to compare with")
     if s.fixed_nodes.size != m.fixed.size or not np.array_equal(s.fixed_nodes, m.fixed):
-        raise ViewerError(f"{shards[sim]}: another liver than the model's (use --liver)")
+        raise ViewerError(f"{path}: another liver than the model's (use --liver)")
     for j in range(len(m.handles)):
         m.handles[j].node = int(s.load_nodes[j])
         m.handles[j].force = np.asarray(s.forces[j], float) * float(s.load_fractions[-1])
@@ -524,6 +524,9 @@ def main(argv=None) -> int:
         print(f"{log_prefix}: {exc}", file=sys.stderr)
         return 2
     except ValueError as exc:  # a model or liver that cannot be used, with its reason
+        print(f"{log_prefix}: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # an output directory that cannot be written
         print(f"{log_prefix}: {exc}", file=sys.stderr)
         return 2
 

@@ -193,6 +193,16 @@ def test_command_line_refuses_a_directory_without_a_model(tmp_path):
     assert "Traceback" not in proc.stderr
 
 
+def test_command_line_refuses_an_output_that_is_a_file(run, tmp_path):
+    out = tmp_path / "frames"
+    out.write_text("a file, not a directory")
+    proc = subprocess.run([sys.executable, "-m", "surrogate.viewer", str(run), "--offscreen",
+                           "--out", str(out)], capture_output=True, text=True, timeout=300,
+                          cwd=ROOT)
+    assert proc.returncode == 2 and str(out) in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
 @pytest.fixture()
 def xvfb():
     """A private X display; the test is skipped, with the reason, where none can start."""
