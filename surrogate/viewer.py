@@ -225,7 +225,8 @@ class Scene:
         self.view.ghost_actor.SetVisibility(False)
         frame_camera(plotter, m.surface, [h.node for h in m.handles], zoom=1.3)
         h = plotter.window_size[1]
-        self.status = plotter.add_text(" ", position=(10, h - 118), font_size=10, color="black")
+        self.status = plotter.add_text(" ", position=(10, h - 34), font_size=10, color="black")
+        self.status.prop.SetVerticalJustificationToTop()  # more lines grow downward
         self.last_frame_s = None
         self.last = None
 
@@ -297,9 +298,9 @@ def run_window(m, clim: float, screenshot: Path | None, window_size) -> int:
             m.set_input(i, value)
             scene.draw()
 
-        y = 0.72 - 0.1 * i
+        y = 0.76 - 0.13 * i  # under the force slider, right of the status lines
         p.add_slider_widget(on_input, (inp.lo, inp.hi), value=inp.value, title=inp.name,
-                            pointa=(0.02, y), pointb=(0.3, y), interaction_event="end",
+                            pointa=(0.64, y), pointb=(0.96, y), interaction_event="end",
                             color="black", title_height=0.02, slider_width=0.02,
                             tube_width=0.006, fmt="%.3g")
 
@@ -333,7 +334,7 @@ def run_window(m, clim: float, screenshot: Path | None, window_size) -> int:
         scene.draw()
 
     p.add_key_event("m", toggle_mode)
-    p.add_text("right-click: move the force; drag the sphere: set it; keys 1, 2: which force; "
+    p.add_text("right-click: move the force; drag the sphere: set it; 1, 2: which force; "
                "z: zero; m: pull/push; g: outline", position=(10, window_size[1] - 24),
                font_size=9, color="black")
     if screenshot is not None:
