@@ -418,8 +418,13 @@ def compare(m, pred, data: Path, sim: int | None, out: Path | None, window_size)
     if s.status != "ok" or s.n_done == 0:
         raise ViewerError(f"{path}: simulation {sim} did not converge "
                           f"({s.failure_reason}): nothing to compare with")
-    if s.fixed_nodes.size != m.fixed.size or not np.array_equal(s.fixed_nodes, m.fixed):
-        raise ViewerError(f"{path}: another liver than the model's (use --liver)")
+    same = s.fixed_nodes.size == m.fixed.size and np.array_equal(s.fixed_nodes, m.fixed)
+    if not same and pred.points is None:  # a model of many livers: show this simulation's
+        from surrogate.manipulator import Manipulator
+
+        m = Manipulator(pred, nodes=m.nodes_mode, geometry=dataset_liver(data, s.geometry_id))
+    elif not same:
+        raise ViewerError(f"{path}: another liver than the model's")
     for j in range(len(m.handles)):
         m.handles[j].node = int(s.load_nodes[j])
         m.handles[j].force = np.asarray(s.forces[j], float) * float(s.load_fractions[-1])
