@@ -176,6 +176,7 @@ bench-viewer: setup
 	    --config basis epochs=30 folds=2
 	$(TPY) bench/bench_viewer.py --run $(DEMO_RUN) --run $(VIEWER_RUN) --run $(VIEWER_RUN)_basis \
 	    --md docs/viewer.md
+	$(SPY) -m fem_sim summary $(VIEWER_DATA) --png docs/summary_sofa.png
 
 lint: setup-trainer
 	$(TRAIN_VENV)/bin/ruff check .

@@ -204,12 +204,18 @@ def view_toward(surface: Surface, nodes=()) -> np.ndarray:
     return v
 
 
-def frame_camera(plotter, surface: Surface, nodes=(), zoom: float = 1.2) -> None:
-    """Point the active viewport's camera at the liver from :func:`view_toward`."""
+def frame_camera(plotter, surface: Surface, nodes=(), zoom: float = 1.2,
+                 everything: bool = False) -> None:
+    """Point the active viewport's camera at the liver from :func:`view_toward`; framing the
+    liver's bounds, or ``everything`` drawn (arrows included).
+    """
     v = view_toward(surface, nodes)
     up = (0, 1, 0) if abs(v[2]) > 0.95 else (0, 0, 1)
     plotter.view_vector(v, viewup=up)
-    plotter.reset_camera(bounds=surface.polydata().bounds)
+    if everything:
+        plotter.reset_camera()
+    else:
+        plotter.reset_camera(bounds=surface.polydata().bounds)
     plotter.camera.zoom(zoom)
 
 
@@ -264,7 +270,7 @@ def render_panels(panels: list[Panel], out_png, *, title: str = "", cols: int | 
                          ghost=panel.u is not None, solid=panel.u is None)
         if panel.u is not None:
             view.update(panel.u, panel.forces, panel.load_nodes, scalars=panel.scalars)
-        frame_camera(p, panel.surface, panel.load_nodes)
+        frame_camera(p, panel.surface, panel.load_nodes, zoom=1.1, everything=True)
     out = Path(out_png)
     out.parent.mkdir(parents=True, exist_ok=True)
     p.screenshot(str(out))
