@@ -80,7 +80,7 @@ def load_script(path: Path | None, m) -> tuple[list[dict], float]:
     checked against the model; errors name the file and the key.
     """
     L = len(m.handles)
-    if path is None:  # the default: pull the far node outward, sweep the direction, let go
+    if path is None:  # the default at the far node: push in, sweep sideways, pull out, let go
         node = m.handles[0].node
         i = m.surface.local([node])[0]
         n = m.surface.normals()[i]
@@ -141,6 +141,10 @@ def load_script(path: Path | None, m) -> tuple[list[dict], float]:
                     isinstance(i, int) and 0 <= i < m.points.shape[0] for i in ids)):
                 raise ViewerError(f"{where}: nodes: expected {L} node id(s) in "
                                   f"[0, {m.points.shape[0]}), got {ids!r}")
+            fixed = sorted(set(ids) & set(m.fixed.tolist()))
+            if fixed:
+                raise ViewerError(f"{where}: nodes: {fixed} are in the fixed region (zero "
+                                  "displacement): a force there moves nothing")
             nodes = list(ids)
         elif "points" in entry:
             try:

@@ -149,6 +149,7 @@ def test_off_screen_frames_are_drawn_and_differ_between_forces(m, tmp_path):
     ([{"nodes": [0], "forces": [[0, 0, "x"]]}], r"frames\[0\]: forces"),
     ([{"nodes": [10 ** 6], "forces": [[0, 0, 0]]}], r"frames\[0\]: nodes: expected 1 node"),
     ([{"forces": [[0, 0, 0]], "pull": 1}], r"frames\[0\]: unknown key\(s\) \['pull'\]"),
+    ([{"nodes": [0], "forces": [[0, 0, 0]]}], r"frames\[0\]: nodes: \[0\] are in the fixed"),
     ([{"forces": [[0, 0, 0]], "steps": 0}], r"frames\[0\]: steps"),
     ([{"forces": [[0, 0, 0]], "inputs": [1.0]}], r"frames\[0\]: inputs: expected 0 numbers"),
     ([], "non-empty list 'frames'"),
