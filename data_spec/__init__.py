@@ -1,7 +1,8 @@
 """data_spec: the contract between the solver (fem_sim) and the trainer (surrogate).
 
 Scene schema (TOML), geometry and shard schemas (HDF5 + XDMF), writers, readers and a validator.
-Depends on numpy and h5py only, so it imports under both project interpreters.
+Depends on numpy and h5py only, so it imports under both project interpreters
+(``data_spec.pictures``, the one drawing of a liver, imports pyvista when it first draws).
 """
 
 from data_spec.geometry import Geometry, read_geometry, write_geometry
