@@ -80,9 +80,13 @@ class Surface:
 
     def local(self, mesh_nodes) -> np.ndarray:
         """Local ids of mesh node ids that lie on the surface (-1 for the others)."""
-        local_of = np.full(int(max(self.nodes.max(), np.max(mesh_nodes))) + 1, -1)
-        local_of[self.nodes] = np.arange(self.nodes.size)
-        return local_of[np.asarray(mesh_nodes)]
+        mesh_nodes = np.asarray(mesh_nodes, dtype=np.int64)
+        out = np.full(mesh_nodes.shape, -1, dtype=np.int64)
+        pos = np.searchsorted(self.nodes, mesh_nodes)  # nodes are sorted (np.unique)
+        hit = (pos < self.nodes.size) & (self.nodes[np.minimum(pos, self.nodes.size - 1)]
+                                         == mesh_nodes)
+        out[hit] = pos[hit]
+        return out
 
     def normals(self) -> np.ndarray:
         """Outward unit vertex normals (area-weighted triangle normals)."""
@@ -161,8 +165,8 @@ class LiverView:
         if surface.fixed.size:
             plotter.add_mesh(pv.PolyData(surface.points[surface.fixed]), color=FIXED,
                              point_size=7, render_points_as_spheres=True)
-        self.arrows = pv.PolyData()
-        self._arrow_actor = plotter.add_mesh(self.arrows, color=FORCE, smooth_shading=True)
+        self.arrows = pv.PolyData()  # refilled in place by update()
+        plotter.add_mesh(self.arrows, color=FORCE, smooth_shading=True)
         if label:
             plotter.add_text(label, position="upper_left", font_size=11, color="black")
 
@@ -264,7 +268,7 @@ def render_panels(panels: list[Panel], out_png, *, title: str = "", cols: int | 
     first = 1 if title else 0
     for k, panel in enumerate(panels):
         p.subplot(first + k // cols, k % cols)
-        clim = panel.clim or (0.0, top[panel.title]) if panel.u is not None else None
+        clim = None if panel.u is None else (panel.clim or (0.0, top[panel.title]))
         view = LiverView(p, panel.surface, clim=clim, title=panel.title,
                          f_ref=panel.f_ref, cmap=panel.cmap, label=panel.label,
                          ghost=panel.u is not None, solid=panel.u is None)

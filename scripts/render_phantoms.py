@@ -41,7 +41,7 @@ def solve(work: Path) -> None:
                  f"{ext[2]:.0f} mm, {g.n_nodes} nodes\nmax displacement "
                  f"{np.linalg.norm(u, axis=1).max():.1f} mm")
         write_geometry(work / f"g{seed}.h5", g)
-        np.savez(work / f"u{seed}.npz", u=u, node=node, label=label)
+        np.savez(work / f"u{seed}.npz", u=u, node=node, fixed=fixed, label=label)
         print(f"seed {seed}: {g.n_nodes} nodes, max |u| {np.linalg.norm(u, axis=1).max():.1f} mm",
               flush=True)
 
@@ -54,7 +54,7 @@ def render(work: Path, out: Path) -> None:
     for seed in range(6):
         z = np.load(work / f"u{seed}.npz")
         items.append((read_geometry(work / f"g{seed}.h5"), z["u"], [int(z["node"])], FORCE,
-                      str(z["label"])))
+                      z["fixed"], str(z["label"])))
     render_shards(items, out, TITLE, cols=3)
     print(out)
 

@@ -67,7 +67,7 @@ def summary(directory: str | Path, out=sys.stdout, png: str | Path | None = None
             g = read_geometry(geometry_path(directory, s.geometry_id))
             u = np.zeros((g.n_nodes, 3))
             u[s.output_nodes] = s.displacement[-1]
-            items.append((g, u, s.load_nodes, s.forces,
+            items.append((g, u, s.load_nodes, s.forces, s.fixed_nodes,
                           f"{what}: sim {s.sim_index}, force "
                           f"{np.linalg.norm(s.forces, axis=1).max():.2f} N\nmax displacement "
                           f"{np.linalg.norm(u, axis=1).max():.1f} mm"))
