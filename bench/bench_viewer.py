@@ -53,11 +53,10 @@ def measure(run: Path, nodes: str, frames: int, repeats: int, size) -> dict:
         p.close()
         inference.append(np.median(inf))
         frame.append(np.median(fr))
-    n_pred = m.surface.nodes.size if nodes == "surface" else m.points.shape[0]
     return {"run": str(run), "scene": pred.meta.get("scene", ""), "design": pred.design,
             "hidden": pred.meta["config"]["hidden"], "nodes": nodes,
             "liver_nodes": int(m.points.shape[0]), "surface_nodes": int(m.surface.nodes.size),
-            "predicted_nodes": int(n_pred), "triangles": int(m.surface.triangles.shape[0]),
+            "predicted_nodes": m.n_predicted, "triangles": int(m.surface.triangles.shape[0]),
             "inference_ms": float(np.median(inference) * 1e3),
             "frame_ms": float(np.median(frame) * 1e3),
             "fps": float(1e3 / (np.median(frame) * 1e3))}

@@ -239,18 +239,33 @@ class Panel:
     f_ref: float = 1.0
 
 
-def render_panels(panels: list[Panel], out_png, *, title: str = "", cols: int | None = None,
-                  panel_size=(560, 480)) -> Path:
-    """Render panels side by side (off-screen) into one PNG; returns its path. Panels with
-    the same colour-bar title share one colour range (pyvista draws one bar per title), so
-    livers next to each other compare at a glance.
+def draw_panels(plotter, panels: list[Panel], cols: int, first_row: int = 0) -> None:
+    """Draw panels into a plotter's subplots, row by row from ``first_row``. Panels with the
+    same colour-bar title share one colour range (pyvista draws one bar per title), so livers
+    next to each other compare at a glance.
     """
-    pv = pyvista()
     top: dict[str, float] = {}
     for panel in panels:
         if panel.u is not None and panel.clim is None:
             v = (np.linalg.norm(panel.u, axis=1) if panel.scalars is None else panel.scalars)
             top[panel.title] = max(top.get(panel.title, 1e-9), float(np.max(v)))
+    for k, panel in enumerate(panels):
+        plotter.subplot(first_row + k // cols, k % cols)
+        clim = None if panel.u is None else (panel.clim or (0.0, top[panel.title]))
+        view = LiverView(plotter, panel.surface, clim=clim, title=panel.title,
+                         f_ref=panel.f_ref, cmap=panel.cmap, label=panel.label,
+                         ghost=panel.u is not None, solid=panel.u is None)
+        if panel.u is not None:
+            view.update(panel.u, panel.forces, panel.load_nodes, scalars=panel.scalars)
+        frame_camera(plotter, panel.surface, panel.load_nodes, zoom=1.1, everything=True)
+
+
+def render_panels(panels: list[Panel], out_png, *, title: str = "", cols: int | None = None,
+                  panel_size=(560, 480)) -> Path:
+    """Render panels side by side (off-screen, :func:`draw_panels`) into one PNG; returns its
+    path.
+    """
+    pv = pyvista()
     n = len(panels)
     cols = cols or n
     rows = (n + cols - 1) // cols
@@ -265,16 +280,7 @@ def render_panels(panels: list[Panel], out_png, *, title: str = "", cols: int | 
     else:
         p = pv.Plotter(off_screen=True, shape=(rows, cols), border=False, window_size=size)
     p.set_background("white")
-    first = 1 if title else 0
-    for k, panel in enumerate(panels):
-        p.subplot(first + k // cols, k % cols)
-        clim = None if panel.u is None else (panel.clim or (0.0, top[panel.title]))
-        view = LiverView(p, panel.surface, clim=clim, title=panel.title,
-                         f_ref=panel.f_ref, cmap=panel.cmap, label=panel.label,
-                         ghost=panel.u is not None, solid=panel.u is None)
-        if panel.u is not None:
-            view.update(panel.u, panel.forces, panel.load_nodes, scalars=panel.scalars)
-        frame_camera(p, panel.surface, panel.load_nodes, zoom=1.1, everything=True)
+    draw_panels(p, panels, cols, first_row=1 if title else 0)
     out = Path(out_png)
     out.parent.mkdir(parents=True, exist_ok=True)
     p.screenshot(str(out))

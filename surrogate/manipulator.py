@@ -220,6 +220,11 @@ class Manipulator:
                              f"{self.pred.output_nodes.size} output nodes, not all {n_all}")
         return None, surf
 
+    @property
+    def n_predicted(self) -> int:
+        """How many nodes each prediction computes (the surface, or the whole liver)."""
+        return int(self._rows.size if self._predict_nodes is not None else self.points.shape[0])
+
     def predict(self) -> Frame:
         """The surrogate's displacement for the current handles and inputs."""
         spec = self.pred.spec

@@ -35,6 +35,7 @@ from data_spec.pictures import (
     FORCE,
     LiverView,
     Panel,
+    draw_panels,
     frame_camera,
     pyvista,
     render_panels,
@@ -95,9 +96,7 @@ def load_script(path: Path | None, m) -> tuple[list[dict], float]:
             tgt[0] = target
             if L > 1:
                 tgt[1] = -target[[1, 2, 0]] * 0.5
-            for s in range(1, steps + 1):
-                frames.append({"nodes": [h.node for h in m.handles],
-                               "forces": prev + (tgt - prev) * s / steps, "inputs": None})
+            frames += _ramp(prev, tgt, steps, [h.node for h in m.handles], None)
             prev = tgt
         return frames, 12.0
     try:
@@ -165,11 +164,15 @@ def load_script(path: Path | None, m) -> tuple[list[dict], float]:
         steps = entry.get("steps", 1)
         if not isinstance(steps, int) or steps < 1:
             raise ViewerError(f"{where}: steps: expected an integer >= 1, got {steps!r}")
-        for s in range(1, steps + 1):
-            frames.append({"nodes": nodes, "forces": prev + (forces - prev) * s / steps,
-                           "inputs": inputs})
+        frames += _ramp(prev, forces, steps, nodes, inputs)
         prev = forces
     return frames, float(fps)
+
+
+def _ramp(start, end, steps: int, nodes, inputs) -> list[dict]:
+    """The frames that take the forces from ``start`` to ``end`` linearly in ``steps``."""
+    return [{"nodes": nodes, "forces": start + (end - start) * s / steps, "inputs": inputs}
+            for s in range(1, steps + 1)]
 
 
 def apply_frame(m, frame: dict) -> None:
@@ -205,9 +208,9 @@ def status_text(m, inference_s: float, frame_s: float | None, spheres: bool = Fa
                      f"at node {h.node}")
     for inp in m.inputs[:4]:
         parts.append(f"{inp.name} = {inp.value:.4g}")
-    n = m.surface.nodes.size if m.nodes_mode == "surface" else m.points.shape[0]
     lines = parts + ([f"spheres {m.mode} (key m)"] if spheres else [])
-    lines.append(f"inference {inference_s * 1e3:.2f} ms ({n} nodes, {m.nodes_mode})")
+    lines.append(f"inference {inference_s * 1e3:.2f} ms ({m.n_predicted} nodes, "
+                 f"{m.nodes_mode})")
     if frame_s:
         lines.append(f"frame {frame_s * 1e3:.1f} ms ({1 / frame_s:.0f} fps)")
     return "\n".join(lines)
@@ -274,11 +277,14 @@ def run_window(m, clim: float, screenshot: Path | None, window_size) -> int:
                                  color="black", title_height=0.02, slider_width=0.02,
                                  tube_width=0.006, fmt="%.2f")
 
+    def show_magnitude():  # the slider follows the active force, however it was set
+        slider.GetRepresentation().SetValue(float(np.linalg.norm(m.handles[m.active].force)))
+
     def on_drag(center, widget, j):
         m.active = j
         m.drag(center, j)
         widget.SetCenter(*m.handle_position(j))  # a clamped force pulls the sphere back
-        slider.GetRepresentation().SetValue(float(np.linalg.norm(m.handles[j].force)))
+        show_magnitude()
         scene.draw()
 
     for j in range(len(m.handles)):
@@ -311,14 +317,14 @@ def run_window(m, clim: float, screenshot: Path | None, window_size) -> int:
     def choose(j):
         if j < len(m.handles):
             m.active = j
-            slider.GetRepresentation().SetValue(float(np.linalg.norm(m.handles[j].force)))
+            show_magnitude()
             scene.draw()
 
     def reset():
         for j in range(len(m.handles)):
             m.set_force(np.zeros(3), j)
         move_widgets()
-        slider.GetRepresentation().SetValue(0.0)
+        show_magnitude()
         scene.draw()
 
     p.add_key_event("1", lambda: choose(0))
@@ -389,8 +395,7 @@ def run_offscreen(m, clim: float, script: Path | None, out: Path, window_size) -
     p.close()
     gif = write_gif(images, out / "manipulator.gif", fps)
     timing = {"frames": len(frames), "nodes_mode": m.nodes_mode,
-              "nodes_predicted": int(m.surface.nodes.size if m.nodes_mode == "surface"
-                                     else m.points.shape[0]),
+              "nodes_predicted": m.n_predicted,
               "inference_ms_median": float(np.median(inference) * 1e3),
               "frame_ms_median": float(np.median(frame_times) * 1e3),
               "fps_median": float(1 / np.median(frame_times)), "gif": str(gif)}
@@ -460,12 +465,7 @@ def compare(m, pred, data: Path, sim: int | None, out: Path | None, window_size)
                              title=f"{pred.meta.get('scene', '')}: FE against surrogate")
     pv = pyvista()
     p = pv.Plotter(shape=(1, 3), window_size=window_size, title="FE against surrogate")
-    for k, panel in enumerate(panels):
-        p.subplot(0, k)
-        v = LiverView(p, panel.surface, clim=panel.clim, title=panel.title, f_ref=f_ref,
-                      cmap=panel.cmap, label=panel.label)
-        v.update(panel.u, panel.forces, panel.load_nodes, scalars=panel.scalars)
-        frame_camera(p, panel.surface)
+    draw_panels(p, panels, cols=3)
     p.link_views()
     p.show()
     return None
@@ -530,13 +530,9 @@ def main(argv=None) -> int:
                   f"({t['fps_median']:.0f} fps) for {t['nodes_predicted']} nodes")
             return 0
         return run_window(m, clim, args.screenshot, tuple(args.size))
-    except ViewerError as exc:
-        print(f"{log_prefix}: {exc}", file=sys.stderr)
-        return 2
-    except ValueError as exc:  # a model or liver that cannot be used, with its reason
-        print(f"{log_prefix}: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:  # an output directory that cannot be written
+    # ViewerError (bad options, script, dataset), ValueError (a model or liver that cannot be
+    # used), OSError (an output that cannot be written): each message names its file.
+    except (ValueError, OSError) as exc:
         print(f"{log_prefix}: {exc}", file=sys.stderr)
         return 2
 
