@@ -99,7 +99,10 @@ def main() -> int:
             f"frames, median over {args.repeats} runs. A frame is the surrogate's inference, "
             "moving the surface, redrawing the force arrow and the status line, and "
             "rendering. `predicted`: the nodes the surrogate computes (surface: the drawn "
-            "vertices only; all: every node of the liver, as a simulator needs).\n\n"
+            "vertices only; all: every node of the liver, as a simulator needs). The models "
+            "measure speed, not accuracy: make bench-viewer trains its real-liver ones on 12 "
+            "simulations for a few epochs (a frame costs the same for a well-trained network "
+            "of the same size).\n\n"
             + text + "\n")
     return 0
 
