@@ -37,6 +37,39 @@ def displacements(d):
     return {p.name: read_shard(p).displacement for p in list_shards(d)}
 
 
+def session_members(sid):
+    """Live processes of session ``sid`` (from /proc; zombies have released their files)."""
+    pids = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            text = stat.read_text()
+        except OSError:  # the process ended while we looked
+            continue
+        fields = text[text.rindex(")") + 2:].split()  # state ppid pgrp session ...
+        if int(fields[3]) == sid and fields[0] != "Z":
+            pids.append(int(stat.parent.name))
+    return pids
+
+
+def kill_session(sid, timeout=30.0):
+    """SIGKILL a whole mpirun job, as a batch scheduler does, and wait until it is gone.
+
+    ``killpg`` on mpirun is not enough: Open MPI starts every rank in its own process group,
+    so the ranks outlive a killed mpirun and go on working (and rank 0 goes on holding the
+    dataset's lock). The job started with ``start_new_session``, so its session id is
+    mpirun's pid and every rank carries it.
+    """
+    t0 = time.time()
+    while (pids := session_members(sid)) and time.time() - t0 < timeout:
+        for pid in pids:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        time.sleep(0.05)
+    assert not session_members(sid), f"processes of session {sid} survived SIGKILL"
+
+
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
     out = tmp_path_factory.mktemp("ref")
@@ -98,7 +131,7 @@ def test_sigkill_midway_then_resume(reference, tmp_path):
     t0 = time.time()
     while len(list_shards(d)) < 3 and time.time() - t0 < 120:
         time.sleep(0.05)
-    os.killpg(proc.pid, signal.SIGKILL)
+    kill_session(proc.pid)
     proc.wait()
     assert len(list_shards(d)) < 12
     res = generate(scene, d, n=2)
