@@ -5,6 +5,10 @@ Depends on numpy and h5py only, so it imports under both project interpreters
 (``data_spec.pictures``, the one drawing of a liver, imports pyvista when it first draws).
 """
 
+from data_spec.cpu_blas import configure as _configure_blas
+
+_configure_blas()  # before numpy loads OpenBLAS (see data_spec/cpu_blas.py)
+
 from data_spec.geometry import Geometry, read_geometry, write_geometry
 from data_spec.material import OgdenMaterial
 from data_spec.scene import SCENE_SCHEMA_VERSION, Scene, SceneError, load_scene, parse_scene
