@@ -9,10 +9,16 @@ from data_spec.cpu_blas import configure as _configure_blas
 
 _configure_blas()  # before numpy loads OpenBLAS (see data_spec/cpu_blas.py)
 
-from data_spec.geometry import Geometry, read_geometry, write_geometry
-from data_spec.material import OgdenMaterial
-from data_spec.scene import SCENE_SCHEMA_VERSION, Scene, SceneError, load_scene, parse_scene
-from data_spec.shards import (
+from data_spec.geometry import Geometry, read_geometry, write_geometry  # noqa: E402
+from data_spec.material import OgdenMaterial  # noqa: E402
+from data_spec.scene import (  # noqa: E402
+    SCENE_SCHEMA_VERSION,
+    Scene,
+    SceneError,
+    load_scene,
+    parse_scene,
+)
+from data_spec.shards import (  # noqa: E402
     SHARD_SCHEMA_VERSION,
     Shard,
     SolverStats,
@@ -22,8 +28,8 @@ from data_spec.shards import (
     shard_path,
     write_shard,
 )
-from data_spec.solver_settings import SolverSettings
-from data_spec.validate import shard_problems, validate_dataset
+from data_spec.solver_settings import SolverSettings  # noqa: E402
+from data_spec.validate import shard_problems, validate_dataset  # noqa: E402
 
 __all__ = [
     "SCENE_SCHEMA_VERSION", "SHARD_SCHEMA_VERSION", "Geometry", "OgdenMaterial", "Scene",

@@ -50,7 +50,8 @@ def coretype(flags: set[str]) -> str | None:
 
 def configure(environ=os.environ, flags: set[str] | None = None) -> str | None:
     """Set OPENBLAS_CORETYPE unless already set; returns the value in force (or None).
-    Only effective before OpenBLAS is loaded (before numpy, scipy or petsc4py is imported)."""
+    Only effective before OpenBLAS is loaded (before numpy, scipy or petsc4py is imported).
+    """
     if environ.get("OPENBLAS_CORETYPE"):
         return environ["OPENBLAS_CORETYPE"]
     name = coretype(cpu_flags() if flags is None else flags)

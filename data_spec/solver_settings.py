@@ -47,6 +47,10 @@ class SolverSettings:
         "hermite", "start of each load step: Hermite polynomial through the last converged "
         "states and their tangents, tangent integration, extrapolation of states, or the last "
         "state", choices=("hermite", "tangent", "extrapolate", "previous"), scene=True)
+    pivoting: bool = _setting(False, "float32 LDL^T (factorization single) with MUMPS' "
+                              "2x2 pivoting (SYM=2) instead of none (SYM=1, ~15 % faster; "
+                              "an indefinite tangent still factorises, and a solve the "
+                              "factors cannot give falls back to float64 with pivoting)")
     petsc_options: dict = _setting({}, "extra PETSc options for PETSc's solvers (factorization "
                                    "petsc, gamg); a pc_type here selects PETSc's path",
                                    scene=True)
@@ -76,9 +80,13 @@ class SolverSettings:
     relax_max_nodes: int = _setting(1000, "local relaxation: skipped when the hot spot has "
                                     "more nodes", lo=1)
     first_increment: float = _setting(0.25, "the first increment as a fraction of the first "
-                                      "output step (smaller: the stiffening start is taken in "
-                                      "sub-increments that double after easy ones)", lo=0.0,
-                                      strict=True, hi=1.0)
+                                      "output step, at most (smaller: the stiffening start "
+                                      "is taken in sub-increments that double after easy "
+                                      "ones)", lo=0.0, strict=True, hi=1.0)
+    first_step_stiffening: float = _setting(
+        1.0, "a smaller first increment where the small-strain solution (predictor hermite, "
+        "no prescribed displacements) gives max(|m_k - 2|, 1) * max |grad u| above this (the "
+        "Ogden law's stiffening over the increment); 0: always first_increment", lo=0.0)
 
     @classmethod
     def from_dict(cls, values: dict | None, where: str = "settings") -> SolverSettings:

@@ -26,7 +26,8 @@ from fem_sim import cext
 
 SOURCE = cext.Path(__file__).with_name("ldlt_kernel.c")
 CDEF = """
-void *ldlt_new(int single);
+void *ldlt_new(int single, int sym);
+void ldlt_set_icntl(void *h, int i, int v);
 int ldlt_info(void *h, int i);
 double ldlt_rinfo(void *h, int i);
 int ldlt_analyse(void *h, int n, int64_t nnz, int *irn, int *jcn, int *perm_in, int mem_relax);
@@ -106,7 +107,8 @@ class SerialLDLT:
     (3 for displacements), the ordering is computed on the block graph.
     """
 
-    def __init__(self, precision: str = "single", bs: int = 3):
+    def __init__(self, precision: str = "single", bs: int = 3, pivoting: bool = True,
+                 icntl: dict | None = None):
         if precision not in ("single", "double"):
             raise ValueError(f"precision must be 'single' or 'double', got {precision!r}")
         mod = load()
@@ -115,9 +117,11 @@ class SerialLDLT:
         self.ffi, self.lib = mod.ffi, mod.lib
         self.dtype = np.float32 if precision == "single" else np.float64
         self.bs = bs
-        self._h = self.lib.ldlt_new(int(precision == "single"))
+        self._h = self.lib.ldlt_new(int(precision == "single"), 2 if pivoting else 1)
         if self._h == self.ffi.NULL:
             raise MemoryError("ldlt_new failed")
+        for i, v in (icntl or {}).items():
+            self.lib.ldlt_set_icntl(self._h, int(i), int(v))
         self._pattern = None
         _live.add(self)
         self.analyses = self.factorizations = 0

@@ -31,9 +31,9 @@ typedef struct {
     else { DMUMPS_STRUC_C *m = &(h)->d; setup; m->job = (JOB); dmumps_c(m); }             \
   } while (0)
 
-#define INIT(m)                                                              \
+#define INIT(m, SYM)                                                         \
   do {                                                                       \
-    (m)->par = 1; (m)->sym = 2; /* general symmetric: LDL^T with 2x2 pivots */ \
+    (m)->par = 1; (m)->sym = (SYM); /* 2: LDL^T with 2x2 pivots; 1: no pivoting */ \
     (m)->comm_fortran = (MUMPS_INT)MPI_Comm_c2f(MPI_COMM_SELF);             \
   } while (0)
 
@@ -42,12 +42,18 @@ typedef struct {
     (m)->ICNTL(1) = -1; (m)->ICNTL(2) = -1; (m)->ICNTL(3) = -1; (m)->ICNTL(4) = 0;   \
   } while (0)
 
-void *ldlt_new(int single) {
+void *ldlt_new(int single, int sym) {
   ldlt_t *h = calloc(1, sizeof(ldlt_t));
   if (!h) return NULL;
   h->single = single;
-  RUN(h, -1, INIT(m)); /* JOB=-1 sets the default ICNTL; QUIET is applied before analysis */
+  RUN(h, -1, INIT(m, sym)); /* JOB=-1 sets the default ICNTL; QUIET is applied before analysis */
   return h;
+}
+
+/* Set ICNTL(i) = v (before the analysis or factorisation it should affect). */
+void ldlt_set_icntl(void *hv, int i, int v) {
+  ldlt_t *h = hv;
+  if (h->single) h->s.ICNTL(i) = v; else h->d.ICNTL(i) = v;
 }
 
 int ldlt_info(void *hv, int i) {

@@ -24,13 +24,17 @@ def extension(compiled):
     compiled("ldlt")  # needs gcc, libmumps-dev, libmetis-dev
 
 
+@pytest.mark.parametrize("pivoting", [True, False])  # MUMPS SYM=2, SYM=1 (the float32 default)
 @pytest.mark.parametrize("precision", ["double", "single"])
 @pytest.mark.parametrize("shift", [0.0, 1.3])  # SPD, and indefinite
-def test_solves_match_dense_and_inertia_is_exact(precision, shift):
+def test_solves_match_dense_and_inertia_is_exact(precision, shift, pivoting):
+    """Without pivoting too: an indefinite matrix with no zero leading minor factorises, and
+    the negative pivots still count its negative eigenvalues (Sylvester's law of inertia)."""
     A = laplacian_3d(5, shift=shift)
     dense = A.toarray()
     b = np.random.default_rng(0).normal(size=A.shape[0])
-    solver = ldlt.SerialLDLT(precision, bs=3)
+    solver = ldlt.SerialLDLT(precision, bs=3, pivoting=pivoting,
+                             icntl=None if pivoting else {8: 0})
     solver.factor(A.indptr, A.indices, A.data)
     exact = np.linalg.solve(dense, b)
     one = solver.solve(b)

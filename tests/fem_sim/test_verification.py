@@ -201,6 +201,47 @@ def test_chord_steps_and_predictors_reach_the_plain_newton_answer():
     assert runs["default"].local_iterations > 0  # and the relaxation
 
 
+def test_first_increment_is_capped_by_the_small_strain_stiffening():
+    """max_gradient of a linear field v = A x is the largest singular value of A at every
+    point (closed form); the first increment is first_increment of the first step unless
+    max(|m - 2|, 1) * max|grad t| * dlam exceeds first_step_stiffening (t = du/dlam at u = 0),
+    then exactly where it equals it; and the capped run converges to the same answer."""
+    g = make_phantom(0, 20.0)
+    node = int(np.argmax(g.points[:, 0]))
+    cap = 0.2  # below the default (1.0), for a load this coarse mesh carries
+    prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells,
+                        settings={"rtol": 1e-10, "first_step_stiffening": cap})
+    eqs = prob.equations
+    A = np.array([[0.1, 0.02, 0.0], [0.0, -0.05, 0.03], [0.04, 0.0, 0.2]])
+    xyz = prob.disc.V.tabulate_dof_coordinates()[: eqs.n_owned_dofs // 3]
+    before = eqs.state()
+    assert eqs.max_gradient((xyz @ A.T).ravel()) == pytest.approx(np.linalg.norm(A, 2),
+                                                                  rel=1e-10)
+    np.testing.assert_array_equal(eqs.state(), before)  # u untouched
+    cons = [Constraint(g.regions["vena_cava"])]
+    fractions = np.linspace(0.1, 1.0, 10)
+    steps = {}
+    for scale in (0.1, 20.0):
+        load = [NodalLoad([node], [[0.0, -0.3 * scale, -0.3 * scale]])]
+        eqs.set_problem(MAT, cons, load)
+        eqs.set_state(np.zeros_like(before))
+        prob.linear.reset()
+        prob.predictor.start()  # the tangent at u = 0
+        rate = (MAT.m[0] - 2.0) * eqs.max_gradient(prob.predictor.initial_tangent())
+        quarter = 0.25 * fractions[0]
+        want = quarter if rate * quarter <= cap else cap / rate
+        steps[scale] = prob.stepper.first_increment(fractions[0])
+        assert steps[scale] == pytest.approx(want, rel=1e-12), scale
+    assert steps[0.1] == quarter and steps[20.0] < quarter  # the cap is exercised
+    capped = prob.solve(MAT, cons, load, fractions)
+    plain = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells,
+                         settings={"rtol": 1e-10, "first_step_stiffening": 0.0},
+                         prefix="nocap_").solve(MAT, cons, load, fractions)
+    assert capped.status == plain.status == "ok"
+    ref = plain.displacement
+    assert np.abs(capped.displacement - ref).max() <= 1e-8 * np.abs(ref).max()
+
+
 def test_hermite_predictor_error_falls_with_the_polynomial_degree():
     """From exact states and tangents of a smooth load path, the Hermite predictor's error
     over one increment h falls as h^(2m) for m points: halving h divides it by ~2^(2m)."""
