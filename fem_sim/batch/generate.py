@@ -13,6 +13,7 @@ rank 0 before the split (FFCx waits only 10 s for another process compiling the 
 from __future__ import annotations
 
 import logging
+import os
 import sys
 import time
 from dataclasses import dataclass
@@ -277,6 +278,12 @@ def generate(scene_file: str, out: str | Path, ranks_per_sim: int = 1, only: str
     world = MPI.COMM_WORLD
     out = Path(out)
     t_start = time.perf_counter()
+    if world.size > 1 and not os.environ.get("OMP_NUM_THREADS"):
+        # The ranks share the cores: one point-kernel thread each (a lone rank keeps
+        # OpenMP's default, the cores it may run on).
+        from fem_sim.material import ogden_c
+
+        ogden_c.threads(1)
     plan, scene = Plan(), None
     if world.rank == 0:
         if world.size % ranks_per_sim:  # checked before anything is written

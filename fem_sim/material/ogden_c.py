@@ -22,14 +22,25 @@ CDEF = """
 int ogden_points(int n, const double *F_all, int nterms, const double *ck, const double *mk,
                  double K, int vol_log, int want_tangent, double *W_all, double *P_all,
                  double *A_all, double *J_all);
+int ogden_threads(int n);
 """
-COMPILE_ARGS = ["-O2", "-std=c99"]  # no -ffast-math: the kernel relies on NaN and isfinite
+# No -ffast-math: the kernel relies on NaN and isfinite. OpenMP over the points.
+COMPILE_ARGS = ["-O2", "-std=c99", "-fopenmp"]
 
 
 def load():
     """The compiled module (with ``.ffi`` and ``.lib``), or None if it cannot be built."""
     return cext.load("ogden", SOURCE, CDEF, "using the numpy kernel (several times slower)",
-                     extra_compile_args=COMPILE_ARGS, libraries=["m"])
+                     extra_compile_args=COMPILE_ARGS, extra_link_args=["-fopenmp"],
+                     libraries=["m"])
+
+
+def threads(n: int = 0) -> int:
+    """Threads of the compiled kernel: ``n > 0`` sets the count; returns the count in force
+    (1 without the compiled kernel).
+    """
+    mod = load()
+    return 1 if mod is None else int(mod.lib.ogden_threads(int(n)))
 
 
 def _ptr(ffi, arr: np.ndarray):

@@ -6,6 +6,34 @@
  * Points with det F <= 0 or non-finite F get NaN in W, P, A; the return value counts them.
  */
 #include <math.h>
+#include <stdlib.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+/* Threads for the point loop (points are independent, so the results do not depend on the
+ * count). n > 0 sets it, n <= 0 only asks; returns the count in force. The default is
+ * OMP_NUM_THREADS, else the processors OpenMP sees; the batch generator sets 1 per MPI rank.
+ * Kept here, not in OpenMP's global setting: MUMPS resets that to 1 during a factorisation
+ * (measured: 2 before a simulation, 1 after). */
+static int kernel_threads = 0;
+
+int ogden_threads(int n)
+{
+#ifdef _OPENMP
+    if (n > 0) {
+        kernel_threads = n;
+    } else if (kernel_threads <= 0) {
+        const char *env = getenv("OMP_NUM_THREADS");
+        int from_env = env ? atoi(env) : 0;
+        kernel_threads = from_env > 0 ? from_env : omp_get_num_procs();
+    }
+    return kernel_threads;
+#else
+    (void)n;
+    return 1;
+#endif
+}
 
 /* Eigen-decomposition of a symmetric 3x3 matrix by cyclic Jacobi rotations: accurate to
  * round-off in every eigenvalue (relative to the matrix norm), orthonormal vectors even for
@@ -67,6 +95,9 @@ int ogden_points(int n, const double *F_all, int nterms, const double *ck, const
 {
     int bad_count = 0;
     const double nan = NAN;
+    const int nthreads = ogden_threads(0);
+    (void)nthreads;
+#pragma omp parallel for schedule(static) reduction(+ : bad_count) num_threads(nthreads)
     for (int pt = 0; pt < n; ++pt) {
         const double *F = F_all + 9 * pt;
         double *P = P_all + 9 * pt;

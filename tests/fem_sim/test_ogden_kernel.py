@@ -127,3 +127,27 @@ def test_compiled_kernel_matches_the_numpy_kernel(mat, compiled):
     # zero stress at F = I (to round-off of the parameters), exact linear-elastic tangent
     assert np.abs(Pc[0]).max() <= 1e-15 * mat.mu
     np.testing.assert_allclose(Ac[0], A[0], rtol=0, atol=1e-15 * np.abs(A[0]).max())
+
+
+def test_threads_give_the_same_values_and_count_bad_points():
+    """The compiled kernel's OpenMP loop: every point is computed alone (no sum across points),
+    so 1 and 3 threads give identical values (equal, not close), NaN at the same inverted
+    points; the thread count is set and read back."""
+    if ogden_c.load() is None:
+        pytest.skip("compiled kernel unavailable")
+    rng = np.random.default_rng(1)
+    F = np.eye(3).ravel() + 0.15 * rng.standard_normal((5003, 9))
+    F[[7, 4000]] = -np.eye(3).ravel()  # inverted points
+    mat = MATS[2]
+    before = ogden_c.threads()
+    try:
+        out = {}
+        for n in (1, 3):
+            assert ogden_c.threads(n) == n
+            out[n] = ogden_c.ogden_points(F, mat.c, mat.m, mat.K, mat.volumetric, True)
+    finally:
+        ogden_c.threads(before)
+    for a, b in zip(out[1], out[3]):
+        np.testing.assert_array_equal(a, b)
+    W = out[1][0]
+    assert np.isnan(W[[7, 4000]]).all() and np.isfinite(np.delete(W, [7, 4000])).all()
