@@ -69,7 +69,9 @@ class NewtonSolver:
         history.append(r)
         if self.relax is not None and r > tol and gap <= gap_tol and \
                 self.relax.relax(lam, tol) > 0:
-            if not eqs.update_points(tangent=False):
+            # With the tangent: a Newton step nearly always follows (the relaxation leaves
+            # the residual spread over the liver), and it then needs no separate pass.
+            if not eqs.update_points(tangent=True):
                 raise StepFailure(f"det F <= 0 after the local relaxation (min det F = "
                                   f"{eqs.min_J:.3g})")
             r = eqs.residual(lam)
