@@ -84,9 +84,10 @@ class SolverSettings:
                                       "is taken in sub-increments that double after easy "
                                       "ones)", lo=0.0, strict=True, hi=1.0)
     first_step_stiffening: float = _setting(
-        1.0, "a smaller first increment where the small-strain solution (predictor hermite, "
+        0.0, "a smaller first increment where the small-strain solution (predictor hermite, "
         "no prescribed displacements) gives max(|m_k - 2|, 1) * max |grad u| above this (the "
-        "Ogden law's stiffening over the increment); 0: always first_increment", lo=0.0)
+        "Ogden law's stiffening over the increment; 1 helps large forces on P1 but sends the "
+        "Hermite predictor astray on P2, see README); 0: always first_increment", lo=0.0)
 
     @classmethod
     def from_dict(cls, values: dict | None, where: str = "settings") -> SolverSettings:

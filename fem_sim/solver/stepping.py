@@ -119,11 +119,14 @@ class LoadStepper:
         (m - 2) g. With t = du/dlam at u = 0 at hand (the Hermite predictor computes it at the
         start, with the factorisation the first Newton step needs anyway), the increment is
         capped where max(|m_k - 2|, 1) * max|grad t| * dlam = ``first_step_stiffening``.
-        Measured on the real liver (``bench/bench_hard.py``, 14.6k nodes, P1): 5x the nominal
-        force (stiffening 8.4 over the first step) 31 factorisations instead of 41 and no
-        cut-back; a whole first step where the stiffening is below 1.7 saved 1-2 factorisations
-        on the phantoms but cost 2 more on the softest material (1.7, m = 6) and up to 13 more
-        at 2x force, hence a cap only.
+        Measured on the real liver (``bench/bench_hard.py``, 14.6k nodes, P1): with the cap at
+        1, 5x the nominal force (stiffening 8.4 over the first step) 31 factorisations instead
+        of 41 and no cut-back, the other hard cases unchanged; but P2 at 12 mm 79 instead of
+        34 (53 Newton iterations in step 2: the Hermite polynomial through the closely spaced
+        states of a finely divided first step extrapolates badly over the next step). So the
+        cap is off by default (``first_step_stiffening = 0``). Letting the rule also enlarge the
+        first increment was worse: 2 more factorisations on the softest material, up to 13 more
+        at 2x force.
         """
         s = self.settings
         dlam = lam1 * s.first_increment
