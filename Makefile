@@ -60,14 +60,14 @@ setup-system:
 # that nothing installed into it can replace numpy. The project itself is put on each venv's path
 # with a .pth file (no build step, no wheel needed), and a second .pth chooses OpenBLAS' kernels
 # from the CPU's instruction sets at every start (data_spec/cpu_blas.py: VMs that hide the CPU
-# model otherwise get OpenBLAS' SSE3 kernels, 2x slower factorisations).
+# model otherwise get OpenBLAS' SSE3 kernels, 2x slower factorisations). Both are written by
+# setup-solver / setup-trainer on every run (cheap), which every other target goes through.
 $(SOLVER_VENV)/.stamp: requirements/debian-packages.txt requirements/solver-extras.txt \
                        requirements/solver-constraints.txt pyproject.toml
 	@bash scripts/setup_system.sh requirements/debian-packages.txt
 	$(SYS_PY) -m venv --system-site-packages $(SOLVER_VENV)
 	$(SPY) -m pip install -q --disable-pip-version-check -c requirements/solver-constraints.txt \
 	    -r requirements/solver-extras.txt
-	$(SPY) scripts/install_pth.py "$(CURDIR)"
 	$(SPY) -c "import dolfinx, numpy; assert numpy.__version__.startswith('1.'), numpy.__version__"
 	@touch $@
 
@@ -78,7 +78,6 @@ $(TRAIN_VENV)/.stamp: requirements/trainer.lock requirements/debian-packages-tra
 	@bash scripts/setup_system.sh requirements/debian-packages-trainer.txt
 	$(SYS_PY) -m venv $(TRAIN_VENV)
 	$(TPY) -m pip install -q --disable-pip-version-check -r requirements/trainer.lock
-	$(TPY) scripts/install_pth.py "$(CURDIR)"
 	$(TPY) -c "import jax, flax, optax, numpy; assert int(numpy.__version__[0]) >= 2"
 	@touch $@
 

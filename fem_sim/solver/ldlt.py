@@ -104,11 +104,12 @@ class SerialLDLT:
     ``factor(indptr, indices, values)`` analyses on the first call (and whenever the pattern
     changes), then factorises; ``solve(b)`` returns x (float64) with A x ~= b.
     ``precision``: "single" (float32 factors) or "double"; ``bs``: block size of the dofs
-    (3 for displacements), the ordering is computed on the block graph.
+    (3 for displacements), the ordering is computed on the block graph; ``pivoting``: MUMPS'
+    SYM=2 (2x2 pivots) or SYM=1 (none: faster; an indefinite matrix still factorises unless
+    a pivot vanishes, and :attr:`negative_pivots` still gives its inertia).
     """
 
-    def __init__(self, precision: str = "single", bs: int = 3, pivoting: bool = True,
-                 icntl: dict | None = None):
+    def __init__(self, precision: str = "single", bs: int = 3, pivoting: bool = True):
         if precision not in ("single", "double"):
             raise ValueError(f"precision must be 'single' or 'double', got {precision!r}")
         mod = load()
@@ -120,8 +121,11 @@ class SerialLDLT:
         self._h = self.lib.ldlt_new(int(precision == "single"), 2 if pivoting else 1)
         if self._h == self.ffi.NULL:
             raise MemoryError("ldlt_new failed")
-        for i, v in (icntl or {}).items():
-            self.lib.ldlt_set_icntl(self._h, int(i), int(v))
+        if not pivoting:
+            # No pivot choice to guide, so no scaling (ICNTL(8) = 0). Measured on the real
+            # liver's Jacobian, float32: 1.00 s against 1.05 s with OpenBLAS' SSE3 kernels,
+            # equal (0.47 s) with its AVX-512 ones.
+            self.lib.ldlt_set_icntl(self._h, 8, 0)
         self._pattern = None
         _live.add(self)
         self.analyses = self.factorizations = 0

@@ -104,9 +104,9 @@ class SerialLDLTSolver(LinearSolver):
             solver = self._ldlts.get(precision)
             if solver is None:
                 # Unpivoted float32 factors unless asked (the float64 fallback pivots).
-                pivot = precision == "double" or self.settings.pivoting
                 solver = self._ldlts[precision] = ldlt.SerialLDLT(
-                    precision, bs=3, pivoting=pivot, icntl=None if pivot else {8: 0})
+                    precision, bs=3,
+                    pivoting=precision == "double" or self.settings.pivoting)
             if k:
                 self.counts.double_fallbacks += 1
                 log.debug("float32 LDL^T insufficient (%s); factorising in float64", why)
