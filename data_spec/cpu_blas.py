@@ -3,9 +3,10 @@
 Why: Debian's OpenBLAS (and the one in numpy's wheels) chooses its kernels at load time from the
 CPU's family and model numbers. Virtual machines often report a generic model ("Intel(R) Xeon(R)
 Processor"), and then OpenBLAS falls back to its Prescott (SSE3) kernels: measured on such a
-2-core VM with AVX-512 (``bench/bench_jacobian.py``, the real liver's Jacobian, 43.7k dofs),
-one float32 MUMPS factorisation took 1.0 s with the Prescott kernels and 0.47 s with SkylakeX's
-(the same flops; 63 % of the time was ``sgemm_kernel_PRESCOTT`` in ``perf``). Setting
+2-core VM with AVX-512 (``bench/bench_jacobian.py``, the real liver's Jacobian, 43.7k dofs,
+run with ``OPENBLAS_CORETYPE=Prescott`` and without), one float32 MUMPS factorisation took
+1.28 s with the Prescott kernels and 0.59 s with SkylakeX's, float64 2.20 and 0.92 s (the same
+flops and residuals; 63 % of the time was ``sgemm_kernel_PRESCOTT`` in ``perf``). Setting
 ``OPENBLAS_CORETYPE`` from the instruction sets the CPU reports in ``/proc/cpuinfo`` picks the
 right kernels and is harmless where detection works (it names the same kernels).
 
