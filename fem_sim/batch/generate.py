@@ -248,6 +248,7 @@ def run_case(problem, scene: Scene, case: cs.Case, g: Geometry, fixed: np.ndarra
                   "factorizations": sol.factorizations if sol else 0,
                   "krylov_iterations": sol.krylov_iterations if sol else 0,
                   "double_fallbacks": sol.double_fallbacks if sol else 0,
+                  "reused_factorizations": sol.reused_factorizations if sol else 0,
                   "total_wall_time": time.perf_counter() - t0}
     if not np.all(np.isfinite(disp)):  # never NaN in a shard
         keep = np.all(np.isfinite(disp), axis=(1, 2))

@@ -67,6 +67,13 @@ class LinearSolver:
     def solve_near(self, J: Jacobian, rhs, du, rtol: float, maxit: int) -> bool:
         return False
 
+    def solve_recurring(self, J: Jacobian, rhs, du, rtol: float) -> None:
+        """As :meth:`solve`, for a matrix that recurs in every simulation of a problem (the
+        tangent at u = 0 of the same mesh, material and constraints): a solver may keep its
+        factorisation and reuse it when the same matrix comes again. Default: :meth:`solve`.
+        """
+        self.solve(J, rhs, du, rtol)
+
     def invalidate(self) -> None:
         pass
 
@@ -85,8 +92,12 @@ class SerialLDLTSolver(LinearSolver):
     def __init__(self, settings: SolverSettings, precision: str):
         super().__init__(settings)
         self.name = precision
-        self._ldlts: dict[str, ldlt.SerialLDLT] = {}  # by precision; keeps the analysis
+        # by (slot, precision); each keeps its analysis. Slot "work" holds Newton's
+        # factorisations, slot "recurring" the one of solve_recurring, kept across simulations.
+        self._ldlts: dict[tuple[str, str], ldlt.SerialLDLT] = {}
         self._ldlt: ldlt.SerialLDLT | None = None     # the one holding the last factorisation
+        # (column indices, values, factors) of the recurring matrix's last factorisation
+        self._recurring: tuple[np.ndarray, np.ndarray, ldlt.SerialLDLT] | None = None
 
     def reset(self) -> None:
         super().reset()
@@ -96,15 +107,15 @@ class SerialLDLTSolver(LinearSolver):
     def has_factorization(self) -> bool:
         return self._ldlt is not None
 
-    def solve(self, J: Jacobian, rhs, du, rtol: float) -> None:
+    def solve(self, J: Jacobian, rhs, du, rtol: float, slot: str = "work") -> None:
         indptr, indices, values = J.csr()
         precisions = [self.name] + (["double"] if self.name == "single" else [])
         why = ""
         for k, precision in enumerate(precisions):
-            solver = self._ldlts.get(precision)
+            solver = self._ldlts.get((slot, precision))
             if solver is None:
                 # Unpivoted float32 factors unless asked (the float64 fallback pivots).
-                solver = self._ldlts[precision] = ldlt.SerialLDLT(
+                solver = self._ldlts[slot, precision] = ldlt.SerialLDLT(
                     precision, bs=3,
                     pivoting=precision == "double" or self.settings.pivoting)
             if k:
@@ -127,6 +138,31 @@ class SerialLDLTSolver(LinearSolver):
             why = f"GMRES with the LDL^T factors did not reach {rtol:.1e} in {its} iterations"
         self._ldlt = None  # no valid factorisation: chord steps and tangents must not use one
         raise StepFailure(f"linear solver failed: {why}")
+
+    def solve_recurring(self, J: Jacobian, rhs, du, rtol: float) -> None:
+        """The factorisation of the recurring matrix is kept in its own slot (Newton's
+        factorisations do not overwrite it) with a copy of the matrix; when the same matrix
+        (equal values, entry by entry) comes again, the solve reuses it: a batch of
+        simulations on one liver and material saves one factorisation per simulation. The
+        solution is the same as with a fresh factorisation (the same factors: MUMPS is
+        deterministic for equal input and the same analysis; tested).
+        """
+        indptr, indices, values = J.csr()
+        kept = self._recurring
+        if kept is not None and kept[1].size == values.size \
+                and np.array_equal(kept[1], values) and np.array_equal(kept[0], indices):
+            x, its, ok = kept[2].solve_refined(ldlt.csr(indptr, indices, values),
+                                               rhs.array_r, rtol, self.settings.max_krylov)
+            self.counts.krylov_iterations += its
+            if ok:
+                self.counts.reused_factorizations += 1
+                self._ldlt = kept[2]
+                du.array[:] = x
+                _ghost_update(du)
+                return
+        self._recurring = None
+        self.solve(J, rhs, du, rtol, slot="recurring")
+        self._recurring = (indices.copy(), values.copy(), self._ldlt)
 
     def back_solve(self, rhs, du) -> bool:
         """One back-solve: with float32 factors the relative error is ~1e-3, fine for chord

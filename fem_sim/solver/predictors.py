@@ -163,9 +163,12 @@ class Hermite(TangentIntegration):
         eqs.update_points(tangent=True)
         J = eqs.jacobian(lift=False)
         eqs.set_rhs_to_load()
+        # At u = 0 (lam = 0) J is the small-strain tangent, the same in every simulation of
+        # this mesh, material and constraints: its factorisation may be kept across them.
+        solve = self.linear.solve_recurring if lam == 0.0 else self.linear.solve
         if not self.linear.solve_near(J, eqs.rhs, eqs.du, TANGENT_RTOL, TANGENT_MAX_GMRES):
             try:
-                self.linear.solve(J, eqs.rhs, eqs.du, TANGENT_RTOL)
+                solve(J, eqs.rhs, eqs.du, TANGENT_RTOL)
             except StepFailure as exc:  # e.g. a singular tangent: predict without tangents
                 log.debug("no tangent at load %.4g (%s)", lam, exc)
                 self.points = []

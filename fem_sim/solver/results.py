@@ -21,6 +21,7 @@ class LinearCounts:
     krylov_iterations: int = 0
     back_solves: int = 0
     double_fallbacks: int = 0  # float32 factorisations that had to be redone in float64
+    reused_factorizations: int = 0  # kept from an earlier simulation (solve_recurring)
 
 
 @dataclass
@@ -42,6 +43,7 @@ class Solution:
     chord_steps: int = 0       # accepted back-solves with an old factorisation
     chord_rejected: int = 0    # chord steps tried and undone (too little contraction)
     double_fallbacks: int = 0  # float32 factorisations that had to be redone in float64
+    reused_factorizations: int = 0  # kept from an earlier simulation (solve_recurring)
     local_iterations: int = 0  # local Newton iterations of the hot-spot relaxation
 
     @property

@@ -102,6 +102,7 @@ class LoadStepper:
         c = self.linear.counts
         sol.factorizations, sol.krylov_iterations = c.factorizations, c.krylov_iterations
         sol.back_solves, sol.double_fallbacks = c.back_solves, c.double_fallbacks
+        sol.reused_factorizations = c.reused_factorizations
         sol.chord_steps, sol.chord_rejected = self.newton.chord_steps, self.newton.chord_rejected
         sol.local_iterations = self.newton.local_iterations
         if eqs.disc.comm.rank == 0:

@@ -303,6 +303,41 @@ def test_factorisation_backends_give_the_same_answer():
             MAT, [Constraint(g.regions["vena_cava"])], [], [1.0])
 
 
+def test_small_strain_factorisation_is_kept_across_simulations_of_a_problem():
+    """The tangent at u = 0 is factorised once per mesh, material and constraints: a second
+    simulation with another force reuses it (one factorisation fewer, counted) and gives the
+    displacements of a fresh problem; another material gets its own factorisation."""
+    if MPI.COMM_WORLD.size > 1:
+        pytest.skip("the serial factorisation runs on one process")
+    g = make_phantom(0, 20.0)
+    fixed = [Constraint(g.regions["vena_cava"])]
+    node = int(np.argmax(g.points[:, 0]))
+    loads = {"a": [NodalLoad([node], [[0.0, -0.3, -0.3]])],
+             "b": [NodalLoad([node], [[0.2, 0.1, -0.3]])]}
+    soft = OgdenMaterial((2e-3,), (6.0,), 0.4)
+
+    def problem(name):
+        return OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, settings={"rtol": 1e-10},
+                            prefix=f"keep_{name}_")
+
+    shared = problem("shared")
+    first = shared.solve(MAT, fixed, loads["a"], [0.5, 1.0])
+    second = shared.solve(MAT, fixed, loads["b"], [0.5, 1.0])
+    other = shared.solve(soft, fixed, loads["b"], [0.5, 1.0])
+    fresh = problem("fresh").solve(MAT, fixed, loads["b"], [0.5, 1.0])
+    for s in (first, second, other, fresh):
+        assert s.status == "ok", s.failure_reason
+    assert (first.reused_factorizations, second.reused_factorizations,
+            other.reused_factorizations, fresh.reused_factorizations) == (0, 1, 0, 0)
+    assert second.factorizations == fresh.factorizations - 1
+    assert second.newton_iterations == fresh.newton_iterations
+    for k in range(2):
+        ref = fresh.displacement[k]
+        assert np.abs(second.displacement[k] - ref).max() <= 1e-12 * np.abs(ref).max()
+    assert np.abs(other.displacement[-1] - fresh.displacement[-1]).max() > \
+        0.1 * np.abs(fresh.displacement[-1]).max()  # the soft material really was solved
+
+
 def test_float32_factorisation_falls_back_to_float64_when_it_cannot_solve():
     """One GMRES iteration (max_krylov = 1) cannot take a float32 solve to 1e-10: every
     Newton system is then factorised again in float64, and the answer is unchanged."""
