@@ -71,6 +71,10 @@ class SolverSettings:
     chord_trigger: float = _setting(1e-2, "try chord steps after a Newton step that cut |R| "
                                     "this much", lo=0.0, strict=True)
     max_chord_steps: int = _setting(30, "chord steps per increment attempt", lo=0)
+    near_iterations: int = _setting(8, "a Newton step after the first of an increment "
+                                    "attempt: GMRES preconditioned with the attempt's last "
+                                    "factorisation, up to this many iterations, before a new "
+                                    "factorisation (0: always factorise)", lo=0)
     local_relaxation: bool = _setting(True, "one rank: before each load step's global "
                                       "Newton, relax the hot spot of the residual (largest "
                                       "nodal residuals and their neighbours) by a small local "

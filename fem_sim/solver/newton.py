@@ -2,7 +2,10 @@
 
 Each iteration is either a *chord step* (a back-solve with the last factorisation, kept while
 it contracts |R| by ``chord_contraction`` or better) or a full Newton step (fresh Jacobian,
-factorisation, line search). This is Shamanskii's modified Newton with an adaptive switch: a
+factorisation, line search). A Newton step after the first of an attempt is first tried by
+GMRES preconditioned with that attempt's last factorisation (``near_iterations``; it is one
+Newton step old, close enough to converge in a few iterations) and factorises only if GMRES
+does not converge. This is Shamanskii's modified Newton with an adaptive switch: a
 factorisation costs about ten back-solves plus a residual, so a chord step that reduces |R| by
 5x is cheaper than a Newton step, and switching back to Newton as soon as contraction drops
 keeps the robustness of full Newton.
@@ -39,6 +42,7 @@ class NewtonSolver:
     def reset(self) -> None:
         self.chord_steps = 0
         self.chord_rejected = 0
+        self.near_steps = 0  # Newton steps solved with an older factorisation (no new one)
         if self.relax is not None:
             self.relax.reset()
 
@@ -51,8 +55,8 @@ class NewtonSolver:
         return self.settings.chord_contraction > 0 and self.linear.direct
 
     def solve(self, lam: float, history: list[float], first_order_start: bool) -> int:
-        """Iterate to convergence at load ``lam``; returns the Newton iterations (=
-        factorisations) of this attempt. ``history`` receives |R| after every step.
+        """Iterate to convergence at load ``lam``; returns the Newton iterations of this
+        attempt (each a factorisation, unless solved on the last one: ``near_steps``). ``history`` receives |R| after every step.
         ``first_order_start``: u comes from a linear (or no) prediction.
         """
         s, eqs = self.settings, self.eqs
@@ -105,7 +109,8 @@ class NewtonSolver:
             # tolerances cost more Newton iterations (assembly + kernels) than they save.
             eta = s.krylov_rtol if gap > 0 else min(
                 1e-2, max(s.krylov_rtol, 0.1 * tol / max(r, 1e-300)))
-            self.linear.solve(J, eqs.rhs, eqs.du, eta)
+            if not self._solve_near(it, gap, J, eta):
+                self.linear.solve(J, eqs.rhs, eqs.du, eta)
             # Round-off floor: |R| cannot decrease below ~eps * |F_int|, and that floor does not
             # shrink with a small increment (the stresses of a nearly undeformed state carry
             # an absolute round-off of ~eps * mu). A state this close to the full load's scale
@@ -135,6 +140,25 @@ class NewtonSolver:
                                   f"after {it} iterations, {history[0]:.3e} at the start)")
         raise StepFailure(f"Newton did not converge in {s.max_iterations} iterations at load "
                           f"{lam:.4g} (|R| = {r:.3e}, tolerance {tol:.1e})")
+
+    def _solve_near(self, it: int, gap: float, J, eta: float) -> bool:
+        """A later Newton step of this attempt solved by GMRES preconditioned with the
+        attempt's own last factorisation (no new one), if that converges within
+        ``near_iterations``; False: factorise as usual.
+
+        Only after a Newton step of the same attempt: the factorisation is then one Newton
+        step old, as for the Hermite tangents, which GMRES solves in ~3 iterations with it.
+        A factorisation from the previous load step is not close enough (measured: plain
+        chord steps from it diverge, GMRES needs 10-25 iterations, more than a
+        factorisation costs).
+        """
+        if it == 0 or gap > 0 or self.settings.near_iterations <= 0 \
+                or not self.linear.solves_near or not self.linear.has_factorization:
+            return False
+        ok = self.linear.solve_near(J, self.eqs.rhs, self.eqs.du, eta,
+                                    self.settings.near_iterations)
+        self.near_steps += ok
+        return ok
 
     def _line_search(self, lam: float, r: float, tol: float, closing_gap: bool,
                      keep_full_step: bool, restore: bool) -> tuple[float, float, bool]:

@@ -42,6 +42,7 @@ class Solution:
     back_solves: int = 0       # back-solves with an existing factorisation (chord, predictor)
     chord_steps: int = 0       # accepted back-solves with an old factorisation
     chord_rejected: int = 0    # chord steps tried and undone (too little contraction)
+    near_steps: int = 0        # Newton steps solved by GMRES on an older factorisation
     double_fallbacks: int = 0  # float32 factorisations that had to be redone in float64
     reused_factorizations: int = 0  # kept from an earlier simulation (solve_recurring)
     local_iterations: int = 0  # local Newton iterations of the hot-spot relaxation

@@ -104,6 +104,7 @@ class LoadStepper:
         sol.back_solves, sol.double_fallbacks = c.back_solves, c.double_fallbacks
         sol.reused_factorizations = c.reused_factorizations
         sol.chord_steps, sol.chord_rejected = self.newton.chord_steps, self.newton.chord_rejected
+        sol.near_steps = self.newton.near_steps
         sol.local_iterations = self.newton.local_iterations
         if eqs.disc.comm.rank == 0:
             sol.displacement = (np.stack(stored) if stored

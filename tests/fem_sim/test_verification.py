@@ -168,7 +168,8 @@ def test_iterative_solver_and_lagged_factorisation_give_the_direct_answer():
 
 def test_chord_steps_and_predictors_reach_the_plain_newton_answer():
     """The default solver (Hermite predictor through three converged states and their
-    tangents, chord steps between Newton steps, the first step in sub-increments), the
+    tangents, chord steps between Newton steps, later Newton steps of an increment by GMRES on
+    its last factorisation, the first step in sub-increments), without those GMRES steps, the
     tangent-integration predictor, Euler, the first step taken whole, no hot-spot relaxation,
     and plain full Newton from the previous state converge to the same displacements at every
     load step, and store exactly the requested steps. (How many factorisations each needs is a
@@ -182,8 +183,10 @@ def test_chord_steps_and_predictors_reach_the_plain_newton_answer():
                      "euler": {"predictor_order": 1},
                      "whole first step": {"first_increment": 1.0},
                      "no relaxation": {"local_relaxation": False},
+                     "no near steps": {"near_iterations": 0},
                      "plain": {"predictor": "previous", "chord_contraction": 0.0,
-                               "first_increment": 1.0, "local_relaxation": False}}.items():
+                               "first_increment": 1.0, "local_relaxation": False,
+                               "near_iterations": 0}}.items():
         prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells,
                             settings={"rtol": 1e-10, **st}, prefix=f"pc_{name}_")
         s = prob.solve(MAT, [Constraint(g.regions["vena_cava"])],
@@ -191,14 +194,41 @@ def test_chord_steps_and_predictors_reach_the_plain_newton_answer():
         assert s.status == "ok", (name, s.failure_reason)
         runs[name] = s
     ref = runs["plain"].displacement
-    assert runs["plain"].chord_steps == 0
-    for name in ("default", "tangent", "euler", "whole first step", "no relaxation"):
+    assert runs["plain"].chord_steps == runs["plain"].near_steps == 0
+    assert runs["no near steps"].near_steps == 0
+    for name in ("default", "tangent", "euler", "whole first step", "no relaxation",
+                 "no near steps"):
         u = runs[name].displacement
         assert u.shape[0] == len(runs[name].newton_iterations) == fractions.size
         for k in range(fractions.size):
             assert np.abs(u[k] - ref[k]).max() <= 1e-8 * np.abs(ref[k]).max(), (name, k)
     assert runs["no relaxation"].chord_steps > 0  # the chord phase was exercised
     assert runs["default"].local_iterations > 0  # and the relaxation
+
+
+def test_later_newton_steps_on_the_last_factorisation_reach_the_same_answer():
+    """Newton steps after the first of an increment solved by GMRES preconditioned with that
+    increment's last factorisation (near_iterations): fewer factorisations, counted, and the
+    displacements of always factorising. A load that makes Newton work (previous-state
+    predictor, the first step whole, no relaxation: 3 Newton steps per load step)."""
+    g = make_phantom(0, 20.0)
+    node = int(np.argmax(g.points[:, 0]))
+    runs = {}
+    for name, near in (("near", 8), ("factorise", 0)):
+        prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, prefix=f"near_{name}_",
+                            settings={"rtol": 1e-10, "predictor": "previous",
+                                      "first_increment": 1.0, "local_relaxation": False,
+                                      "near_iterations": near})
+        runs[name] = prob.solve(MAT, [Constraint(g.regions["vena_cava"])],
+                                [NodalLoad([node], [[0.0, -0.6, -0.6]])], [0.25, 0.5, 1.0])
+        assert runs[name].status == "ok", (name, runs[name].failure_reason)
+    near, ref = runs["near"], runs["factorise"]
+    assert ref.near_steps == 0 and near.near_steps > 0
+    if MPI.COMM_WORLD.size == 1:  # the serial LDL^T solves near its factorisation
+        assert near.factorizations < ref.factorizations
+    for k in range(3 if MPI.COMM_WORLD.rank == 0 else 0):  # displacements live on rank 0
+        assert np.abs(near.displacement[k] - ref.displacement[k]).max() <= \
+            1e-8 * np.abs(ref.displacement[k]).max(), k
 
 
 def test_first_increment_is_capped_by_the_small_strain_stiffening():
