@@ -127,6 +127,8 @@ class SerialLDLT:
             # equal (0.47 s) with its AVX-512 ones.
             self.lib.ldlt_set_icntl(self._h, 8, 0)
         self._pattern = None
+        self._like: SerialLDLT | None = None  # share_ordering
+        self._perm_in = None
         _live.add(self)
         self.analyses = self.factorizations = 0
 
@@ -148,13 +150,42 @@ class SerialLDLT:
     def _ptr(self, arr: np.ndarray, ctype: str):
         return self.ffi.cast(ctype, arr.ctypes.data)
 
+    def share_ordering(self, other: SerialLDLT) -> None:
+        """Take ``other``'s ordering (and triangle arrays) when this instance analyses the
+        pattern ``other`` analysed: one METIS run for several instances of one pattern."""
+        self._like = other
+
+    def _same_pattern(self, indptr: np.ndarray, indices: np.ndarray) -> bool:
+        return self._pattern is not None and np.array_equal(self._pattern[0], indptr) \
+            and np.array_equal(self._pattern[1], indices)
+
     def _analyse(self, indptr: np.ndarray, indices: np.ndarray) -> None:
+        n = indptr.size - 1
+        like = self._like
+        perm_in = self.ffi.NULL  # not blocked: MUMPS' own choice (AMD)
+        if like is not None and like.bs == self.bs and like._same_pattern(indptr, indices):
+            self._upper, self._irn, self._jcn = like._upper, like._irn, like._jcn
+            if like._perm_in is not None:
+                self._perm_in = like._perm_in
+                perm_in = self._ptr(self._perm_in, "int *")
+        else:
+            perm_in = self._order(indptr, indices)
+        self.lib.ldlt_analyse(self._h, n, self._irn.size, self._ptr(self._irn, "int *"),
+                              self._ptr(self._jcn, "int *"), perm_in, 100)
+        self._check("analysis")
+        self._pattern = (indptr.copy(), indices.copy())
+        self.analyses += 1
+
+    def _order(self, indptr: np.ndarray, indices: np.ndarray):
+        """The upper-triangle arrays and METIS' nested dissection of the block graph; returns
+        MUMPS' PERM_IN pointer (NULL: MUMPS orders)."""
         n = indptr.size - 1
         rows = np.repeat(np.arange(n, dtype=np.int32), np.diff(indptr))
         self._upper = indices >= rows
         self._irn = np.ascontiguousarray(rows[self._upper] + 1, dtype=np.int32)
         self._jcn = np.ascontiguousarray(indices[self._upper] + 1, dtype=np.int32)
-        perm_in = self.ffi.NULL  # not blocked: MUMPS' own choice (AMD)
+        self._perm_in = None
+        perm_in = self.ffi.NULL
         if n % self.bs == 0:
             xadj, adj = block_graph(indptr, indices, self.bs)
             nb = xadj.size - 1
@@ -169,16 +200,10 @@ class SerialLDLT:
             self._perm_in = (self.bs * iperm[:, None] + np.arange(self.bs)).ravel() + 1
             self._perm_in = np.ascontiguousarray(self._perm_in, dtype=np.int32)
             perm_in = self._ptr(self._perm_in, "int *")
-        self.lib.ldlt_analyse(self._h, n, self._irn.size, self._ptr(self._irn, "int *"),
-                              self._ptr(self._jcn, "int *"), perm_in, 100)
-        self._check("analysis")
-        self._pattern = (indptr.copy(), indices.copy())
-        self.analyses += 1
+        return perm_in
 
     def factor(self, indptr: np.ndarray, indices: np.ndarray, values: np.ndarray) -> None:
-        if self._pattern is None or not (
-                np.array_equal(self._pattern[0], indptr)
-                and np.array_equal(self._pattern[1], indices)):
+        if not self._same_pattern(indptr, indices):
             self._analyse(indptr, indices)
         self._a = np.ascontiguousarray(values[self._upper], dtype=self.dtype)
         self.lib.ldlt_factor(self._h, self._ptr(self._a, "void *"))

@@ -118,6 +118,9 @@ class SerialLDLTSolver(LinearSolver):
                 solver = self._ldlts[slot, precision] = ldlt.SerialLDLT(
                     precision, bs=3,
                     pivoting=precision == "double" or self.settings.pivoting)
+                for (_, p), other in self._ldlts.items():  # one METIS ordering per pattern
+                    if other is not solver and p == precision:
+                        solver.share_ordering(other)
             if k:
                 self.counts.double_fallbacks += 1
                 log.debug("float32 LDL^T insufficient (%s); factorising in float64", why)

@@ -77,6 +77,27 @@ def test_new_pattern_is_analysed_again_and_values_refactorised():
     np.testing.assert_allclose(B @ solver.solve(np.ones(B.shape[0])), 1.0, rtol=1e-10)
 
 
+def test_shared_ordering_is_used_only_for_the_same_pattern():
+    """share_ordering: a second instance on the pattern the first analysed takes its METIS
+    ordering (the same array, no second METIS run) and solves alike; on another pattern it
+    orders for itself."""
+    A = laplacian_3d(6)
+    first = ldlt.SerialLDLT("single", bs=3, pivoting=False)
+    first.factor(A.indptr, A.indices, A.data)
+    second = ldlt.SerialLDLT("single", bs=3, pivoting=False)
+    second.share_ordering(first)
+    second.factor(A.indptr, A.indices, 3.0 * A.data)
+    assert second._perm_in is first._perm_in and second.analyses == 1
+    b = np.ones(A.shape[0])
+    np.testing.assert_allclose(3.0 * second.solve(b), first.solve(b), rtol=1e-5)
+    B = laplacian_3d(5)
+    third = ldlt.SerialLDLT("single", bs=3, pivoting=False)
+    third.share_ordering(first)
+    third.factor(B.indptr, B.indices, B.data)
+    assert third._perm_in is not first._perm_in and third._perm_in.size == B.shape[0]
+    np.testing.assert_allclose(B @ third.solve(np.ones(B.shape[0])), 1.0, rtol=1e-4)
+
+
 def test_singular_matrix_raises_a_factor_error():
     A = laplacian_3d(3).tolil()
     A[5, :] = 0.0
