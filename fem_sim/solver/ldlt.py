@@ -152,7 +152,8 @@ class SerialLDLT:
 
     def share_ordering(self, other: SerialLDLT) -> None:
         """Take ``other``'s ordering (and triangle arrays) when this instance analyses the
-        pattern ``other`` analysed: one METIS run for several instances of one pattern."""
+        pattern ``other`` analysed: one METIS run for several instances of one pattern.
+        """
         self._like = other
 
     def _same_pattern(self, indptr: np.ndarray, indices: np.ndarray) -> bool:
@@ -178,7 +179,8 @@ class SerialLDLT:
 
     def _order(self, indptr: np.ndarray, indices: np.ndarray):
         """The upper-triangle arrays and METIS' nested dissection of the block graph; returns
-        MUMPS' PERM_IN pointer (NULL: MUMPS orders)."""
+        MUMPS' PERM_IN pointer (NULL: MUMPS orders).
+        """
         n = indptr.size - 1
         rows = np.repeat(np.arange(n, dtype=np.int32), np.diff(indptr))
         self._upper = indices >= rows

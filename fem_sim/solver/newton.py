@@ -56,8 +56,9 @@ class NewtonSolver:
 
     def solve(self, lam: float, history: list[float], first_order_start: bool) -> int:
         """Iterate to convergence at load ``lam``; returns the Newton iterations of this
-        attempt (each a factorisation, unless solved on the last one: ``near_steps``). ``history`` receives |R| after every step.
-        ``first_order_start``: u comes from a linear (or no) prediction.
+        attempt (each a factorisation, unless solved on the last one: ``near_steps``).
+        ``history`` receives |R| after every step. ``first_order_start``: u comes from a
+        linear (or no) prediction.
         """
         s, eqs = self.settings, self.eqs
         self.attempt_iterations = 0
