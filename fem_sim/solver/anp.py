@@ -47,6 +47,21 @@ def _volumetric(mat, J: np.ndarray):
     return U, Up, (UppJ / J - Up) / J
 
 
+def _cofactor(F: np.ndarray) -> np.ndarray:
+    """cof F = J F^-T (= dJ/dF) of every (3, 3) matrix of ``F`` (n, 3, 3), in closed form."""
+    C = np.empty_like(F)
+    C[:, 0, 0] = F[:, 1, 1] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 1]
+    C[:, 0, 1] = F[:, 1, 2] * F[:, 2, 0] - F[:, 1, 0] * F[:, 2, 2]
+    C[:, 0, 2] = F[:, 1, 0] * F[:, 2, 1] - F[:, 1, 1] * F[:, 2, 0]
+    C[:, 1, 0] = F[:, 0, 2] * F[:, 2, 1] - F[:, 0, 1] * F[:, 2, 2]
+    C[:, 1, 1] = F[:, 0, 0] * F[:, 2, 2] - F[:, 0, 2] * F[:, 2, 0]
+    C[:, 1, 2] = F[:, 0, 1] * F[:, 2, 0] - F[:, 0, 0] * F[:, 2, 1]
+    C[:, 2, 0] = F[:, 0, 1] * F[:, 1, 2] - F[:, 0, 2] * F[:, 1, 1]
+    C[:, 2, 1] = F[:, 0, 2] * F[:, 1, 0] - F[:, 0, 0] * F[:, 1, 2]
+    C[:, 2, 2] = F[:, 0, 0] * F[:, 1, 1] - F[:, 0, 1] * F[:, 1, 0]
+    return C
+
+
 class ANPAssembler(CAssembler):
     """P1 with averaged nodal pressure (see the module docstring); one process."""
 
@@ -121,7 +136,8 @@ class ANPAssembler(CAssembler):
             return False
         d, mat = self.disc, self.material
         F = self.deformation_gradients().reshape(-1, 3, 3)
-        J = np.linalg.det(F)
+        JFinvT = _cofactor(F)                                # dJ/dF = J F^-T
+        J = np.einsum("nij,nij->n", F, JFinvT) / 3.0         # each row of F . cof F is J
         Jbar = self.Mw @ J
         if not (np.all(Jbar > 0) and np.all(np.isfinite(Jbar))):
             self.min_J = float(min(np.min(J), np.min(Jbar)))
@@ -131,8 +147,6 @@ class ANPAssembler(CAssembler):
         U_e, Up_e, Upp_e = _volumetric(mat, J)
         U_a, Up_a, Upp_a = _volumetric(mat, Jbar)
         pbar = Up_a[cells].mean(axis=1)
-        Finv_T = np.linalg.inv(F).transpose(0, 2, 1)
-        JFinvT = J[:, None, None] * Finv_T                   # dJ/dF
         dp = pbar - Up_e
         W = d.point_values(d.W_q, 1)
         P = d.point_values(d.P_q, 9)
@@ -140,26 +154,35 @@ class ANPAssembler(CAssembler):
         P += (dp[:, None, None] * JFinvT).reshape(-1, 9)
         if tangent:
             A = d.point_values(d.A_q, 81).reshape(-1, 3, 3, 3, 3)
-            # d(J F^-T)_iJ / dF_kL = J (F^-T_iJ F^-T_kL - F^-T_iL F^-T_kJ)
-            outer = np.einsum("nij,nkl->nijkl", Finv_T, Finv_T)
-            swap = np.einsum("nil,nkj->nijkl", Finv_T, Finv_T)
-            A += (dp * J)[:, None, None, None, None] * (outer - swap)
-            A -= Upp_e[:, None, None, None, None] * np.einsum("nij,nkl->nijkl", JFinvT, JFinvT)
+            # d(J F^-T)_iJ / dF_kL = J (F^-T_iJ F^-T_kL - F^-T_iL F^-T_kJ); with C = J F^-T:
+            # dp d(J F^-T)/dF - U''(J) C (x) C = (dp / J - U''(J)) C_iJ C_kL - dp / J C_iL C_kJ
+            C = JFinvT
+            outer = C[:, :, :, None, None] * C[:, None, None, :, :]
+            swap = C[:, :, None, None, :] * C.transpose(0, 2, 1)[:, None, :, :, None]
+            s = dp / J
+            A += (s - Upp_e)[:, None, None, None, None] * outer
+            A -= s[:, None, None, None, None] * swap
             # g terms: w_ae dJ_e/du_(b,k) = w_ae J_e (F^-T dN_b)_k
             a_loc, b_loc, k = self._g_term
             dJdu = np.einsum("nkj,nbj->nbk", JFinvT, self.c.dN[:, 0])  # (nc, 4, 3)
             w_ae = (self.c.w[:, 0, None] / 4.0) / self.V0_node[cells]
             terms = w_ae[:, a_loc] * dJdu[:, b_loc, k]
             g = np.bincount(self.g_index, terms.ravel(), minlength=self.n_g)
-            dnode = self.V0_node * Upp_a
-            self._nonlocal = np.bincount(
-                self.pair_pos, dnode[self.pair_node] * g[self.pair_p] * g[self.pair_q],
-                minlength=self.c.values.size)
+            # d_a g_a g_a^T, added at assembly (in C: the pairs are ~2000 per node)
+            self._nonlocal = (np.ascontiguousarray(self.V0_node * Upp_a), g)
         return True
 
     def jacobian(self, cons: DofConstraints, rhs=None, lift=None) -> Jacobian:
         self.c.assemble(self.disc.point_values(self.disc.A_q, 81))
-        self.c.values += self._nonlocal
+        dnode, g = self._nonlocal
+        cast = self.c.ffi.cast
+        self.c.lib.anp_pairs(self.pair_pos.size, cast("int32_t *", self.pair_pos.ctypes.data),
+                             cast("int32_t *", self.pair_node.ctypes.data),
+                             cast("int32_t *", self.pair_p.ctypes.data),
+                             cast("int32_t *", self.pair_q.ctypes.data),
+                             cast("double *", dnode.ctypes.data),
+                             cast("double *", g.ctypes.data),
+                             cast("double *", self.c.values.ctypes.data))
         self.c.apply_dirichlet(cons.owned, rhs.array if lift is not None else None,
                                lift.array_r if lift is not None else None)
         return Jacobian(csr=(self.c.indptr, self.c.indices, self.c.values))

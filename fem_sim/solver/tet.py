@@ -22,6 +22,8 @@ void tet_deformation(int ncells, int nn, int nq, const int32_t *cells, const dou
                      const double *u, double *F_all);
 void tet_forces(int ncells, int nn, int nq, const int32_t *cells, const double *dN_all,
                 const double *w_all, const double *P_all, double *b);
+void anp_pairs(int64_t n, const int32_t *pos, const int32_t *node, const int32_t *p,
+               const int32_t *q, const double *d, const double *g, double *values);
 """
 
 # Edges of the reference tetrahedron in basix's numbering: the P2 cell dofs 4..9 sit at their

@@ -84,3 +84,11 @@ void tet_forces(int ncells, int nn, int nq, const int32_t *cells, const double *
       }
     }
 }
+
+/* Sum of rank-one terms d_a g_a g_a^T into the CSR values (the averaged-nodal-pressure
+ * coupling, fem_sim/solver/anp.py): for every pair t of entries (p[t], q[t]) of the same row
+ * node[t] of g, values[pos[t]] += d[node[t]] g[p[t]] g[q[t]]. */
+void anp_pairs(int64_t n, const int32_t *pos, const int32_t *node, const int32_t *p,
+               const int32_t *q, const double *d, const double *g, double *values) {
+  for (int64_t t = 0; t < n; t++) values[pos[t]] += d[node[t]] * g[p[t]] * g[q[t]];
+}
