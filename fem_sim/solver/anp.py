@@ -48,7 +48,7 @@ def _volumetric(mat, J: np.ndarray):
 
 
 def _cofactor(F: np.ndarray) -> np.ndarray:
-    """cof F = J F^-T (= dJ/dF) of every (3, 3) matrix of ``F`` (n, 3, 3), in closed form."""
+    """The cofactor matrices J F^-T (= dJ/dF) of ``F`` (n, 3, 3), in closed form."""
     C = np.empty_like(F)
     C[:, 0, 0] = F[:, 1, 1] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 1]
     C[:, 0, 1] = F[:, 1, 2] * F[:, 2, 0] - F[:, 1, 0] * F[:, 2, 2]
