@@ -287,6 +287,12 @@ def _check_steps(st: dict, problems: list[str]) -> None:
 
 
 def _check_solver(sv: dict, problems: list[str]) -> None:
+    if sv.get("element") == "anp" and (sv.get("degree") != 1
+                                       or sv.get("quadrature_degree", 1) != 1):
+        problems.append("solver.element: 'anp' is a P1 element with one quadrature point "
+                        f"(degree = 1, quadrature_degree = 1), got degree = "
+                        f"{sv.get('degree')!r}, quadrature_degree = "
+                        f"{sv.get('quadrature_degree', 1)!r}")
     if "quadrature_degree" not in sv and sv.get("degree") in (1, 2):
         # P1 with one-point quadrature is FEBio's tet4; P2 integrates the (nonlinear) integrand
         # with a degree-2 rule, enough for its linear strains at the nodes of the reference test.

@@ -220,6 +220,9 @@ _SCHEMA: dict[str, dict[str, Key]] = {
     "solver": {
         "degree": Key(_int(1, 2), 1, "Lagrange degree of the displacement (1 or 2)"),
         "quadrature_degree": Key(_int(1), OPTIONAL, "default: 1 for P1 (FEBio tet4), 2 for P2"),
+        "element": Key(_choice("lagrange", "anp"), OPTIONAL,
+                       "default 'lagrange' (P1/P2 by degree); 'anp': P1 with averaged nodal "
+                       "pressure, which does not lock (degree 1, one rank per simulation)"),
         **_solver_keys(),
     },
     "surrogate": {

@@ -101,7 +101,7 @@ _LOCK: DirectoryLock | None = None  # held by world rank 0 for the whole run
 
 
 def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool,
-              progress: bool = False) -> tuple[Plan, Scene | None]:
+              progress: bool = False, ranks_per_sim: int = 1) -> tuple[Plan, Scene | None]:
     """Rank 0 only: validate everything, lock the directory and decide the work. Any error
     goes into Plan.error (so it is broadcast, and no rank waits for a plan that never comes).
     """
@@ -109,6 +109,10 @@ def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool,
     try:
         scene = load_scene(scene_file)
         todo = parse_range(only, scene.n_simulations)  # a bad --only writes nothing
+        if ranks_per_sim > 1 and scene["solver"].get("element") == "anp":
+            raise SceneError(scene_file, [f"solver.element: 'anp' runs one rank per "
+                                          f"simulation (the serial factorisation), got "
+                                          f"--ranks-per-sim {ranks_per_sim}"])
         _LOCK = DirectoryLock(out).acquire()
         for tmp in leftover_temporaries(out):  # we hold the lock: no writer is running
             log.info("removing %s, left by an interrupted writer", tmp)
@@ -242,6 +246,7 @@ def run_case(problem, scene: Scene, case: cs.Case, g: Geometry, fixed: np.ndarra
         stats = SolverStats(sol.newton_iterations, sol.residual_norms, sol.cutbacks,
                             sol.wall_time, sol.residual_history)
     stats.info = {"degree": problem.degree, "quadrature_degree": problem.qdeg,
+                  "element": problem.element,
                   "linear_solver": problem.settings.linear_solver,
                   "factorization": problem.factorization,
                   "ranks": problem.comm.size,
@@ -291,7 +296,8 @@ def generate(scene_file: str, out: str | Path, ranks_per_sim: int = 1, only: str
             plan = Plan(error=f"--ranks-per-sim {ranks_per_sim} does not divide the "
                               f"{world.size} MPI ranks")
         else:
-            plan, scene = make_plan(scene_file, out, only, retry_failed, progress)
+            plan, scene = make_plan(scene_file, out, only, retry_failed, progress,
+                                    ranks_per_sim)
     plan = world.bcast(plan, root=0)  # collective
     if plan.error:
         if world.rank == 0:
@@ -332,6 +338,7 @@ def generate(scene_file: str, out: str | Path, ranks_per_sim: int = 1, only: str
                                    geo.cells if group.rank == 0 else None,
                                    degree=scene["solver"]["degree"],
                                    quadrature_degree=scene["solver"]["quadrature_degree"],
+                                   element=scene["solver"].get("element", "lagrange"),
                                    settings=solver_settings(scene),
                                    prefix=f"g{world.rank // ranks_per_sim}_")
             current = gi

@@ -46,8 +46,8 @@ __all__ = ["Constraint", "NodalLoad", "OgdenProblem", "PatchLoad", "Solution", "
 class OgdenProblem:
     """An Ogden body on a fixed mesh; :meth:`solve` runs one simulation (collective on
     ``comm``). ``settings``: overrides of :class:`SolverSettings` (a dict or the dataclass).
-    ``element``: "lagrange" (P1/P2 by ``degree``) or "anp" (experimental: P1 with averaged
-    nodal pressure, which does not lock; :mod:`fem_sim.solver.anp`).
+    ``element``: "lagrange" (P1/P2 by ``degree``) or "anp" (P1 with averaged nodal pressure,
+    which does not lock, one rank; :mod:`fem_sim.solver.anp`; a scene's ``solver.element``).
     """
 
     def __init__(self, comm, points: np.ndarray | None, cells: np.ndarray | None, *,
@@ -66,6 +66,7 @@ class OgdenProblem:
                              f"factorisation (degree 1, one rank), got degree {degree} on "
                              f"{comm.size} ranks with factorization {settings.factorization!r}")
         self.comm = comm
+        self.element = element
         self.degree = degree
         self.qdeg = quadrature_degree or (1 if degree == 1 else 2)
         self.disc = Discretisation(comm, points, cells, degree, self.qdeg)  # collective

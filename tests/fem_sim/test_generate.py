@@ -280,6 +280,27 @@ def test_bad_command_line_is_refused_before_anything_is_written(tmp_path, extra,
     assert not (tmp_path / "d" / "scene.toml").exists()
 
 
+def test_the_locking_free_element_from_a_scene(reference, tmp_path):
+    """solver.element = 'anp': a valid dataset whose shards record the element, with larger
+    displacements than P1's (P1 locks at K/mu = 200: it is too stiff); several ranks per
+    simulation are refused before anything is written (the element is serial)."""
+    scene = tmp_path / "anp.toml"
+    scene.write_text(TINY.read_text().replace('linear_solver = "mumps"',
+                                              'linear_solver = "mumps"\nelement = "anp"'))
+    res = generate(scene, tmp_path / "d", n=2)
+    assert res.returncode == 0, res.stderr
+    assert validate_dataset(tmp_path / "d") == []
+    ours, p1 = displacements(tmp_path / "d"), displacements(reference)
+    assert ours.keys() == p1.keys()
+    for name in ours:
+        assert read_shard(tmp_path / "d" / "sims" / name).stats.info["element"] == "anp"
+        a, b = np.abs(ours[name][-1]).max(), np.abs(p1[name][-1]).max()
+        assert a > 1.05 * b, (name, a, b)
+    res = generate(scene, tmp_path / "e", n=2, r=2, timeout=120)
+    assert res.returncode == 2 and "'anp' runs one rank per simulation" in res.stderr
+    assert not (tmp_path / "e" / "scene.toml").exists()
+
+
 def test_truncated_geometry_file_is_rewritten_on_resume(reference, tmp_path):
     d = tmp_path / "d"
     shutil.copytree(reference, d)
