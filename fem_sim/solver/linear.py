@@ -130,13 +130,8 @@ class SerialLDLTSolver(LinearSolver):
                 why = str(exc)
                 continue
             self.counts.factorizations += 1
-            x, its, ok = solver.solve_refined(ldlt.csr(indptr, indices, values),
-                                              rhs.array_r, rtol, self.settings.max_krylov)
-            self.counts.krylov_iterations += its
+            ok, its = self._refine(solver, J, rhs, du, rtol, self.settings.max_krylov)
             if ok:
-                self._ldlt = solver
-                du.array[:] = x
-                _ghost_update(du)
                 return
             why = f"GMRES with the LDL^T factors did not reach {rtol:.1e} in {its} iterations"
         self._ldlt = None  # no valid factorisation: chord steps and tangents must not use one
@@ -150,19 +145,13 @@ class SerialLDLTSolver(LinearSolver):
         solution is the same as with a fresh factorisation (the same factors: MUMPS is
         deterministic for equal input and the same analysis; tested).
         """
-        indptr, indices, values = J.csr()
+        _, indices, values = J.csr()
         kept = self._recurring
-        if kept is not None and kept[1].size == values.size \
-                and np.array_equal(kept[1], values) and np.array_equal(kept[0], indices):
-            x, its, ok = kept[2].solve_refined(ldlt.csr(indptr, indices, values),
-                                               rhs.array_r, rtol, self.settings.max_krylov)
-            self.counts.krylov_iterations += its
-            if ok:
-                self.counts.reused_factorizations += 1
-                self._ldlt = kept[2]
-                du.array[:] = x
-                _ghost_update(du)
-                return
+        if kept is not None and np.array_equal(kept[1], values) \
+                and np.array_equal(kept[0], indices) \
+                and self._refine(kept[2], J, rhs, du, rtol, self.settings.max_krylov)[0]:
+            self.counts.reused_factorizations += 1
+            return
         self._recurring = None
         self.solve(J, rhs, du, rtol, slot="recurring")
         self._recurring = (indices.copy(), values.copy(), self._ldlt)
@@ -183,11 +172,21 @@ class SerialLDLTSolver(LinearSolver):
     def solve_near(self, J: Jacobian, rhs, du, rtol: float, maxit: int) -> bool:
         if self._ldlt is None:
             return False
-        x, its, ok = self._ldlt.solve_refined(ldlt.csr(*J.csr()), rhs.array_r, rtol, maxit)
+        return self._refine(self._ldlt, J, rhs, du, rtol, maxit)[0]
+
+    def _refine(self, solver: ldlt.SerialLDLT, J: Jacobian, rhs, du, rtol: float,
+                maxit: int) -> tuple[bool, int]:
+        """GMRES on J preconditioned with ``solver``'s factors; if it reaches ``rtol``, du is
+        the solution and ``solver`` holds the last factorisation. Returns (converged,
+        iterations).
+        """
+        x, its, ok = solver.solve_refined(ldlt.csr(*J.csr()), rhs.array_r, rtol, maxit)
         self.counts.krylov_iterations += its
         if ok:
+            self._ldlt = solver
             du.array[:] = x
-        return ok
+            _ghost_update(du)
+        return ok, its
 
 
 class PetscSolver(LinearSolver):
