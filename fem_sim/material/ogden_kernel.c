@@ -35,6 +35,18 @@ int ogden_threads(int n)
 #endif
 }
 
+/* The Jacobi rotation (c, s) that zeroes apq of the symmetric 2x2 block [[app, apq], [apq,
+ * aqq]] (apq != 0): the smaller rotation angle, computed stably. */
+static void jacobi_rotation(double app, double aqq, double apq, double *c, double *s)
+{
+    double theta = 0.5 * (aqq - app) / apq;
+    double t = 1.0 / (fabs(theta) + sqrt(theta * theta + 1.0));
+    if (theta < 0.0)
+        t = -t;
+    *c = 1.0 / sqrt(t * t + 1.0);
+    *s = t * *c;
+}
+
 /* Cyclic Jacobi rotations on a symmetric 3x3 matrix a = Q0^T C Q0, v = Q0 on entry (Q0
  * orthonormal, the columns are the current eigenvector estimates). On return a[0], a[4], a[8]
  * hold the eigenvalues and v's columns the eigenvectors: v diag(a) v^T equals C up to an
@@ -53,12 +65,8 @@ static void jacobi3_from(double a[9], double v[9])
                 double apq = a[3 * p + q];
                 if (apq == 0.0)
                     continue;
-                double app = a[3 * p + p], aqq = a[3 * q + q];
-                double theta = 0.5 * (aqq - app) / apq;
-                double t = 1.0 / (fabs(theta) + sqrt(theta * theta + 1.0));
-                if (theta < 0.0)
-                    t = -t;
-                double c = 1.0 / sqrt(t * t + 1.0), s = t * c;
+                double c, s;
+                jacobi_rotation(a[3 * p + p], a[3 * q + q], apq, &c, &s);
                 /* A <- R^T A R with R the rotation in the (p, q) plane */
                 for (int k = 0; k < 3; ++k) {
                     double akp = a[3 * k + p], akq = a[3 * k + q];
@@ -155,14 +163,8 @@ static int eig3_start(const double C[9], double Q[9])
     double mww = w[0] * Cw[0] + w[1] * Cw[1] + w[2] * Cw[2];
     double muw = u[0] * Cw[0] + u[1] * Cw[1] + u[2] * Cw[2];
     double c = 1.0, sn = 0.0;
-    if (muw != 0.0) {  /* the Jacobi rotation of the 2x2 block, as in jacobi3_from */
-        double theta = 0.5 * (mww - muu) / muw;
-        double t = 1.0 / (fabs(theta) + sqrt(theta * theta + 1.0));
-        if (theta < 0.0)
-            t = -t;
-        c = 1.0 / sqrt(t * t + 1.0);
-        sn = t * c;
-    }
+    if (muw != 0.0)
+        jacobi_rotation(muu, mww, muw, &c, &sn);
     for (int i = 0; i < 3; ++i) {
         Q[3 * i] = v[i];
         Q[3 * i + 1] = c * u[i] - sn * w[i];
