@@ -32,7 +32,7 @@ def run(liver: str, element: str, h: float) -> dict:
 
     from fem_sim import Constraint, OgdenMaterial, OgdenProblem, PatchLoad
 
-    spec = {**tf.DEFAULTS, "liver": liver, "load": "patch", "h": h, "role": "mesh"}
+    spec = tf.spec_of(liver, load="patch", h=h, role="mesh")
     ref = tf.npz_name(tf.key_of(tf.reference_of(spec)))
     if not ref.exists():
         raise SystemExit(f"{ref} is missing: run `make tradeoff-fem` first (the references)")
