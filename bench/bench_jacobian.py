@@ -1,7 +1,9 @@
 """One Newton step's linear algebra on the real liver (or the phantom): the Jacobian assembled
 by dolfinx and by fem_sim's C assembly for P1 (fem_sim/solver/tet.py), then factorised by PETSc's
-MUMPS LDL^T (PORD ordering, what Debian's MUMPS offers) and by fem_sim's serial LDL^T (MUMPS'
-C interface, METIS ordering) in float64 and float32.
+MUMPS LDL^T (PORD ordering, what Debian's MUMPS offers), by fem_sim's serial LDL^T (MUMPS'
+C interface, METIS ordering) in float64 (pivoting) and float32 (none, as the solver runs it), and
+by MKL PARDISO's float32 Cholesky with the same ordering (the serial default when MKL is
+installed). Threads: OMP_NUM_THREADS (PARDISO) and OPENBLAS_NUM_THREADS (MUMPS' fronts).
 
     OPENBLAS_NUM_THREADS=1 .venv-solver/bin/python bench/bench_jacobian.py [--mesh sofa] [--h 5.0]
 
@@ -102,7 +104,10 @@ def petsc_mumps(indptr, indices, values, b, runs):
 
 
 def own(indptr, indices, values, b, runs, precision):
-    solver = ldlt.SerialLDLT(precision, bs=3)
+    from fem_sim.solver import pardiso
+
+    solver = (pardiso.PardisoCholesky() if precision == "pardiso" else
+              ldlt.SerialLDLT(precision, bs=3, pivoting=precision == "double"))
     solver.factor(indptr, indices, values)
     times, solves = [], []
     for _ in range(runs):
@@ -145,8 +150,13 @@ def main():
     rows = [("PETSc MUMPS LDL^T, PORD", petsc_mumps(indptr, indices, values, b, args.runs)),
             ("fem_sim LDL^T, METIS, float64", own(indptr, indices, values, b, args.runs,
                                                   "double")),
-            ("fem_sim LDL^T, METIS, float32", own(indptr, indices, values, b, args.runs,
-                                                  "single"))]
+            ("fem_sim LDL^T (MUMPS), METIS, float32", own(indptr, indices, values, b,
+                                                          args.runs, "single"))]
+    from fem_sim.solver import pardiso
+
+    if pardiso.available():
+        rows.append(("fem_sim Cholesky (MKL PARDISO), METIS, float32",
+                     own(indptr, indices, values, b, args.runs, "pardiso")))
     for label, (flops, tf, ts, x) in rows:
         res = np.linalg.norm(A @ x - b) / np.linalg.norm(b)
         print(f"| {label} | {flops / 1e9:.1f} | {tf:.3f} | {ts:.4f} | {res:.1e} |")

@@ -40,9 +40,11 @@ class SolverSettings:
     linear_solver: str = _setting("mumps", "mumps: direct (symmetric); gamg: CG + GAMG, "
                                   "rigid-body modes", choices=("mumps", "gamg"), scene=True)
     factorization: str = _setting(
-        "auto", "mumps: single (float32 LDL^T, METIS, GMRES-refined) or double (float64) on "
-        "one rank; petsc (PETSc's MUMPS); auto: single on one rank, petsc on several",
-        choices=("auto", "single", "double", "petsc"), scene=True)
+        "auto", "mumps: on one rank pardiso (float32 Cholesky by MKL PARDISO, METIS, "
+        "GMRES-refined; MUMPS' LDL^T for a matrix that is not positive definite), single "
+        "(float32 LDL^T by MUMPS) or double (float64); petsc (PETSc's MUMPS); auto: pardiso "
+        "on one rank when MKL is installed, else single; petsc on several",
+        choices=("auto", "pardiso", "single", "double", "petsc"), scene=True)
     predictor: str = _setting(
         "hermite", "start of each load step: Hermite polynomial through the last converged "
         "states and their tangents, tangent integration, extrapolation of states, or the last "

@@ -253,6 +253,7 @@ def run_case(problem, scene: Scene, case: cs.Case, g: Geometry, fixed: np.ndarra
                   "factorizations": sol.factorizations if sol else 0,
                   "krylov_iterations": sol.krylov_iterations if sol else 0,
                   "double_fallbacks": sol.double_fallbacks if sol else 0,
+                  "cholesky_fallbacks": sol.cholesky_fallbacks if sol else 0,
                   "reused_factorizations": sol.reused_factorizations if sol else 0,
                   "total_wall_time": time.perf_counter() - t0}
     if not np.all(np.isfinite(disp)):  # never NaN in a shard
@@ -285,11 +286,13 @@ def generate(scene_file: str, out: str | Path, ranks_per_sim: int = 1, only: str
     out = Path(out)
     t_start = time.perf_counter()
     if world.size > 1 and not os.environ.get("OMP_NUM_THREADS"):
-        # The ranks share the cores: one point-kernel thread each (a lone rank keeps
-        # OpenMP's default, the cores it may run on).
+        # The ranks share the cores: one point-kernel and one PARDISO thread each (a lone rank
+        # keeps OpenMP's default, the cores it may run on).
         from fem_sim.material import ogden_c
+        from fem_sim.solver import pardiso
 
         ogden_c.threads(1)
+        pardiso.threads(1)
     plan, scene = Plan(), None
     if world.rank == 0:
         if world.size % ranks_per_sim:  # checked before anything is written

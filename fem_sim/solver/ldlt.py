@@ -70,8 +70,9 @@ def load():
                      library_dirs=list(flags["library_dirs"]))
 
 
-# MUMPS instances must be freed before MPI_Finalize: mpi4py finalises MPI in an atexit hook
-# registered at its import, and atexit runs hooks last-in first-out, so ours runs first.
+# MUMPS instances (and PARDISO's, pardiso.py) must be freed before MPI_Finalize: mpi4py
+# finalises MPI in an atexit hook registered at its import, and atexit runs hooks last-in
+# first-out, so ours runs first.
 _live: weakref.WeakSet = weakref.WeakSet()
 
 
@@ -82,7 +83,9 @@ def _free_all() -> None:
 
 
 class FactorError(RuntimeError):
-    """MUMPS reported an error (INFOG(1) < 0), e.g. -10: numerically singular matrix."""
+    """The factorisation failed: MUMPS reported an error (INFOG(1) < 0, e.g. -10: numerically
+    singular matrix), or PARDISO did (e.g. -4: not positive definite).
+    """
 
 
 def block_graph(indptr: np.ndarray, indices: np.ndarray, bs: int):

@@ -11,9 +11,10 @@ One interface, :class:`LinearSolver`:
 
 Each solver counts its own work in ``counts`` (:class:`LinearCounts`), reset per simulation.
 
-Implementations: :class:`SerialLDLTSolver` (MUMPS' LDL^T through its C interface with METIS
-ordering, float32 factors refined by GMRES, :mod:`fem_sim.solver.ldlt`; one process; it exists
-because Debian's MUMPS has no METIS and PETSc 3.18 gives a user ordering only to LU) and
+Implementations: :class:`SerialLDLTSolver` (MKL PARDISO's Cholesky, :mod:`fem_sim.solver.pardiso`,
+or MUMPS' LDL^T through its C interface, :mod:`fem_sim.solver.ldlt`, with METIS ordering,
+float32 factors refined by GMRES; one process; it exists because Debian's MUMPS has no METIS
+and PETSc 3.18 gives a user ordering only to LU) and
 :class:`PetscSolver` (PETSc KSP: MUMPS LDL^T, GMRES with a lagged factorisation, or CG + GAMG
 with the rigid-body near-nullspace; any number of processes). :func:`make_linear_solver`
 picks one from the settings.
@@ -26,7 +27,7 @@ import logging
 import numpy as np
 from petsc4py import PETSc
 
-from fem_sim.solver import ldlt
+from fem_sim.solver import ldlt, pardiso
 from fem_sim.solver.assembly import Jacobian
 from fem_sim.solver.results import LinearCounts, StepFailure
 from fem_sim.solver.settings import SolverSettings
@@ -79,13 +80,20 @@ class LinearSolver:
 
 
 class SerialLDLTSolver(LinearSolver):
-    """MUMPS LDL^T with METIS ordering in float32 ("single") or float64 ("double").
+    """Float32 Cholesky by MKL PARDISO ("pardiso"), or MUMPS LDL^T in float32 ("single") or
+    float64 ("double"), all with METIS ordering.
 
-    If float32 factors cannot give the solve (GMRES does not reach ``rtol`` within
-    ``max_krylov`` iterations, e.g. a tangent too ill-conditioned for single precision, or the
-    float32 factorisation fails), the same matrix is factorised in float64 and the simulation
-    goes on; ``counts.double_fallbacks`` counts these.
+    A matrix that is not positive definite fails the Cholesky factorisation and is factorised
+    by MUMPS' float32 LDL^T instead (``counts.cholesky_fallbacks``). If float32 factors cannot
+    give the solve (GMRES does not reach ``rtol`` within ``max_krylov`` iterations, e.g. a
+    tangent too ill-conditioned for single precision, or the float32 factorisation fails), the
+    same matrix is factorised in float64 and the simulation goes on;
+    ``counts.double_fallbacks`` counts these.
     """
+
+    # the factorisations a mode tries, in order
+    CHAINS = {"pardiso": ("pardiso", "single", "double"), "single": ("single", "double"),
+              "double": ("double",)}
 
     csr = direct = solves_near = True
 
@@ -109,21 +117,24 @@ class SerialLDLTSolver(LinearSolver):
 
     def solve(self, J: Jacobian, rhs, du, rtol: float, slot: str = "work") -> None:
         indptr, indices, values = J.csr()
-        precisions = [self.name] + (["double"] if self.name == "single" else [])
         why = ""
-        for k, precision in enumerate(precisions):
+        for k, precision in enumerate(self.CHAINS[self.name]):
             solver = self._ldlts.get((slot, precision))
             if solver is None:
                 # Unpivoted float32 factors unless asked (the float64 fallback pivots).
-                solver = self._ldlts[slot, precision] = ldlt.SerialLDLT(
-                    precision, bs=3,
-                    pivoting=precision == "double" or self.settings.pivoting)
+                solver = self._ldlts[slot, precision] = (
+                    pardiso.PardisoCholesky() if precision == "pardiso" else
+                    ldlt.SerialLDLT(precision, bs=3,
+                                    pivoting=precision == "double" or self.settings.pivoting))
                 for (_, p), other in self._ldlts.items():  # one METIS ordering per pattern
                     if other is not solver and p == precision:
                         solver.share_ordering(other)
-            if k:
+            if precision == "double" and k:
                 self.counts.double_fallbacks += 1
-                log.debug("float32 LDL^T insufficient (%s); factorising in float64", why)
+                log.debug("float32 factors insufficient (%s); factorising in float64", why)
+            elif k:
+                self.counts.cholesky_fallbacks += 1
+                log.debug("Cholesky insufficient (%s); factorising with MUMPS' LDL^T", why)
             try:
                 solver.factor(indptr, indices, values)
             except ldlt.FactorError as exc:
@@ -349,20 +360,29 @@ def _rigid_body_modes(A, x: np.ndarray, comm):
 def factorization_mode(settings: SolverSettings, comm_size: int) -> str | None:
     """"single"/"double" when the serial METIS LDL^T applies, else None (PETSc's KSP).
 
-    ``auto`` is "single" on one process (float32 factors with METIS ordering, faster than
-    PETSc's MUMPS: ``bench/bench_jacobian.py``) and PETSc's MUMPS on several.
+    ``auto`` on one process is "pardiso" when MKL is installed (float32 Cholesky, faster than
+    MUMPS' LDL^T and threaded: ``bench/bench_jacobian.py``), else "single" (MUMPS' float32
+    LDL^T with METIS ordering, faster than PETSc's MUMPS); PETSc's MUMPS on several.
     """
     s = settings
     mode = s.factorization
     if (s.linear_solver != "mumps" or s.lag_factorization or mode == "petsc"
             or comm_size > 1 or "pc_type" in s.petsc_options):
-        if mode in ("single", "double") and comm_size > 1:
+        if mode in ("pardiso", "single", "double") and comm_size > 1:
             raise ValueError(f"settings.factorization = {mode!r} runs on one process; "
                              f"this problem has {comm_size} (use 'auto' or 'petsc')")
         return None
     if ldlt.load() is None:
+        if mode == "pardiso":
+            raise ValueError("settings.factorization = 'pardiso' needs the compiled METIS "
+                             "extension (fem_sim/solver/ldlt_kernel.c), which did not build")
         return None
-    return "single" if mode == "auto" else mode
+    if mode == "pardiso" and not pardiso.available():
+        raise ValueError("settings.factorization = 'pardiso' needs MKL (pip install mkl, "
+                         "done by make setup); 'auto' falls back to MUMPS without it")
+    if mode == "auto":
+        return "pardiso" if pardiso.available() else "single"
+    return mode
 
 
 def make_linear_solver(settings: SolverSettings, comm, prefix: str,

@@ -103,6 +103,7 @@ class LoadStepper:
         sol.factorizations, sol.krylov_iterations = c.factorizations, c.krylov_iterations
         sol.back_solves, sol.double_fallbacks = c.back_solves, c.double_fallbacks
         sol.reused_factorizations = c.reused_factorizations
+        sol.cholesky_fallbacks = c.cholesky_fallbacks
         sol.chord_steps, sol.chord_rejected = self.newton.chord_steps, self.newton.chord_rejected
         sol.near_steps = self.newton.near_steps
         sol.local_iterations = self.newton.local_iterations

@@ -115,3 +115,140 @@ def test_gmres_reports_non_convergence():
     assert not ok and its == 3
     x, its, ok = ldlt.gmres(A.dot, lambda v: v, b, 1e-10, A.shape[0])
     assert ok and np.linalg.norm(A @ x - b) <= 1e-10 * np.linalg.norm(b)
+
+
+# ----------------------------------------------------------------------------------------------
+# MKL PARDISO's float32 Cholesky (fem_sim/solver/pardiso.py)
+# ----------------------------------------------------------------------------------------------
+def test_make_setup_installs_mkl():
+    """The solver environment has MKL (requirements/solver-extras.txt), so the serial default
+    is PARDISO's Cholesky; the tests below would otherwise skip."""
+    from fem_sim.solver import linear, pardiso
+    from fem_sim.solver.settings import SolverSettings
+
+    assert pardiso.available(), "MKL's libmkl_rt is missing from the solver environment"
+    assert linear.factorization_mode(SolverSettings(), 1) == "pardiso"
+
+
+def test_without_mkl_auto_is_mumps_and_pardiso_is_refused(monkeypatch):
+    from fem_sim.solver import linear, pardiso
+    from fem_sim.solver.settings import SolverSettings
+
+    monkeypatch.setattr(pardiso, "available", lambda: False)
+    assert linear.factorization_mode(SolverSettings(), 1) == "single"
+    with pytest.raises(ValueError, match="needs MKL"):
+        linear.factorization_mode(SolverSettings(factorization="pardiso"), 1)
+    with pytest.raises(ValueError, match="one process"):
+        linear.factorization_mode(SolverSettings(factorization="pardiso"), 2)
+
+
+@pytest.fixture
+def cholesky():
+    from fem_sim.solver import pardiso
+
+    if not pardiso.available():
+        pytest.skip("MKL is not installed")
+    return pardiso.PardisoCholesky
+
+
+def test_pardiso_cholesky_matches_dense_and_refines(cholesky):
+    A = laplacian_3d(6)
+    b = np.random.default_rng(1).normal(size=A.shape[0])
+    solver = cholesky()
+    solver.factor(A.indptr, A.indices, A.data)
+    exact = np.linalg.solve(A.toarray(), b)
+    err = np.linalg.norm(solver.solve(b) - exact) / np.linalg.norm(exact)
+    cond = np.linalg.cond(A.toarray())
+    assert err <= 50 * cond * np.finfo(np.float32).eps, (err, cond)
+    assert err > 1e-10  # float32 factors: not a double-precision solve
+    x, its, ok = solver.solve_refined(A, b, 1e-12)
+    assert ok and its <= 6, its
+    assert np.linalg.norm(A @ x - b) <= 1e-12 * np.linalg.norm(b)
+    assert solver.flops > 0 and solver.negative_pivots == 0
+
+
+def test_pardiso_analyses_once_per_pattern(cholesky):
+    A = laplacian_3d(5)
+    first = cholesky()
+    first.factor(A.indptr, A.indices, A.data)
+    first.factor(A.indptr, A.indices, 2.0 * A.data)
+    assert (first.analyses, first.factorizations) == (1, 2)
+    b = np.ones(A.shape[0])
+    np.testing.assert_allclose(2.0 * (A @ first.solve(b)), b, rtol=1e-4)
+    # PARDISO's nested dissection: a permutation of the dofs, not the identity
+    assert np.array_equal(np.sort(first._perm), np.arange(A.shape[0]))
+    assert not np.array_equal(first._perm, np.arange(A.shape[0]))
+    B = laplacian_3d(4)
+    first.factor(B.indptr, B.indices, B.data)
+    assert first.analyses == 2
+    np.testing.assert_allclose(B @ first.solve(np.ones(B.shape[0])), 1.0, rtol=1e-4)
+
+
+def test_pardiso_refuses_an_indefinite_matrix_and_the_solver_falls_back(cholesky, monkeypatch):
+    """Cholesky cannot factorise an indefinite matrix (FactorError, not wrong factors); the
+    linear solver then factorises it with MUMPS' LDL^T, counts that, and solves it."""
+    from fem_sim.solver import linear
+    from fem_sim.solver.settings import SolverSettings
+
+    indefinite, spd = laplacian_3d(5, shift=1.3), laplacian_3d(5)
+    with pytest.raises(ldlt.FactorError, match="not positive definite"):
+        cholesky().factor(indefinite.indptr, indefinite.indices, indefinite.data)
+
+    class Jacobian:  # the interface the linear solver uses
+        def __init__(self, A):
+            self.A = A
+
+        def csr(self):
+            return self.A.indptr, self.A.indices, self.A.data
+
+    class Vec:
+        def __init__(self, a):
+            self.array = self.array_r = a
+
+    monkeypatch.setattr(linear, "_ghost_update", lambda vec: None)  # plain arrays here
+    solver = linear.SerialLDLTSolver(SolverSettings(), "pardiso")
+    b = np.random.default_rng(2).normal(size=spd.shape[0])
+    for A, fallbacks in ((indefinite, 1), (spd, 1)):
+        du = Vec(np.zeros_like(b))
+        solver.solve(Jacobian(A), Vec(b), du, 1e-11)
+        assert solver.counts.cholesky_fallbacks == fallbacks
+        assert np.linalg.norm(A @ du.array - b) <= 1e-11 * np.linalg.norm(b)
+    assert solver.counts.factorizations == 2
+    assert isinstance(solver._ldlt, cholesky)  # the SPD matrix: Cholesky's factors
+
+
+def test_pardiso_keeps_its_threads_when_gmsh_starts(cholesky, tmp_path):
+    """gmsh.initialize() sets libgomp's thread count to 1 (General.NumThreads), which MKL's
+    GNU threading layer followed: PARDISO then crashed on factors made with two threads
+    (SIGSEGV, seen with MKL 2026.2). Its count is now set explicitly. In a subprocess: a crash
+    must fail this test, not kill the test run."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = tmp_path / "gmsh_then_pardiso.py"
+    script.write_text(f"""
+import sys
+import numpy as np
+from mpi4py import MPI  # noqa: F401
+sys.path.insert(0, {str(Path(__file__).parent)!r})
+from test_ldlt import laplacian_3d
+from fem_sim.solver import pardiso
+A = laplacian_3d(12)
+P = pardiso.PardisoCholesky()
+P.factor(A.indptr, A.indices, A.data)
+before = pardiso.threads()
+import gmsh
+gmsh.initialize()
+gmsh.finalize()
+P.factor(A.indptr, A.indices, A.data)
+x = P.solve(np.ones(A.shape[0]))
+print(before, pardiso.threads(), float(np.abs(A @ x - 1.0).max()))
+""")
+    env = {**os.environ, "OMP_NUM_THREADS": "2", "PETSC_OPTIONS": "-no_signal_handler"}
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                         env=env, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    before, after, err = out.stdout.split()[-3:]
+    assert before == after == "2" and float(err) < 1e-2
