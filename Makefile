@@ -126,9 +126,11 @@ test-trainer: setup-trainer $(TEST_DATA)/.done
 bench: setup
 	@bash scripts/bench.sh "$(SPY)" "$(TPY)"
 
-# FEM price list (resumable: re-run to continue): docs/tradeoff_fem.{md,png}
+# FEM price list (resumable: re-run to continue): docs/tradeoff_fem.{md,png}; one run at a
+# time on FEM_THREADS threads (the machine's two cores by default)
+FEM_THREADS ?= 2
 tradeoff-fem: setup-solver
-	$(SPY) bench/tradeoff_fem.py
+	$(SPY) bench/tradeoff_fem.py --threads $(FEM_THREADS)
 
 # Surrogate price list + error budget (resumable): docs/tradeoff_surrogate.md, docs/*.png
 tradeoff-surrogate: setup
