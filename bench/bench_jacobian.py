@@ -155,7 +155,7 @@ def main():
     from fem_sim.solver import pardiso
 
     if pardiso.available():
-        rows.append(("fem_sim Cholesky (MKL PARDISO), METIS, float32",
+        rows.append(("fem_sim Cholesky (MKL PARDISO, its METIS), float32",
                      own(indptr, indices, values, b, args.runs, "pardiso")))
     for label, (flops, tf, ts, x) in rows:
         res = np.linalg.norm(A @ x - b) / np.linalg.norm(b)
