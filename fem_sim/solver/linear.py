@@ -358,7 +358,8 @@ def _rigid_body_modes(A, x: np.ndarray, comm):
 
 
 def factorization_mode(settings: SolverSettings, comm_size: int) -> str | None:
-    """"single"/"double" when the serial METIS LDL^T applies, else None (PETSc's KSP).
+    """"pardiso"/"single"/"double" when the serial factorisations apply, else None (PETSc's
+    KSP).
 
     ``auto`` on one process is "pardiso" when MKL is installed (float32 Cholesky, faster than
     MUMPS' LDL^T and threaded: ``bench/bench_jacobian.py``), else "single" (MUMPS' float32

@@ -169,7 +169,7 @@ class PardisoCholesky:
 
     def free(self) -> None:
         """Release PARDISO's memory (also at garbage collection and at exit)."""
-        if getattr(self, "_pattern", None) is not None and np.any(self._pt):
+        if getattr(self, "_pattern", None) is not None and self._pt.any():
             self._call(-1)
             self._pt[:] = 0
         self._factored = False
