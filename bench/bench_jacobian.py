@@ -2,7 +2,7 @@
 by dolfinx and by fem_sim's C assembly for P1 (fem_sim/solver/tet.py), then factorised by PETSc's
 MUMPS LDL^T (PORD ordering, what Debian's MUMPS offers), by fem_sim's serial LDL^T (MUMPS'
 C interface, METIS ordering) in float64 (pivoting) and float32 (none, as the solver runs it), and
-by MKL PARDISO's float32 Cholesky with the same ordering (the serial default when MKL is
+by MKL PARDISO's float32 Cholesky with its own METIS ordering (the serial default when MKL is
 installed). Threads: OMP_NUM_THREADS (PARDISO) and OPENBLAS_NUM_THREADS (MUMPS' fronts).
 
     OPENBLAS_NUM_THREADS=1 .venv-solver/bin/python bench/bench_jacobian.py [--mesh sofa] [--h 5.0]

@@ -33,6 +33,7 @@ from fem_sim.solver.results import LinearCounts, StepFailure
 from fem_sim.solver.settings import SolverSettings
 
 log = logging.getLogger(__name__)
+Factors = ldlt.SerialLDLT | pardiso.PardisoCholesky  # one interface: factor, solve, ...
 
 
 def _ghost_update(vec) -> None:
@@ -84,7 +85,8 @@ class SerialLDLTSolver(LinearSolver):
     float64 ("double"), all with METIS ordering.
 
     A matrix that is not positive definite fails the Cholesky factorisation and is factorised
-    by MUMPS' float32 LDL^T instead (``counts.cholesky_fallbacks``). If float32 factors cannot
+    by MUMPS' float32 LDL^T instead (``counts.cholesky_fallbacks``, which also counts the rare
+    Cholesky whose factors GMRES could not refine to ``rtol``). If float32 factors cannot
     give the solve (GMRES does not reach ``rtol`` within ``max_krylov`` iterations, e.g. a
     tangent too ill-conditioned for single precision, or the float32 factorisation fails), the
     same matrix is factorised in float64 and the simulation goes on;
@@ -102,10 +104,10 @@ class SerialLDLTSolver(LinearSolver):
         self.name = precision
         # by (slot, precision); each keeps its analysis. Slot "work" holds Newton's
         # factorisations, slot "recurring" the one of solve_recurring, kept across simulations.
-        self._ldlts: dict[tuple[str, str], ldlt.SerialLDLT] = {}
-        self._ldlt: ldlt.SerialLDLT | None = None     # the one holding the last factorisation
+        self._ldlts: dict[tuple[str, str], Factors] = {}
+        self._ldlt: Factors | None = None     # the one holding the last factorisation
         # (column indices, values, factors) of the recurring matrix's last factorisation
-        self._recurring: tuple[np.ndarray, np.ndarray, ldlt.SerialLDLT] | None = None
+        self._recurring: tuple[np.ndarray, np.ndarray, Factors] | None = None
 
     def reset(self) -> None:
         super().reset()
@@ -153,8 +155,9 @@ class SerialLDLTSolver(LinearSolver):
         factorisations do not overwrite it) with a copy of the matrix; when the same matrix
         (equal values, entry by entry) comes again, the solve reuses it: a batch of
         simulations on one liver and material saves one factorisation per simulation. The
-        solution is the same as with a fresh factorisation (the same factors: MUMPS is
-        deterministic for equal input and the same analysis; tested).
+        solution is the same as with a fresh factorisation (the same factors: MUMPS, and
+        PARDISO on one thread, are deterministic for equal input and the same analysis;
+        tested; PARDISO on several threads may differ from a fresh one in the last bits).
         """
         _, indices, values = J.csr()
         kept = self._recurring
@@ -185,7 +188,7 @@ class SerialLDLTSolver(LinearSolver):
             return False
         return self._refine(self._ldlt, J, rhs, du, rtol, maxit)[0]
 
-    def _refine(self, solver: ldlt.SerialLDLT, J: Jacobian, rhs, du, rtol: float,
+    def _refine(self, solver: Factors, J: Jacobian, rhs, du, rtol: float,
                 maxit: int) -> tuple[bool, int]:
         """GMRES on J preconditioned with ``solver``'s factors; if it reaches ``rtol``, du is
         the solution and ``solver`` holds the last factorisation. Returns (converged,
@@ -375,8 +378,9 @@ def factorization_mode(settings: SolverSettings, comm_size: int) -> str | None:
         return None
     if ldlt.load() is None:
         if mode == "pardiso":
-            raise ValueError("settings.factorization = 'pardiso' needs the compiled METIS "
-                             "extension (fem_sim/solver/ldlt_kernel.c), which did not build")
+            raise ValueError("settings.factorization = 'pardiso' needs the compiled MUMPS "
+                             "extension (fem_sim/solver/ldlt_kernel.c: the LDL^T for matrices "
+                             "the Cholesky refuses), which did not build")
         return None
     if mode == "pardiso" and not pardiso.available():
         raise ValueError("settings.factorization = 'pardiso' needs MKL (pip install mkl, "

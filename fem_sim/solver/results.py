@@ -21,7 +21,7 @@ class LinearCounts:
     krylov_iterations: int = 0
     back_solves: int = 0
     double_fallbacks: int = 0  # float32 factorisations that had to be redone in float64
-    cholesky_fallbacks: int = 0  # matrices not positive definite: LDL^T after the Cholesky
+    cholesky_fallbacks: int = 0  # LDL^T after the Cholesky (not positive definite, mostly)
     reused_factorizations: int = 0  # kept from an earlier simulation (solve_recurring)
 
 
@@ -45,7 +45,7 @@ class Solution:
     chord_rejected: int = 0    # chord steps tried and undone (too little contraction)
     near_steps: int = 0        # Newton steps solved by GMRES on an older factorisation
     double_fallbacks: int = 0  # float32 factorisations that had to be redone in float64
-    cholesky_fallbacks: int = 0  # matrices not positive definite: LDL^T after the Cholesky
+    cholesky_fallbacks: int = 0  # LDL^T after the Cholesky (not positive definite, mostly)
     reused_factorizations: int = 0  # kept from an earlier simulation (solve_recurring)
     local_iterations: int = 0  # local Newton iterations of the hot-spot relaxation
 
