@@ -26,7 +26,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fem_sim import Constraint, NodalLoad, OgdenMaterial, OgdenProblem
-from fem_sim.solver import ldlt
+from fem_sim.solver import ldlt, pardiso
 from fem_sim.solver.assembly import DolfinxAssembler
 
 
@@ -104,8 +104,6 @@ def petsc_mumps(indptr, indices, values, b, runs):
 
 
 def own(indptr, indices, values, b, runs, precision):
-    from fem_sim.solver import pardiso
-
     solver = (pardiso.PardisoCholesky() if precision == "pardiso" else
               ldlt.SerialLDLT(precision, bs=3, pivoting=precision == "double"))
     solver.factor(indptr, indices, values)
@@ -152,8 +150,6 @@ def main():
                                                   "double")),
             ("fem_sim LDL^T (MUMPS), METIS, float32", own(indptr, indices, values, b,
                                                           args.runs, "single"))]
-    from fem_sim.solver import pardiso
-
     if pardiso.available():
         rows.append(("fem_sim Cholesky (MKL PARDISO, its METIS), float32",
                      own(indptr, indices, values, b, args.runs, "pardiso")))

@@ -51,10 +51,7 @@ def run(liver: str, element: str, h: float) -> dict:
     u = prob.displacement_at(pts)
     e = np.linalg.norm(u - u_ref, axis=1)
     scale = np.abs(u_ref).max()
-    # Signed: the component of u - u_ref along u_ref, relative to u_ref (-0.1: 10 % too stiff
-    # overall). The mean error is dominated by the many small far-field displacements; this
-    # says which way and how much the whole field is off.
-    signed = float(np.sum((u - u_ref) * u_ref) / np.sum(u_ref * u_ref))
+    signed = tf.signed_error(u, u_ref)
     return {"liver": liver, "element": element, "h": h, "nodes": g.n_nodes,
             "status": sol.status, "seconds": secs, "its": sol.newton_iterations,
             "factorizations": sol.factorizations, "mean": e.mean() / scale,
