@@ -5,6 +5,12 @@ assembly with the constraints applied (``bench/bench_jacobian.py``), and the val
 to the factorisation without a PETSc matrix in between; F and the forces replace dolfinx's
 expression evaluation and vector assembly.
 ``tests/fem_sim/test_verification.py`` checks all three against dolfinx for P1 and P2.
+
+Threads (OpenMP, the point kernels' count: :func:`threads`): the cells are coloured so that no
+two cells of a colour share a node, and each colour is split among the threads; results are
+the same bit for bit on any number of threads. Measured on the real liver with P2 at 10 mm
+(15k cells, 42 colours): the stiffness 29 ms on two threads, 60 ms on one, 77 ms before
+(without the element matrix's symmetry, -O2); a 14.5 s simulation spent 2.0 s in it.
 """
 
 from __future__ import annotations
@@ -16,12 +22,15 @@ from fem_sim import cext
 
 SOURCE = cext.Path(__file__).with_name("tet_kernel.c")
 CDEF = """
+int tet_colour(int ncells, int nn, int nnodes, const int32_t *cells, int32_t *colour);
 int tet_stiffness(int ncells, int nn, int nq, const double *dN_all, const double *w_all,
-                  const double *A_all, const int32_t *pos_all, double *values);
+                  const double *A_all, const int32_t *pos_all, double *values, int ncolours,
+                  const int64_t *starts, const int32_t *order, int nthreads);
 void tet_deformation(int ncells, int nn, int nq, const int32_t *cells, const double *dN_all,
-                     const double *u, double *F_all);
+                     const double *u, double *F_all, int nthreads);
 void tet_forces(int ncells, int nn, int nq, const int32_t *cells, const double *dN_all,
-                const double *w_all, const double *P_all, double *b);
+                const double *w_all, const double *P_all, double *b, int ncolours,
+                const int64_t *starts, const int32_t *order, int nthreads);
 void anp_pairs(int64_t n, const int32_t *pos, const int32_t *node, const int32_t *p,
                const int32_t *q, const double *d, const double *g, double *values);
 """
@@ -33,7 +42,17 @@ TET_EDGES = ((2, 3), (1, 3), (1, 2), (0, 3), (0, 2), (0, 1))
 
 def load():
     return cext.load("tet", SOURCE, CDEF, "using dolfinx's assembly",
-                     extra_compile_args=["-O2", "-std=c99"])
+                     extra_compile_args=["-O3", "-std=c99", "-fopenmp"],
+                     extra_link_args=["-fopenmp"])
+
+
+def threads() -> int:
+    """Threads of the kernels: the compiled Ogden kernel's count (``OMP_NUM_THREADS``, else the
+    cores; the batch generator sets one per MPI rank): one setting for every point kernel.
+    """
+    from fem_sim.material import ogden_c
+
+    return max(1, ogden_c.threads())
 
 
 def reference_gradients(degree: int, points: np.ndarray) -> np.ndarray:
@@ -126,6 +145,28 @@ class TetAssembler:
         if self.diag.size != n:
             raise ValueError("TetAssembler: the CSR pattern misses diagonal entries")
         self._bc_key = None
+        # Cells by colour (no two cells of a colour share a node): the threads split each
+        # colour, and every sum runs in the same order whatever their number.
+        colour = np.empty(self.ncells, dtype=np.int32)
+        ncol = self.lib.tet_colour(self.ncells, self.nn, n // 3,
+                                   self.ffi.cast("int32_t *", self.cells.ctypes.data),
+                                   self.ffi.cast("int32_t *", colour.ctypes.data))
+        if ncol < 0:  # more than the 256 colours the kernel tracks (never seen): no threads
+            colour[:], ncol = 0, 1
+            self._serial = True
+        else:
+            self._serial = False
+        self.order = np.ascontiguousarray(np.argsort(colour, kind="stable"), dtype=np.int32)
+        self.starts = np.zeros(ncol + 1, dtype=np.int64)
+        np.cumsum(np.bincount(colour, minlength=ncol), out=self.starts[1:])
+
+    def _threads(self) -> int:
+        return 1 if self._serial else threads()
+
+    def _colours(self):
+        p = self.ffi.cast
+        return (self.starts.size - 1, p("int64_t *", self.starts.ctypes.data),
+                p("int32_t *", self.order.ctypes.data), self._threads())
 
     @property
     def n_points(self) -> int:
@@ -149,7 +190,11 @@ class TetAssembler:
         return arr
 
     def assemble(self, A_points: np.ndarray) -> np.ndarray:
-        """Values of the Jacobian from the tangents (ncells * nq, 81) at the points."""
+        """Values of the Jacobian from the tangents (ncells * nq, 81) at the points. The
+        tangents must have major symmetry (A[iJ][kL] = A[kL][iJ], as the second derivative of
+        a strain energy does): each element matrix is computed on and above its diagonal and
+        mirrored, so the result is exactly symmetric.
+        """
         A_points = self._points(A_points, 81, "tangents")
         self.values[:] = 0.0
         p = self.ffi.cast
@@ -158,7 +203,7 @@ class TetAssembler:
                                     p("double *", self.w.ctypes.data),
                                     p("double *", A_points.ctypes.data),
                                     p("int32_t *", self.pos.ctypes.data),
-                                    p("double *", self.values.ctypes.data))
+                                    p("double *", self.values.ctypes.data), *self._colours())
         if rc != 0:
             raise ValueError(f"TetAssembler: {self.nn} nodes per cell is more than the kernel "
                              "takes")
@@ -172,7 +217,8 @@ class TetAssembler:
         self.lib.tet_deformation(self.ncells, self.nn, self.nq,
                                  p("int32_t *", self.cells.ctypes.data),
                                  p("double *", self.dN.ctypes.data),
-                                 p("double *", u.ctypes.data), p("double *", F.ctypes.data))
+                                 p("double *", u.ctypes.data), p("double *", F.ctypes.data),
+                                 self._threads())
         return F
 
     def forces(self, P: np.ndarray, out: np.ndarray) -> np.ndarray:
@@ -187,7 +233,8 @@ class TetAssembler:
         self.lib.tet_forces(self.ncells, self.nn, self.nq,
                             p("int32_t *", self.cells.ctypes.data),
                             p("double *", self.dN.ctypes.data), p("double *", self.w.ctypes.data),
-                            p("double *", P.ctypes.data), p("double *", out.ctypes.data))
+                            p("double *", P.ctypes.data), p("double *", out.ctypes.data),
+                            *self._colours())
         return out
 
     def integrate(self, values: np.ndarray) -> float:
