@@ -23,6 +23,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fem_sim import cext
+from fem_sim.solver import blas
 
 SOURCE = cext.Path(__file__).with_name("ldlt_kernel.c")
 CDEF = """
@@ -211,7 +212,8 @@ class SerialLDLT:
         if not self._same_pattern(indptr, indices):
             self._analyse(indptr, indices)
         self._a = np.ascontiguousarray(values[self._upper], dtype=self.dtype)
-        self.lib.ldlt_factor(self._h, self._ptr(self._a, "void *"))
+        with blas.outer():  # the fronts are level-3 BLAS: the process's threads
+            self.lib.ldlt_factor(self._h, self._ptr(self._a, "void *"))
         self.factorizations += 1
         self._check("factorisation")
 
@@ -253,6 +255,12 @@ def gmres(matvec, precond, b: np.ndarray, rtol: float, maxit: int):
     """Right-preconditioned GMRES from x = 0, without restarts (modified Gram-Schmidt with one
     re-orthogonalisation). Stops when the true residual |b - A x| <= rtol |b|.
     Returns (x, iterations, converged).
+
+    The least-squares residual |beta e1 - H y| is |b - A x| in exact arithmetic (right
+    preconditioning: x = Z y); it decides when to look, and the true residual (one more
+    matvec) decides whether to stop. Checking the true residual at every iteration cost a
+    matvec per iteration: on the real liver with P2 (71k unknowns) 242 matvecs instead of ~130
+    per simulation, with the same iterations.
     """
     bnorm = float(np.linalg.norm(b))
     if bnorm == 0.0:
@@ -275,12 +283,15 @@ def gmres(matvec, precond, b: np.ndarray, rtol: float, maxit: int):
         H[k + 1, k] = float(np.linalg.norm(w))
         e1 = np.zeros(k + 2)
         e1[0] = bnorm
-        y = np.linalg.lstsq(H[: k + 2, : k + 1], e1, rcond=None)[0]
-        x = sum(yi * zi for yi, zi in zip(y, Z))
-        res = float(np.linalg.norm(b - matvec(x)))
-        if res <= rtol * bnorm:
-            return x, k + 1, True
-        if H[k + 1, k] <= 1e-14 * bnorm:
-            return x, k + 1, False  # breakdown without convergence
+        Hk = H[: k + 2, : k + 1]
+        y = np.linalg.lstsq(Hk, e1, rcond=None)[0]
+        breakdown = H[k + 1, k] <= 1e-14 * bnorm
+        estimate = float(np.linalg.norm(e1 - Hk @ y))
+        if estimate <= rtol * bnorm or breakdown or k + 1 == maxit:
+            x = sum(yi * zi for yi, zi in zip(y, Z))
+            if float(np.linalg.norm(b - matvec(x))) <= rtol * bnorm:
+                return x, k + 1, True
+            if breakdown:
+                return x, k + 1, False  # breakdown without convergence
         V.append(w / H[k + 1, k])
     return x, maxit, False

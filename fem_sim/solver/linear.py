@@ -27,7 +27,7 @@ import logging
 import numpy as np
 from petsc4py import PETSc
 
-from fem_sim.solver import ldlt, pardiso
+from fem_sim.solver import blas, ldlt, pardiso
 from fem_sim.solver.assembly import Jacobian
 from fem_sim.solver.results import LinearCounts, StepFailure
 from fem_sim.solver.settings import SolverSettings
@@ -282,7 +282,8 @@ class PetscSolver(LinearSolver):
             ksp.getPC().setReusePreconditioner(False)  # a new factorisation of this J
             ksp.setOperators(A, A)
             self.counts.factorizations += 1
-        ksp.solve(rhs, du)
+        with blas.outer():  # MUMPS' factorisation: level-3 BLAS
+            ksp.solve(rhs, du)
         its, reason = ksp.getIterationNumber(), ksp.getConvergedReason()
         self.counts.krylov_iterations += its
         if self.lagged and reason < 0 and not refactor:
@@ -290,7 +291,8 @@ class PetscSolver(LinearSolver):
             A.copy(self._Pmat, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
             self.counts.factorizations += 1
             ksp.setOperators(A, self._Pmat)
-            ksp.solve(rhs, du)
+            with blas.outer():  # MUMPS' factorisation: level-3 BLAS
+                ksp.solve(rhs, du)
             its, reason = ksp.getIterationNumber(), ksp.getConvergedReason()
             self.counts.krylov_iterations += its
         if reason < 0:

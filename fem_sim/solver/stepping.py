@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 
+from fem_sim.solver import blas
 from fem_sim.solver.equations import Equations
 from fem_sim.solver.linear import LinearSolver
 from fem_sim.solver.newton import NewtonSolver
@@ -35,8 +36,13 @@ class LoadStepper:
 
     def run(self, fractions: np.ndarray, gather) -> Solution:
         """Solve at every fraction from u = 0 (collective). ``gather()`` returns the current
-        displacement at the source nodes (on rank 0) for storage.
+        displacement at the source nodes (on rank 0) for storage. OpenBLAS runs on one thread
+        meanwhile, except in MUMPS' factorisations (:mod:`fem_sim.solver.blas`).
         """
+        with blas.threads(1):
+            return self._run(fractions, gather)
+
+    def _run(self, fractions: np.ndarray, gather) -> Solution:
         s, eqs = self.settings, self.eqs
         eqs.set_state(np.zeros_like(eqs.u.x.array))
         self.linear.reset()

@@ -117,6 +117,25 @@ def test_gmres_reports_non_convergence():
     assert ok and np.linalg.norm(A @ x - b) <= 1e-10 * np.linalg.norm(b)
 
 
+def test_gmres_checks_the_true_residual_only_when_the_estimate_converges():
+    """One matvec per iteration plus one per true-residual check (the Arnoldi estimate decides
+    when to check): preconditioned with the factors of a nearby matrix, a few checks in all."""
+    A = laplacian_3d(6)
+    b = np.random.default_rng(3).standard_normal(A.shape[0])
+    near = sp.csr_matrix(A + sp.diags(0.3 * np.random.default_rng(4).random(A.shape[0])))
+    solver = ldlt.SerialLDLT("single", bs=1)
+    solver.factor(near.indptr, near.indices, near.data)
+    calls = []
+
+    def matvec(v):
+        calls.append(1)
+        return A @ v
+
+    x, its, ok = ldlt.gmres(matvec, solver.solve, b, 1e-12, 30)
+    assert ok and np.linalg.norm(A @ x - b) <= 1e-12 * np.linalg.norm(b)
+    assert 4 <= its < 20 and len(calls) <= its + 2
+
+
 # ----------------------------------------------------------------------------------------------
 # MKL PARDISO's float32 Cholesky (fem_sim/solver/pardiso.py)
 # ----------------------------------------------------------------------------------------------
@@ -252,3 +271,52 @@ print(before, pardiso.threads(), float(np.abs(A @ x - 1.0).max()))
     assert out.returncode == 0, out.stderr[-2000:]
     before, after, err = out.stdout.split()[-3:]
     assert before == after == "2" and float(err) < 1e-2
+
+
+# ----------------------------------------------------------------------------------------------
+# OpenBLAS' threads in the load-step loop (fem_sim/solver/blas.py)
+# ----------------------------------------------------------------------------------------------
+def test_openblas_threads_are_scoped():
+    """One OpenBLAS thread inside the scope, the outer count back in ``outer()`` (MUMPS'
+    factorisations) and after the scope."""
+    from fem_sim.solver import blas
+
+    if blas.count() == 0:
+        pytest.skip("numpy does not use OpenBLAS here")
+    with blas.threads(2):  # OpenBLAS caps it at the cores
+        n = blas.count()
+        with blas.threads(1):
+            assert blas.count() == 1
+            with blas.outer():
+                assert blas.count() == n
+            assert blas.count() == 1
+        assert blas.count() == n
+
+
+def test_load_steps_run_openblas_on_one_thread(monkeypatch):
+    """The Newton loop's vector operations run with one OpenBLAS thread (idle OpenBLAS threads
+    spin on the cores the OpenMP kernels and PARDISO need); the caller's count comes back."""
+    from fem_sim import Constraint, NodalLoad, OgdenMaterial, OgdenProblem
+    from fem_sim.geometry.phantom import make_phantom
+    from fem_sim.solver import blas
+    from fem_sim.solver.equations import Equations
+
+    if blas.count() == 0:
+        pytest.skip("numpy does not use OpenBLAS here")
+    seen = []
+    residual = Equations.residual
+
+    def spy(self, lam):
+        seen.append(blas.count())
+        return residual(self, lam)
+
+    monkeypatch.setattr(Equations, "residual", spy)
+    g = make_phantom(0, 25.0)
+    prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells)
+    node = int(g.surface_nodes[np.argmin(g.points[g.surface_nodes, 2])])
+    with blas.threads(2):
+        sol = prob.solve(OgdenMaterial((4.1e-3,), (10.06,), 0.41),
+                         [Constraint(g.regions["vena_cava"])],
+                         [NodalLoad([node], [[0.0, 0.0, -0.05]])], [0.5, 1.0])
+        assert blas.count() == 2
+    assert sol.status == "ok" and seen and set(seen) == {1}
