@@ -27,7 +27,7 @@ import logging
 import numpy as np
 from petsc4py import PETSc
 
-from fem_sim.solver import blas, ldlt, pardiso
+from fem_sim.solver import blas, ldlt, pardiso, tet
 from fem_sim.solver.assembly import Jacobian
 from fem_sim.solver.results import LinearCounts, StepFailure
 from fem_sim.solver.settings import SolverSettings
@@ -194,7 +194,7 @@ class SerialLDLTSolver(LinearSolver):
         the solution and ``solver`` holds the last factorisation. Returns (converged,
         iterations).
         """
-        x, its, ok = solver.solve_refined(ldlt.csr(*J.csr()), rhs.array_r, rtol, maxit)
+        x, its, ok = solver.solve_refined(tet.operator(*J.csr()), rhs.array_r, rtol, maxit)
         self.counts.krylov_iterations += its
         if ok:
             self._ldlt = solver

@@ -110,6 +110,93 @@ def threads(n: int = 0) -> int:
     return int(mod[1].MKL_Get_Max_Threads())
 
 
+MAXFCT = 2  # numerical factorisations one analysis serves (PARDISO's maxfct)
+
+
+class _Handle:
+    """One PARDISO handle: the ordering and symbolic factorisation of one CSR pattern (phase
+    11), shared by up to MAXFCT :class:`PardisoCholesky` instances, each with its own numerical
+    factors (PARDISO's ``mnum``).
+    """
+
+    def __init__(self, ffi, lib):
+        self.ffi, self.lib = ffi, lib
+        self.pt = np.zeros(64, dtype=np.int64)  # PARDISO's handle: 64 pointers
+        self.iparm = np.zeros(64, dtype=np.int32)
+        ip = self.iparm
+        ip[0] = 1    # these settings, not PARDISO's defaults
+        ip[7] = 0    # no iterative refinement (none is needed without perturbed pivots)
+        ip[9] = 13   # pivot perturbation threshold (unused by Cholesky)
+        ip[17] = -1  # report the factor's nonzeros
+        ip[18] = -1  # and its Mflop
+        ip[23] = 0   # classic parallel factorisation: faster than two-level at two threads
+        ip[26] = 0   # no matrix checker (the arrays come from our assembly)
+        ip[27] = 1   # single precision: float32 values and factors
+        ip[34] = 1   # zero-based ia / ja
+        self.pattern = None
+        self.users: set[int] = set()  # the mnum in use
+        self.dummy = np.zeros(1, dtype=np.float32)
+
+    def call(self, phase: int, mnum: int = 1, a: np.ndarray | None = None,
+             b: np.ndarray | None = None, x: np.ndarray | None = None) -> int:
+        ffi = self.ffi
+        err = ffi.new("int *")
+        i = lambda v: ffi.new("int *", v)  # noqa: E731
+        ptr = lambda arr: ffi.cast("void *", arr.ctypes.data)  # noqa: E731
+        d = self.dummy
+        self.lib.pardiso(ptr(self.pt), i(MAXFCT), i(mnum), i(SPD), i(phase), i(self.n),
+                         ptr(a if a is not None else d), ffi.cast("int *", self.ia.ctypes.data),
+                         ffi.cast("int *", self.ja.ctypes.data),
+                         ffi.cast("int *", self.perm.ctypes.data), i(1),
+                         ffi.cast("int *", self.iparm.ctypes.data), i(0),
+                         ptr(b if b is not None else d), ptr(x if x is not None else d), err)
+        return int(err[0])
+
+    def same_pattern(self, indptr: np.ndarray, indices: np.ndarray) -> bool:
+        return self.pattern is not None and np.array_equal(self.pattern[0], indptr) \
+            and np.array_equal(self.pattern[1], indices)
+
+    def analyse(self, indptr: np.ndarray, indices: np.ndarray) -> None:
+        self.free()
+        n = indptr.size - 1
+        rows = np.repeat(np.arange(n, dtype=np.int32), np.diff(indptr))
+        upper = indices >= rows
+        if np.any((np.diff(indices) <= 0) & (np.diff(rows) == 0)):
+            raise FactorError("PARDISO needs sorted, unique column indices in every CSR row")
+        # PARDISO's own nested dissection (OpenMP METIS) on the scalar graph, returned in perm.
+        # Measured on the real liver's easy case (two threads): back-solves 7.7 ms against
+        # 13.5 ms with our METIS ordering of the 3x3-block graph as input (what MUMPS gets),
+        # factorisations 0.19 s against 0.18 s.
+        self.iparm[1] = 3
+        self.iparm[4] = 2
+        self.perm = np.zeros(n, dtype=np.int32)
+        self.upper = np.flatnonzero(upper)
+        self.n = n
+        self.ia = np.zeros(n + 1, dtype=np.int32)
+        np.cumsum(np.bincount(rows[upper], minlength=n), out=self.ia[1:])
+        self.ja = np.ascontiguousarray(indices[upper], dtype=np.int32)
+        self.pattern = (indptr.copy(), indices.copy())
+        err = self.call(11)
+        if err:
+            self.pattern = None
+            raise FactorError(f"PARDISO analysis failed: error {err} ({ERRORS.get(err, '?')})")
+
+    def release(self, mnum: int) -> None:
+        """Instance ``mnum`` is done: its factors go, and everything with the last user."""
+        self.users.discard(mnum)
+        if self.pattern is not None and self.pt.any():
+            if self.users:
+                self.call(0, mnum)  # this matrix's factors only
+            else:
+                self.free()
+
+    def free(self) -> None:
+        if self.pattern is not None and self.pt.any():
+            self.call(-1)
+            self.pt[:] = 0
+        self.pattern = None
+
+
 class PardisoCholesky:
     """Float32 Cholesky (LL^T) of a symmetric positive definite matrix given by its full CSR
     arrays, with the interface of :class:`~fem_sim.solver.ldlt.SerialLDLT`.
@@ -128,92 +215,60 @@ class PardisoCholesky:
         if mod is None:
             raise RuntimeError("MKL PARDISO is unavailable (pip install mkl)")
         self.ffi, self.lib = mod
-        self._pt = np.zeros(64, dtype=np.int64)  # PARDISO's handle: 64 pointers
-        self._iparm = np.zeros(64, dtype=np.int32)
-        ip = self._iparm
-        ip[0] = 1    # these settings, not PARDISO's defaults
-        ip[7] = 0    # no iterative refinement (none is needed without perturbed pivots)
-        ip[9] = 13   # pivot perturbation threshold (unused by Cholesky)
-        ip[17] = -1  # report the factor's nonzeros
-        ip[18] = -1  # and its Mflop
-        ip[23] = 0   # classic parallel factorisation: faster than two-level at two threads
-        ip[26] = 0   # no matrix checker (the arrays come from our assembly)
-        ip[27] = 1   # single precision: float32 values and factors
-        ip[34] = 1   # zero-based ia / ja
-        self._pattern = None
+        self._h = _Handle(self.ffi, self.lib)
+        self._mnum = 1
+        self._h.users.add(1)
         self._factored = False
         self.analyses = self.factorizations = 0
         ldlt._live.add(self)  # freed at exit with the MUMPS instances
 
     def share_ordering(self, other: PardisoCholesky) -> None:
-        """Nothing: each instance orders its matrix itself. PARDISO's own ordering given back
-        to it as input (iparm[4] = 1) made the back-solves 2x slower (14.6 ms against 7.7 ms
-        on the real liver's easy case, two threads), more than a second analysis costs (0.19 s
-        once per problem).
+        """Factorise with ``other``'s analysis (one handle, PARDISO's ``mnum``) while the
+        pattern is the same: one ordering and symbolic factorisation serve both, each keeps
+        its own factors. Measured on the real liver with P2 at 10 mm (71k unknowns): an
+        analysis costs 0.5 s, and the solver's two slots (Newton's factorisations and the
+        recurring small-strain one) each made their own. Nothing if ``other``'s handle is
+        full.
         """
+        h = other._h
+        free = [m for m in range(1, MAXFCT + 1) if m not in h.users]
+        if h is self._h or not free:
+            return
+        self._h.release(self._mnum)
+        self._h, self._mnum = h, free[0]
+        h.users.add(self._mnum)
+        self._factored = False
 
-    def _call(self, phase: int, b: np.ndarray | None = None,
-              x: np.ndarray | None = None) -> int:
-        err = self.ffi.new("int *")
-        i = lambda v: self.ffi.new("int *", v)  # noqa: E731
-        ptr = lambda arr: self.ffi.cast("void *", arr.ctypes.data)  # noqa: E731
-        dummy = self._dummy
-        self.lib.pardiso(ptr(self._pt), i(1), i(1), i(SPD), i(phase), i(self._n),
-                         ptr(self._a), self.ffi.cast("int *", self._ia.ctypes.data),
-                         self.ffi.cast("int *", self._ja.ctypes.data),
-                         self.ffi.cast("int *", self._perm.ctypes.data), i(1),
-                         self.ffi.cast("int *", self._iparm.ctypes.data), i(0),
-                         ptr(b if b is not None else dummy), ptr(x if x is not None else dummy),
-                         err)
-        return int(err[0])
+    @property
+    def _perm(self) -> np.ndarray:
+        return self._h.perm
 
     def free(self) -> None:
         """Release PARDISO's memory (also at garbage collection and at exit)."""
-        if getattr(self, "_pattern", None) is not None and self._pt.any():
-            self._call(-1)
-            self._pt[:] = 0
+        h = getattr(self, "_h", None)
+        if h is not None:
+            h.release(self._mnum)
+            self._h = None
         self._factored = False
 
     __del__ = free
 
-    def _same_pattern(self, indptr: np.ndarray, indices: np.ndarray) -> bool:
-        return self._pattern is not None and np.array_equal(self._pattern[0], indptr) \
-            and np.array_equal(self._pattern[1], indices)
-
-    def _analyse(self, indptr: np.ndarray, indices: np.ndarray) -> None:
-        self.free()
-        n = indptr.size - 1
-        rows = np.repeat(np.arange(n, dtype=np.int32), np.diff(indptr))
-        upper = indices >= rows
-        if np.any((np.diff(indices) <= 0) & (np.diff(rows) == 0)):
-            raise FactorError("PARDISO needs sorted, unique column indices in every CSR row")
-        # PARDISO's own nested dissection (OpenMP METIS) on the scalar graph, returned in perm.
-        # Measured on the real liver's easy case (two threads): back-solves 7.7 ms against
-        # 13.5 ms with our METIS ordering of the 3x3-block graph as input (what MUMPS gets),
-        # factorisations 0.19 s against 0.18 s.
-        self._iparm[1] = 3
-        self._iparm[4] = 2
-        self._perm = np.zeros(n, dtype=np.int32)
-        self._upper = upper
-        self._n = n
-        self._ia = np.zeros(n + 1, dtype=np.int32)
-        np.cumsum(np.bincount(rows[upper], minlength=n), out=self._ia[1:])
-        self._ja = np.ascontiguousarray(indices[upper], dtype=np.int32)
-        self._a = np.zeros(self._ja.size, dtype=np.float32)
-        self._dummy = np.zeros(1, dtype=np.float32)
-        self._pattern = (indptr.copy(), indices.copy())
-        err = self._call(11)
-        if err:
-            self._pattern = None
-            raise FactorError(f"PARDISO analysis failed: error {err} ({ERRORS.get(err, '?')})")
-        self.analyses += 1
-
     def factor(self, indptr: np.ndarray, indices: np.ndarray, values: np.ndarray) -> None:
-        if not self._same_pattern(indptr, indices):
-            self._analyse(indptr, indices)
-        self._a = np.ascontiguousarray(values[self._upper], dtype=np.float32)
+        h = self._h
+        if h is None:
+            raise FactorError("PARDISO factorisation after free()")
+        if not h.same_pattern(indptr, indices):
+            if h.pattern is not None and h.users != {self._mnum}:
+                # shared and analysed for another pattern: a handle of its own
+                h.users.discard(self._mnum)
+                h = self._h = _Handle(self.ffi, self.lib)
+                self._mnum = 1
+                h.users.add(1)
+            h.analyse(indptr, indices)
+            self.analyses += 1
+        self._a = np.ascontiguousarray(values[h.upper], dtype=np.float32)
         self._factored = False
-        err = self._call(22)
+        err = h.call(22, self._mnum, self._a)
         if err:
             raise FactorError(f"PARDISO Cholesky failed: error {err} "
                               f"({ERRORS.get(err, '?')})")
@@ -226,7 +281,7 @@ class PardisoCholesky:
             raise FactorError("PARDISO solve without a factorisation")
         rhs = np.ascontiguousarray(b, dtype=np.float32)
         x = np.empty_like(rhs)
-        err = self._call(33, rhs, x)
+        err = self._h.call(33, self._mnum, self._a, rhs, x)
         if err:
             raise FactorError(f"PARDISO solve failed: error {err} ({ERRORS.get(err, '?')})")
         return x.astype(np.float64)
@@ -238,4 +293,4 @@ class PardisoCholesky:
     @property
     def flops(self) -> float:
         """Floating-point operations of the factorisation (PARDISO's Mflop report)."""
-        return float(self._iparm[18]) * 1e6
+        return float(self._h.iparm[18]) * 1e6

@@ -31,6 +31,8 @@ void tet_deformation(int ncells, int nn, int nq, const int32_t *cells, const dou
 void tet_forces(int ncells, int nn, int nq, const int32_t *cells, const double *dN_all,
                 const double *w_all, const double *P_all, double *b, int ncolours,
                 const int64_t *starts, const int32_t *order, int nthreads);
+void csr_matvec(int64_t n, const int32_t *indptr, const int32_t *indices, const double *values,
+                const double *x, double *y, int nthreads);
 void anp_pairs(int64_t n, const int32_t *pos, const int32_t *node, const int32_t *p,
                const int32_t *q, const double *d, const double *g, double *values);
 """
@@ -269,3 +271,44 @@ class TetAssembler:
             rhs[fixed] = lift[fixed]
         self.values[self._bc_zero] = 0.0
         self.values[self._bc_diag] = 1.0
+
+
+class CsrOperator:
+    """y = A x for CSR arrays (int32 indices, float64 values) with the kernels' threads:
+    GMRES' matvec (scipy's runs on one thread). Measured on the real liver with P2 at 10 mm
+    (71k unknowns, 5.6M entries), two threads: 1.7 ms a product alone, scipy's 3.5 ms; inside
+    the solver (caches cold after a factorisation) 3.2 ms against 5.4-6 ms.
+    """
+
+    def __init__(self, indptr: np.ndarray, indices: np.ndarray, values: np.ndarray):
+        mod = load()
+        if mod is None:
+            raise RuntimeError("the compiled tetrahedron kernels are unavailable")
+        self.ffi, self.lib = mod.ffi, mod.lib
+        self.indptr = np.ascontiguousarray(indptr, dtype=np.int32)
+        self.indices = np.ascontiguousarray(indices, dtype=np.int32)
+        self.values = np.ascontiguousarray(values, dtype=np.float64)
+        n = self.indptr.size - 1
+        self.shape = (n, n)
+
+    def dot(self, x: np.ndarray) -> np.ndarray:
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        if x.shape != (self.shape[1],):
+            raise ValueError(f"CsrOperator.dot: x of shape {x.shape}, expected "
+                             f"({self.shape[1]},)")
+        y = np.empty(self.shape[0])
+        p = self.ffi.cast
+        self.lib.csr_matvec(self.shape[0], p("int32_t *", self.indptr.ctypes.data),
+                            p("int32_t *", self.indices.ctypes.data),
+                            p("double *", self.values.ctypes.data),
+                            p("double *", x.ctypes.data), p("double *", y.ctypes.data), threads())
+        return y
+
+    __matmul__ = dot
+
+
+def operator(indptr: np.ndarray, indices: np.ndarray, values: np.ndarray):
+    """A matrix with ``.dot``: :class:`CsrOperator` when the kernels are compiled, else scipy's."""
+    if load() is None:
+        return sp.csr_matrix((values, indices, indptr), shape=(indptr.size - 1,) * 2)
+    return CsrOperator(indptr, indices, values)

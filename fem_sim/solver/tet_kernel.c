@@ -163,3 +163,16 @@ void anp_pairs(int64_t n, const int32_t *pos, const int32_t *node, const int32_t
                const int32_t *q, const double *d, const double *g, double *values) {
   for (int64_t t = 0; t < n; t++) values[pos[t]] += d[node[t]] * g[p[t]] * g[q[t]];
 }
+
+/* y = A x for a CSR matrix, rows split among the threads (each row's sum in column order:
+ * the same bits on any thread count). */
+void csr_matvec(int64_t n, const int32_t *indptr, const int32_t *indices, const double *values,
+                const double *x, double *y, int nthreads) {
+  (void)nthreads;
+#pragma omp parallel for schedule(static) num_threads(nthreads)
+  for (int64_t i = 0; i < n; i++) {
+    double s = 0.0;
+    for (int32_t e = indptr[i]; e < indptr[i + 1]; e++) s += values[e] * x[indices[e]];
+    y[i] = s;
+  }
+}

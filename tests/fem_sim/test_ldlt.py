@@ -117,6 +117,29 @@ def test_gmres_reports_non_convergence():
     assert ok and np.linalg.norm(A @ x - b) <= 1e-10 * np.linalg.norm(b)
 
 
+def test_threaded_csr_product_matches_scipy(compiled):
+    """GMRES' matvec (fem_sim.solver.tet.CsrOperator, rows split among the threads): scipy's
+    product to round-off, the same bits on one and two threads."""
+    from fem_sim.material import ogden_c
+    from fem_sim.solver import tet
+
+    compiled("tet")
+    A = sp.csr_matrix(laplacian_3d(7) + sp.random(1029, 1029, 0.01, random_state=2))
+    A.sort_indices()
+    op = tet.operator(A.indptr, A.indices, A.data)
+    assert isinstance(op, tet.CsrOperator)
+    x = np.random.default_rng(6).standard_normal(A.shape[0])
+    before = ogden_c.threads()
+    try:
+        ys = [(ogden_c.threads(n), op.dot(x))[1] for n in (1, 2)]
+    finally:
+        ogden_c.threads(before)
+    np.testing.assert_allclose(ys[0], A @ x, rtol=0, atol=1e-13 * np.abs(A @ x).max())
+    assert np.array_equal(ys[0], ys[1])
+    with pytest.raises(ValueError, match="expected"):
+        op.dot(x[:-1])
+
+
 def test_gmres_checks_the_true_residual_only_when_the_estimate_converges():
     """One matvec per iteration plus one per true-residual check (the Arnoldi estimate decides
     when to check): preconditioned with the factors of a nearby matrix, a few checks in all."""
@@ -201,6 +224,32 @@ def test_pardiso_analyses_once_per_pattern(cholesky):
     first.factor(B.indptr, B.indices, B.data)
     assert first.analyses == 2
     np.testing.assert_allclose(B @ first.solve(np.ones(B.shape[0])), 1.0, rtol=1e-4)
+
+
+def test_pardiso_instances_share_one_analysis_and_keep_their_own_factors(cholesky):
+    """share_ordering: the second instance factorises with the first one's analysis (no second
+    ordering) and both keep their own factors; a new pattern gives the sharer a handle of its
+    own and leaves the other's factors intact."""
+    A = laplacian_3d(5)
+    first, second = cholesky(), cholesky()
+    first.factor(A.indptr, A.indices, A.data)
+    second.share_ordering(first)
+    second.factor(A.indptr, A.indices, 3.0 * A.data)
+    assert (first.analyses, second.analyses) == (1, 0)
+    b = np.ones(A.shape[0])
+    np.testing.assert_allclose(A @ first.solve(b), b, rtol=1e-4)
+    np.testing.assert_allclose(3.0 * (A @ second.solve(b)), b, rtol=1e-4)
+    third = cholesky()
+    third.share_ordering(first)  # the handle serves two: the third keeps its own
+    third.factor(A.indptr, A.indices, A.data)
+    assert third.analyses == 1
+    B = laplacian_3d(4)
+    second.factor(B.indptr, B.indices, B.data)
+    assert second.analyses == 1
+    np.testing.assert_allclose(B @ second.solve(np.ones(B.shape[0])), 1.0, rtol=1e-4)
+    np.testing.assert_allclose(A @ first.solve(b), b, rtol=1e-4)
+    second.free()
+    np.testing.assert_allclose(A @ first.solve(b), b, rtol=1e-4)
 
 
 def test_pardiso_refuses_an_indefinite_matrix_and_the_solver_falls_back(cholesky, monkeypatch):
