@@ -332,14 +332,16 @@ def test_openblas_threads_are_scoped():
 
     if blas.count() == 0:
         pytest.skip("numpy does not use OpenBLAS here")
-    with blas.threads(2):  # OpenBLAS caps it at the cores
-        n = blas.count()
-        with blas.threads(1):
-            assert blas.count() == 1
-            with blas.outer():
-                assert blas.count() == n
-            assert blas.count() == 1
+    n = blas.count()  # the process's own count (OPENBLAS_NUM_THREADS, capped at the cores)
+    with blas.threads(1):
+        assert blas.count() == 1
+        with blas.outer():
+            assert blas.count() == n
+        assert blas.count() == 1
+    assert blas.count() == n
+    with blas.threads(2), blas.threads(1), blas.outer():  # the outermost scope's "before"
         assert blas.count() == n
+    assert blas.count() == n
 
 
 def test_load_steps_run_openblas_on_one_thread(monkeypatch):
