@@ -310,34 +310,6 @@ def test_first_increment_is_capped_by_the_small_strain_stiffening():
     assert np.abs(capped.displacement - ref).max() <= 1e-8 * np.abs(ref).max()
 
 
-def test_increments_do_not_shrink_to_a_small_remainder(monkeypatch):
-    """The first output step goes in sub-increments that double after easy ones; an increment
-    that would leave less than half of itself before the output fraction goes to the fraction
-    instead (the remainder costs a factorisation like any increment). Without cut-backs the
-    increments on evenly spaced fractions never shrink, and every output fraction is hit."""
-    from fem_sim.solver.newton import NewtonSolver
-
-    g = make_phantom(0, 20.0)
-    node = int(np.argmax(g.points[:, 0]))
-    trials = []
-    solve = NewtonSolver.solve
-
-    def spy(self, lam, history, first_order_start):
-        trials.append(lam)
-        return solve(self, lam, history, first_order_start)
-
-    monkeypatch.setattr(NewtonSolver, "solve", spy)
-    fractions = np.linspace(0.1, 1.0, 10)
-    sol = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells).solve(
-        MAT, [Constraint(g.regions["vena_cava"])], [NodalLoad([node], [[0.0, -0.03, -0.03]])],
-        fractions)
-    assert sol.status == "ok" and not any(sol.cutbacks)
-    steps = np.diff([0.0] + trials)
-    assert steps[0] == pytest.approx(0.025) and len(trials) < 13  # sub-increments were taken
-    assert np.all(steps[1:] >= steps[:-1] * (1 - 1e-12)), steps
-    assert all(np.isclose(trials, f).any() for f in fractions)
-
-
 @pytest.mark.parametrize("factorization", ["single", "auto"])
 def test_hermite_predictor_error_falls_with_the_polynomial_degree(monkeypatch, factorization):
     """From exact states and tangents of a smooth load path, the Hermite predictor's error
