@@ -215,10 +215,8 @@ class PardisoCholesky:
         if mod is None:
             raise RuntimeError("MKL PARDISO is unavailable (pip install mkl)")
         self.ffi, self.lib = mod
-        self._h = _Handle(self.ffi, self.lib)
-        self._mnum = 1
-        self._h.users.add(1)
-        self._factored = False
+        self._h: _Handle | None = None
+        self._join(_Handle(self.ffi, self.lib), 1)
         self.analyses = self.factorizations = 0
         ldlt._live.add(self)  # freed at exit with the MUMPS instances
 
@@ -232,11 +230,17 @@ class PardisoCholesky:
         """
         h = other._h
         free = [m for m in range(1, MAXFCT + 1) if m not in h.users]
-        if h is self._h or not free:
-            return
-        self._h.release(self._mnum)
-        self._h, self._mnum = h, free[0]
-        h.users.add(self._mnum)
+        if h is not self._h and free:
+            self._join(h, free[0])
+
+    def _join(self, h: _Handle, mnum: int) -> None:
+        """Factorise as matrix ``mnum`` of handle ``h`` from now on; this instance's factors in
+        its former handle are released (and that handle with its last user).
+        """
+        if self._h is not None:
+            self._h.release(self._mnum)
+        self._h, self._mnum = h, mnum
+        h.users.add(mnum)
         self._factored = False
 
     @property
@@ -260,10 +264,8 @@ class PardisoCholesky:
         if not h.same_pattern(indptr, indices):
             if h.pattern is not None and h.users != {self._mnum}:
                 # shared and analysed for another pattern: a handle of its own
-                h.users.discard(self._mnum)
-                h = self._h = _Handle(self.ffi, self.lib)
-                self._mnum = 1
-                h.users.add(1)
+                self._join(_Handle(self.ffi, self.lib), 1)
+                h = self._h
             h.analyse(indptr, indices)
             self.analyses += 1
         self._a = np.ascontiguousarray(values[h.upper], dtype=np.float32)
