@@ -153,7 +153,7 @@ class TetAssembler:
         ncol = self.lib.tet_colour(self.ncells, self.nn, n // 3,
                                    self.ffi.cast("int32_t *", self.cells.ctypes.data),
                                    self.ffi.cast("int32_t *", colour.ctypes.data))
-        if ncol < 0:  # more than the 256 colours the kernel tracks (never seen): no threads
+        if ncol < 0:  # > 256 colours (never seen) or no memory for the colouring: no threads
             colour[:], ncol = 0, 1
             self._serial = True
         else:
