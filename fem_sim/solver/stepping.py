@@ -63,6 +63,7 @@ class LoadStepper:
         stored = []
         states: list[tuple[float, np.ndarray]] = [(0.0, eqs.state())]
         lam, dlam = 0.0, self.first_increment(float(fractions[0]))
+        last = float(fractions[-1])
         for target in fractions:
             t0 = time.perf_counter()
             iters, cutbacks, history, retry_plain = 0, 0, [], False
@@ -97,7 +98,10 @@ class LoadStepper:
                     retry_plain = False
                     lam = trial
                     states = (states + [(lam, eqs.state())])[-3:]
-                    self.predictor.converged(lam, its)
+                    if lam < last:
+                        # Nothing is predicted after the last fraction: the Hermite predictor's
+                        # tangent there (an assembly and a GMRES solve) would be thrown away.
+                        self.predictor.converged(lam, its)
                     if its <= 3:
                         # An easy increment: let a cut-back or a small first increment grow
                         # (capped by the distance to the next output fraction).

@@ -337,9 +337,9 @@ def test_hermite_predictor_error_falls_with_the_polynomial_degree(monkeypatch, f
 
     def predictor_error(h, m):
         lams = 0.5 + h * np.arange(-m + 1, 2)  # m converged points, then the target
-        u = path(lams)  # the solve records (lam, u, du/dlam) at each converged step
-        hermite = prob.predictor
-        hermite.points = hermite.points[-1 - m:-1]  # the m points before the target
+        u = path(lams)  # the solve records (lam, u, du/dlam) at each converged step but
+        hermite = prob.predictor  # the last: the m points before the target
+        hermite.points = hermite.points[-m:]
         assert [p[0] for p in hermite.points] == pytest.approx(lams[:-1])
         hermite.hermite(lams[-1])
         pred = prob.displacement()
@@ -349,6 +349,30 @@ def test_hermite_predictor_error_falls_with_the_polynomial_degree(monkeypatch, f
         e1, e2 = predictor_error(0.04, m), predictor_error(0.02, m)
         order = np.log2(e1 / e2)
         assert abs(order - 2 * m) < 0.6, (m, e1, e2, order)
+
+
+def test_hermite_tangents_are_computed_where_a_prediction_follows():
+    """The Hermite predictor assembles and solves for du/dlam at u = 0 and at every converged
+    increment except the last fraction's, after which nothing is predicted."""
+    from fem_sim.solver import predictors
+
+    g = make_phantom(0, 20.0)
+    node = int(np.argmax(g.points[:, 0]))
+    prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells,
+                        settings={"rtol": 1e-10, "first_increment": 1.0})
+    recorded = []
+    record = predictors.Hermite._record
+
+    def counting(self, lam):
+        recorded.append(lam)
+        record(self, lam)
+
+    prob.predictor._record = counting.__get__(prob.predictor)
+    s = prob.solve(MAT, [Constraint(g.regions["vena_cava"])],
+                   [NodalLoad([node], [[0.0, 0.0, -0.1]])], [0.25, 0.5, 1.0])
+    assert s.status == "ok" and sum(s.cutbacks) == 0
+    assert recorded == [0.0, 0.25, 0.5]
+    assert [p[0] for p in prob.predictor.points] == [0.0, 0.25, 0.5]
 
 
 def test_factorisation_backends_give_the_same_answer():
