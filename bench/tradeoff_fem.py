@@ -113,6 +113,10 @@ def plan(livers: list[str]) -> list[dict]:
                 add(liver=liver, load="patch", h=h, element="anp", steps=n, role="steps")
         for rtol in (1e-4, 1e-6, 1e-8, 1e-10):
             add(liver=liver, load="patch", h=d, rtol=rtol, role="tolerance")
+        # The locking-free element under a looser Newton tolerance: what the summary's
+        # tolerance rows cost in seconds and accuracy at the meshes that reach 2 %
+        for h in s["p2"]:
+            add(liver=liver, load="patch", h=h, degree=2, rtol=1e-6, role="tolerance")
         for fac in ("double", "petsc"):
             add(liver=liver, load="patch", h=d, factorization=fac, role="linear solver")
         add(liver=liver, load="patch", h=d, linear_solver="gamg", role="linear solver")
@@ -347,37 +351,45 @@ def threads_note(rows: list) -> str:
 
 def summary(rows: list) -> list[str]:
     """The seconds each element needs to come within TARGET of the converged answer (patch
-    load, K/mu = 200, the mesh rows), by the mean and by the max error: the cheapest run that
-    does, or the most accurate run when none does."""
+    load, K/mu = 200, the mesh, load-step and tolerance rows), by the mean and by the max
+    error: the cheapest run that does, or the most accurate run when none does; with the
+    cheapest at the default Newton tolerance beside it when another one wins."""
     out = ["## Seconds to reach 2 % of the converged answer", "",
-           f"Patch load, K/mu = 200, the mesh and load-step rows below. For each element the "
-           f"cheapest run whose error is within {TARGET:.0%} of the reference's largest "
-           "displacement (mean error, then max error), with its seconds per simulation; when "
-           "no run of the study gets there, its most accurate one. Fewer load steps give the "
+           f"Patch load, K/mu = 200, the mesh, load-step and tolerance rows below. For each "
+           f"element the cheapest run whose error is within {TARGET:.0%} of the reference's "
+           "largest displacement (mean error, then max error), with its seconds per "
+           "simulation (the first on a new problem, in a fresh process); when no run of the "
+           "study gets there, its most accurate one; when the cheapest has a looser Newton "
+           "tolerance, the cheapest at the default one too. Fewer load steps give the "
            "same answer (to the Newton tolerance) sooner: a single answer needs no 10 steps, a "
-           "dataset that stores every load fraction does.", "",
-           "| liver | element | measure | h mm | vertices | steps | s/sim | fact. | error | "
-           "signed |",
-           "|---|---|---|---|---|---|---|---|---|---|"]
+           "dataset that stores every load fraction does. A looser tolerance moves the answer "
+           "by the last column of its row in the table below.", "",
+           "| liver | element | measure | h mm | vertices | steps | rtol | s/sim | fact. | "
+           "error | signed |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
     for liver in SIZES:
         for element in ("P1", "ANP", "P2"):
             runs = [(s, r, e) for s, r, e in rows if s["liver"] == liver and e and
-                    s["role"] in ("mesh", "steps") and s["load"] == "patch" and
+                    s["role"] in ("mesh", "steps", "tolerance") and s["load"] == "patch" and
                     s["K_over_mu"] == 200.0 and element_of(s) == element]
             if not runs:
                 continue
             for measure in ("rel_mean", "rel_max"):
                 good = [x for x in runs if x[2][measure] <= TARGET]
                 # the most accurate: equal errors (other load steps) go to the cheapest run
-                spec, rec, e = (min(good, key=lambda x: x[1]["seconds"]) if good else
-                                min(runs, key=lambda x: (round(x[2][measure], 5),
-                                                         x[1]["seconds"])))
-                secs = (f"{rec['seconds']:.1f}" if good else
-                        f"not reached ({rec['seconds']:.1f})")
-                out.append(f"| {liver} | {element} | {measure[4:]} | {spec['h']:g} | "
-                           f"{rec['n_vertices']} | {spec['steps']} | {secs} | "
-                           f"{rec['factorizations']} | "
-                           f"{e[measure]:.2%} | {e['signed']:+.1%} |")
+                best = (min(good, key=lambda x: x[1]["seconds"]) if good else
+                        min(runs, key=lambda x: (round(x[2][measure], 5), x[1]["seconds"])))
+                shown = [best]
+                default = [x for x in good if x[0]["rtol"] == DEFAULTS["rtol"]]
+                if best[0]["rtol"] != DEFAULTS["rtol"] and default:
+                    shown.append(min(default, key=lambda x: x[1]["seconds"]))
+                for spec, rec, e in shown:
+                    secs = (f"{rec['seconds']:.1f}" if good else
+                            f"not reached ({rec['seconds']:.1f})")
+                    out.append(f"| {liver} | {element} | {measure[4:]} | {spec['h']:g} | "
+                               f"{rec['n_vertices']} | {spec['steps']} | {spec['rtol']:g} | "
+                               f"{secs} | {rec['factorizations']} | "
+                               f"{e[measure]:.2%} | {e['signed']:+.1%} |")
     return out + [""]
 
 

@@ -1,0 +1,158 @@
+"""One row of the FEM price list as a dataset runs it: first and later simulations, side by side.
+
+The price list (``bench/tradeoff_fem.py``) times one simulation per fresh process. A dataset
+runs many simulations on one problem (one liver, material and fixed region): the first pays
+PARDISO's analysis and the small-strain factorisation, the later ones reuse them. This script
+times both on the price list's setting (the real liver, 0.4 N along -z as a patch load, radius
+15 mm, at the price list's load point, its fixed region, Ogden c1 = 4.1e-3 MPa, m1 = 10.06,
+K/mu = 200, 10 load steps, rtol 1e-9), by default on its 2 % row (P2 at 10 mm), and compares
+variants in the same run, their runs interleaved so that they share the machine's load:
+
+    .venv-solver/bin/python bench/bench_price_row.py [--element p2] [--h 10] [--sims 3]
+        [--runs 2] [--settings '{"rtol": 1e-6}']   # a solver variant (OgdenProblem settings)
+        [--baseline DIR]   # the same runs with the fem_sim of another checkout (git worktree)
+
+Each run is a fresh process (``--worker``) on OMP_NUM_THREADS / OPENBLAS_NUM_THREADS threads
+(default 2); the table gives medians over the runs, the counts of the first run, the ratio of
+seconds to the first variant, and the largest difference of the final displacement from the
+first variant's (relative to its max |u|): what a variant costs in accuracy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+
+
+def worker(job: dict) -> None:
+    """Set up one problem and solve ``sims`` simulations on it; one JSON line each."""
+    import logging
+
+    logging.getLogger().setLevel(logging.ERROR)
+    sys.path.insert(0, str(HERE))
+    import tradeoff_fem as T
+    from mpi4py import MPI
+
+    import fem_sim
+    from fem_sim import Constraint, OgdenMaterial, OgdenProblem, PatchLoad
+
+    root = job.get("root")
+    if root and not Path(fem_sim.__file__).resolve().is_relative_to(Path(root).resolve()):
+        raise SystemExit(f"fem_sim came from {fem_sim.__file__}, not from {root}")
+    t0 = time.perf_counter()
+    g, fixed = T.mesh("sofa", job["h"])
+    kw = {"element": "anp"} if job["element"] == "anp" else {}
+    prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, settings=job["settings"],
+                        degree=2 if job["element"] == "p2" else 1, **kw)
+    c1 = 4.1e-3
+    mat = OgdenMaterial((c1,), (10.06,), 200.0 * c1 / 2)
+    load = [PatchLoad(np.asarray(job["load_point"]), T.FORCE, T.PATCH_RADIUS)]
+    fractions = np.arange(1, 11) / 10.0
+    print(json.dumps({"setup_seconds": time.perf_counter() - t0, "vertices": g.n_nodes}),
+          flush=True)
+    for k in range(job["sims"]):
+        t1 = time.perf_counter()
+        sol = prob.solve(mat, [Constraint(fixed)], load, fractions)
+        secs = time.perf_counter() - t1
+        if k == 0 and sol.n_done:
+            np.save(job["u_out"], sol.displacement[-1])
+        print(json.dumps({"sim": k, "seconds": secs, "status": sol.status,
+                          "its": sol.newton_iterations, "factorizations": sol.factorizations,
+                          "back_solves": sol.back_solves, "krylov": sol.krylov_iterations,
+                          "chord": sol.chord_steps}), flush=True)
+
+
+def run(job: dict, root: str | None, threads: int) -> list[dict]:
+    env = {**os.environ, "OMP_NUM_THREADS": str(threads), "OPENBLAS_NUM_THREADS": str(threads)}
+    if root:  # the other checkout's fem_sim first on the path (ahead of the editable install)
+        env["PYTHONPATH"] = os.pathsep.join([root, env.get("PYTHONPATH", "")])
+    proc = subprocess.run([sys.executable, __file__, "--worker", json.dumps({**job,
+                           "root": root})], capture_output=True, text=True, env=env)
+    if proc.returncode:
+        raise SystemExit(f"worker failed ({root or 'this checkout'}):\n{proc.stderr[-2000:]}")
+    return [json.loads(ln) for ln in proc.stdout.splitlines() if ln.startswith("{")]
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--element", choices=("p1", "p2", "anp"), default="p2")
+    ap.add_argument("--h", type=float, default=10.0, help="mesh size, mm")
+    ap.add_argument("--sims", type=int, default=3, help="simulations on one problem")
+    ap.add_argument("--runs", type=int, default=2, help="fresh processes per variant")
+    ap.add_argument("--settings", default=None, help="JSON: a solver variant to compare")
+    ap.add_argument("--baseline", default=None, metavar="DIR",
+                    help="a checkout (git worktree) whose fem_sim runs as the baseline")
+    ap.add_argument("--threads", type=int, default=2)
+    a = ap.parse_args()
+    if a.worker:
+        worker(json.loads(a.worker))
+        return 0
+    if a.sims < 1 or a.runs < 1:
+        ap.error("--sims and --runs must be >= 1")
+    sys.path.insert(0, str(HERE))
+    import tradeoff_fem as T
+
+    if not T.SOFA.exists():
+        print(f"{T.SOFA} not found: the price list's real liver is needed")
+        return 1
+    point = T.load_point("sofa").tolist()
+    variants = {"defaults": (None, {})}
+    if a.baseline:
+        variants = {"baseline": (str(Path(a.baseline).resolve()), {}), **variants}
+    if a.settings:
+        variants["variant"] = (None, json.loads(a.settings))
+    tmp = Path(tempfile.mkdtemp(prefix="price_row_"))
+    recs: dict[str, list[list[dict]]] = {v: [] for v in variants}
+    for r in range(a.runs):
+        for v, (root, settings) in variants.items():
+            job = {"h": a.h, "element": a.element, "sims": a.sims, "load_point": point,
+                   "settings": {"rtol": 1e-9, **settings}, "u_out": str(tmp / f"{v}.npy")}
+            out = run(job, root, a.threads)
+            recs[v].append(out)
+            sims = out[1:]
+            times = ", ".join(f"{s['seconds']:.2f} ({s['status']})" for s in sims)
+            print(f"run {r + 1}/{a.runs} {v}: setup {out[0]['setup_seconds']:.1f} s, "
+                  f"simulations {times} s, "
+                  f"factorisations {[s['factorizations'] for s in sims]}", flush=True)
+    first_v = next(iter(variants))
+    u0 = np.load(tmp / f"{first_v}.npy")
+    print(f"\nreal liver, patch load, {a.element.upper()} at {a.h:g} mm "
+          f"({recs[first_v][0][0]['vertices']} vertices), 10 load steps, {a.threads} threads; "
+          f"median of {a.runs} runs, each a fresh process with {a.sims} simulations on one "
+          "problem\n")
+    print("| variant | settings | setup s | first sim s | later sims s | x first variant "
+          "(first / later) | factorisations first / later | Newton its per step | "
+          "back-solves | GMRES its | max diff |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    base = None
+    for v, (root, settings) in variants.items():
+        runs = recs[v]
+        setup = np.median([o[0]["setup_seconds"] for o in runs])
+        first = np.median([o[1]["seconds"] for o in runs])
+        later = (np.median([s["seconds"] for o in runs for s in o[2:]]) if a.sims > 1
+                 else float("nan"))
+        base = base or (first, later)
+        s0 = runs[0][1:]
+        facts = f"{s0[0]['factorizations']} / " + (
+            ", ".join(str(s["factorizations"]) for s in s0[1:]) or "-")
+        diff = float(np.abs(np.load(tmp / f"{v}.npy") - u0).max() / np.abs(u0).max())
+        print(f"| {v} | {json.dumps(settings) if settings else (root or '-')} | {setup:.1f} | "
+              f"{first:.2f} | {later:.2f} | {first / base[0]:.2f} / {later / base[1]:.2f} | "
+              f"{facts} | {' '.join(map(str, s0[0]['its']))} | {s0[0]['back_solves']} | "
+              f"{s0[0]['krylov']} | {diff:.1e} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
