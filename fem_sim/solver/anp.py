@@ -153,15 +153,21 @@ class ANPAssembler(CAssembler):
         W[:, 0] += U_a[cells].mean(axis=1) - U_e
         P += (dp[:, None, None] * JFinvT).reshape(-1, 9)
         if tangent:
-            A = d.point_values(d.A_q, 81).reshape(-1, 3, 3, 3, 3)
+            A = d.point_values(d.A_q, 81)  # a view of the tangents: updated in place
             # d(J F^-T)_iJ / dF_kL = J (F^-T_iJ F^-T_kL - F^-T_iL F^-T_kJ); with C = J F^-T:
             # dp d(J F^-T)/dF - U''(J) C (x) C = (dp / J - U''(J)) C_iJ C_kL - dp / J C_iL C_kJ
-            C = JFinvT
-            outer = C[:, :, :, None, None] * C[:, None, None, :, :]
-            swap = C[:, :, None, None, :] * C.transpose(0, 2, 1)[:, None, :, :, None]
+            # (in C, one pass: numpy's four 81-wide temporaries cost ~2.5 s of a 31 s
+            # simulation at 5 mm)
             s = dp / J
-            A += (s - Upp_e)[:, None, None, None, None] * outer
-            A -= s[:, None, None, None, None] * swap
+            C = np.ascontiguousarray(JFinvT)
+            s1, s2 = np.ascontiguousarray(s - Upp_e), np.ascontiguousarray(s)
+            if not (A.flags.c_contiguous and A.base is not None):
+                raise RuntimeError("ANPAssembler: the tangents are not a contiguous view")
+            cast = self.c.ffi.cast
+            self.c.lib.anp_tangent(C.shape[0], cast("double *", C.ctypes.data),
+                                   cast("double *", s1.ctypes.data),
+                                   cast("double *", s2.ctypes.data),
+                                   cast("double *", A.ctypes.data), self.c._threads())
             # g terms: w_ae dJ_e/du_(b,k) = w_ae J_e (F^-T dN_b)_k
             a_loc, b_loc, k = self._g_term
             dJdu = np.einsum("nkj,nbj->nbk", JFinvT, self.c.dN[:, 0])  # (nc, 4, 3)

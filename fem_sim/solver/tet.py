@@ -35,6 +35,8 @@ void csr_matvec(int64_t n, const int32_t *indptr, const int32_t *indices, const 
                 const double *x, double *y, int nthreads);
 void anp_pairs(int64_t n, const int32_t *pos, const int32_t *node, const int32_t *p,
                const int32_t *q, const double *d, const double *g, double *values);
+void anp_tangent(int64_t n, const double *C_all, const double *s1, const double *s2,
+                 double *A_all, int nthreads);
 """
 
 # Edges of the reference tetrahedron in basix's numbering: the P2 cell dofs 4..9 sit at their

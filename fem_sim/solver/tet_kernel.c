@@ -156,6 +156,28 @@ void tet_forces(int ncells, int nn, int nq, const int32_t *cells, const double *
   }
 }
 
+/* The averaged-nodal-pressure correction of one-point tangents (fem_sim/solver/anp.py), cell
+ * by cell: with C = J F^-T of the cell (row-major 3 x 3),
+ *   A[iJ][kL] += s1 C[iJ] C[kL],  then  A[iJ][kL] -= s2 C[iL] C[kJ],
+ * each product and sum rounded as numpy's elementwise expression rounds it. */
+void anp_tangent(int64_t n, const double *C_all, const double *s1, const double *s2,
+                 double *A_all, int nthreads) {
+  (void)nthreads;
+#pragma omp parallel for schedule(static) num_threads(nthreads)
+  for (int64_t c = 0; c < n; c++) {
+    const double *C = C_all + 9 * c;
+    double *A = A_all + 81 * c;
+    for (int i = 0; i < 3; i++)
+      for (int J = 0; J < 3; J++)
+        for (int k = 0; k < 3; k++)
+          for (int L = 0; L < 3; L++) {
+            double *a = A + 9 * (3 * i + J) + 3 * k + L;
+            *a = *a + s1[c] * (C[3 * i + J] * C[3 * k + L]);
+            *a = *a - s2[c] * (C[3 * i + L] * C[3 * k + J]);
+          }
+  }
+}
+
 /* Sum of rank-one terms d_a g_a g_a^T into the CSR values (the averaged-nodal-pressure
  * coupling, fem_sim/solver/anp.py): for every pair t of entries (p[t], q[t]) of the same row
  * node[t] of g, values[pos[t]] += d[node[t]] g[p[t]] g[q[t]]. */
