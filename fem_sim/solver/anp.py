@@ -102,9 +102,11 @@ class ANPAssembler(CAssembler):
         a_loc, b_loc, k = a_loc.ravel(), b_loc.ravel(), k.ravel()      # 48 terms per cell
         rows = cells[:, a_loc]                                         # (nc, 48)
         cols = 3 * cells[:, b_loc] + k
-        self._g_term = (a_loc, b_loc, k)
         keys = (rows * (3 * nb) + cols).ravel()
-        ukeys, self.g_index = np.unique(keys, return_inverse=True)
+        ukeys, g_index = np.unique(keys, return_inverse=True)
+        self.g_index = np.ascontiguousarray(g_index, dtype=np.int64)
+        # w_ae = (V0_e / 4) / V0_a for the cell's nodes a (nc, 4): Jbar's weights
+        self.w_ae = np.ascontiguousarray((self.c.w[:, 0, None] / 4.0) / self.V0_node[cells])
         g_row, g_col = ukeys // (3 * nb), ukeys % (3 * nb)
         ptr = np.searchsorted(g_row, np.arange(nb + 1))
         # K_nl = sum_a d_a g_a g_a^T: every pair of entries of a row of g lands at a fixed
@@ -168,12 +170,13 @@ class ANPAssembler(CAssembler):
                                    cast("double *", s1.ctypes.data),
                                    cast("double *", s2.ctypes.data),
                                    cast("double *", A.ctypes.data), self.c._threads())
-            # g terms: w_ae dJ_e/du_(b,k) = w_ae J_e (F^-T dN_b)_k
-            a_loc, b_loc, k = self._g_term
-            dJdu = np.einsum("nkj,nbj->nbk", JFinvT, self.c.dN[:, 0])  # (nc, 4, 3)
-            w_ae = (self.c.w[:, 0, None] / 4.0) / self.V0_node[cells]
-            terms = w_ae[:, a_loc] * dJdu[:, b_loc, k]
-            g = np.bincount(self.g_index, terms.ravel(), minlength=self.n_g)
+            # g terms: w_ae dJ_e/du_(b,k) = w_ae J_e (F^-T dN_b)_k, summed into g (in C)
+            g = np.zeros(self.n_g)
+            self.c.lib.anp_g(C.shape[0], cast("double *", C.ctypes.data),
+                             cast("double *", self.c.dN.ctypes.data),
+                             cast("double *", self.w_ae.ctypes.data),
+                             cast("int64_t *", self.g_index.ctypes.data),
+                             cast("double *", g.ctypes.data))
             # d_a g_a g_a^T, added at assembly (in C: the pairs are ~2000 per node)
             self._nonlocal = (np.ascontiguousarray(self.V0_node * Upp_a), g)
         return True

@@ -37,6 +37,8 @@ void anp_pairs(int64_t n, const int32_t *pos, const int32_t *node, const int32_t
                const int32_t *q, const double *d, const double *g, double *values);
 void anp_tangent(int64_t n, const double *C_all, const double *s1, const double *s2,
                  double *A_all, int nthreads);
+void anp_g(int64_t n, const double *C_all, const double *dN_all, const double *w_ae,
+           const int64_t *g_index, double *g);
 """
 
 # Edges of the reference tetrahedron in basix's numbering: the P2 cell dofs 4..9 sit at their

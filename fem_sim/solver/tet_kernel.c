@@ -178,6 +178,30 @@ void anp_tangent(int64_t n, const double *C_all, const double *s1, const double 
   }
 }
 
+/* The ANP gradients g_a = dJbar_a/du (fem_sim/solver/anp.py) as a sum of per-cell terms: for
+ * cell c and (a, b, k) in that nesting order (t = 12 a + 3 b + k),
+ *   g[g_index[48 c + t]] += w_ae[c][a] * dJ_c/du_(b,k),  dJ_c/du_(b,k) = sum_j C[k][j] dN[b][j]
+ * (C = J F^-T of the cell, dN its four P1 gradients), serially in (c, t) order: the sums of
+ * numpy's einsum + bincount, in their order. */
+void anp_g(int64_t n, const double *C_all, const double *dN_all, const double *w_ae,
+           const int64_t *g_index, double *g) {
+  for (int64_t c = 0; c < n; c++) {
+    const double *C = C_all + 9 * c, *dN = dN_all + 12 * c;
+    double dJ[4][3];
+    for (int b = 0; b < 4; b++)
+      for (int k = 0; k < 3; k++) {
+        double s = C[3 * k] * dN[3 * b];
+        s += C[3 * k + 1] * dN[3 * b + 1];
+        s += C[3 * k + 2] * dN[3 * b + 2];
+        dJ[b][k] = s;
+      }
+    const int64_t *gi = g_index + 48 * c;
+    for (int a = 0; a < 4; a++)
+      for (int b = 0; b < 4; b++)
+        for (int k = 0; k < 3; k++) g[gi[12 * a + 3 * b + k]] += w_ae[4 * c + a] * dJ[b][k];
+  }
+}
+
 /* Sum of rank-one terms d_a g_a g_a^T into the CSR values (the averaged-nodal-pressure
  * coupling, fem_sim/solver/anp.py): for every pair t of entries (p[t], q[t]) of the same row
  * node[t] of g, values[pos[t]] += d[node[t]] g[p[t]] g[q[t]]. */
