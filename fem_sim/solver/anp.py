@@ -92,8 +92,8 @@ class ANPAssembler(CAssembler):
                                   pattern.indices)
         V0 = self.c.w[:, 0]                                  # cell volumes
         self.V0_node = np.bincount(cells.ravel(), np.repeat(V0 / 4.0, 4), minlength=nb)
-        # Jbar = Mw @ J: Mw[a, e] = (V0_e / 4) / V0_a for a in e.
-        w_ae = (V0[:, None] / 4.0) / self.V0_node[cells]      # (nc, 4)
+        # Jbar = Mw @ J: Mw[a, e] = (V0_e / 4) / V0_a for a in e (also g's weights).
+        self.w_ae = w_ae = np.ascontiguousarray((V0[:, None] / 4.0) / self.V0_node[cells])
         self.Mw = sp.csr_matrix((w_ae.ravel(), (cells.ravel(), np.repeat(np.arange(nc), 4))),
                                 shape=(nb, nc))
         # g_a = sum_(e at a) w_ae dJ_e/du: entries (a, dof of (e, b, k)) for a, b in e. Their
@@ -105,8 +105,6 @@ class ANPAssembler(CAssembler):
         keys = (rows * (3 * nb) + cols).ravel()
         ukeys, g_index = np.unique(keys, return_inverse=True)
         self.g_index = np.ascontiguousarray(g_index, dtype=np.int64)
-        # w_ae = (V0_e / 4) / V0_a for the cell's nodes a (nc, 4): Jbar's weights
-        self.w_ae = np.ascontiguousarray((self.c.w[:, 0, None] / 4.0) / self.V0_node[cells])
         g_row, g_col = ukeys // (3 * nb), ukeys % (3 * nb)
         ptr = np.searchsorted(g_row, np.arange(nb + 1))
         # K_nl = sum_a d_a g_a g_a^T: every pair of entries of a row of g lands at a fixed
