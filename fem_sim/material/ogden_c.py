@@ -26,8 +26,8 @@ int ogden_threads(int n);
 """
 # No -ffast-math: the kernel relies on NaN and isfinite. OpenMP over the points. -O3 rather
 # than -O2: the same bits (ISO C: no FMA contraction, no reassociation), and the pass with
-# tangents 20 -> 15 ms at the 68k points of the real liver's P2 mesh at 10 mm (two threads,
-# four runs alternated; the stress-only pass unchanged). -march=native was tried too: the
+# tangents 59-62 -> 41-46 ms at 75k points on one thread (bench/bench_kernel.py, alternated
+# with an -O2 build; the stress-only pass about unchanged). -march=native was tried too: the
 # same bits, the stiffness pass 12 % faster but the point passes 10 % slower; not kept.
 COMPILE_ARGS = ["-O3", "-std=c99", "-fopenmp"]
 
