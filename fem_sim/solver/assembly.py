@@ -37,6 +37,18 @@ class Jacobian:
         """(indptr, indices, values) of the local rows (one process: the whole matrix)."""
         return self._csr if self._csr is not None else self._mat.getValuesCSR()
 
+    def mult(self, x: np.ndarray) -> np.ndarray:
+        """J x for the owned rows, from x's owned entries (collective on the PETSc path)."""
+        if self._csr is not None:
+            return tet.operator(*self._csr).dot(x)
+        xv, y = self._mat.createVecRight(), self._mat.createVecLeft()
+        xv.array[:] = x
+        self._mat.mult(xv, y)
+        out = y.array.copy()
+        xv.destroy()
+        y.destroy()
+        return out
+
     def petsc(self):
         if self._mat is None:
             raise NotImplementedError("this Jacobian was assembled into CSR arrays for the "

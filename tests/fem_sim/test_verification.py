@@ -375,6 +375,68 @@ def test_hermite_tangents_are_computed_where_a_prediction_follows():
     assert [p[0] for p in prob.predictor.points] == [0.0, 0.25, 0.5]
 
 
+def test_hermite_weights_are_exact_for_polynomials_of_their_degree():
+    """The predictor's weights reproduce p(lam) for a polynomial of degree 2m-1 through m
+    values and slopes, and the tangent guess's weights p'(lam) for degree 2m when the value at
+    lam is added; one degree more and they are not exact (the test can fail)."""
+    from fem_sim.solver.predictors import hermite_weights
+
+    rng = np.random.default_rng(3)
+    lams, lam = [0.2, 0.35, 0.5], 0.6
+    for m in (1, 2, 3):
+        at = lams[-m:]
+        for deg, derivative, end, exact in ((2 * m - 1, False, False, True),
+                                            (2 * m, True, True, True),
+                                            (2 * m + 1, True, True, False)):
+            c = rng.normal(size=deg + 1)
+            p = np.polynomial.Polynomial(c)
+            dp = p.deriv()
+            w = hermite_weights(at, lam, derivative=derivative, value_at_end=end)
+            data = [v for x in at for v in (p(x), dp(x))] + ([p(lam)] if end else [])
+            got, want = w @ np.array(data), (dp(lam) if derivative else p(lam))
+            assert (abs(got - want) <= 1e-9 * np.abs(c).sum()) == exact, (m, deg, got, want)
+
+
+@pytest.mark.parametrize("factorization", ["auto", "petsc"])
+def test_recorded_tangents_solve_the_tangent_equation(factorization):
+    """The Hermite predictor's tangents, solved from the polynomial's guess, satisfy
+    |f - J(u) t| <= TANGENT_RTOL |f| at every converged state (J re-assembled there), as when
+    solved from zero; and the guess is used (fewer Krylov iterations than without it)."""
+    from fem_sim.solver import predictors
+
+    g = make_phantom(0, 20.0)
+    node = int(np.argmax(g.points[:, 0]))
+    cons = [Constraint(g.regions["vena_cava"])]
+    load = [NodalLoad([node], [[0.0, -0.3, -0.3]])]
+    krylov = {}
+    for use_guess in (True, False):
+        prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells,
+                            settings={"rtol": 1e-10, "factorization": factorization},
+                            prefix=f"tg_{factorization}_{use_guess}_")
+        hermite, residuals = prob.predictor, []
+        record = predictors.Hermite._record
+
+        def checked(self, lam, record=record, use_guess=use_guess, residuals=residuals):
+            if not use_guess:
+                self.tangent_guess = lambda lam, u: None
+            record(self, lam)
+            eqs = self.eqs
+            J = eqs.jacobian(lift=False)  # the points' tangents are those of this state
+            eqs.set_rhs_to_load()
+            f = eqs.rhs.array_r.copy()
+            r = f - J.mult(self.points[-1][2])
+            r[eqs.cons.owned] = 0.0
+            residuals.append(np.linalg.norm(r) / np.linalg.norm(f))
+
+        hermite._record = checked.__get__(hermite)
+        sol = prob.solve(MAT, cons, load, np.linspace(0.1, 1.0, 10))
+        assert sol.status == "ok"
+        assert len(residuals) >= 10
+        assert max(residuals) <= 1.01 * predictors.TANGENT_RTOL, residuals
+        krylov[use_guess] = sol.krylov_iterations
+    assert krylov[True] < krylov[False], krylov
+
+
 def test_factorisation_backends_give_the_same_answer():
     """Float32 Cholesky (PARDISO, the serial default) and float32 LDL^T (MUMPS), each with
     GMRES refinement, float64 LDL^T with METIS, and PETSc's MUMPS: the same displacements to
