@@ -14,9 +14,10 @@ be (0: the previous state; 1: linear), which the Newton loop uses to judge its f
   last factorisation).
 * :class:`Hermite` ("hermite", the default): at every converged state u_k the exact tangent
   du/dlam = J(u_k)^-1 f is computed (J assembled there, GMRES preconditioned with the last
-  factorisation), and the next state is the polynomial of degree 2m-1 through the last m
-  states and tangents. Its error falls as h^(2m) (tested); it needs a linear solver that can
-  solve near a kept factorisation, and fixed (zero) constraints, else it acts as "tangent".
+  factorisation, starting from the polynomial's own estimate of it), and the next state is
+  the polynomial of degree 2m-1 through the last m states and tangents. Its error falls as
+  h^(2m) (tested); it needs a linear solver that can solve near a kept factorisation, and
+  fixed (zero) constraints, else it acts as "tangent".
 """
 
 from __future__ import annotations
@@ -180,7 +181,7 @@ class Hermite(TangentIntegration):
             eqs.rhs.array[:n] = r0
             r0_norm = eqs.rhs.norm()
             if r0_norm < f_norm:
-                rtol = TANGENT_RTOL * f_norm / r0_norm
+                rtol = TANGENT_RTOL * f_norm / max(r0_norm, 1e-300)  # >= 1: t = guess
             else:  # no better than zero: solve for the whole tangent
                 eqs.set_rhs_to_load()
                 guess = None
