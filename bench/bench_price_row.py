@@ -44,7 +44,7 @@ def worker(job: dict) -> None:
     from mpi4py import MPI
 
     import fem_sim
-    from fem_sim import Constraint, OgdenMaterial, OgdenProblem, PatchLoad
+    from fem_sim import Constraint, OgdenProblem, PatchLoad
 
     root = job.get("root")
     if root and not Path(fem_sim.__file__).resolve().is_relative_to(Path(root).resolve()):
@@ -54,8 +54,7 @@ def worker(job: dict) -> None:
     kw = {"element": "anp"} if job["element"] == "anp" else {}
     prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, settings=job["settings"],
                         degree=2 if job["element"] == "p2" else 1, **kw)
-    c1 = 4.1e-3
-    mat = OgdenMaterial((c1,), (10.06,), 200.0 * c1 / 2)
+    mat = T.material(200.0)
     load = [PatchLoad(np.asarray(job["load_point"]), T.FORCE, T.PATCH_RADIUS)]
     fractions = np.arange(1, 11) / 10.0
     print(json.dumps({"setup_seconds": time.perf_counter() - t0, "vertices": g.n_nodes}),
