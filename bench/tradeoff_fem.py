@@ -308,9 +308,10 @@ def signed_error(u: np.ndarray, u_ref: np.ndarray) -> float:
     return float(np.sum((u - u_ref) * u_ref) / np.sum(u_ref * u_ref))
 
 
-def errors(spec: dict, rec: dict, h: float) -> dict | None:
-    """Mean/max displacement error (mm and relative to max |u_ref|) against the reference."""
-    ref = results().get(key_of(reference_of(spec)))
+def errors(spec: dict, rec: dict, h: float, res: dict) -> dict | None:
+    """Mean/max displacement error (mm and relative to max |u_ref|) against the reference
+    (``res``: the study's records, :func:`results`)."""
+    ref = res.get(key_of(reference_of(spec)))
     if ref is None or rec.get("status") != "ok" or not npz_name(key_of(
             reference_of(spec))).exists():
         return None
@@ -414,7 +415,7 @@ def report() -> None:
         if rec["key"] not in planned:
             continue
         spec = rec["spec"]
-        err = errors(spec, rec, spec["h"]) if rec.get("status") == "ok" else None
+        err = errors(spec, rec, spec["h"], res) if rec.get("status") == "ok" else None
         rows.append((spec, rec, err))
     order = ["reference", "mesh", "steps", "tolerance", "linear solver", "predictor", "K/mu"]
     rows.sort(key=lambda r: (r[0]["liver"], order.index(r[0]["role"]), r[0]["load"],
