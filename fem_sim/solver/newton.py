@@ -34,6 +34,7 @@ class NewtonSolver:
     def __init__(self, settings: SolverSettings, eqs: Equations, linear: LinearSolver):
         self.settings, self.eqs, self.linear = settings, eqs, linear
         self.attempt_iterations = 0  # Newton iterations of the last attempt, failed or not
+        self.tolerance = self.start_residual = 0.0  # of the last attempt: |R| to reach, at u0
         self.relax = (relaxation.LocalRelaxation(eqs, settings.relax_rings,
                                                  settings.relax_max_nodes)
                       if settings.local_relaxation and relaxation.available(eqs) else None)
@@ -70,6 +71,7 @@ class NewtonSolver:
         gap = eqs.constraint_gap(lam)
         scale = max(lam * eqs.f_norm, r)
         tol = max(s.atol, s.rtol * scale)
+        self.tolerance, self.start_residual = tol, r
         gap_tol = 1e-12 * max(1.0, eqs.cons.value_norm * lam)
         history.append(r)
         if self.relax is not None and r > tol and gap <= gap_tol and \

@@ -42,6 +42,7 @@ class Predictor:
     def __init__(self, settings: SolverSettings, eqs: Equations, linear: LinearSolver):
         self.settings, self.eqs, self.linear = settings, eqs, linear
         self.order = 0
+        self.error_exponent: int | None = None
 
     def start(self) -> None:
         """A new simulation from u = 0."""
@@ -57,9 +58,11 @@ class Predictor:
 
     def predict(self, states: States, lam: float, extrapolate: bool = True) -> None:
         """Set u to the guess at load ``lam`` (collective). ``extrapolate=False``: retry from
-        the last converged state.
+        the last converged state. ``error_exponent``: q when the guess's error relative to the
+        increment is known to scale as (increment)^q (the load stepper then sizes the next
+        increment from it), else None.
         """
-        self.order = 0
+        self.order, self.error_exponent = 0, None
         if not (extrapolate and self._guess(states, lam)):
             self.eqs.set_state(states[-1][1])
 
@@ -231,6 +234,11 @@ class Hermite(TangentIntegration):
         arr[:n] = sum(w[2 * i] * ui + w[2 * i + 1] * ti for i, (_, ui, ti) in enumerate(pts))
         self.eqs.scatter()
         self.order = m
+        if m >= 2 and m == self.settings.predictor_order:
+            # Degree 2m - 1 through points spaced like the increment: the error is O(h^2m),
+            # O(h^(2m-1)) relative to the increment itself. (Fewer points: the next guess will
+            # have more, so this one's error says little about it.)
+            self.error_exponent = 2 * m - 1
 
 
 def hermite_weights(lams: list[float], lam: float, derivative: bool = False,

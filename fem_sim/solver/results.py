@@ -34,6 +34,7 @@ class Solution:
     newton_iterations: list[int] = field(default_factory=list)
     residual_norms: list[float] = field(default_factory=list)
     cutbacks: list[int] = field(default_factory=list)
+    increments: list[int] = field(default_factory=list)  # converged increments per step
     wall_time: list[float] = field(default_factory=list)
     residual_history: list[list[float]] = field(default_factory=list)
     status: str = "ok"

@@ -1,6 +1,10 @@
 """Load stepping: from the undeformed state through the requested load fractions.
 
-Each increment starts from the predictor's guess. If Newton fails from an extrapolated guess,
+Increments are sized by the predictor's measured error (the Hermite predictor at full order:
+:func:`next_increment`), independently of how far apart the requested fractions are: each is
+reached by equal increments no larger than that size, so asking for 2 output fractions costs
+no more than asking for 10. Each increment starts from the predictor's guess. If Newton fails
+from an extrapolated guess,
 the same increment is retried from the last converged state; if that fails too, the increment
 is halved (up to ``max_cutbacks`` halvings per output step), and easy steps after a cut-back
 let it grow again. Only the requested fractions are stored; nothing is ever returned for a
@@ -11,6 +15,7 @@ the steps it reached.
 from __future__ import annotations
 
 import logging
+import math
 import time
 
 import numpy as np
@@ -35,6 +40,24 @@ log = logging.getLogger(__name__)
 # and 26. A cost that depends on luck is worse than one factorisation: back to a round-off
 # guard.
 STRETCH = 1e-3
+
+# Increment control from the Hermite predictor's own error (at full order). Measured on the real
+# liver, P2 10 mm, patch load (development probe; the resulting costs: bench/bench_price_row.py
+# --steps): guesses off by <= 1.3e-3 of the increment converged with one factorisation,
+# 4e-3-2e-2 needed three (and 5-6 Newton iterations); the error grew 11-25x when the increment
+# doubled mid-load (as h^3.5-h^4.6; the theory's h^5 holds only asymptotically).
+ERROR_TARGET = 1e-3
+ERROR_SHRINK = 3e-3
+# The first increment is taken from at most this fraction of the load, however large the first
+# output step: from u = 0 the only guess is the small-strain (Euler) one. Measured there: first
+# increments of 0.025 and 0.05 of the load converged with 2 factorisations, 0.075 needed 18,
+# 0.125 and 0.25 failed (and were cut back, after ~20 Newton iterations each).
+FIRST_STEP_LOAD = 0.1
+MIN_INCREMENT = 1e-6  # a floor for the controller (cut-backs have their own limit)
+# A guess whose residual is within this factor of Newton's tolerance counts as exact for the
+# controller (a tiny load on the unit cube with atol dominating: the states carry 1e-4 noise
+# and their "errors" halved the increment without end, found by test_mesh_convergence_orders).
+NOISE = 1e3
 
 
 class LoadStepper:
@@ -63,17 +86,25 @@ class LoadStepper:
         stored = []
         states: list[tuple[float, np.ndarray]] = [(0.0, eqs.state())]
         lam, dlam = 0.0, self.first_increment(float(fractions[0]))
+        h_ok = None  # the increment the predictor's measured error allows (once it is known)
         last = float(fractions[-1])
         for target in fractions:
             t0 = time.perf_counter()
             iters, cutbacks, history, retry_plain = 0, 0, [], False
+            increments = 0
             dlam = min(dlam, target - lam) if dlam > 0 else target - lam
             try:
                 while lam < target - 1e-14:
-                    trial = min(lam + dlam, target)
-                    if target - trial < STRETCH * dlam:
-                        trial = target
+                    if h_ok is not None:  # equal increments to the target, none above h_ok
+                        rest = target - lam
+                        trial = lam + rest / max(1, math.ceil(rest / h_ok - 1e-6))
+                    else:
+                        trial = min(lam + dlam, target)
+                        if target - trial < STRETCH * dlam:
+                            trial = target
                     self.predictor.predict(states, trial, extrapolate=not retry_plain)
+                    q = self.predictor.error_exponent
+                    guess = eqs.state() if q else None
                     try:
                         its = self.newton.solve(trial, history, self.predictor.order <= 1)
                     except StepFailure as exc:
@@ -92,12 +123,26 @@ class LoadStepper:
                                               "cut-backs") from None
                         eqs.set_state(states[-1][1])
                         dlam = 0.5 * (trial - lam)
+                        if h_ok is not None:
+                            h_ok = dlam
                         self.linear.invalidate()
                         continue
                     iters += its
+                    increments += 1
                     retry_plain = False
-                    lam = trial
+                    h, lam = trial - lam, trial
                     states = (states + [(lam, eqs.state())])[-3:]
+                    if guess is not None:
+                        # A guess Newton did not need to correct (no Newton step, or |R| within
+                        # NOISE of the tolerance) was good enough: its "error" is then the
+                        # noise of the converged states (they are exact only to the
+                        # tolerance), never a reason to shrink.
+                        newton = self.newton
+                        exact = its == 0 or newton.start_residual <= NOISE * newton.tolerance
+                        err = (0.0 if exact else
+                               self.relative_error(guess, states[-2][1], states[-1][1]))
+                        h_ok = max(next_increment(h, err, q, h_ok if h_ok is not None
+                                                  else dlam), MIN_INCREMENT)
                     if lam < last:
                         # Nothing is predicted after the last fraction: the Hermite predictor's
                         # tangent there (an assembly and a GMRES solve) would be thrown away.
@@ -114,6 +159,7 @@ class LoadStepper:
             sol.residual_norms.append(history[-1])
             sol.residual_history.append(history)
             sol.cutbacks.append(cutbacks)
+            sol.increments.append(increments)
             sol.wall_time.append(time.perf_counter() - t0)
             stored.append(gather())
             dlam = max(dlam, 0.0)
@@ -133,10 +179,22 @@ class LoadStepper:
                                 else np.zeros((0, eqs.disc.n_nodes, 3)))
         return sol
 
+    def relative_error(self, guess: np.ndarray, before: np.ndarray, after: np.ndarray) -> float:
+        """|after - guess| / |after - before| over the owned dofs (collective): the predictor's
+        error relative to the increment it predicted.
+        """
+        n = self.eqs.n_owned_dofs
+        local = np.array([np.sum((after[:n] - guess[:n]) ** 2),
+                          np.sum((after[:n] - before[:n]) ** 2)])
+        err2, inc2 = self.eqs.disc.comm.allreduce(local)
+        return math.sqrt(err2 / inc2) if inc2 > 0 else 0.0
+
     def first_increment(self, lam1: float) -> float:
         """The first load increment (later ones grow and shrink with Newton's work).
 
-        At most ``first_increment`` of the first output step, and smaller when the
+        At most ``first_increment`` of the first output step or of FIRST_STEP_LOAD of the
+        load, whichever is smaller (then the increments grow with the predictor's measured
+        error, :func:`next_increment`), and smaller when the
         small-strain solution says the step is strongly nonlinear: Ogden's law stiffens like
         stretch^(m - 2) (uniaxial tangent), so a linear guess over an increment whose
         small-strain displacement gradient reaches g misjudges the stiffness by about
@@ -153,7 +211,7 @@ class LoadStepper:
         at 2x force.
         """
         s = self.settings
-        dlam = lam1 * s.first_increment
+        dlam = min(lam1, FIRST_STEP_LOAD) * s.first_increment
         t = self.predictor.initial_tangent()
         if s.first_step_stiffening <= 0 or t is None:
             return dlam
@@ -162,3 +220,19 @@ class LoadStepper:
         if rate * dlam <= s.first_step_stiffening:
             return dlam
         return max(s.first_step_stiffening / rate, 1e-3 * lam1)
+
+
+def next_increment(h: float, err: float, q: int, h_prev: float) -> float:
+    """The largest increment the predictor's error allows, from an increment h whose guess was
+    off by ``err`` (relative to the increment; it scales as h^q).
+
+    Aimed at ERROR_TARGET, where Newton converges with one factorisation. The increment is
+    made smaller (at most halved) only when the guess was off by more than ERROR_SHRINK;
+    otherwise it grows towards the estimate, at most 2x, and never falls below ``h_prev`` (h
+    may have been cut short by an output fraction: its small error says little about a larger
+    increment, since the measured error grows more slowly than h^q from a short increment).
+    """
+    est = h * (ERROR_TARGET / err) ** (1.0 / q) if err > 0 else math.inf
+    if err > ERROR_SHRINK:
+        return max(0.5 * h, est)
+    return max(h_prev, h, min(est, 2.0 * h))

@@ -369,10 +369,10 @@ def test_hermite_tangents_are_computed_where_a_prediction_follows():
 
     prob.predictor._record = counting.__get__(prob.predictor)
     s = prob.solve(MAT, [Constraint(g.regions["vena_cava"])],
-                   [NodalLoad([node], [[0.0, 0.0, -0.1]])], [0.25, 0.5, 1.0])
-    assert s.status == "ok" and sum(s.cutbacks) == 0
-    assert recorded == [0.0, 0.25, 0.5]
-    assert [p[0] for p in prob.predictor.points] == [0.0, 0.25, 0.5]
+                   [NodalLoad([node], [[0.0, 0.0, -0.1]])], [0.05, 0.1, 0.2])
+    assert s.status == "ok" and sum(s.cutbacks) == 0 and s.increments == [1, 1, 1]
+    assert recorded == [0.0, 0.05, 0.1]
+    assert [p[0] for p in prob.predictor.points] == [0.0, 0.05, 0.1]
 
 
 def test_hermite_weights_are_exact_for_polynomials_of_their_degree():
@@ -564,3 +564,51 @@ def test_displacement_at_points_reproduces_a_linear_field(degree):
     pts = np.concatenate([rng.uniform(0.0, 1.0, size=(50, 3)),
                           [[1.02, 0.5, 0.5], [-0.01, 0.3, 0.7]]])
     np.testing.assert_allclose(prob.displacement_at(pts), pts @ G.T + c, rtol=0, atol=1e-12)
+
+
+def test_next_increment_follows_the_predictor_error():
+    """The increment controller (closed form): a guess off by exactly the target keeps h; an
+    error 2^q times smaller doubles it (and no more, however small); above ERROR_SHRINK it
+    shrinks to h (target / err)^(1/q), at most by half; in between, and from an increment
+    cut short by an output fraction, it never falls below the increment that worked before."""
+    from fem_sim.solver.stepping import ERROR_SHRINK, ERROR_TARGET, next_increment
+    h, q = 0.1, 5
+    assert next_increment(h, ERROR_TARGET, q, h) == pytest.approx(h, rel=1e-12)
+    assert next_increment(h, ERROR_TARGET / 2 ** q, q, h) == pytest.approx(2 * h, rel=1e-12)
+    assert next_increment(h, ERROR_TARGET / 1e6, q, h) == pytest.approx(2 * h, rel=1e-12)
+    assert next_increment(h, 0.0, q, h) == pytest.approx(2 * h, rel=1e-12)
+    assert next_increment(h, ERROR_TARGET * 1.5 ** q, q, h) == pytest.approx(h / 1.5, rel=1e-12)
+    assert ERROR_TARGET * 1.5 ** q > ERROR_SHRINK  # the case above is a shrink
+    assert next_increment(h, 1.0, q, h) == pytest.approx(h / 2, rel=1e-12)
+    between = 0.5 * (ERROR_TARGET + ERROR_SHRINK)
+    assert next_increment(h, between, q, 0.3) == 0.3
+    assert next_increment(0.025, ERROR_TARGET / 1e3, q, 0.1) == 0.1  # cut short: keeps 0.1
+    assert next_increment(0.025, ERROR_TARGET / 1e3, 1, 0.01) == pytest.approx(0.05, rel=1e-12)
+
+
+def test_fewer_output_fractions_reach_the_same_answer_through_controlled_increments():
+    """Asking for 1 or 2 output fractions instead of 10: the stepper still takes increments of
+    the size the predictor's error allows (several per output step, equal ones within it,
+    the first from at most a tenth of the load), with no cut-back, and the final answer is the
+    10-step one to the Newton tolerance; only the requested fractions are stored."""
+    from fem_sim.solver.stepping import FIRST_STEP_LOAD
+    g = make_phantom(0, 20.0)
+    node = int(np.argmax(g.points[:, 0]))
+    prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, settings={"rtol": 1e-10},
+                        prefix="ctl_")
+    cons = [Constraint(g.regions["vena_cava"])]
+    load = [NodalLoad([node], [[0.0, -0.3, -0.3]])]
+    runs = {n: prob.solve(MAT, cons, load, np.arange(1, n + 1) / n) for n in (10, 2, 1)}
+    assert prob.stepper.first_increment(1.0) == pytest.approx(
+        FIRST_STEP_LOAD * prob.settings.first_increment, rel=1e-12)
+    for n, s in runs.items():
+        assert s.status == "ok", (n, s.failure_reason)
+        assert len(s.increments) == n and sum(s.cutbacks) == 0, n
+    assert runs[1].increments[0] >= 5 and runs[2].increments[1] >= 2
+    if MPI.COMM_WORLD.rank == 0:
+        ref = runs[10].displacement[-1]
+        for n in (2, 1):
+            assert runs[n].displacement.shape[0] == n
+            assert np.abs(runs[n].displacement[-1] - ref).max() <= 1e-8 * np.abs(ref).max(), n
+        assert np.abs(runs[2].displacement[0] - runs[10].displacement[4]).max() <= \
+            1e-8 * np.abs(ref).max()
