@@ -115,7 +115,7 @@ def plan(livers: list[str]) -> list[dict]:
             add(liver=liver, load="patch", h=d, steps=n, role="steps")
         # The locking-free elements with fewer load steps: one answer sooner (a dataset wants
         # every load fraction as a sample; a single answer does not)
-        for n in (2, 5):
+        for n in (1, 2, 5):
             for h in s["p2"]:
                 add(liver=liver, load="patch", h=h, degree=2, steps=n, role="steps")
             for h in s["anp"]:
@@ -126,6 +126,7 @@ def plan(livers: list[str]) -> list[dict]:
         # tolerance rows cost in seconds and accuracy at the meshes that reach 2 %
         for h in s["p2"]:
             add(liver=liver, load="patch", h=h, degree=2, rtol=1e-6, role="tolerance")
+            add(liver=liver, load="patch", h=h, degree=2, rtol=1e-6, steps=1, role="tolerance")
         for fac in ("double", "petsc"):
             add(liver=liver, load="patch", h=d, factorization=fac, role="linear solver")
         add(liver=liver, load="patch", h=d, linear_solver="gamg", role="linear solver")
