@@ -86,9 +86,11 @@ class SolverSettings:
     relax_max_nodes: int = _setting(1000, "local relaxation: skipped when the hot spot has "
                                     "more nodes", lo=1)
     first_increment: float = _setting(0.25, "the first increment as a fraction of the first "
-                                      "output step, at most (smaller: the stiffening start "
-                                      "is taken in sub-increments that double after easy "
-                                      "ones)", lo=0.0, strict=True, hi=1.0)
+                                      "output step or of a tenth of the load, whichever is "
+                                      "smaller (the stiffening start is taken in "
+                                      "sub-increments that double after easy ones; later "
+                                      "increments are sized by the predictor's error)",
+                                      lo=0.0, strict=True, hi=1.0)
     first_step_stiffening: float = _setting(
         0.0, "a smaller first increment where the small-strain solution (predictor hermite, "
         "no prescribed displacements) gives max(|m_k - 2|, 1) * max |grad u| above this (the "

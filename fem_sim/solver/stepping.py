@@ -105,6 +105,7 @@ class LoadStepper:
                     self.predictor.predict(states, trial, extrapolate=not retry_plain)
                     q = self.predictor.error_exponent
                     guess = eqs.state() if q else None
+                    factorizations = self.linear.counts.factorizations
                     try:
                         its = self.newton.solve(trial, history, self.predictor.order <= 1)
                     except StepFailure as exc:
@@ -141,8 +142,9 @@ class LoadStepper:
                         exact = its == 0 or newton.start_residual <= NOISE * newton.tolerance
                         err = (0.0 if exact else
                                self.relative_error(guess, states[-2][1], states[-1][1]))
+                        costly = self.linear.counts.factorizations - factorizations >= 3
                         h_ok = max(next_increment(h, err, q, h_ok if h_ok is not None
-                                                  else dlam), MIN_INCREMENT)
+                                                  else dlam, costly), MIN_INCREMENT)
                     if lam < last:
                         # Nothing is predicted after the last fraction: the Hermite predictor's
                         # tangent there (an assembly and a GMRES solve) would be thrown away.
@@ -222,17 +224,20 @@ class LoadStepper:
         return max(s.first_step_stiffening / rate, 1e-3 * lam1)
 
 
-def next_increment(h: float, err: float, q: int, h_prev: float) -> float:
+def next_increment(h: float, err: float, q: int, h_prev: float, costly: bool = True) -> float:
     """The largest increment the predictor's error allows, from an increment h whose guess was
     off by ``err`` (relative to the increment; it scales as h^q).
 
     Aimed at ERROR_TARGET, where Newton converges with one factorisation. The increment is
-    made smaller (at most halved) only when the guess was off by more than ERROR_SHRINK;
+    made smaller (at most halved) only when the guess was off by more than ERROR_SHRINK and
+    the increment was ``costly`` (3 or more factorisations: two increments cost at least two,
+    so splitting a cheaper one cannot pay; measured on the softest material of
+    bench/bench_hard.py, 14 -> 16 factorisations when cheap increments were split too);
     otherwise it grows towards the estimate, at most 2x, and never falls below ``h_prev`` (h
     may have been cut short by an output fraction: its small error says little about a larger
     increment, since the measured error grows more slowly than h^q from a short increment).
     """
     est = h * (ERROR_TARGET / err) ** (1.0 / q) if err > 0 else math.inf
-    if err > ERROR_SHRINK:
+    if err > ERROR_SHRINK and costly:
         return max(0.5 * h, est)
     return max(h_prev, h, min(est, 2.0 * h))
