@@ -569,7 +569,8 @@ def test_displacement_at_points_reproduces_a_linear_field(degree):
 def test_next_increment_follows_the_predictor_error():
     """The increment controller (closed form): a guess off by exactly the target keeps h; an
     error 2^q times smaller doubles it (and no more, however small); above ERROR_SHRINK it
-    shrinks to h (target / err)^(1/q), at most by half; in between, and from an increment
+    shrinks to h (target / err)^(1/q), at most by half, unless the increment was cheap (fewer
+    than 3 factorisations); in between, and from an increment
     cut short by an output fraction, it never falls below the increment that worked before."""
     from fem_sim.solver.stepping import ERROR_SHRINK, ERROR_TARGET, next_increment
     h, q = 0.1, 5
@@ -580,6 +581,7 @@ def test_next_increment_follows_the_predictor_error():
     assert next_increment(h, ERROR_TARGET * 1.5 ** q, q, h) == pytest.approx(h / 1.5, rel=1e-12)
     assert ERROR_TARGET * 1.5 ** q > ERROR_SHRINK  # the case above is a shrink
     assert next_increment(h, 1.0, q, h) == pytest.approx(h / 2, rel=1e-12)
+    assert next_increment(h, 1.0, q, h, costly=False) == h  # cheap: splitting cannot pay
     between = 0.5 * (ERROR_TARGET + ERROR_SHRINK)
     assert next_increment(h, between, q, 0.3) == 0.3
     assert next_increment(0.025, ERROR_TARGET / 1e3, q, 0.1) == 0.1  # cut short: keeps 0.1
