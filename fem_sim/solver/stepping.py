@@ -1,10 +1,10 @@
 """Load stepping: from the undeformed state through the requested load fractions.
 
 Increments are sized by the predictor's measured error (the Hermite predictor at full order:
-:func:`next_increment`), independently of how far apart the requested fractions are: each is
-reached by equal increments no larger than that size, so asking for 2 output fractions costs
-no more than asking for 10. Each increment starts from the predictor's guess. If Newton fails
-from an extrapolated guess,
+:func:`next_increment`), independently of how far apart the requested fractions are: each
+fraction is reached by equal increments no larger than that size, so a single answer asked
+for in 1 or 2 fractions takes about the increments of a 10-fraction run, not one giant step.
+Each increment starts from the predictor's guess. If Newton fails from an extrapolated guess,
 the same increment is retried from the last converged state; if that fails too, the increment
 is halved (up to ``max_cutbacks`` halvings per output step), and easy steps after a cut-back
 let it grow again. Only the requested fractions are stored; nothing is ever returned for a
