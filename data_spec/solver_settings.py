@@ -35,8 +35,8 @@ class SolverSettings:
     # easy, phantom and softest cases, 8.7e-7 at 2x and 2.3e-6 at 5x the force; on the price
     # list's patch loads (docs/tradeoff_fem.md) by <= 3.2e-9 of max |u| from rtol 1e-9 in 10
     # load steps, and runs in 1-5 steps by <= 4.4e-7 from those: far below the discretisation
-    # error of any mesh there (>= 0.3 %) and the float32 resolution a surrogate trains at, for
-    # up to two factorisations and ~10 back-solves fewer per simulation.
+    # error of any mesh there (>= 0.3 %), for up to two factorisations and ~10 back-solves
+    # fewer per simulation (0.83-0.89x the time of P2 at 10 mm, bench/bench_price_row.py).
     rtol: float = _setting(1e-6, "Newton relative residual tolerance: |R| <= rtol * "
                            "max(lambda |f|, |R| at the predictor)", lo=0.0, strict=True,
                            scene=True)
