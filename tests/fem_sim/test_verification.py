@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from data_spec.solver_settings import SolverSettings
 from data_spec.testing import box_mesh
 from fem_sim import Constraint, NodalLoad, OgdenMaterial, OgdenProblem, PatchLoad
 from fem_sim.geometry.phantom import make_phantom
@@ -125,8 +126,6 @@ def test_default_tolerance_bounds_the_displacement_error(degree, force):
     """The default Newton tolerance (a residual criterion) keeps every stored load step within
     10 x rtol of max |u| of the answer at rtol 1e-10, under a large deformation (the tip moves
     6-44 mm). Measured: 3.3e-8 (P1, 0.4 N) and 2.6e-7 (P2, 1 N) at the default rtol 1e-6."""
-    from data_spec.solver_settings import SolverSettings
-
     g = make_phantom(0, 20.0)
     node = int(np.argmax(g.points[:, 0]))  # tip of the right lobe, far from the cava
     us = []
