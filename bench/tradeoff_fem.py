@@ -400,8 +400,7 @@ def summary(rows: list) -> list[str]:
            "tolerance than the default, the cheapest at the default one too. Fewer load steps "
            "give the same answer (to the Newton tolerance) sooner: a single answer needs no 10 "
            "steps, a dataset that stores every load fraction does. Another tolerance moves the "
-           "answer "
-           "by the last column of its row in the table below.", "",
+           "answer by the last column of its row in the table below.", "",
            "| liver | element | measure | h mm | vertices | steps | rtol | s/sim first | "
            "s/sim later | fact. first / later | error | signed |",
            "|---|---|---|---|---|---|---|---|---|---|---|---|"]

@@ -48,6 +48,9 @@ STRETCH = 1e-3
 # doubled mid-load (as h^3.5-h^4.6; the theory's h^5 holds only asymptotically).
 ERROR_TARGET = 1e-3
 ERROR_SHRINK = 3e-3
+# An increment is shrunk for ERROR_SHRINK only if it needed at least this many factorisations
+# (see next_increment).
+COSTLY_FACTORIZATIONS = 3
 # The first increment is taken from at most this fraction of the load, however large the first
 # output step: from u = 0 the only guess is the small-strain (Euler) one. Measured there: first
 # increments of 0.025 and 0.05 of the load converged with 2 factorisations, 0.075 needed 18,
@@ -142,7 +145,8 @@ class LoadStepper:
                         exact = its == 0 or newton.start_residual <= NOISE * newton.tolerance
                         err = (0.0 if exact else
                                self.relative_error(guess, states[-2][1], states[-1][1]))
-                        costly = self.linear.counts.factorizations - factorizations >= 3
+                        costly = (self.linear.counts.factorizations - factorizations
+                                  >= COSTLY_FACTORIZATIONS)
                         h_ok = max(next_increment(h, err, q, h_ok if h_ok is not None
                                                   else dlam, costly), MIN_INCREMENT)
                     if lam < last:
@@ -230,9 +234,10 @@ def next_increment(h: float, err: float, q: int, h_prev: float, costly: bool = T
 
     Aimed at ERROR_TARGET, where Newton converges with one factorisation. The increment is
     made smaller (at most halved) only when the guess was off by more than ERROR_SHRINK and
-    the increment was ``costly`` (3 or more factorisations: two increments cost at least two,
-    so splitting a cheaper one cannot pay; measured on the softest material of
-    bench/bench_hard.py, 14 -> 16 factorisations when cheap increments were split too);
+    the increment was ``costly`` (COSTLY_FACTORIZATIONS = 3 or more factorisations: two
+    increments cost at least two, so splitting a cheaper one cannot pay; measured on the
+    softest material of bench/bench_hard.py, 14 -> 16 factorisations when cheap increments
+    were split too);
     otherwise it grows towards the estimate, at most 2x, and never falls below ``h_prev`` (h
     may have been cut short by an output fraction: its small error says little about a larger
     increment, since the measured error grows more slowly than h^q from a short increment).
