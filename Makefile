@@ -24,6 +24,12 @@ export OMPI_ALLOW_RUN_AS_ROOT_CONFIRM := 1
 export OMPI_MCA_rmaps_base_oversubscribe := 1
 export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
+# OpenBLAS' kernels from the CPU's instruction sets (fem_sim/cpu_blas.py: VMs that hide the CPU
+# model otherwise get the SSE3 kernels, about 2x slower factorisations); a value set is kept.
+BLAS_CORE := $(shell $(SYS_PY) fem_sim/cpu_blas.py 2>/dev/null)
+ifneq ($(BLAS_CORE),)
+export OPENBLAS_CORETYPE ?= $(BLAS_CORE)
+endif
 MPIRUN := mpirun -n $(NP)
 
 .PHONY: help setup setup-system setup-solver setup-trainer demo test test-solver test-trainer \
@@ -57,32 +63,31 @@ setup-system:
 	@bash scripts/setup_system.sh requirements/debian-packages-trainer.txt
 
 # The solver venv sees Debian's packages (dolfinx, petsc4py, numpy 1.24); pip is constrained so
-# that nothing installed into it can replace numpy. The project itself is put on each venv's path
-# with a .pth file (no build step, no wheel needed), and a second .pth chooses OpenBLAS' kernels
-# from the CPU's instruction sets at every start (data_spec/cpu_blas.py: VMs that hide the CPU
-# model otherwise get OpenBLAS' SSE3 kernels, 2x slower factorisations). Both are written by
-# setup-solver / setup-trainer on every run (cheap), which every other target goes through.
+# that nothing installed into it can replace numpy. The project is installed editable into each
+# environment (pip install -e . --no-deps: the versions come from Debian and the lock files).
 $(SOLVER_VENV)/.stamp: requirements/debian-packages.txt requirements/solver-extras.txt \
                        requirements/solver-constraints.txt pyproject.toml
 	@bash scripts/setup_system.sh requirements/debian-packages.txt
 	$(SYS_PY) -m venv --system-site-packages $(SOLVER_VENV)
 	$(SPY) -m pip install -q --disable-pip-version-check -c requirements/solver-constraints.txt \
 	    -r requirements/solver-extras.txt
+	$(SPY) -m pip install -q --disable-pip-version-check --no-deps --no-build-isolation -e .
 	$(SPY) -c "import dolfinx, numpy; assert numpy.__version__.startswith('1.'), numpy.__version__"
 	@touch $@
 
 setup-solver: $(SOLVER_VENV)/.stamp
-	@$(SPY) scripts/install_pth.py "$(CURDIR)"
 
-$(TRAIN_VENV)/.stamp: requirements/trainer.lock requirements/debian-packages-trainer.txt pyproject.toml
+$(TRAIN_VENV)/.stamp: requirements/trainer.lock requirements/test.lock \
+                      requirements/debian-packages-trainer.txt pyproject.toml
 	@bash scripts/setup_system.sh requirements/debian-packages-trainer.txt
 	$(SYS_PY) -m venv $(TRAIN_VENV)
-	$(TPY) -m pip install -q --disable-pip-version-check -r requirements/trainer.lock
+	$(TPY) -m pip install -q --disable-pip-version-check -r requirements/trainer.lock \
+	    -r requirements/test.lock
+	$(TPY) -m pip install -q --disable-pip-version-check --no-deps -e .
 	$(TPY) -c "import jax, flax, optax, numpy; assert int(numpy.__version__[0]) >= 2"
 	@touch $@
 
 setup-trainer: $(TRAIN_VENV)/.stamp
-	@$(TPY) scripts/install_pth.py "$(CURDIR)"
 
 # Re-pin the trainer environment from requirements/trainer.in (maintainers only).
 lock-trainer:
@@ -103,7 +108,7 @@ train: setup-trainer
 test: setup test-solver test-extremes test-trainer
 
 test-solver: setup-solver
-	bash scripts/run_pytest.sh $(SPY) tests/common tests/data_spec tests/fem_sim tests/reliability -q $(TESTS)
+	bash scripts/run_pytest.sh $(SPY) tests/common tests/data_spec tests/liverviz tests/fem_sim tests/reliability -q $(TESTS)
 
 # Stability at the extremes: every case must converge with a physically right answer.
 test-extremes: setup-solver
@@ -121,7 +126,7 @@ $(TEST_DATA)/.done: data_spec/scenes/ci_scene1.toml | setup-solver
 test-trainer: setup-trainer $(TEST_DATA)/.done
 	$(TRAIN_VENV)/bin/ruff check .
 	LIVERFEM_TEST_DATASET=$(TEST_DATA) \
-	    bash scripts/run_pytest.sh $(TPY) tests/data_spec tests/surrogate tests/reliability -q $(TESTS)
+	    bash scripts/run_pytest.sh $(TPY) tests/data_spec tests/liverviz tests/surrogate tests/reliability -q $(TESTS)
 
 bench: setup
 	@bash scripts/bench.sh "$(SPY)" "$(TPY)"

@@ -24,7 +24,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from data_spec.pictures import pyvista  # noqa: E402
+from liverviz.pictures import pyvista  # noqa: E402
 from surrogate.export import load_predictor  # noqa: E402
 from surrogate.manipulator import Manipulator  # noqa: E402
 from surrogate.viewer import Scene, apply_frame, display_range, load_script, model_dir  # noqa: E402

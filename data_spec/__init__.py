@@ -1,24 +1,19 @@
 """data_spec: the contract between the solver (fem_sim) and the trainer (surrogate).
 
 Scene schema (TOML), geometry and shard schemas (HDF5 + XDMF), writers, readers and a validator.
-Depends on numpy and h5py only, so it imports under both project interpreters
-(``data_spec.pictures``, the one drawing of a liver, imports pyvista when it first draws).
+Depends on numpy and h5py only, so it imports under both project interpreters.
 """
 
-from data_spec.cpu_blas import configure as _configure_blas
-
-_configure_blas()  # before numpy loads OpenBLAS (see data_spec/cpu_blas.py)
-
-from data_spec.geometry import Geometry, read_geometry, write_geometry  # noqa: E402
-from data_spec.material import OgdenMaterial  # noqa: E402
-from data_spec.scene import (  # noqa: E402
+from data_spec.geometry import Geometry, read_geometry, write_geometry
+from data_spec.material import OgdenMaterial
+from data_spec.scene import (
     SCENE_SCHEMA_VERSION,
     Scene,
     SceneError,
     load_scene,
     parse_scene,
 )
-from data_spec.shards import (  # noqa: E402
+from data_spec.shards import (
     SHARD_SCHEMA_VERSION,
     Shard,
     SolverStats,
@@ -28,8 +23,8 @@ from data_spec.shards import (  # noqa: E402
     shard_path,
     write_shard,
 )
-from data_spec.solver_settings import SolverSettings  # noqa: E402
-from data_spec.validate import shard_problems, validate_dataset  # noqa: E402
+from data_spec.solver_settings import SolverSettings
+from data_spec.validate import shard_problems, validate_dataset
 
 __all__ = [
     "SCENE_SCHEMA_VERSION", "SHARD_SCHEMA_VERSION", "Geometry", "OgdenMaterial", "Scene",

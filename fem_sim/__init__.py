@@ -5,10 +5,18 @@ simulation: discretisation, assembly, linear solvers, predictors, Newton, load s
 ``batch/`` (datasets under MPI, summaries, the command line).
 
 Importing the package does not import dolfinx; :class:`OgdenProblem` loads it on first use.
+Imported before numpy, it chooses OpenBLAS' kernels from the CPU (:mod:`fem_sim.cpu_blas`).
 """
 
-from fem_sim.material.ogden import OgdenMaterial, ogden_point_kernel
-from fem_sim.solver.loads import Constraint, NodalLoad, PatchLoad
+import sys
+
+if "numpy" not in sys.modules:  # only effective before OpenBLAS is loaded
+    from fem_sim.cpu_blas import configure as _configure_blas
+
+    _configure_blas()
+
+from fem_sim.material.ogden import OgdenMaterial, ogden_point_kernel  # noqa: E402
+from fem_sim.solver.loads import Constraint, NodalLoad, PatchLoad  # noqa: E402
 
 __all__ = ["Constraint", "NodalLoad", "OgdenMaterial", "OgdenProblem", "PatchLoad", "Solution",
            "ogden_point_kernel"]

@@ -1,5 +1,5 @@
 """Pictures of deformed livers for fem_sim's summary and ``make docs``:
-pyvista renders (off-screen) through :mod:`data_spec.pictures`, the drawing the surrogate's
+pyvista renders (off-screen) through :mod:`liverviz.pictures`, the drawing the surrogate's
 viewer uses too.
 """
 
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from data_spec.pictures import Panel, Surface, render_panels
+from liverviz.pictures import Panel, Surface, render_panels
 
 
 def render_shards(items, out_png: str | Path, title: str = "", cols: int | None = None) -> Path:

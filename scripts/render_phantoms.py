@@ -4,7 +4,7 @@ pressed downward (-z), the default material, P1 in 10 load steps: what a scene-1
 does to each. Regenerate with ``make docs`` (about half a minute on 2 cores).
 
 The solves and the picture run in two processes: VTK's wheel must not share a process with
-dolfinx (see data_spec.pictures).
+dolfinx (see liverviz.pictures).
 """
 
 import subprocess

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from data_spec.pictures import Surface
+from liverviz.pictures import Surface
 
 
 @dataclass

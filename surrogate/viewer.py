@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from data_spec.pictures import (
+from liverviz.pictures import (
     FORCE,
     LiverView,
     Panel,

@@ -211,7 +211,7 @@ def _warm_jit_cache(degree: int, qdeg: int) -> None:
     """Compile the solver's forms on this process alone (fills FFCx's cache for every rank)."""
     from mpi4py import MPI
 
-    from data_spec.testing import box_mesh
+    from data_spec.geometry import box_mesh
     from fem_sim.solver.problem import OgdenProblem
 
     g = box_mesh(1)

@@ -185,17 +185,3 @@ class CAssembler(Assembler):
         self.c.apply_dirichlet(cons.owned, rhs.array if lift is not None else None,
                                lift.array_r if lift is not None else None)
         return Jacobian(csr=(self.c.indptr, self.c.indices, self.c.values))
-
-
-def make_assembler(disc: Discretisation, csr_solver: bool, element: str = "lagrange") -> Assembler:
-    """The C assembly where it applies (P1 or P2, one process) and the linear solver takes CSR
-    arrays (the serial factorisation); dolfinx's assembly otherwise. ``element="anp"``: the P1
-    tetrahedron with averaged nodal pressure (:mod:`fem_sim.solver.anp`).
-    """
-    if element == "anp":  # OgdenProblem checked that it applies
-        from fem_sim.solver.anp import ANPAssembler
-
-        return ANPAssembler(disc)
-    if csr_solver and CAssembler.available(disc):
-        return CAssembler(disc)
-    return DolfinxAssembler(disc)

@@ -29,7 +29,8 @@ from __future__ import annotations
 import numpy as np
 
 from fem_sim.material.ogden import OgdenMaterial
-from fem_sim.solver.assembly import make_assembler
+from fem_sim.solver.anp import ANPAssembler
+from fem_sim.solver.assembly import Assembler, CAssembler, DolfinxAssembler
 from fem_sim.solver.discretisation import Discretisation
 from fem_sim.solver.equations import Equations
 from fem_sim.solver.linear import factorization_mode, make_linear_solver
@@ -126,3 +127,15 @@ class OgdenProblem:
         total = comm.allreduce(vals * w[:, None], op=MPI.SUM)
         fallback = comm.allreduce(np.nan_to_num(vals), op=MPI.SUM) / comm.size
         return np.where(hits[:, None] > 0, total / np.maximum(hits, 1)[:, None], fallback)
+
+
+def make_assembler(disc: Discretisation, csr_solver: bool, element: str = "lagrange") -> Assembler:
+    """The C assembly where it applies (P1 or P2, one process) and the linear solver takes CSR
+    arrays (the serial factorisation); dolfinx's assembly otherwise. ``element="anp"``: the P1
+    tetrahedron with averaged nodal pressure (:mod:`fem_sim.solver.anp`).
+    """
+    if element == "anp":  # the rule table admitted it (data_spec.solver_rules)
+        return ANPAssembler(disc)
+    if csr_solver and CAssembler.available(disc):
+        return CAssembler(disc)
+    return DolfinxAssembler(disc)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from data_spec import SceneError, load_scene, parse_scene, write_geometry
-from data_spec.testing import box_mesh
+from tests.fixtures import box_mesh
 
 SCENES = sorted((Path(__file__).parents[2] / "data_spec" / "scenes").glob("*.toml"))
 

@@ -19,7 +19,7 @@ from data_spec import (
     write_shard,
 )
 from data_spec.atomic import atomic_path
-from data_spec.testing import box_mesh, synthetic_dataset, synthetic_shard, write_test_scene
+from tests.fixtures import box_mesh, synthetic_dataset, synthetic_shard, write_test_scene
 
 
 @pytest.fixture

@@ -83,9 +83,9 @@ def test_sliver_heavy_mesh_reproduces_a_homogeneous_state():
     the regular cube."""
     from mpi4py import MPI
 
-    from data_spec.testing import box_mesh
     from fem_sim import Constraint, OgdenMaterial, OgdenProblem
     from fem_sim.geometry.quality import mean_ratio, mesh_problems
+    from tests.fixtures import box_mesh
 
     g = box_mesh(4)
     x = g.points

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from data_spec.testing import box_mesh
 from fem_sim import Constraint, NodalLoad, OgdenMaterial, OgdenProblem
 from fem_sim.geometry.phantom import make_phantom
 from tests.fem_sim.fd import jacobian_fd_error
+from tests.fixtures import box_mesh
 
 MAT = OgdenMaterial((4.1e-3,), (10.06,), 0.41)  # K/mu = 200
 

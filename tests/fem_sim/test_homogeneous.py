@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from data_spec.testing import box_mesh
 from fem_sim import Constraint, OgdenMaterial, OgdenProblem
+from tests.fixtures import box_mesh
 
 C, M = (4.1e-3,), (10.06,)
 K = 200 * 4.1e-3 / 2  # K/mu = 200

@@ -15,7 +15,7 @@ pytest.importorskip("skimage")
 def test_voxelize_measures_a_box_exactly():
     """A 10 x 20 x 30 mm box (6 tetrahedra), 1 mm voxels offset by half a voxel: exactly
     10 * 20 * 30 voxel centres lie inside."""
-    from data_spec.testing import box_mesh
+    from tests.fixtures import box_mesh
 
     g = box_mesh(1)
     pts = g.points * np.array([10.0, 20.0, 30.0])

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from data_spec.testing import synthetic_dataset
 from fem_sim.batch.summary import range_cases
+from tests.fixtures import synthetic_dataset
 
 ROOT = Path(__file__).parents[2]
 
@@ -43,7 +43,7 @@ def test_summary_draws_three_livers_with_pyvista(tmp_path):
 def test_pictures_refuse_to_run_beside_dolfinx():
     import dolfinx  # noqa: F401
 
-    from data_spec.pictures import pyvista
+    from liverviz.pictures import pyvista
 
     with pytest.raises(RuntimeError, match="separate process"):
         pyvista()

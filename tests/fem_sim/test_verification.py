@@ -7,13 +7,13 @@ import pytest
 from mpi4py import MPI
 
 from data_spec.solver_settings import SolverSettings
-from data_spec.testing import box_mesh
 from fem_sim import Constraint, NodalLoad, OgdenMaterial, OgdenProblem, PatchLoad
 from fem_sim.geometry.phantom import make_phantom
 from fem_sim.solver import ldlt
 from fem_sim.solver.assembly import CAssembler, DolfinxAssembler
 from fem_sim.solver.discretisation import DofConstraints
 from tests.fem_sim.fd import jacobian_fd_error
+from tests.fixtures import box_mesh
 
 MAT = OgdenMaterial((4.1e-3,), (10.06,), 0.82)
 

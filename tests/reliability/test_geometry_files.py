@@ -8,7 +8,7 @@ import numpy as np
 
 from data_spec import validate_dataset
 from data_spec.geometry import read_geometry
-from data_spec.testing import synthetic_dataset
+from tests.fixtures import synthetic_dataset
 
 
 def _geometry_file(d):

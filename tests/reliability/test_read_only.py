@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from data_spec.testing import synthetic_dataset
+from tests.fixtures import synthetic_dataset
 from tests.reliability.conftest import read_only
 
 ROOT = Path(__file__).parents[2]

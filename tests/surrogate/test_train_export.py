@@ -157,7 +157,7 @@ def test_material_model_warns_outside_the_training_range(tmp_path):
     import dataclasses
 
     from data_spec import OgdenMaterial, geometry_path, write_geometry, write_shard
-    from data_spec.testing import box_mesh, synthetic_shard
+    from tests.fixtures import box_mesh, synthetic_shard
     from tests.surrogate.conftest import ROOT
 
     geo = box_mesh(3)

@@ -266,8 +266,8 @@ class _TwoForceMaterialModel:
     """
 
     def __init__(self):
-        from data_spec.testing import box_mesh
         from surrogate.features import FeatureSpec
+        from tests.fixtures import box_mesh
 
         g = box_mesh(3, (30.0, 20.0, 10.0))
         self.spec = FeatureSpec(n_loads=2, material_dim=3)

@@ -3,17 +3,15 @@
 Why: Debian's OpenBLAS (and the one in numpy's wheels) chooses its kernels at load time from the
 CPU's family and model numbers. Virtual machines often report a generic model ("Intel(R) Xeon(R)
 Processor"), and then OpenBLAS falls back to its Prescott (SSE3) kernels: measured on such a
-2-core VM with AVX-512 (``bench/bench_jacobian.py``, the real liver's Jacobian, 43.7k dofs,
-run with ``OPENBLAS_CORETYPE=Prescott`` and without), one float32 MUMPS factorisation took
-1.28 s with the Prescott kernels and 0.59 s with SkylakeX's, float64 2.20 and 0.92 s (the same
-flops and residuals; 63 % of the time was ``sgemm_kernel_PRESCOTT`` in ``perf``). Setting
+2-core VM with AVX-512 (``bench/bench_jacobian.py`` run with ``OPENBLAS_CORETYPE=Prescott`` and
+without), a MUMPS factorisation takes about twice as long with the SSE3 kernels. Setting
 ``OPENBLAS_CORETYPE`` from the instruction sets the CPU reports in ``/proc/cpuinfo`` picks the
 right kernels and is harmless where detection works (it names the same kernels).
 
-Standard library only, and never imports the ``data_spec`` package: the project's virtual
-environments run :func:`configure` at interpreter start-up (a ``.pth`` line written by ``make
-setup``), before anything imports numpy; ``data_spec/__init__.py`` runs it too, for interpreters
-outside those environments that import the project before numpy. A value the user set is kept.
+Standard library only, so it runs before numpy: ``fem_sim/__init__.py`` calls :func:`configure`
+when numpy is not loaded yet, the Makefile exports ``OPENBLAS_CORETYPE`` from this file run as a
+script (``python fem_sim/cpu_blas.py`` prints the kernel set, or nothing), so every process it
+starts, in either environment, loads the right kernels. A value the user set is kept.
 """
 
 from __future__ import annotations
@@ -59,3 +57,7 @@ def configure(environ=os.environ, flags: set[str] | None = None) -> str | None:
     if name:
         environ["OPENBLAS_CORETYPE"] = name
     return name
+
+
+if __name__ == "__main__":
+    print(coretype(cpu_flags()) or "")

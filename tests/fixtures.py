@@ -1,6 +1,5 @@
-"""Small exact objects for tests and examples: a structured box mesh and synthetic shards.
-
-Numpy only, so the trainer's tests can build datasets without the solver.
+"""Test fixtures: synthetic shards and datasets (numpy + data_spec only, so the trainer's
+tests build datasets without the solver).
 """
 
 from __future__ import annotations
@@ -9,40 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from data_spec.geometry import Geometry, boundary_triangles, write_geometry
+from data_spec.geometry import Geometry, box_mesh, write_geometry
 from data_spec.shards import OgdenMaterial, Shard, SolverStats, geometry_path, write_shard
-
-
-def box_mesh(n: int = 4, size: tuple[float, float, float] = (1.0, 1.0, 1.0)) -> Geometry:
-    """A box [0, Lx] x [0, Ly] x [0, Lz] split into n^3 cubes of 6 tetrahedra each.
-
-    Node (i, j, k) has id i + (n+1) j + (n+1)^2 k. The region ``x0`` holds the nodes on x = 0.
-    """
-    m = n + 1
-    g = np.stack(np.meshgrid(*(np.linspace(0, s, m) for s in size), indexing="ij"), -1)
-    points = g.transpose(2, 1, 0, 3).reshape(-1, 3)  # x fastest
-    nid = np.arange(m ** 3).reshape(m, m, m)  # [k, j, i]
-    cells = []
-    # Kuhn split of each cube along its main diagonal: 6 tets, conforming across cubes.
-    paths = [(0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0)]
-    for k in range(n):
-        for j in range(n):
-            for i in range(n):
-                for path in paths:
-                    c = [0, 0, 0]
-                    tet = [nid[k, j, i]]
-                    for axis in path:
-                        c[axis] += 1
-                        tet.append(nid[k + c[2], j + c[1], i + c[0]])
-                    cells.append(tet)
-    cells = np.array(cells, dtype=np.int64)
-    e = points[cells[:, 1:]] - points[cells[:, :1]]
-    negative = np.linalg.det(e) < 0
-    cells[negative] = cells[negative][:, [0, 2, 1, 3]]  # positive orientation everywhere
-    return Geometry(points=points, cells=cells,
-                    surface_triangles=boundary_triangles(cells, points),
-                    regions={"x0": np.flatnonzero(points[:, 0] == 0.0)},
-                    description=f"box {size} mm, {n}^3 cubes of 6 tets")
 
 
 def synthetic_shard(geometry: Geometry, index: int, *, n_steps: int = 3, seed: int = 0,
@@ -69,7 +36,7 @@ def synthetic_shard(geometry: Geometry, index: int, *, n_steps: int = 3, seed: i
     )
 
 
-TEST_SCENE = Path(__file__).with_name("scenes") / "tiny_scene1.toml"
+TEST_SCENE = Path(__file__).parents[1] / "data_spec" / "scenes" / "tiny_scene1.toml"
 
 
 def write_test_scene(directory: str | Path, scene_file: str | Path = TEST_SCENE):

@@ -8,8 +8,8 @@ import sys
 import numpy as np
 import pytest
 
-from data_spec.pictures import Panel, Surface, arrow_segments, render_panels, write_gif
-from data_spec.testing import box_mesh
+from liverviz.pictures import Panel, Surface, arrow_segments, render_panels, write_gif
+from tests.fixtures import box_mesh
 
 
 @pytest.fixture(scope="module")
@@ -66,7 +66,7 @@ def _liver_pixels(png):
 
 @pytest.fixture()
 def renderer():
-    """VTK must not render beside dolfinx (data_spec.pictures.pyvista says why): in the
+    """VTK must not render beside dolfinx (liverviz.pictures.pyvista says why): in the
     solver's test process these renders run in tests/fem_sim/test_summary_pictures.py, in a
     subprocess; here they run in the trainer's test process.
     """

@@ -3,9 +3,8 @@ mm), the undeformed outline, the fixed region and the force arrows.
 
 One drawing for every place people look: ``fem_sim summary`` and ``make docs`` (solver
 environment) and the surrogate's viewer (trainer environment) all draw through
-:class:`LiverView`, so a liver looks the same everywhere. pyvista is imported on first use:
-data_spec itself still needs numpy and h5py only (the pictures need pyvista and an OpenGL:
-Mesa's EGL off-screen, or a window under X/Xvfb; see README "Pictures and the manipulator").
+:class:`LiverView`, so a liver looks the same everywhere. pyvista is imported on first use
+(it needs an OpenGL: Mesa's EGL off-screen, or a window under X/Xvfb).
 """
 
 from __future__ import annotations
