@@ -59,7 +59,7 @@ def train(data: Path, folds: int) -> dict:
 
 def at_scale(run: Path, n_nodes: int, directory: Path, seed: int = 0) -> Path:
     """A copy of the run's exported model on a synthetic liver-sized cloud of n_nodes."""
-    from surrogate.export import export_basis, export_model, load_predictor
+    from surrogate.export import export_model, load_predictor
 
     pred = load_predictor(run / "model")
     meta = pred.meta
@@ -81,9 +81,9 @@ def at_scale(run: Path, n_nodes: int, directory: Path, seed: int = 0) -> Path:
                            x_std=np.asarray(st["x_std"], np.float32), c_scale=st["c_scale"],
                            f_scale=st["f_scale"], hidden=tuple(meta["config"]["hidden"]),
                            n_loads=pred.spec.n_loads)
-        export_basis(directory, model, meta["config"], ds)
     else:
-        export_model(directory, _params(run), pred.norm, meta["config"], ds)
+        model = (_params(run), pred.norm)
+    export_model(directory, model, {**meta["config"], "design": pred.design}, ds)
     return directory
 
 

@@ -21,11 +21,12 @@ import numpy as np
 
 from surrogate import load_predictor
 from surrogate.config import get_config
+from surrogate.engine import make_train_step, optimizer
 from surrogate.export import export_model
 from surrogate.features import FeatureSpec
 from surrogate.model import NodeMLP
+from surrogate.nodewise import nodewise_loss
 from surrogate.normalise import Normaliser
-from surrogate.train import make_fns
 
 NETS = {"small (128,128,128)": [128, 128, 128],
         "paper scene 1 (500,300,100,50)": [500, 300, 100, 50],
@@ -45,7 +46,7 @@ def fake_model(directory: Path, hidden, n_nodes: int, seed: int = 0) -> np.ndarr
     ds = SimpleNamespace(forces=np.full((1, 1, 3), 0.4), extra=np.zeros((1, 0)),
                          scene_name="bench", spec=spec, points=[pts], fixed=[fixed],
                          out_nodes=[np.arange(n_nodes)])
-    export_model(directory, params, norm, get_config("small", hidden=hidden), ds)
+    export_model(directory, (params, norm), get_config("small", hidden=hidden), ds)
     return pts
 
 
@@ -85,29 +86,28 @@ def main():
     for name, hidden in NETS.items():
         cfg = get_config("small", hidden=hidden)
         model = NodeMLP(hidden=tuple(hidden))
-        import optax
-        from flax.training import train_state
-
         params = model.init(jax.random.PRNGKey(0), jnp.zeros((1, 18)))["params"]
-        state = train_state.TrainState.create(
-            apply_fn=model.apply, params=params,
-            tx=optax.inject_hyperparams(optax.adam)(learning_rate=1e-3))
-        step, _, _ = make_fns(cfg, 1)
+        tx = optimizer(cfg, 1)
+        opt_state = tx.init(params)
+        step = make_train_step(nodewise_loss(model, 0.0, 1), tx)
         n = 20000
-        data = {"static": jnp.asarray(np.random.rand(n, 11), jnp.float32),
-                "forces": jnp.ones((100, 1, 3)), "load_points": jnp.ones((100, 1, 3)),
-                "extra": jnp.zeros((100, 0))}
         norm = Normaliser(x_mean=jnp.zeros(18), x_std=jnp.ones(18), y_mean=jnp.zeros(3),
                           y_std=jnp.ones(3))
+        data = {"static": jnp.asarray(np.random.rand(n, 11), jnp.float32),
+                "forces": jnp.ones((100, 1, 3)), "load_points": jnp.ones((100, 1, 3)),
+                "extra": jnp.zeros((100, 0)), "norm": norm}
         B = cfg["batch_size"]
         rows = jnp.asarray(np.random.randint(0, n, B))
         smp = jnp.asarray(np.random.randint(0, 100, B))
         tgt = jnp.zeros((B, 3))
-        state, loss = step(state, norm, data, rows, smp, tgt, jax.random.PRNGKey(0))
+        value = jnp.float32(1.0)
+        params, opt_state, loss = step(params, opt_state, data, (rows, smp, tgt),
+                                       jax.random.PRNGKey(0), value)
         loss.block_until_ready()
         t = time.perf_counter()
         for i in range(20):
-            state, loss = step(state, norm, data, rows, smp, tgt, jax.random.PRNGKey(i))
+            params, opt_state, loss = step(params, opt_state, data, (rows, smp, tgt),
+                                           jax.random.PRNGKey(i), value)
         loss.block_until_ready()
         print(f"| {name} | {B} | {20 * B / (time.perf_counter() - t):,.0f} |")
 

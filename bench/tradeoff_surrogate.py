@@ -197,7 +197,8 @@ def train_one(spec: dict) -> dict:
     from surrogate.data import restrict_nodes
     from surrogate.export import export_model
     from surrogate.metrics import displacement_metrics
-    from surrogate.train import example_index, fit
+    from surrogate.nodewise import example_index
+    from surrogate.train import fit_design
 
     ds, surface = dataset(spec["data"])
     train_ds = restrict_nodes(ds, [surface]) if spec["nodes"] == "surface" else ds
@@ -205,11 +206,11 @@ def train_one(spec: dict) -> dict:
     cfg = get_config("paper_scene1", hidden=spec["hidden"], node_fraction=spec["node_fraction"],
                      epochs=EPOCHS, final_fit=False)
     t0 = time.perf_counter()
-    params, norm, hist = fit(train_ds, train, cfg, seed=0, label=f"{spec['id']} ",
-                             log_fn=lambda m: print(m, file=sys.stderr, flush=True))
+    trained, hist = fit_design(train_ds, train, cfg, 0, f"{spec['id']} ",
+                               lambda m: print(m, file=sys.stderr, flush=True))
     seconds = time.perf_counter() - t0
     model = RESULTS / "models" / spec["id"]
-    export_model(model, params, norm, cfg, train_ds)
+    export_model(model, trained, cfg, train_ds)
     rec = {"id": spec["id"], "spec": spec, "training_seconds": seconds, "epochs": len(hist),
            "examples_seen": int(sum(h["examples_per_s"] * h["seconds"] for h in hist))}
     if spec["data"] == LEARN_DATA:

@@ -1,4 +1,7 @@
-"""``python -m surrogate train --data DIR --run RUN [--config NAME] [key=value ...]``."""
+"""``python -m surrogate train --data DIR --run RUN [--config NAME] [--fresh] [key=value ...]``.
+
+A killed training resumes when the same command is run again (``--fresh`` starts over).
+"""
 
 from __future__ import annotations
 
@@ -21,6 +24,8 @@ def main(argv=None) -> int:
     t.add_argument("--data", required=True, help="dataset directory written by fem_sim")
     t.add_argument("--run", required=True, help="run directory to write")
     t.add_argument("--config", help="config name (default: the scene's surrogate.config)")
+    t.add_argument("--fresh", action="store_true",
+                   help="discard RUN/checkpoints instead of resuming from them")
     t.add_argument("overrides", nargs="*", metavar="key=value",
                    help="config overrides, e.g. epochs=20 hidden=[64,64]")
     args = parser.parse_args(argv)
@@ -60,7 +65,7 @@ def main(argv=None) -> int:
         print(f"surrogate train: --run {args.run} is a file, not a directory", file=sys.stderr)
         return 2
     try:
-        result = train_and_evaluate(args.data, args.run, cfg)
+        result = train_and_evaluate(args.data, args.run, cfg, fresh=args.fresh)
     except (DataError, OSError) as exc:  # OSError: a run directory that cannot be written
         print(f"surrogate train: {exc}", file=sys.stderr)
         return 2

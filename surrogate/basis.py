@@ -14,18 +14,19 @@ fixed direction and magnitude, and zero without load. A call costs one small net
 (3N x modes) product, for any number of nodes (docs/realtime.md).
 
 It needs one liver (the basis lives on its nodes): a scene that varies the geometry keeps the
-node-wise design. Pure functions of arrays, and one training loop like the node-wise one
-(early stopping on held-out simulations, the same learning-rate rule).
+node-wise design. Pure functions of arrays; trained by the one loop of :mod:`surrogate.engine`.
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
+import flax.linen as nn
+import jax.numpy as jnp
 import numpy as np
 
 from surrogate.data import Dataset
+from surrogate.engine import Problem
 
 LOAD_FEATURES = 7  # per load: point (3), force direction (3), force magnitude (1)
 
@@ -63,20 +64,26 @@ def load_features(forces, load_points, extra, xp=np):
     return xp.concatenate([flat, extra], axis=-1)
 
 
-def network(hidden, modes: int, n_loads: int):
-    """The flax module: (features, forces / f_scale) -> coefficients (modes,)."""
-    import flax.linen as nn
-    import jax.numpy as jnp
+class BasisMLP(nn.Module):
+    """(features, forces / f_scale) -> mode coefficients (modes,): hidden GELU layers
+    ``hidden_i``, then ``coefficients``, the (modes x 3 n_loads) matrix applied to the forces.
+    """
 
-    class BasisMLP(nn.Module):
-        @nn.compact
-        def __call__(self, x, f):
-            for width in hidden:
-                x = nn.gelu(nn.Dense(width)(x))
-            M = nn.Dense(modes * 3 * n_loads)(x).reshape(x.shape[:-1] + (modes, 3 * n_loads))
-            return jnp.einsum("...kj,...j->...k", M, f.reshape(f.shape[:-2] + (-1,)))
+    hidden: tuple
+    modes: int
+    n_loads: int
 
-    return BasisMLP()
+    @nn.compact
+    def __call__(self, x, f):
+        for i, width in enumerate(self.hidden):
+            x = nn.gelu(nn.Dense(width, name=f"hidden_{i}")(x))
+        M = nn.Dense(self.modes * 3 * self.n_loads, name="coefficients")(x)
+        M = M.reshape(x.shape[:-1] + (self.modes, 3 * self.n_loads))
+        return jnp.einsum("...kj,...j->...k", M, f.reshape(f.shape[:-2] + (-1,)))
+
+
+def network(hidden, modes: int, n_loads: int) -> BasisMLP:
+    return BasisMLP(hidden=tuple(hidden), modes=int(modes), n_loads=int(n_loads))
 
 
 def fields(ds: Dataset, samples: np.ndarray) -> np.ndarray:
@@ -119,85 +126,54 @@ def projection_mee(U: np.ndarray, modes: np.ndarray) -> float:
     return float(np.linalg.norm(R.reshape(U.shape[0], -1, 3), axis=2).mean())
 
 
-def fit(ds: Dataset, train_samples: np.ndarray, cfg: dict, seed: int, label: str = "",
-        log_fn=print) -> tuple[BasisModel, list[dict]]:
-    """Modes and network from ``train_samples`` (a slice of simulations held out for early
-    stopping, as for the node-wise design).
+class BasisProblem(Problem):
+    """Modes of the training fields, then a network from the loads to their coefficients;
+    an example is one sample (a whole field).
     """
-    import jax
-    import jax.numpy as jnp
-    import optax
-    from flax.training import train_state
-    from flax.training.early_stopping import EarlyStopping
 
-    from surrogate.train import LearningRateRule, early_stopping_split, end_of_epoch
+    def __init__(self, ds: Dataset, tr: np.ndarray, va: np.ndarray, cfg: dict, seed: int):
+        check_dataset(ds)
+        U = fields(ds, tr)
+        self.modes = compute_modes(U, cfg["modes"], seed).astype(np.float32)
+        self.projection_mee = projection_mee(U, self.modes.astype(np.float64))
+        X = load_features(ds.forces, ds.load_points, ds.extra)
+        self.x_mean = X[tr].mean(axis=0).astype(np.float32)
+        std = X[tr].std(axis=0)
+        self.x_std = np.where(std > 1e-8 * (np.abs(X[tr]).max(axis=0) + 1e-30), std,
+                              1.0).astype(np.float32)
+        C = U @ self.modes.T.astype(np.float64)
+        self.c_scale = float(np.sqrt(np.mean(C**2))) or 1.0
+        self.f_scale = float(np.linalg.norm(ds.forces[tr], axis=-1).mean()) or 1.0
+        target = np.zeros((ds.n_samples, self.modes.shape[0]), dtype=np.float32)
+        target[tr] = C / self.c_scale
+        if va.size:
+            target[va] = fields(ds, va) @ self.modes.T.astype(np.float64) / self.c_scale
+        self.data = {"x": jnp.asarray((X - self.x_mean) / self.x_std, dtype=jnp.float32),
+                     "f": jnp.asarray(ds.forces / self.f_scale, dtype=jnp.float32),
+                     "target": jnp.asarray(target)}
+        self.net = network(tuple(cfg["hidden"]), self.modes.shape[0], ds.spec.n_loads)
+        self.tr, self.va = tr, va
+        self.B = min(cfg["batch_size"], tr.size)
+        self.steps_per_epoch = tr.size // self.B
+        self.hidden, self.n_loads = tuple(cfg["hidden"]), ds.spec.n_loads
 
-    check_dataset(ds)
-    tr, va, rng = early_stopping_split(ds, train_samples, cfg, seed)
-    U = fields(ds, tr)
-    modes = compute_modes(U, cfg["modes"], seed).astype(np.float32)
-    X = load_features(ds.forces, ds.load_points, ds.extra)
-    x_mean = X[tr].mean(axis=0)
-    std = X[tr].std(axis=0)
-    x_std = np.where(std > 1e-8 * (np.abs(X[tr]).max(axis=0) + 1e-30), std, 1.0)
-    C = U @ modes.T.astype(np.float64)
-    c_scale = float(np.sqrt(np.mean(C**2))) or 1.0
-    f_scale = float(np.linalg.norm(ds.forces[tr], axis=-1).mean()) or 1.0
-    Xn = jnp.asarray((X - x_mean) / x_std, dtype=jnp.float32)
-    Fn = jnp.asarray(ds.forces / f_scale, dtype=jnp.float32)
-    target = np.zeros((ds.n_samples, modes.shape[0]), dtype=np.float32)
-    target[tr] = C / c_scale
-    if va.size:
-        target[va] = fields(ds, va) @ modes.T.astype(np.float64) / c_scale
-    target = jnp.asarray(target)
-    n_loads = ds.spec.n_loads
-    net = network(tuple(cfg["hidden"]), modes.shape[0], n_loads)
-    key = jax.random.PRNGKey(seed)
-    params = net.init(key, Xn[:1], Fn[:1])["params"]
-    tx = optax.inject_hyperparams(optax.adam)(learning_rate=cfg["learning_rate"])
-    state = train_state.TrainState.create(apply_fn=net.apply, params=params, tx=tx)
+    def init(self, key):
+        return self.net.init(key, self.data["x"][:1], self.data["f"][:1])["params"]
 
-    def loss_fn(params, idx):
-        pred = net.apply({"params": params}, Xn[idx], Fn[idx])
-        return jnp.mean(jnp.sum((pred - target[idx]) ** 2, axis=-1))
+    def epoch(self, rng):
+        order = rng.permutation(self.tr)
+        return [order[i * self.B:(i + 1) * self.B] for i in range(self.steps_per_epoch)]
 
-    @jax.jit
-    def step(state, idx):
-        loss, grads = jax.value_and_grad(loss_fn)(state.params, idx)
-        return state.apply_gradients(grads=grads), loss
+    def batch(self, indices):
+        return jnp.asarray(indices)
 
-    val_loss_fn = jax.jit(loss_fn)
-    lr_rule = LearningRateRule(cfg, params)
-    stop = EarlyStopping(min_delta=0.0, patience=cfg["early_stopping"] - 1)
-    B = min(cfg["batch_size"], tr.size)
-    best, history = state.params, []
-    for epoch in range(cfg["epochs"]):
-        t0 = time.perf_counter()
-        order = rng.permutation(tr)
-        losses = []
-        for i in range(0, order.size - B + 1, B):
-            state, loss = step(state, jnp.asarray(order[i:i + B]))
-            losses.append(loss)
-        train_loss = float(np.mean(jax.device_get(losses)))
-        val_loss = float(val_loss_fn(state.params, jnp.asarray(va))) if va.size else train_loss
-        dt = time.perf_counter() - t0
-        history.append({"epoch": epoch + 1, "train_loss": train_loss, "val_loss": val_loss,
-                        "lr": lr_rule.value, "seconds": dt,
-                        "examples_per_s": order.size / dt})
-        if epoch % 10 == 0:
-            # coefficient loss x c_scale^2 = mean squared field error summed over dofs, mm^2
-            log_fn(f"{label}epoch {epoch + 1:3d}  train {train_loss:.4e}  val {val_loss:.4e}  "
-                   f"lr {lr_rule.value:.1e}")
-        state, stop, best = end_of_epoch(state, stop, lr_rule, best, val_loss)
-        if stop.should_stop:
-            break
-    log_fn(f"{label}stopped after {len(history)} epochs; {modes.shape[0]} modes, projection "
-           f"MEE of the training fields {projection_mee(U, modes.astype(np.float64)):.4f} mm")
-    model = BasisModel(params=jax.device_get(best), modes=modes,
-                       x_mean=x_mean.astype(np.float32), x_std=x_std.astype(np.float32),
-                       c_scale=c_scale, f_scale=f_scale, hidden=tuple(cfg["hidden"]),
-                       n_loads=n_loads)
-    return model, history
+    def validation(self):
+        return jnp.asarray(self.va) if self.va.size else None
+
+    def loss(self, params, data, idx, key, train):
+        # coefficient loss x c_scale^2 = mean squared field error summed over dofs, mm^2
+        pred = self.net.apply({"params": params}, data["x"][idx], data["f"][idx])
+        return jnp.mean(jnp.sum((pred - data["target"][idx]) ** 2, axis=-1))
 
 
 def coefficients(model: BasisModel, forces, load_points, extra, *, apply, xp=np):
@@ -211,10 +187,8 @@ def coefficients(model: BasisModel, forces, load_points, extra, *, apply, xp=np)
 
 def predict_samples(ds: Dataset, model: BasisModel, samples: np.ndarray):
     """Predicted and true displacement (mm) of every output node of ``samples``, laid out
-    as :func:`surrogate.train.predict_samples` (sample by sample, output nodes in order).
+    as the node-wise design's (sample by sample, output nodes in order).
     """
-    import jax.numpy as jnp
-
     net = network(model.hidden, model.modes.shape[0], model.n_loads)
 
     def apply(x, f):
@@ -227,3 +201,32 @@ def predict_samples(ds: Dataset, model: BasisModel, samples: np.ndarray):
     true = fields(ds, samples).reshape(-1, 3)
     n = int(ds.sample_offset[1] - ds.sample_offset[0])
     return pred, true, np.repeat(samples, n)
+
+
+class Basis:
+    """The design's entry in the registry (:data:`surrogate.designs.DESIGNS`)."""
+
+    name = "basis"
+    log_every = 10
+
+    def check(self, ds: Dataset) -> None:
+        check_dataset(ds)
+
+    def problem(self, ds, train, val, cfg, rng) -> BasisProblem:
+        return BasisProblem(ds, train, val, cfg, int(rng.integers(2**31)))
+
+    def model(self, problem: BasisProblem, params) -> BasisModel:
+        return BasisModel(params=params, modes=problem.modes, x_mean=problem.x_mean,
+                          x_std=problem.x_std, c_scale=problem.c_scale,
+                          f_scale=problem.f_scale, hidden=problem.hidden,
+                          n_loads=problem.n_loads)
+
+    def summary(self, problem: BasisProblem) -> str:
+        return (f"{problem.modes.shape[0]} modes, projection MEE of the training fields "
+                f"{problem.projection_mee:.4f} mm")
+
+    def predict_samples(self, ds: Dataset, model: BasisModel, cfg: dict, samples: np.ndarray):
+        return predict_samples(ds, model, samples)
+
+    def export_parts(self, model: BasisModel) -> tuple[dict, dict, dict]:
+        return model.params, model.stats(), {"basis.npz": {"modes": model.modes}}

@@ -3,7 +3,8 @@ model never executes code. ``load_predictor(path)`` returns a jitted predictor i
 
     RUN/model/model.json     format, version, config, feature spec, normalisation statistics,
                              training ranges
-    RUN/model/params.npz     network parameters, keys "Dense_0/kernel", ...
+    RUN/model/params.npz     network parameters, keys "hidden_0/kernel", ..., "output/bias"
+                             (the reduced basis: "coefficients/..." for its last layer)
     RUN/model/geometry.npz   the liver (points, fixed nodes, output nodes, outward surface
                              triangles) when the scene has one liver: enough to draw it
 """
@@ -22,29 +23,25 @@ from surrogate.features import FeatureSpec, node_features, static_node_features
 from surrogate.normalise import Normaliser
 
 MODEL_FORMAT = "liverfem-surrogate"
-MODEL_VERSION = 2          # 2: the design ("nodewise" or "basis") is recorded
-READABLE_VERSIONS = (1, 2)  # version 1 models are node-wise
+MODEL_VERSION = 3          # 3: explicit layer names; 2: the design is recorded
+READABLE_VERSIONS = (1, 2, 3)  # 1-2: flax's automatic names Dense_i; version 1 is node-wise
 DESIGNS = ("nodewise", "basis")
 # Inference precisions: float32 (as trained), or the weights and activations cast to 16 bits.
 PRECISIONS = ("float32", "bfloat16", "float16")
 log = logging.getLogger(__name__)
 
 
-def export_model(directory, params, norm: Normaliser, cfg, ds, unseen=()) -> Path:
-    """Write a model directory from a trained node-wise network, its normaliser and its
-    dataset. ``unseen``: the simulations the model never trained on (recorded for viewers).
+def export_model(directory, model, cfg, ds, unseen=()) -> Path:
+    """Write a model directory from a trained model of the config's design (node-wise:
+    (parameters, normaliser); basis: a :class:`surrogate.basis.BasisModel`) and its dataset.
+    ``unseen``: the simulations the model never trained on (recorded for viewers).
     """
-    return _export(directory, params, {"design": "nodewise", "stats": norm.to_dict()}, cfg, ds,
-                   unseen)
+    from surrogate.designs import DESIGNS
 
-
-def export_basis(directory, model, cfg, ds, unseen=()) -> Path:
-    """Write a model directory from a trained :class:`surrogate.basis.BasisModel`: its network
-    in params.npz, its modes in basis.npz, its statistics in model.json.
-    """
-    d = _export(directory, model.params, {"design": "basis", "stats": model.stats()}, cfg, ds,
-                unseen)
-    np.savez(d / "basis.npz", modes=model.modes)
+    params, stats, files = DESIGNS[cfg["design"]].export_parts(model)
+    d = _export(directory, params, {"design": cfg["design"], "stats": stats}, cfg, ds, unseen)
+    for name, arrays in files.items():
+        np.savez(d / name, **arrays)
     return d
 
 
@@ -95,9 +92,15 @@ def _read_meta(path: Path) -> dict:
     return meta
 
 
-def _read_params(path: Path, dim: int, hidden: tuple[int, ...], out: int = 3) -> dict:
+def layer_names(n_hidden: int, last: str) -> list[str]:
+    return [f"hidden_{i}" for i in range(n_hidden)] + [last]
+
+
+def _read_params(path: Path, dim: int, hidden: tuple[int, ...], out: int = 3,
+                 version: int = MODEL_VERSION, last: str = "output") -> dict:
     """The network's parameters, checked against the architecture in the config: every layer
-    present with the right shapes, every value finite.
+    present with the right shapes, every value finite. Models before version 3 name their
+    layers Dense_0, Dense_1, ... in order; they are read under the explicit names.
     """
     try:
         with np.load(path, allow_pickle=False) as z:
@@ -106,11 +109,16 @@ def _read_params(path: Path, dim: int, hidden: tuple[int, ...], out: int = 3) ->
         raise ValueError(f"{path}: missing") from None
     except (OSError, ValueError) as exc:  # truncated, not an npz, or a pickled array
         raise ValueError(f"{path}: cannot be read without executing code ({exc})") from None
+    names = layer_names(len(hidden), last)
+    if version < 3:
+        old = {f"Dense_{i}": n for i, n in enumerate(names)}
+        flat = {f"{old.get(k.split('/')[0], k.split('/')[0])}/{k.split('/', 1)[-1]}": v
+                for k, v in flat.items()}
     widths = (dim, *hidden, out)
     want = {}
-    for i in range(len(widths) - 1):
-        want[f"Dense_{i}/kernel"] = (widths[i], widths[i + 1])
-        want[f"Dense_{i}/bias"] = (widths[i + 1],)
+    for i, name in enumerate(names):
+        want[f"{name}/kernel"] = (widths[i], widths[i + 1])
+        want[f"{name}/bias"] = (widths[i + 1],)
     problems = [f"'{k}' has shape {flat[k].shape}, the config says {shape}"
                 for k, shape in want.items() if k in flat and flat[k].shape != shape]
     problems += [f"'{k}' is missing" for k in want if k not in flat]
@@ -175,7 +183,8 @@ class Predictor:
         if self.design == "basis":
             self._init_basis(d, meta, hidden, dtype)
             return
-        params = _read_params(d / "params.npz", self.spec.dim, hidden)
+        params = _read_params(d / "params.npz", self.spec.dim, hidden,
+                              version=meta["version"])
         # Reduced precision: the weights and the network's activations are cast; features,
         # normalisation and the returned millimetres stay float32.
         self.params = jax.tree_util.tree_map(lambda w: jnp.asarray(w, dtype=dtype), params)
@@ -298,7 +307,8 @@ class Predictor:
         L, e = self.spec.n_loads, self.spec.material_dim + self.spec.geometry_dim
         dim = LOAD_FEATURES * L + e
         k = modes.shape[0]
-        params = _read_params(d / "params.npz", dim, hidden, out=3 * k * L)
+        params = _read_params(d / "params.npz", dim, hidden, out=3 * k * L,
+                              version=meta["version"], last="coefficients")
         st = meta.get("stats")
         try:
             x_mean = np.asarray(st["x_mean"], dtype=np.float32)

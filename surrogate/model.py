@@ -1,6 +1,8 @@
 """The node-wise MLP: normalised features (dim,) -> normalised displacement (3,).
 
-Dense layers act on the last axis, so the same module maps one node or a batch of nodes.
+Dense layers act on the last axis, so the same module maps one node or a batch of nodes. The
+layers are named ``hidden_0`` ... ``hidden_{n-1}`` and ``output``: the names of the exported
+parameters (``params.npz``), independent of flax's automatic naming.
 """
 
 from __future__ import annotations
@@ -18,8 +20,8 @@ class NodeMLP(nn.Module):
 
     @nn.compact
     def __call__(self, x, *, train: bool = False):
-        for width in self.hidden:
-            x = nn.relu(nn.Dense(width)(x))
+        for i, width in enumerate(self.hidden):
+            x = nn.relu(nn.Dense(width, name=f"hidden_{i}")(x))
             if self.dropout > 0:
                 x = nn.Dropout(self.dropout, deterministic=not train)(x)
-        return nn.Dense(3)(x)
+        return nn.Dense(3, name="output")(x)

@@ -53,7 +53,7 @@ def test_training_and_inference_build_the_same_features():
     case, used by the exported predictor) must lay out identical feature vectors."""
     import jax.numpy as jnp
 
-    from surrogate.train import batch_features
+    from surrogate.nodewise import batch_features
 
     rng = np.random.default_rng(0)
     pts = rng.normal(size=(9, 3))
@@ -69,19 +69,57 @@ def test_training_and_inference_build_the_same_features():
     np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-6)
 
 
-def test_learning_rate_rules_follow_the_config():
+def test_learning_rate_rules_are_optax_transforms():
     """plateau: x0.1 once ``lr_patience`` epochs pass without a relative improvement of 1e-4
-    (counted again from zero after each reduction); decay: / 1.5 per epoch."""
+    (counted again from zero after each reduction), judged on the mean value of an epoch of
+    steps; decay: / 1.5 per epoch; read from the optimiser state, never written into it."""
     import jax.numpy as jnp
 
     from surrogate.config import get_config
-    from surrogate.train import LearningRateRule
+    from surrogate.engine import learning_rate_now, optimizer
 
-    rule = LearningRateRule(get_config("small", learning_rate=1e-3, lr_patience=2),
-                            {"w": jnp.zeros(2)})
-    lrs = [rule.update(v) for v in (1.0, 0.9, 0.95, 0.95, 0.95, 0.95, 0.8)]
+    steps = 3
+    cfg = get_config("small", learning_rate=1e-3, lr_patience=2)
+    tx = optimizer(cfg, steps)
+    params = {"w": jnp.ones(2)}
+    state = tx.init(params)
+    lrs = []
+    for epoch, v in enumerate((1.0, 0.9, 0.95, 0.95, 0.95, 0.95, 0.8)):
+        for _ in range(steps):
+            _, state = tx.update({"w": jnp.ones(2)}, state, params, value=jnp.float32(v))
+        lrs.append(learning_rate_now(cfg, state, (epoch + 1) * steps, steps))
     np.testing.assert_allclose(lrs, [1e-3, 1e-3, 1e-3, 1e-4, 1e-4, 1e-5, 1e-5], rtol=1e-6)
-    decay = LearningRateRule(get_config("small", learning_rate=1e-3, lr_rule="decay"),
-                             {"w": jnp.zeros(2)})
-    np.testing.assert_allclose([decay.update(1.0) for _ in range(3)],
-                               [1e-3 / 1.5, 1e-3 / 1.5**2, 1e-3 / 1.5**3])
+    decay = get_config("small", learning_rate=1e-3, lr_rule="decay")
+    assert [learning_rate_now(decay, None, k * steps, steps) for k in (1, 2, 3)] == \
+        [1e-3 / 1.5, 1e-3 / 1.5**2, 1e-3 / 1.5**3]
+    # the update a decay optimiser applies in the second epoch is the rate's: Adam's first
+    # step moves each weight by the learning rate (sign of the gradient)
+    tx = optimizer(decay, steps)
+    state = tx.init(params)
+    moves = []
+    for _ in range(2 * steps):
+        u, state = tx.update({"w": jnp.ones(2)}, state, params)
+        moves.append(float(-u["w"][0]))
+    np.testing.assert_allclose(moves[:steps], [1e-3] * steps, rtol=1e-4)
+    np.testing.assert_allclose(moves[steps:], [1e-3 / 1.5] * steps, rtol=1e-4)
+
+
+def test_weight_decay_is_the_gradient_of_the_l2_penalty_on_the_weight_matrices():
+    """l2 > 0 adds l2 w to the gradient of every kernel (the penalty l2 |w|^2 / 2), not to
+    biases: with a zero loss gradient and plain SGD-like scaling checked through Adam's
+    first step direction."""
+    import jax.numpy as jnp
+    import optax
+
+    from surrogate.config import get_config
+    from surrogate.engine import kernel_mask
+
+    params = {"layer": {"kernel": jnp.array([2.0, -3.0]), "bias": jnp.array([5.0])}}
+    mask = kernel_mask(params)
+    assert mask == {"layer": {"kernel": True, "bias": False}}
+    tx = optax.add_decayed_weights(0.1, mask=kernel_mask)
+    g = {"layer": {"kernel": jnp.zeros(2), "bias": jnp.zeros(1)}}
+    u, _ = tx.update(g, tx.init(params), params)
+    np.testing.assert_allclose(u["layer"]["kernel"], [0.2, -0.3], rtol=1e-6)
+    np.testing.assert_allclose(u["layer"]["bias"], [0.0])
+    assert get_config("small", l2=0.1)["l2"] == 0.1

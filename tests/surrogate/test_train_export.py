@@ -113,10 +113,14 @@ def test_node_subsets_follow_each_request(run):
 
 def test_model_files_are_plain(run):
     d = run[0] / "model"
+    meta = json.loads((d / "model.json").read_text())
     with np.load(d / "params.npz", allow_pickle=False) as z:
         assert all(z[k].dtype == np.float32 for k in z.files)
-    meta = json.loads((d / "model.json").read_text())
-    assert meta["format"] == "liverfem-surrogate" and meta["version"] == 2
+        n = len(meta["config"]["hidden"])
+        assert sorted(z.files) == sorted([f"hidden_{i}/{w}" for i in range(n)
+                                          for w in ("kernel", "bias")]
+                                         + ["output/kernel", "output/bias"])
+    assert meta["format"] == "liverfem-surrogate" and meta["version"] == 3
     assert meta["design"] == "nodewise"
 
 
@@ -130,12 +134,18 @@ def test_version_1_models_still_load_as_nodewise(run, tmp_path):
     meta = json.loads((d / "model.json").read_text())
     meta.pop("design")
     meta["version"] = 1
+    # before version 3 the layers had flax's automatic names Dense_0, Dense_1, ...
+    n = len(meta["config"]["hidden"])
+    old = {f"hidden_{i}": f"Dense_{i}" for i in range(n)} | {"output": f"Dense_{n}"}
+    with np.load(d / "params.npz") as z:
+        arrays = {f"{old[k.split('/')[0]]}/{k.split('/')[1]}": z[k] for k in z.files}
+    np.savez(d / "params.npz", **arrays)
     (d / "model.json").write_text(json.dumps(meta))
     f = np.array([[0.0, 0.1, -0.3]])
     np.testing.assert_allclose(load_predictor(d)(f, [3]), load_predictor(run[0] / "model")(f, [3]),
                                rtol=1e-6, atol=1e-7)
     for key, value, message in (("design", "graph", "design 'graph'"),
-                                ("version", 3, "version 3")):
+                                ("version", 4, "version 4")):
         (d / "model.json").write_text(json.dumps({**meta, key: value}))
         with pytest.raises(ValueError, match=message):
             load_predictor(d)
@@ -280,7 +290,7 @@ def test_predictor_is_finite_at_the_corners_and_flags_inputs_outside_its_range(t
     ds = SimpleNamespace(forces=np.array([[[0.0, 0.0, 0.4]]]), extra=extra, scene_name="t",
                          spec=spec, points=[pts, pts], fixed=[np.arange(5)] * 2,
                          out_nodes=[np.arange(40)] * 2)
-    export_model(tmp_path / "m", jax.device_get(params["params"]), norm,
+    export_model(tmp_path / "m", (jax.device_get(params["params"]), norm),
                  get_config("small", hidden=[16]), ds)
     predict = load_predictor(tmp_path / "m")
     geometry = (pts, np.arange(5))
@@ -307,8 +317,8 @@ def test_predictor_is_finite_at_the_corners_and_flags_inputs_outside_its_range(t
 
 
 @pytest.mark.parametrize("tamper, message", [
-    ("nan_weight", r"params.npz: 'Dense_0/kernel' contains NaN"),
-    ("wrong_shape", r"params.npz: 'Dense_1/kernel' has shape .* the config says"),
+    ("nan_weight", r"params.npz: 'hidden_0/kernel' contains NaN"),
+    ("wrong_shape", r"params.npz: 'hidden_1/kernel' has shape .* the config says"),
     ("truncated_json", r"model.json: not valid JSON"),
     ("array_json", r"model.json: expected a JSON object, got list"),
     ("string_version", r"model.json: version '1', this code reads 1"),
@@ -327,9 +337,9 @@ def test_tampered_model_files_are_refused_at_load(run, tmp_path, tamper, message
         with np.load(d / "params.npz") as z:
             flat = {k: z[k] for k in z.files}
         if tamper == "nan_weight":
-            flat["Dense_0/kernel"][0, 0] = np.nan
+            flat["hidden_0/kernel"][0, 0] = np.nan
         else:
-            flat["Dense_1/kernel"] = flat["Dense_1/kernel"][:, :-1]
+            flat["hidden_1/kernel"] = flat["hidden_1/kernel"][:, :-1]
         np.savez(d / "params.npz", **flat)
     elif tamper == "truncated_json":
         (d / "model.json").write_text((d / "model.json").read_text()[:100])
@@ -350,7 +360,7 @@ def test_restrict_nodes_keeps_the_targets_of_the_kept_nodes(synth_dir):
     """A surface-only view of a dataset: every sample keeps exactly its rows at the kept nodes
     (checked against the full dataset by node id), and training examples index into it."""
     from surrogate.data import load_dataset, restrict_nodes
-    from surrogate.train import example_index
+    from surrogate.nodewise import example_index
 
     ds = load_dataset(synth_dir, stream=False)
     keep = ds.out_nodes[0][::3][:40]

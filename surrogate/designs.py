@@ -1,0 +1,13 @@
+"""The designs the training engine knows, by the name a config gives (``design = ...``).
+
+A design is an object with ``name``, ``check(ds)``, ``problem(ds, train, val, cfg, rng)`` (an
+:class:`surrogate.engine.Problem`), ``model(problem, params)``, ``predict_samples(ds, model,
+cfg, samples)`` and ``export_parts(model)``; adding one is adding an entry here.
+"""
+
+from __future__ import annotations
+
+from surrogate.basis import Basis
+from surrogate.nodewise import NodeWise
+
+DESIGNS = {d.name: d for d in (NodeWise(), Basis())}

@@ -1,0 +1,110 @@
+"""One training engine for every design: a killed training resumes where it stopped and ends
+where an uninterrupted one ends."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from surrogate import engine
+from surrogate.config import get_config
+from surrogate.data import load_dataset
+from surrogate.train import fit_design
+
+
+class Killed(Exception):
+    pass
+
+
+class KilledAfter(engine.Checkpoint):
+    """A checkpoint whose process dies right after saving epoch ``epoch``."""
+
+    def __init__(self, directory, identity, epoch):
+        super().__init__(directory, identity)
+        self.kill_at = epoch
+
+    def save(self, tree, meta):
+        super().save(tree, meta)
+        if meta["epoch"] == self.kill_at:
+            raise Killed(meta["epoch"])
+
+
+@pytest.mark.parametrize("design, overrides", [
+    ("small", {"hidden": [16, 16], "epochs": 5, "early_stopping": 10, "batch_size": 256}),
+    ("basis", {"hidden": [16], "modes": 8, "epochs": 6, "early_stopping": 10,
+               "batch_size": 16}),
+])
+def test_killed_fit_resumes_and_ends_where_an_uninterrupted_fit_ends(synth_dir, tmp_path,
+                                                                      design, overrides):
+    ds = load_dataset(synth_dir, stream=False)
+    cfg = get_config(design, **overrides)
+    train = np.arange(ds.n_samples - 9)
+    whole, hist = fit_design(ds, train, cfg, 3, "", lambda m: None)
+    ck = engine.Checkpoint(tmp_path / "ck", "id")
+    with pytest.raises(Killed):
+        fit_design(ds, train, cfg, 3, "", lambda m: None, KilledAfter(ck.dir, "id", 2))
+    assert json.loads(ck.meta_file.read_text())["epoch"] == 2
+    said = []
+    resumed, hist2 = fit_design(ds, train, cfg, 3, "", said.append, ck)
+    assert said[0].startswith("resumed after epoch 2"), said[0]
+    assert [h["epoch"] for h in hist2] == [h["epoch"] for h in hist]
+    np.testing.assert_allclose([h["val_loss"] for h in hist2], [h["val_loss"] for h in hist],
+                               rtol=1e-4)
+    a = whole[0] if design == "small" else whole.params
+    b = resumed[0] if design == "small" else resumed.params
+    flat_a = np.concatenate([np.ravel(v) for v in _leaves(a)])
+    flat_b = np.concatenate([np.ravel(v) for v in _leaves(b)])
+    np.testing.assert_allclose(flat_b, flat_a, rtol=1e-4, atol=1e-6 * np.abs(flat_a).max())
+
+
+def _leaves(tree):
+    import jax
+
+    return [np.asarray(x) for x in jax.tree_util.tree_leaves(tree)]
+
+
+def test_checkpoint_of_another_configuration_is_not_used(synth_dir, tmp_path):
+    ds = load_dataset(synth_dir, stream=False)
+    cfg = get_config("small", hidden=[8], epochs=3, batch_size=256)
+    train = np.arange(ds.n_samples - 9)
+    fit_design(ds, train, cfg, 0, "", lambda m: None, engine.Checkpoint(tmp_path, "one"))
+    said = []
+    fit_design(ds, train, cfg, 0, "", said.append, engine.Checkpoint(tmp_path, "two"))
+    assert not any("resumed" in m for m in said)
+    assert json.loads((tmp_path / "state.json").read_text())["identity"] == "two"
+
+
+@pytest.mark.slow
+def test_a_training_killed_by_sigkill_resumes_from_the_command_line(synth_dir, tmp_path):
+    """The real thing: `python -m surrogate train` killed with SIGKILL during the second fold,
+    run again: it reports the first fold done and resumes the second, and finishes with the
+    metrics of a run never interrupted."""
+    run = tmp_path / "run"
+    cmd = [sys.executable, "-m", "surrogate", "train", "--data", str(synth_dir), "--run",
+           str(run), "--config", "small", "hidden=[16,16]", "epochs=8", "folds=3",
+           "early_stopping=20", "batch_size=512", "final_fit=false"]
+    env = {**os.environ, "JAX_PLATFORMS": "cpu"}
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    target = run / "checkpoints" / "fold1" / "state.json"
+    deadline = time.monotonic() + 300
+    while not target.exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert proc.poll() is None, proc.communicate()[1].decode()[-2000:]
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    again = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stderr[-2000:]
+    assert "fold 1/3 done before" in again.stderr
+    assert "fold 2/3 resumed after epoch" in again.stderr
+    assert not (run / "checkpoints").exists()  # removed once the run is complete
+    resumed = json.loads((run / "metrics.json").read_text())
+    fresh = subprocess.run(cmd[:7] + [str(tmp_path / "clean")] + cmd[8:], env=env,
+                           capture_output=True, text=True, timeout=600)
+    assert fresh.returncode == 0, fresh.stderr[-2000:]
+    clean = json.loads((tmp_path / "clean" / "metrics.json").read_text())
+    assert resumed["network"]["mee"] == pytest.approx(clean["network"]["mee"], rel=1e-3)
