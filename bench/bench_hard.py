@@ -10,6 +10,7 @@ factors too poor) and seconds, and the
 factorisations relative to the easy case (the issue's bar: <= 1.5x at 1x force).
 
     .venv-solver/bin/python bench/bench_hard.py [--h 5] [--runs 1] [--settings '{"k": v}']
+        [--md docs/solver.md]   # the report (header: machine, date, commit, command)
         [--textbook]   # also the textbook dolfinx solver on the easy case, side by side
         [--elements 16 12]   # also P2 against P1 on the same meshes (easy load)
         [--batch 3]   # also 3 more easy-case simulations on the first one's problem, as a
@@ -33,6 +34,7 @@ from mpi4py import MPI
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_solver as bs  # noqa: E402
+from report import ROOT, capture  # noqa: E402
 
 from fem_sim import Constraint, NodalLoad, OgdenMaterial, OgdenProblem  # noqa: E402
 
@@ -112,7 +114,14 @@ def main() -> int:
                          "small-strain factorisation)")
     ap.add_argument("--elements", type=float, nargs="*", default=None, metavar="H",
                     help="also P2 against P1 on meshes of these sizes (mm)")
+    ap.add_argument("--md", default=str(ROOT / "docs/solver.md"),
+                    help="the report to write (default: docs/solver.md)")
     a = ap.parse_args()
+    with capture(a.md, "Solver: the easy case beside the hard cases and the textbook solver"):
+        return _run(a, ap)
+
+
+def _run(a, ap) -> int:
     variants = {"defaults": {}}
     if a.settings:
         variants["variant"] = json.loads(a.settings)

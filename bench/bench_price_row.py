@@ -5,8 +5,8 @@ runs many simulations on one problem (one liver, material and fixed region): the
 PARDISO's analysis and the small-strain factorisation, the later ones reuse them. This script
 times both on the price list's setting (the real liver, 0.4 N along -z as a patch load, radius
 15 mm, at the price list's load point, its fixed region, Ogden c1 = 4.1e-3 MPa, m1 = 10.06,
-K/mu = 200, 10 load steps unless --steps, each checkout's default Newton tolerance: 1e-6
-since session 15, 1e-9 before), by default on its 2 % row (P2 at 10 mm), and compares
+K/mu = 200, 10 load steps unless --steps, each checkout at its own default Newton
+tolerance), by default on its 2 % row (P2 at 10 mm), and compares
 variants in the same run, their runs interleaved so that they share the machine's load:
 
     .venv-solver/bin/python bench/bench_price_row.py [--element p2] [--h 10] [--sims 3]

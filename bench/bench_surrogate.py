@@ -1,6 +1,6 @@
 """Surrogate inference latency and training throughput on this CPU.
 
-    .venv-train/bin/python bench/bench_surrogate.py [--calls 200]
+    .venv-train/bin/python bench/bench_surrogate.py [--calls 200] [--md docs/inference.md]
 
 Latency: median of --calls jitted predictor calls (after warm-up) through the real exported
 model path (load_predictor), for the whole liver and for the surface only, at the paper's
@@ -10,6 +10,7 @@ network sizes. Weights are random: latency does not depend on their values.
 from __future__ import annotations
 
 import argparse
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -27,6 +28,9 @@ from surrogate.features import FeatureSpec
 from surrogate.model import NodeMLP
 from surrogate.nodewise import nodewise_loss
 from surrogate.normalise import Normaliser
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from report import ROOT, capture  # noqa: E402
 
 NETS = {"small (128,128,128)": [128, 128, 128],
         "paper scene 1 (500,300,100,50)": [500, 300, 100, 50],
@@ -65,8 +69,14 @@ def latency(predict, n_nodes, nodes, calls):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--calls", type=int, default=200)
+    ap.add_argument("--md", default=str(ROOT / "docs" / "inference.md"))
     args = ap.parse_args()
-    print(f"JAX {jax.__version__} on {jax.devices()[0].platform}, float32")
+    with capture(args.md, "Surrogate inference latency and training throughput"):
+        _run(args)
+
+
+def _run(args):
+    print(f"JAX {jax.__version__} on {jax.devices()[0].platform}, float32\n")
     print("| network | nodes | latency ms (median) | rate Hz | 25 Hz graphics | 300 Hz haptics |")
     print("|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:

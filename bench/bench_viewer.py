@@ -23,6 +23,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from report import header  # noqa: E402
 
 from liverviz.pictures import pyvista  # noqa: E402
 from surrogate.export import load_predictor  # noqa: E402
@@ -92,7 +94,7 @@ def main() -> int:
     print(text)
     if args.md:
         args.md.write_text(
-            "# Manipulator frame rate (make bench-viewer)\n\n"
+            header("Manipulator frame rate (make bench-viewer)") +
             f"{platform.processor() or platform.machine()}, 2 cores, no GPU: Mesa's software "
             "OpenGL (llvmpipe) through EGL, off-screen, window "
             f"{args.size[0]} x {args.size[1]}; the default pull sequence, {args.frames} "

@@ -29,7 +29,6 @@ CONFIGS = {
     "euler": {"predictor_order": 1},
     "extrapolate": {"predictor": "extrapolate"},
     "plain": {"predictor": "previous", "chord_contraction": 0.0},
-    "lagged": {"lag_factorization": True},
     "gamg": {"linear_solver": "gamg", "max_krylov": 500, "krylov_rtol": 1e-12},
     "fallback64": {"max_krylov": 1},
     "no_line_search": {"line_search": False},

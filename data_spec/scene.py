@@ -22,6 +22,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+from data_spec import solver_rules
 from data_spec.checks import is_int
 from data_spec.scene_schema import (  # noqa: F401  (SCENE_SCHEMA_VERSION, schema_table: API)
     _CASE_KEYS,
@@ -287,12 +288,19 @@ def _check_steps(st: dict, problems: list[str]) -> None:
 
 
 def _check_solver(sv: dict, problems: list[str]) -> None:
-    if sv.get("element") == "anp" and (sv.get("degree") != 1
-                                       or sv.get("quadrature_degree", 1) != 1):
-        problems.append("solver.element: 'anp' is a P1 element with one quadrature point "
-                        f"(degree = 1, quadrature_degree = 1), got degree = "
-                        f"{sv.get('degree')!r}, quadrature_degree = "
-                        f"{sv.get('quadrature_degree', 1)!r}")
+    keys = ("degree", "linear_solver", "factorization", "petsc_options")
+    if all(k in sv for k in keys) and not any(p.startswith(("solver.degree",
+                                                            "solver.linear_solver",
+                                                            "solver.factorization",
+                                                            "solver.element",
+                                                            "solver.quadrature_degree",
+                                                            "solver.petsc_options"))
+                                            for p in problems):
+        # the one rule table of element, degree, solver and factorisation (any rank count
+        # here; fem_sim generate checks its --ranks-per-sim against the same table)
+        problems += solver_rules.problems(sv.get("element", "lagrange"), sv["degree"],
+                                          sv.get("quadrature_degree"), sv["linear_solver"],
+                                          sv["factorization"], sv["petsc_options"])
     if "quadrature_degree" not in sv and sv.get("degree") in (1, 2):
         # P1 with one-point quadrature is FEBio's tet4; P2 integrates the (nonlinear) integrand
         # with a degree-2 rule, enough for its linear strains at the nodes of the reference test.

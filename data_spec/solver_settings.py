@@ -30,13 +30,9 @@ def _setting(default: Any, doc: str, *, choices: tuple[str, ...] | None = None,
 class SolverSettings:
     """Newton, load stepping and linear-solver settings of one :class:`OgdenProblem`."""
 
-    # 1e-6 (1e-9 until session 15): measured against rtol 1e-10 (bench/bench_hard.py
-    # --settings '{"rtol": 1e-6}'), the displacement moves by <= 9.1e-8 (L2, relative) on the
-    # easy, phantom and softest cases, 8.7e-7 at 2x and 2.3e-6 at 5x the force; on the price
-    # list's patch loads (docs/tradeoff_fem.md) by <= 3.2e-9 of max |u| from rtol 1e-9 in 10
-    # load steps, and runs in 1-5 steps by <= 4.4e-7 from those: far below the discretisation
-    # error of any mesh there (>= 0.3 %), for up to two factorisations and ~10 back-solves
-    # fewer per simulation (0.83-0.89x the time of P2 at 10 mm, bench/bench_price_row.py).
+    # The default's cost in accuracy against tighter tolerances is measured in the price list
+    # (docs/tradeoff_fem.md, tolerance rows) and by bench/bench_hard.py --settings: orders of
+    # magnitude below the discretisation error of any mesh there.
     rtol: float = _setting(1e-6, "Newton relative residual tolerance: |R| <= rtol * "
                            "max(lambda |f|, |R| at the predictor)", lo=0.0, strict=True,
                            scene=True)
@@ -45,13 +41,15 @@ class SolverSettings:
     max_iterations: int = _setting(25, "Newton iterations per attempt", lo=1, scene=True)
     max_cutbacks: int = _setting(8, "increment halvings allowed per output step", lo=0,
                                  scene=True)
-    linear_solver: str = _setting("mumps", "mumps: direct (symmetric); gamg: CG + GAMG, "
-                                  "rigid-body modes", choices=("mumps", "gamg"), scene=True)
+    linear_solver: str = _setting("direct", "direct: a symmetric factorisation (which one: "
+                                  "factorization); gamg: CG + GAMG with rigid-body modes",
+                                  choices=("direct", "gamg"), scene=True)
     factorization: str = _setting(
-        "auto", "mumps: on one rank pardiso (float32 Cholesky by MKL PARDISO, METIS, "
+        "auto", "direct: on one rank pardiso (float32 Cholesky by MKL PARDISO, METIS, "
         "GMRES-refined; MUMPS' LDL^T for a matrix that is not positive definite), single "
         "(float32 LDL^T by MUMPS) or double (float64); petsc (PETSc's MUMPS); auto: pardiso "
-        "on one rank when MKL is installed, else single; petsc on several",
+        "on one rank when MKL is installed, else single; petsc on several. The combinations "
+        "with element, degree and ranks: data_spec/solver_rules.py",
         choices=("auto", "pardiso", "single", "double", "petsc"), scene=True)
     predictor: str = _setting(
         "hermite", "start of each load step: Hermite polynomial through the last converged "
@@ -62,14 +60,10 @@ class SolverSettings:
                               "an indefinite tangent still factorises, and a solve the "
                               "factors cannot give falls back to float64 with pivoting)")
     petsc_options: dict = _setting({}, "extra PETSc options for PETSc's solvers (factorization "
-                                   "petsc, gamg); a pc_type here selects PETSc's path",
-                                   scene=True)
-    lag_factorization: bool = _setting(False, "GMRES with a lagged factorisation as "
-                                       "preconditioner (PETSc's MUMPS)")
+                                   "petsc, gamg); a pc_type here selects PETSc's path; an "
+                                   "option PETSc never reads is reported", scene=True)
     krylov_rtol: float = _setting(1e-10, "relative tolerance of each linear solve", lo=0.0,
                                   strict=True)
-    refactor_after: int = _setting(8, "lagged factorisation: refactorise after a solve that "
-                                   "needed more Krylov iterations", lo=1)
     max_krylov: int = _setting(60, "Krylov iterations before a solve counts as failed", lo=1)
     predictor_order: int = _setting(3, "hermite: converged points used (1 = Euler); tangent: "
                                     "tangents used", lo=1)
@@ -99,11 +93,6 @@ class SolverSettings:
                                       "sub-increments that double after easy ones; later "
                                       "increments are sized by the predictor's error)",
                                       lo=0.0, strict=True, hi=1.0)
-    first_step_stiffening: float = _setting(
-        0.0, "a smaller first increment where the small-strain solution (predictor hermite, "
-        "no prescribed displacements) gives max(|m_k - 2|, 1) * max |grad u| above this (the "
-        "Ogden law's stiffening over the increment; 1 helps large forces on P1 but sends the "
-        "Hermite predictor astray on P2, see README); 0: always first_increment", lo=0.0)
 
     @classmethod
     def from_dict(cls, values: dict | None, where: str = "settings") -> SolverSettings:
@@ -113,6 +102,11 @@ class SolverSettings:
         if found:
             raise ValueError("; ".join(found))
         return cls(**values)
+
+
+# Values that were renamed: the message says the new name.
+RENAMED = {("linear_solver", "mumps"): " ('mumps' is now 'direct'; factorization says which "
+                                       "factorisation runs)"}
 
 
 def fields(scene_only: bool = False) -> list[dataclasses.Field]:
@@ -129,7 +123,10 @@ def check(f: dataclasses.Field, v: Any) -> str | None:
     m = f.metadata
     kind = type(default(f))
     if m["choices"]:
-        return None if v in m["choices"] else "one of " + ", ".join(map(repr, m["choices"]))
+        if v in m["choices"]:
+            return None
+        hint = RENAMED.get((f.name, v), "")
+        return "one of " + ", ".join(map(repr, m["choices"])) + hint
     if kind is bool:
         return None if isinstance(v, bool) else "true or false"
     if kind is dict:

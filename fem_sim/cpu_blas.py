@@ -2,7 +2,7 @@
 
 Why: Debian's OpenBLAS (and the one in numpy's wheels) chooses its kernels at load time from the
 CPU's family and model numbers. Virtual machines often report a generic model ("Intel(R) Xeon(R)
-Processor"), and then OpenBLAS falls back to its Prescott (SSE3) kernels: measured on such a
+Processor"), and then OpenBLAS falls back to its Prescott (SSE3) kernels: on such a
 2-core VM with AVX-512 (``bench/bench_jacobian.py`` run with ``OPENBLAS_CORETYPE=Prescott`` and
 without), a MUMPS factorisation takes about twice as long with the SSE3 kernels. Setting
 ``OPENBLAS_CORETYPE`` from the instruction sets the CPU reports in ``/proc/cpuinfo`` picks the

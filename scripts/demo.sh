@@ -7,7 +7,9 @@ SCENE=data_spec/scenes/demo_scene1.toml
 OUT=runs/demo
 start=$(date +%s)
 echo "== 1/5 generate: mpirun -n $NP fem_sim generate $SCENE --out $OUT/data"
+gen_start=$(date +%s)
 mpirun -n "$NP" "$SPY" -m fem_sim generate "$SCENE" --out "$OUT/data"
+gen_seconds=$(( $(date +%s) - gen_start ))
 echo "== 2/5 validate"
 "$SPY" -m data_spec validate "$OUT/data"
 "$SPY" -m fem_sim summary "$OUT/data"
@@ -20,4 +22,6 @@ echo "== 5/5 look: surrogate.viewer $OUT/train --offscreen (frames + GIF), --com
 "$TPY" -m surrogate.viewer "$OUT/train" --compare --data "$OUT/data" --offscreen --out "$OUT/frames"
 echo "pictures: $OUT/data/summary.png, $OUT/frames/manipulator.gif, $OUT/frames/compare_sim*.png"
 echo "the manipulator (a window; under Xvfb on a server): $TPY -m surrogate.viewer $OUT/train"
-echo "demo finished in $(( $(date +%s) - start )) s"
+"$TPY" scripts/demo_report.py --data "$OUT/data" --run "$OUT/train" \
+    --generate-seconds "$gen_seconds" --total-seconds "$(( $(date +%s) - start ))"
+echo "demo finished in $(( $(date +%s) - start )) s (report: docs/demo.md)"

@@ -32,6 +32,7 @@ from data_spec import (
     read_geometry,
     shard_path,
     shard_problems,
+    solver_rules,
     write_geometry,
     write_shard,
 )
@@ -41,6 +42,7 @@ from fem_sim.batch import cases as cs
 from fem_sim.batch.lock import DirectoryLock, LockedError
 from fem_sim.geometry.quality import mesh_problems
 from fem_sim.geometry.source import GeometryError, scene_geometries
+from fem_sim.solver.results import WorkCounts
 
 log = logging.getLogger(__name__)
 
@@ -109,10 +111,13 @@ def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool,
     try:
         scene = load_scene(scene_file)
         todo = parse_range(only, scene.n_simulations)  # a bad --only writes nothing
-        if ranks_per_sim > 1 and scene["solver"].get("element") == "anp":
-            raise SceneError(scene_file, [f"solver.element: 'anp' runs one rank per "
-                                          f"simulation (the serial factorisation), got "
-                                          f"--ranks-per-sim {ranks_per_sim}"])
+        sv = scene["solver"]
+        found = solver_rules.problems(sv.get("element", "lagrange"), sv["degree"],
+                                      sv.get("quadrature_degree"), sv["linear_solver"],
+                                      sv["factorization"], sv["petsc_options"],
+                                      ranks=ranks_per_sim)
+        if found:  # the scene allows it on some rank count, not on this one
+            raise SceneError(scene_file, found)
         _LOCK = DirectoryLock(out).acquire()
         for tmp in leftover_temporaries(out):  # we hold the lock: no writer is running
             log.info("removing %s, left by an interrupted writer", tmp)
@@ -250,11 +255,7 @@ def run_case(problem, scene: Scene, case: cs.Case, g: Geometry, fixed: np.ndarra
                   "linear_solver": problem.settings.linear_solver,
                   "factorization": problem.factorization,
                   "ranks": problem.comm.size,
-                  "factorizations": sol.factorizations if sol else 0,
-                  "krylov_iterations": sol.krylov_iterations if sol else 0,
-                  "double_fallbacks": sol.double_fallbacks if sol else 0,
-                  "cholesky_fallbacks": sol.cholesky_fallbacks if sol else 0,
-                  "reused_factorizations": sol.reused_factorizations if sol else 0,
+                  **(sol if sol is not None else WorkCounts()).counts(),
                   "total_wall_time": time.perf_counter() - t0}
     if not np.all(np.isfinite(disp)):  # never NaN in a shard
         keep = np.all(np.isfinite(disp), axis=(1, 2))

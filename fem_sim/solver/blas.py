@@ -1,12 +1,11 @@
 """OpenBLAS's thread count, set for a scope.
 
-OpenBLAS threads the level-1 operations of long vectors (GMRES' dot products and norms at 71k
-unknowns), and its idle threads then spin for a while before they sleep, on the cores that the
-OpenMP kernels (tetrahedra, Ogden points) and PARDISO want next. Measured on the real liver
-(P2 at 10 mm, 71k unknowns, two threads, one run each): the same simulation 14.1 s with
-OpenBLAS on two threads, 13.3 s on one; the internal forces 7.7 ms a pass instead of 2.5 ms.
-So the load-step loop runs OpenBLAS on one thread (:func:`threads`), and MUMPS' factorisations,
-whose dense fronts are level-3 BLAS, get the process's own count back (:func:`outer`).
+OpenBLAS threads the level-1 operations of long vectors (GMRES' dot products and norms), and its
+idle threads then spin for a while before they sleep, on the cores that the OpenMP kernels
+(tetrahedra, Ogden points) and PARDISO want next: a simulation is slower with OpenBLAS on all
+cores inside the load-step loop than on one. So the load-step loop runs OpenBLAS on one thread
+(:func:`threads`), and MUMPS' factorisations, whose dense fronts are level-3 BLAS, get the
+process's own count back (:func:`outer`).
 
 Without OpenBLAS (another BLAS, or none found) both are no-ops.
 """

@@ -87,20 +87,6 @@ class Equations:
         local = float(np.abs(gap).max()) if gap.size else 0.0
         return self.disc.comm.allreduce(local, op=MPI.MAX)
 
-    def max_gradient(self, v: np.ndarray) -> float:
-        """Largest singular value of grad v over the quadrature points (v on the owned dofs;
-        u is left as it was, the point values are not touched).
-        """
-        saved = self.u.x.array.copy()
-        self.u.x.array[:] = 0.0
-        self.u.x.array[: v.size] = v
-        self.scatter()
-        F = self.assembler.deformation_gradients().reshape(-1, 3, 3)
-        self.u.x.array[:] = saved
-        H = F - np.eye(3)
-        local = float(np.linalg.norm(H, ord=2, axis=(1, 2)).max()) if H.size else 0.0
-        return self.disc.comm.allreduce(local, op=MPI.MAX)
-
     def jacobian(self, lift: bool) -> Jacobian:
         """J at u and rhs = -R. With ``lift``, the Newton update also closes the constraint
         gap (see :meth:`constraint_gap`), accounted for in the free rows.

@@ -15,9 +15,9 @@ Implementations: :class:`SerialLDLTSolver` (MKL PARDISO's Cholesky, :mod:`fem_si
 or MUMPS' LDL^T through its C interface, :mod:`fem_sim.solver.ldlt`, with METIS ordering,
 float32 factors refined by GMRES; one process; it exists because Debian's MUMPS has no METIS
 and PETSc 3.18 gives a user ordering only to LU) and
-:class:`PetscSolver` (PETSc KSP: MUMPS LDL^T, GMRES with a lagged factorisation, or CG + GAMG
-with the rigid-body near-nullspace; any number of processes). :func:`make_linear_solver`
-picks one from the settings.
+:class:`PetscSolver` (PETSc KSP: MUMPS' Cholesky, or CG + GAMG with the rigid-body
+near-nullspace; any number of processes). :func:`make_linear_solver` picks one from the
+settings, through the one rule table :mod:`data_spec.solver_rules`.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ import logging
 import numpy as np
 from petsc4py import PETSc
 
+from data_spec import solver_rules
 from fem_sim.solver import blas, ldlt, pardiso, tet
 from fem_sim.solver.assembly import Jacobian
 from fem_sim.solver.results import LinearCounts, StepFailure
@@ -34,6 +35,35 @@ from fem_sim.solver.settings import SolverSettings
 
 log = logging.getLogger(__name__)
 Factors = ldlt.SerialLDLT | pardiso.PardisoCholesky  # one interface: factor, solve, ...
+
+
+_petsc_lib = None
+
+
+def _option_used(name: str) -> bool:
+    """Whether PETSc read option ``name`` (no leading dash; PetscOptionsUsed on the global
+    database, through the libpetsc this process loaded); True when that cannot be asked.
+    """
+    global _petsc_lib
+    import ctypes
+
+    if _petsc_lib is None:
+        _petsc_lib = False
+        try:
+            with open("/proc/self/maps") as fh:
+                paths = {ln.split()[-1] for ln in fh if "libpetsc" in ln and ".so" in ln}
+            for path in sorted(paths):
+                lib = ctypes.CDLL(path)
+                if hasattr(lib, "PetscOptionsUsed"):
+                    _petsc_lib = lib
+                    break
+        except OSError:
+            pass
+    if not _petsc_lib:
+        return True
+    used = ctypes.c_int(0)
+    err = _petsc_lib.PetscOptionsUsed(None, name.encode(), ctypes.byref(used))
+    return err != 0 or bool(used.value)
 
 
 def _ghost_update(vec) -> None:
@@ -102,6 +132,10 @@ class SerialLDLTSolver(LinearSolver):
     def __init__(self, settings: SolverSettings, precision: str):
         super().__init__(settings)
         self.name = precision
+        if settings.petsc_options:  # the rule table allows no pc_type here, so none is read
+            log.warning("petsc_options %s: have no effect, the serial factorisation %r runs "
+                        "(PETSc's solvers run with factorization = 'petsc' or linear_solver "
+                        "= 'gamg')", sorted(settings.petsc_options), precision)
         # by (slot, precision); each keeps its analysis. Slot "work" holds Newton's
         # factorisations, slot "recurring" the one of solve_recurring, kept across simulations.
         self._ldlts: dict[tuple[str, str], Factors] = {}
@@ -204,9 +238,9 @@ class SerialLDLTSolver(LinearSolver):
 
 
 class PetscSolver(LinearSolver):
-    """PETSc's KSP on the assembled PETSc matrix: MUMPS LDL^T ("petsc"), GMRES with a lagged
-    MUMPS factorisation as preconditioner ("lagged"), or CG + GAMG ("gamg"); any KSP/PC from
-    ``petsc_options``. Collective on the matrix's communicator.
+    """PETSc's KSP on the assembled PETSc matrix: MUMPS' Cholesky ("petsc") or CG + GAMG
+    ("gamg"); any KSP/PC from ``petsc_options`` (an option PETSc never reads is reported).
+    Collective on the matrix's communicator.
     """
 
     def __init__(self, settings: SolverSettings, comm, prefix: str,
@@ -215,26 +249,20 @@ class PetscSolver(LinearSolver):
         self.comm, self.prefix = comm, prefix
         self.coordinates = coordinates  # of the owned dof blocks: GAMG's rigid-body modes
         s = settings
-        self.lagged = s.linear_solver == "mumps" and s.lag_factorization
-        self.name = "none" if s.linear_solver != "mumps" else "petsc"
-        self.direct = s.linear_solver == "mumps" and not s.lag_factorization
+        self.name = "none" if s.linear_solver == "gamg" else "petsc"
+        self.direct = s.linear_solver == "direct"
         self.solves_near = self.direct and "ksp_type" not in s.petsc_options
         self._ksp = None
-        self._Pmat = None
         self._factorized = False
-        self._refactor_next = False
+        self.unused_options: list[str] = []  # petsc_options PETSc never read (after a solve)
 
     def reset(self) -> None:
         super().reset()
-        self._Pmat = None  # a new material: the old factorisation is no preconditioner for it
         self._factorized = False
 
     @property
     def has_factorization(self) -> bool:
         return self._factorized
-
-    def invalidate(self) -> None:
-        self._refactor_next = True
 
     def _get_ksp(self, A) -> PETSc.KSP:
         if self._ksp is not None:
@@ -243,9 +271,8 @@ class PetscSolver(LinearSolver):
         ksp = PETSc.KSP().create(self.comm)
         ksp.setOptionsPrefix(self.prefix)
         opts = PETSc.Options()
-        if s.linear_solver == "mumps":
-            defaults = {"ksp_type": "gmres" if s.lag_factorization else "preonly",
-                        "ksp_gmres_restart": 100,
+        if s.linear_solver == "direct":
+            defaults = {"ksp_type": "preonly",
                         "pc_type": "cholesky", "pc_factor_mat_solver_type": "mumps",
                         "mat_mumps_icntl_14": 200}
         else:
@@ -268,40 +295,32 @@ class PetscSolver(LinearSolver):
         A = J.petsc()
         ksp = self._get_ksp(A)
         ksp.setTolerances(rtol=rtol, atol=0.0, max_it=s.max_krylov)
-        refactor = not self.lagged or self._Pmat is None or self._refactor_next
-        self._refactor_next = False
-        if self.lagged:
-            if refactor:
-                if self._Pmat is None:
-                    self._Pmat = A.duplicate(copy=True)
-                else:
-                    A.copy(self._Pmat, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-                self.counts.factorizations += 1
-            ksp.setOperators(A, self._Pmat)
-        else:
-            ksp.getPC().setReusePreconditioner(False)  # a new factorisation of this J
-            ksp.setOperators(A, A)
-            self.counts.factorizations += 1
+        ksp.getPC().setReusePreconditioner(False)  # a new factorisation of this J
+        ksp.setOperators(A, A)
+        self.counts.factorizations += 1
         with blas.outer():  # MUMPS' factorisation: level-3 BLAS
             ksp.solve(rhs, du)
         its, reason = ksp.getIterationNumber(), ksp.getConvergedReason()
         self.counts.krylov_iterations += its
-        if self.lagged and reason < 0 and not refactor:
-            # The lagged factorisation is too far off: refactorise now and solve again.
-            A.copy(self._Pmat, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-            self.counts.factorizations += 1
-            ksp.setOperators(A, self._Pmat)
-            with blas.outer():  # MUMPS' factorisation: level-3 BLAS
-                ksp.solve(rhs, du)
-            its, reason = ksp.getIterationNumber(), ksp.getConvergedReason()
-            self.counts.krylov_iterations += its
+        if not self._factorized:
+            self._report_unused_options()
         if reason < 0:
             raise StepFailure(f"linear solver failed (PETSc KSP reason {reason} after {its} "
                               "iterations)")
-        if self.lagged and its > s.refactor_after:
-            self._refactor_next = True
         self._factorized = True
         _ghost_update(du)
+
+    def _report_unused_options(self) -> None:
+        """After the first solve every option PETSc uses has been read: warn (rank 0) about
+        the user's petsc_options it never read, a typo or an option of another solver.
+        """
+        unused = [k for k in self.settings.petsc_options
+                  if not _option_used(f"{self.prefix}{k}")]
+        self.unused_options = unused
+        if unused and self.comm.rank == 0:
+            log.warning("petsc_options %s: never read by PETSc (misspelt, or not an option "
+                        "of the solver that runs); they have no effect",
+                        ", ".join(repr(k) for k in unused))
 
     def back_solve(self, rhs, du) -> bool:
         """A solve with the operators as they are: for a direct KSP a back-solve with the kept
@@ -362,25 +381,25 @@ def _rigid_body_modes(A, x: np.ndarray, comm):
     return PETSc.NullSpace().create(vectors=vecs, comm=comm)
 
 
-def factorization_mode(settings: SolverSettings, comm_size: int) -> str | None:
-    """"pardiso"/"single"/"double" when the serial factorisations apply, else None (PETSc's
-    KSP).
+def factorization_mode(settings: SolverSettings, comm_size: int, element: str = "lagrange",
+                       degree: int = 1, quadrature_degree: int | None = None) -> str | None:
+    """"pardiso"/"single"/"double" when the rule table (:mod:`data_spec.solver_rules`) sends
+    the settings to the serial factorisations, else None (PETSc's KSP). ValueError naming the
+    keys for a combination the table does not have.
 
     ``auto`` on one process is "pardiso" when MKL is installed (float32 Cholesky, faster than
     MUMPS' LDL^T and threaded: ``bench/bench_jacobian.py``), else "single" (MUMPS' float32
-    LDL^T with METIS ordering, faster than PETSc's MUMPS); PETSc's MUMPS on several.
+    LDL^T with METIS ordering).
     """
     s = settings
-    mode = s.factorization
-    if (s.linear_solver != "mumps" or s.lag_factorization or mode == "petsc"
-            or comm_size > 1 or "pc_type" in s.petsc_options):
-        if mode in ("pardiso", "single", "double") and comm_size > 1:
-            raise ValueError(f"settings.factorization = {mode!r} runs on one process; "
-                             f"this problem has {comm_size} (use 'auto' or 'petsc')")
+    path = solver_rules.linear_path(s.linear_solver, s.factorization, s.petsc_options,
+                                    comm_size, element, degree, quadrature_degree)
+    if path != "serial":
         return None
+    mode = s.factorization
     if ldlt.load() is None:
-        if mode == "pardiso":
-            raise ValueError("settings.factorization = 'pardiso' needs the compiled MUMPS "
+        if mode != "auto" or element == "anp":
+            raise ValueError(f"settings.factorization = {mode!r} needs the compiled MUMPS "
                              "extension (fem_sim/solver/ldlt_kernel.c: the LDL^T for matrices "
                              "the Cholesky refuses), which did not build")
         return None
@@ -393,9 +412,10 @@ def factorization_mode(settings: SolverSettings, comm_size: int) -> str | None:
 
 
 def make_linear_solver(settings: SolverSettings, comm, prefix: str,
-                       coordinates: np.ndarray | None = None) -> LinearSolver:
+                       coordinates: np.ndarray | None = None, element: str = "lagrange",
+                       degree: int = 1, quadrature_degree: int | None = None) -> LinearSolver:
     """The solver the settings ask for; ``coordinates`` (owned dof blocks) for GAMG."""
-    mode = factorization_mode(settings, comm.size)
+    mode = factorization_mode(settings, comm.size, element, degree, quadrature_degree)
     if mode is not None:
         return SerialLDLTSolver(settings, mode)
     return PetscSolver(settings, comm, prefix, coordinates)

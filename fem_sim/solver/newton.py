@@ -24,7 +24,7 @@ import numpy as np
 from fem_sim.solver import relaxation
 from fem_sim.solver.equations import Equations
 from fem_sim.solver.linear import LinearSolver
-from fem_sim.solver.results import StepFailure
+from fem_sim.solver.results import NewtonCounts, StepFailure
 from fem_sim.solver.settings import SolverSettings
 
 
@@ -50,6 +50,11 @@ class NewtonSolver:
     @property
     def local_iterations(self) -> int:
         return self.relax.iterations if self.relax is not None else 0
+
+    def counts(self) -> NewtonCounts:
+        """This simulation's Newton work so far."""
+        return NewtonCounts(chord_steps=self.chord_steps, chord_rejected=self.chord_rejected,
+                            near_steps=self.near_steps, local_iterations=self.local_iterations)
 
     @property
     def chord_allowed(self) -> bool:

@@ -3,8 +3,8 @@
 Why: on this project's Jacobians (symmetric positive definite at every stable state, constraints
 lifted) a float32 supernodal Cholesky factorises faster than MUMPS' LDL^T, and PARDISO runs the
 elimination tree and the dense fronts on all the cores it is given, where Debian's MUMPS is
-built without OpenMP (only OpenBLAS' threads inside the fronts). Measured on the real liver's
-Jacobian (14.6k nodes, 43.7k dofs, ``bench/bench_jacobian.py``): see the README.
+built without OpenMP (only OpenBLAS' threads inside the fronts); ``bench/bench_jacobian.py``
+measures both on the real liver's Jacobian.
 
 MKL comes from PyPI's ``mkl`` wheel (installed into the solver environment by ``make setup``);
 without it :func:`available` is False and the solver keeps MUMPS. PARDISO runs on MKL's GNU

@@ -47,12 +47,6 @@ class Predictor:
     def start(self) -> None:
         """A new simulation from u = 0."""
 
-    def initial_tangent(self) -> np.ndarray | None:
-        """du/dlam at u = 0 (the small-strain solution per unit load fraction, owned dofs),
-        if this predictor computed it at :meth:`start`.
-        """
-        return None
-
     def converged(self, lam: float, newton_iterations: int) -> None:
         """U (the current state) converged at load ``lam``."""
 
@@ -152,11 +146,6 @@ class Hermite(TangentIntegration):
         super().converged(lam, newton_iterations)
         if self.active:
             self._record(lam)
-
-    def initial_tangent(self) -> np.ndarray | None:
-        if self.active and self.points and self.points[0][0] == 0.0:
-            return self.points[0][2]
-        return None
 
     def _record(self, lam: float) -> None:
         """du/dlam = J(u)^-1 f_ext at the converged state u, kept with u. J is assembled at u;

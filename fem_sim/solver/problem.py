@@ -61,18 +61,16 @@ class OgdenProblem:
         if not isinstance(settings, SolverSettings):
             settings = SolverSettings.from_dict(settings)
         self.settings = settings
-        serial = factorization_mode(settings, comm.size)  # a bad combination fails now
-        if element == "anp" and (degree != 1 or serial is None):
-            raise ValueError("OgdenProblem: element 'anp' is a P1 element for the serial "
-                             f"factorisation (degree 1, one rank), got degree {degree} on "
-                             f"{comm.size} ranks with factorization {settings.factorization!r}")
+        self.qdeg = quadrature_degree or (1 if degree == 1 else 2)
+        # the rule table (data_spec.solver_rules): an unsupported combination fails now
+        factorization_mode(settings, comm.size, element, degree, self.qdeg)
         self.comm = comm
         self.element = element
         self.degree = degree
-        self.qdeg = quadrature_degree or (1 if degree == 1 else 2)
         self.disc = Discretisation(comm, points, cells, degree, self.qdeg)  # collective
         coords = self.disc.V.tabulate_dof_coordinates()[: self.disc.n_owned]
-        self.linear = make_linear_solver(settings, comm, prefix, coords)
+        self.linear = make_linear_solver(settings, comm, prefix, coords, element, degree,
+                                         self.qdeg)
         self.assembler = make_assembler(self.disc, csr_solver=self.linear.csr, element=element)
         self.equations = Equations(self.disc, self.assembler)
         self.newton = NewtonSolver(settings, self.equations, self.linear)

@@ -4,7 +4,7 @@ raises (:class:`StepFailure`). Control flags live in the pieces that use them, n
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
 
@@ -19,15 +19,41 @@ class LinearCounts:
 
     factorizations: int = 0
     krylov_iterations: int = 0
-    back_solves: int = 0
+    back_solves: int = 0       # back-solves with an existing factorisation (chord, predictor)
     double_fallbacks: int = 0  # float32 factorisations that had to be redone in float64
     cholesky_fallbacks: int = 0  # LDL^T after the Cholesky (not positive definite, mostly)
     reused_factorizations: int = 0  # kept from an earlier simulation (solve_recurring)
 
 
 @dataclass
-class Solution:
-    """Result of :meth:`fem_sim.OgdenProblem.solve`. Arrays per *stored* output step."""
+class NewtonCounts:
+    """Work of the Newton loop in one simulation, counted by the loop itself."""
+
+    chord_steps: int = 0       # accepted back-solves with an old factorisation
+    chord_rejected: int = 0    # chord steps tried and undone (too little contraction)
+    near_steps: int = 0        # Newton steps solved by GMRES on an older factorisation
+    local_iterations: int = 0  # local Newton iterations of the hot-spot relaxation
+
+
+@dataclass
+class WorkCounts(NewtonCounts, LinearCounts):
+    """Every work counter of one simulation: the one declaration that :class:`Solution`,
+    the shards' solver statistics and the benchmarks read.
+    """
+
+    @classmethod
+    def of(cls, linear: LinearCounts, newton: NewtonCounts) -> WorkCounts:
+        return cls(**asdict(linear), **asdict(newton))
+
+    def counts(self) -> dict[str, int]:
+        return {f.name: int(getattr(self, f.name)) for f in fields(WorkCounts)}
+
+
+@dataclass(kw_only=True)
+class Solution(WorkCounts):
+    """Result of :meth:`fem_sim.OgdenProblem.solve`. Arrays per *stored* output step; the
+    work counters of :class:`WorkCounts` as attributes.
+    """
 
     fractions: np.ndarray
     displacement: np.ndarray | None  # (n_done, n_nodes, 3) on the comm's rank 0, else None
@@ -39,16 +65,6 @@ class Solution:
     residual_history: list[list[float]] = field(default_factory=list)
     status: str = "ok"
     failure_reason: str = ""
-    factorizations: int = 0
-    krylov_iterations: int = 0
-    back_solves: int = 0       # back-solves with an existing factorisation (chord, predictor)
-    chord_steps: int = 0       # accepted back-solves with an old factorisation
-    chord_rejected: int = 0    # chord steps tried and undone (too little contraction)
-    near_steps: int = 0        # Newton steps solved by GMRES on an older factorisation
-    double_fallbacks: int = 0  # float32 factorisations that had to be redone in float64
-    cholesky_fallbacks: int = 0  # LDL^T after the Cholesky (not positive definite, mostly)
-    reused_factorizations: int = 0  # kept from an earlier simulation (solve_recurring)
-    local_iterations: int = 0  # local Newton iterations of the hot-spot relaxation
 
     @property
     def n_done(self) -> int:

@@ -10,10 +10,8 @@ __all__ = ["TANGENT_MAX_GMRES", "TANGENT_RTOL", "SolverSettings"]
 
 # Tangents for the Hermite predictor: solved to this accuracy (the predictor's own error is
 # ~1e-5 of the increment), by GMRES with the last factorisation as preconditioner, which is
-# refactorised if GMRES needs more than TANGENT_MAX_GMRES iterations. Measured on the real
-# liver (14.6k nodes, easy case, dev run, 3 runs each side by side): 1e-6 instead of 1e-8 saves
-# ~0.4 s of 12.4 (fewer GMRES iterations), the same Newton iterations, answers equal to 9e-11
-# (the converged states do not depend on the predictor beyond the Newton tolerance); 1e-5
-# saves no more; 1e-3 costs 3 factorisations more.
+# refactorised if GMRES needs more than TANGENT_MAX_GMRES iterations. Looser tangents save GMRES
+# iterations and leave the converged states unchanged (they do not depend on the predictor
+# beyond the Newton tolerance) until, around 1e-3, the worse guesses cost factorisations.
 TANGENT_RTOL = 1e-6
 TANGENT_MAX_GMRES = 12

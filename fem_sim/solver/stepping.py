@@ -25,13 +25,13 @@ from fem_sim.solver.equations import Equations
 from fem_sim.solver.linear import LinearSolver
 from fem_sim.solver.newton import NewtonSolver
 from fem_sim.solver.predictors import Predictor
-from fem_sim.solver.results import Solution, StepFailure
+from fem_sim.solver.results import Solution, StepFailure, WorkCounts
 from fem_sim.solver.settings import SolverSettings
 
 log = logging.getLogger(__name__)
 
 # An increment that would leave less than this fraction of itself before the output fraction
-# goes to the output fraction instead. Tried at 0.5 in session 11 (the first step's
+# goes to the output fraction instead. Measured at 0.5 and rejected (the first step's
 # sub-increments 0.25, 0.5, 0.25 of it become 0.25, 0.75): one factorisation fewer on the real
 # liver's easy case, the phantoms, 2x force, P2 at 10-16 mm under a patch load (110 of the price
 # list's 151 runs better, 12 worse), but under a nodal load on fine P2 meshes the Hermite
@@ -172,14 +172,8 @@ class LoadStepper:
             nxt = np.searchsorted(fractions, target, side="right")
             if nxt < fractions.size and not cutbacks:
                 dlam = fractions[nxt] - target
-        c = self.linear.counts
-        sol.factorizations, sol.krylov_iterations = c.factorizations, c.krylov_iterations
-        sol.back_solves, sol.double_fallbacks = c.back_solves, c.double_fallbacks
-        sol.reused_factorizations = c.reused_factorizations
-        sol.cholesky_fallbacks = c.cholesky_fallbacks
-        sol.chord_steps, sol.chord_rejected = self.newton.chord_steps, self.newton.chord_rejected
-        sol.near_steps = self.newton.near_steps
-        sol.local_iterations = self.newton.local_iterations
+        for name, value in WorkCounts.of(self.linear.counts, self.newton.counts()).counts().items():
+            setattr(sol, name, value)
         if eqs.disc.comm.rank == 0:
             sol.displacement = (np.stack(stored) if stored
                                 else np.zeros((0, eqs.disc.n_nodes, 3)))
@@ -196,36 +190,11 @@ class LoadStepper:
         return math.sqrt(err2 / inc2) if inc2 > 0 else 0.0
 
     def first_increment(self, lam1: float) -> float:
-        """The first load increment (later ones grow and shrink with Newton's work).
-
-        At most ``first_increment`` of the first output step or of FIRST_STEP_LOAD of the
-        load, whichever is smaller (then the increments grow with the predictor's measured
-        error, :func:`next_increment`), and smaller when the
-        small-strain solution says the step is strongly nonlinear: Ogden's law stiffens like
-        stretch^(m - 2) (uniaxial tangent), so a linear guess over an increment whose
-        small-strain displacement gradient reaches g misjudges the stiffness by about
-        (m - 2) g. With t = du/dlam at u = 0 at hand (the Hermite predictor computes it at the
-        start, with the factorisation the first Newton step needs anyway), the increment is
-        capped where max(|m_k - 2|, 1) * max|grad t| * dlam = ``first_step_stiffening``.
-        Measured on the real liver (``bench/bench_hard.py``, 14.6k nodes, P1): with the cap at
-        1, 5x the nominal force (stiffening 8.4 over the first step) 31 factorisations instead
-        of 41 and no cut-back, the other hard cases unchanged; but P2 at 12 mm 79 instead of
-        34 (53 Newton iterations in step 2: the Hermite polynomial through the closely spaced
-        states of a finely divided first step extrapolates badly over the next step). So the
-        cap is off by default (``first_step_stiffening = 0``). Letting the rule also enlarge the
-        first increment was worse: 2 more factorisations on the softest material, up to 13 more
-        at 2x force.
+        """At most ``first_increment`` of the first output step or of FIRST_STEP_LOAD of the
+        load, whichever is smaller; later increments grow with the predictor's measured error
+        (:func:`next_increment`).
         """
-        s = self.settings
-        dlam = min(lam1, FIRST_STEP_LOAD) * s.first_increment
-        t = self.predictor.initial_tangent()
-        if s.first_step_stiffening <= 0 or t is None:
-            return dlam
-        m = self.eqs.assembler.material.m
-        rate = max(max(abs(mk - 2.0), 1.0) for mk in m) * self.eqs.max_gradient(t)
-        if rate * dlam <= s.first_step_stiffening:
-            return dlam
-        return max(s.first_step_stiffening / rate, 1e-3 * lam1)
+        return min(lam1, FIRST_STEP_LOAD) * self.settings.first_increment
 
 
 def next_increment(h: float, err: float, q: int, h_prev: float, costly: bool = True) -> float:

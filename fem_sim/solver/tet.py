@@ -1,16 +1,14 @@
 """Lagrange tetrahedra (P1 with one quadrature point, P2 with four) in C, for the serial solver:
 deformation gradients from the displacements, internal forces from the stresses, and the
-Jacobian assembled into a fixed CSR pattern. Several times faster than dolfinx's generic
-assembly with the constraints applied (``bench/bench_jacobian.py``), and the values go straight
+Jacobian assembled into a fixed CSR pattern. Faster than dolfinx's generic assembly with the
+constraints applied (``bench/bench_jacobian.py`` measures both), and the values go straight
 to the factorisation without a PETSc matrix in between; F and the forces replace dolfinx's
 expression evaluation and vector assembly.
 ``tests/fem_sim/test_verification.py`` checks all three against dolfinx for P1 and P2.
 
 Threads (OpenMP, the point kernels' count: :func:`threads`): the cells are coloured so that no
 two cells of a colour share a node, and each colour is split among the threads; results are
-the same bit for bit on any number of threads. Measured on the real liver with P2 at 10 mm
-(15k cells, 42 colours): the stiffness 29 ms on two threads, 60 ms on one, 77 ms before
-(without the element matrix's symmetry, -O2); a 14.5 s simulation spent 2.0 s in it.
+the same bit for bit on any number of threads. The element stiffness uses its symmetry.
 """
 
 from __future__ import annotations

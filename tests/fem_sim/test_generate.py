@@ -156,7 +156,7 @@ def test_failing_case_is_recorded_and_batch_finishes(tmp_path):
     predictor's error, and at 10000x all fail at the first predictor, not in Newton)."""
     scene = tmp_path / "hard.toml"
     text = TINY.read_text().replace("magnitude = 0.4", "magnitude = 800.0")
-    text = text.replace('linear_solver = "mumps"', 'linear_solver = "mumps"\nmax_cutbacks = 2')
+    text = text.replace('linear_solver = "direct"', 'linear_solver = "direct"\nmax_cutbacks = 2')
     scene.write_text(text)
     sweep = ("--max-failure-rate", "1")  # a sweep of extremes may fail often: exit 0
     res = generate(scene, tmp_path / "d", n=2, extra=sweep)
@@ -289,8 +289,8 @@ def test_the_locking_free_element_from_a_scene(reference, tmp_path):
     displacements than P1's (P1 locks at K/mu = 200: it is too stiff); several ranks per
     simulation are refused before anything is written (the element is serial)."""
     scene = tmp_path / "anp.toml"
-    scene.write_text(TINY.read_text().replace('linear_solver = "mumps"',
-                                              'linear_solver = "mumps"\nelement = "anp"'))
+    scene.write_text(TINY.read_text().replace('linear_solver = "direct"',
+                                              'linear_solver = "direct"\nelement = "anp"'))
     res = generate(scene, tmp_path / "d", n=2)
     assert res.returncode == 0, res.stderr
     assert validate_dataset(tmp_path / "d") == []
@@ -301,8 +301,22 @@ def test_the_locking_free_element_from_a_scene(reference, tmp_path):
         a, b = np.abs(ours[name][-1]).max(), np.abs(p1[name][-1]).max()
         assert a > 1.05 * b, (name, a, b)
     res = generate(scene, tmp_path / "e", n=2, r=2, timeout=120)
-    assert res.returncode == 2 and "'anp' runs one rank per simulation" in res.stderr
+    assert res.returncode == 2 and "not a supported combination" in res.stderr
+    assert "on 2 ranks per simulation" in res.stderr, res.stderr
     assert not (tmp_path / "e" / "scene.toml").exists()
+
+
+def test_a_combination_the_rule_table_lacks_is_refused_before_any_file(tmp_path):
+    """element 'anp' with linear_solver 'gamg': refused by the scene check (the one rule
+    table), naming the keys; no scene.toml, geometry or shard is written."""
+    scene = tmp_path / "anp_gamg.toml"
+    scene.write_text(TINY.read_text().replace(
+        'linear_solver = "direct"', 'linear_solver = "gamg"\nelement = "anp"'))
+    res = generate(scene, tmp_path / "d", n=2, timeout=120)
+    assert res.returncode == 2, res.stderr
+    assert "element = 'anp'" in res.stderr and "linear_solver = 'gamg'" in res.stderr
+    assert "not a supported combination" in res.stderr
+    assert not (tmp_path / "d").exists() or not any((tmp_path / "d").iterdir())
 
 
 def test_truncated_geometry_file_is_rewritten_on_resume(reference, tmp_path):
@@ -321,8 +335,8 @@ def test_an_option_petsc_does_not_know_fails_the_batch_with_the_reason(tmp_path)
     as if the dataset were fine; it exits 3 and shows PETSc's complaint."""
     scene = tmp_path / "s.toml"
     scene.write_text(TINY.read_text().replace(
-        'linear_solver = "mumps"',
-        'linear_solver = "mumps"\npetsc_options = { pc_type = "no_such_pc" }'))
+        'linear_solver = "direct"',
+        'linear_solver = "direct"\npetsc_options = { pc_type = "no_such_pc" }'))
     res = generate(scene, tmp_path / "d", n=2, timeout=120)
     assert res.returncode == 3, res.stderr
     assert "4 of 4 simulations failed" in res.stderr and "PCSetFromOptions" in res.stderr

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from data_spec.solver_settings import SolverSettings
 from fem_sim import Constraint, NodalLoad, OgdenMaterial, OgdenProblem, PatchLoad
 from fem_sim.geometry.phantom import make_phantom
 from fem_sim.solver import ldlt
@@ -123,9 +122,10 @@ def _rot(axis, angle):
 
 @pytest.mark.parametrize("degree, force", [(1, 0.4), (2, 1.0)])
 def test_default_tolerance_bounds_the_displacement_error(degree, force):
-    """The default Newton tolerance (a residual criterion) keeps every stored load step within
-    10 x rtol of max |u| of the answer at rtol 1e-10, under a large deformation (the tip moves
-    6-44 mm). Measured: 3.3e-8 (P1, 0.4 N) and 2.6e-7 (P2, 1 N) at the default rtol 1e-6."""
+    """Whatever the default Newton tolerance is, it keeps every stored load step within 1e-5
+    of max |u| of the answer at rtol 1e-10 (three orders below the 1 % discretisation error
+    the shipped scenes aim at), under a large deformation (the tip moves 6-44 mm). The bound
+    is the requirement, not the setting: a default loosened past it fails here."""
     g = make_phantom(0, 20.0)
     node = int(np.argmax(g.points[:, 0]))  # tip of the right lobe, far from the cava
     us = []
@@ -137,7 +137,7 @@ def test_default_tolerance_bounds_the_displacement_error(degree, force):
         us.append(s.displacement)
     u, ref = us
     assert np.abs(ref[-1]).max() > 5.0  # a large deformation
-    bound = 10 * SolverSettings().rtol
+    bound = 1e-5
     for k in range(4):
         err = np.abs(u[k] - ref[k]).max() / np.abs(ref[k]).max()
         assert err <= bound, (k, err, bound)
@@ -169,7 +169,7 @@ def test_newton_converges_quadratically():
     the last iterations satisfy r_{k+1} <= C r_k^2 (observed order ~2)."""
     g = make_phantom(0, 20.0)
     prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, degree=1,
-                        settings={"lag_factorization": False, "predictor": "previous",
+                        settings={"predictor": "previous",
                                   "chord_contraction": 0.0, "rtol": 1e-11, "atol": 1e-15})
     node = int(np.argmax(g.points[:, 0]))
     s = prob.solve(MAT, [Constraint(g.regions["vena_cava"])],
@@ -209,13 +209,13 @@ def test_mesh_convergence_orders():
     assert orders_p1[1] > 1.5 and orders_p1[1] > orders_p1[0], orders_p1
 
 
-def test_iterative_solver_and_lagged_factorisation_give_the_direct_answer():
-    """CG + GAMG (rigid-body near-nullspace) and GMRES with a lagged LDL^T preconditioner
-    converge to the same displacement as the default direct solve."""
+def test_iterative_solver_and_petsc_mumps_give_the_serial_direct_answer():
+    """CG + GAMG (rigid-body near-nullspace) and PETSc's MUMPS converge to the same
+    displacement as the default serial factorisation."""
     g = make_phantom(0, 20.0)
     node = int(np.argmax(g.points[:, 0]))
     out = {}
-    for name, st in {"direct": {}, "lagged": {"lag_factorization": True},
+    for name, st in {"direct": {}, "petsc": {"factorization": "petsc"},
                      "gamg": {"linear_solver": "gamg", "max_krylov": 500,
                               "krylov_rtol": 1e-12}}.items():
         prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, settings={"rtol": 1e-10, **st},
@@ -225,7 +225,7 @@ def test_iterative_solver_and_lagged_factorisation_give_the_direct_answer():
         assert s.status == "ok", (name, s.failure_reason)
         out[name] = s.displacement[-1]
     ref = out["direct"]
-    for name in ("lagged", "gamg"):
+    for name in ("petsc", "gamg"):
         assert np.abs(out[name] - ref).max() <= 1e-6 * np.abs(ref).max(), name
 
 
@@ -292,47 +292,6 @@ def test_later_newton_steps_on_the_last_factorisation_reach_the_same_answer():
     for k in range(3 if MPI.COMM_WORLD.rank == 0 else 0):  # displacements live on rank 0
         assert np.abs(near.displacement[k] - ref.displacement[k]).max() <= \
             1e-8 * np.abs(ref.displacement[k]).max(), k
-
-
-def test_first_increment_is_capped_by_the_small_strain_stiffening():
-    """max_gradient of a linear field v = A x is the largest singular value of A at every
-    point (closed form); the first increment is first_increment of the first step unless
-    max(|m - 2|, 1) * max|grad t| * dlam exceeds first_step_stiffening (t = du/dlam at u = 0),
-    then exactly where it equals it; and the capped run converges to the same answer."""
-    g = make_phantom(0, 20.0)
-    node = int(np.argmax(g.points[:, 0]))
-    cap = 0.2  # below the default (1.0), for a load this coarse mesh carries
-    prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells,
-                        settings={"rtol": 1e-10, "first_step_stiffening": cap})
-    eqs = prob.equations
-    A = np.array([[0.1, 0.02, 0.0], [0.0, -0.05, 0.03], [0.04, 0.0, 0.2]])
-    xyz = prob.disc.V.tabulate_dof_coordinates()[: eqs.n_owned_dofs // 3]
-    before = eqs.state()
-    assert eqs.max_gradient((xyz @ A.T).ravel()) == pytest.approx(np.linalg.norm(A, 2),
-                                                                  rel=1e-10)
-    np.testing.assert_array_equal(eqs.state(), before)  # u untouched
-    cons = [Constraint(g.regions["vena_cava"])]
-    fractions = np.linspace(0.1, 1.0, 10)
-    steps = {}
-    for scale in (0.1, 20.0):
-        load = [NodalLoad([node], [[0.0, -0.3 * scale, -0.3 * scale]])]
-        eqs.set_problem(MAT, cons, load)
-        eqs.set_state(np.zeros_like(before))
-        prob.linear.reset()
-        prob.predictor.start()  # the tangent at u = 0
-        rate = (MAT.m[0] - 2.0) * eqs.max_gradient(prob.predictor.initial_tangent())
-        quarter = 0.25 * fractions[0]
-        want = quarter if rate * quarter <= cap else cap / rate
-        steps[scale] = prob.stepper.first_increment(fractions[0])
-        assert steps[scale] == pytest.approx(want, rel=1e-12), scale
-    assert steps[0.1] == quarter and steps[20.0] < quarter  # the cap is exercised
-    capped = prob.solve(MAT, cons, load, fractions)
-    plain = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells,
-                         settings={"rtol": 1e-10, "first_step_stiffening": 0.0},
-                         prefix="nocap_").solve(MAT, cons, load, fractions)
-    assert capped.status == plain.status == "ok"
-    ref = plain.displacement
-    assert np.abs(capped.displacement - ref).max() <= 1e-8 * np.abs(ref).max()
 
 
 @pytest.mark.parametrize("factorization", ["single", "auto"])
@@ -639,3 +598,30 @@ def test_fewer_output_fractions_reach_the_same_answer_through_controlled_increme
             assert np.abs(runs[n].displacement[-1] - ref).max() <= 1e-8 * np.abs(ref).max(), n
         assert np.abs(runs[2].displacement[0] - runs[10].displacement[4]).max() <= \
             1e-8 * np.abs(ref).max()
+
+
+def test_petsc_options_that_petsc_never_reads_are_reported(caplog):
+    """A misspelt PETSc option would be silently ignored by PETSc: the solver asks PETSc which
+    of the user's options it read after the first solve and warns about the others; on the
+    serial path every petsc_option has no effect and is reported at once."""
+    import logging
+
+    g = make_phantom(0, 20.0)
+    node = int(np.argmax(g.points[:, 0]))
+    opts = {"bogus_option_xyz": 1, "mat_mumps_icntl_14": 300}
+    with caplog.at_level(logging.WARNING, logger="fem_sim"):
+        prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells,
+                            settings={"factorization": "petsc", "petsc_options": opts},
+                            prefix="unused_")
+        s = prob.solve(MAT, [Constraint(g.regions["vena_cava"])],
+                       [NodalLoad([node], [[0.0, 0.0, -0.1]])], [1.0])
+    assert s.status == "ok", s.failure_reason
+    assert prob.linear.unused_options == ["bogus_option_xyz"]
+    if MPI.COMM_WORLD.rank == 0:
+        assert "'bogus_option_xyz'" in caplog.text and "icntl_14" not in caplog.text
+    caplog.clear()
+    if MPI.COMM_WORLD.size == 1 and ldlt.load() is not None:
+        with caplog.at_level(logging.WARNING, logger="fem_sim"):
+            OgdenProblem(MPI.COMM_WORLD, g.points, g.cells,
+                         settings={"petsc_options": {"ksp_type": "cg"}}, prefix="serial_")
+        assert "have no effect" in caplog.text and "ksp_type" in caplog.text

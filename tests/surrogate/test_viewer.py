@@ -141,7 +141,10 @@ def test_off_screen_frames_are_drawn_and_differ_between_forces(m, tmp_path):
 
     with Image.open(t["gif"]) as gif:
         assert gif.n_frames == 2
-    assert t["inference_ms_median"] > 0 and t["fps_median"] > 0
+    # the timings are of these frames: inference is part of a frame, fps is 1 / frame time
+    assert 0 < t["inference_ms_median"] <= t["frame_ms_median"]
+    assert t["fps_median"] == pytest.approx(1e3 / t["frame_ms_median"], rel=1e-9)
+    assert t["frames"] == 2
 
 
 @pytest.mark.parametrize("frames, message", [
