@@ -180,7 +180,7 @@ def test_without_mkl_auto_is_mumps_and_pardiso_is_refused(monkeypatch):
     assert linear.factorization_mode(SolverSettings(), 1) == "single"
     with pytest.raises(ValueError, match="needs MKL"):
         linear.factorization_mode(SolverSettings(factorization="pardiso"), 1)
-    with pytest.raises(ValueError, match="one process"):
+    with pytest.raises(ValueError, match="not a supported combination"):
         linear.factorization_mode(SolverSettings(factorization="pardiso"), 2)
 
 
