@@ -72,7 +72,8 @@ def at_scale(run: Path, n_nodes: int, directory: Path, seed: int = 0) -> Path:
     pts = centre + half * rng.uniform(-1, 1, size=(n_nodes, 3))
     ds = SimpleNamespace(forces=np.full((1, 1, 3), meta["training_range"]["force_norm_max"]),
                          extra=np.zeros((1, 0)), scene_name=meta["scene"], spec=pred.spec,
-                         points=[pts], fixed=[np.arange(100)], out_nodes=[np.arange(n_nodes)])
+                         points=[pts], fixed=[np.arange(100)], out_nodes=[np.arange(n_nodes)],
+                         triangles=[np.zeros((0, 3), dtype=np.int64)])
     if pred.design == "basis":
         from surrogate.basis import BasisModel
 

@@ -49,7 +49,8 @@ def fake_model(directory: Path, hidden, n_nodes: int, seed: int = 0) -> np.ndarr
                        y_mean=np.zeros(3, np.float32), y_std=np.ones(3, np.float32))
     ds = SimpleNamespace(forces=np.full((1, 1, 3), 0.4), extra=np.zeros((1, 0)),
                          scene_name="bench", spec=spec, points=[pts], fixed=[fixed],
-                         out_nodes=[np.arange(n_nodes)])
+                         out_nodes=[np.arange(n_nodes)],
+                         triangles=[np.zeros((0, 3), dtype=np.int64)])  # nothing to draw
     export_model(directory, (params, norm), get_config("small", hidden=hidden), ds)
     return pts
 
