@@ -288,23 +288,15 @@ def _check_steps(st: dict, problems: list[str]) -> None:
 
 
 def _check_solver(sv: dict, problems: list[str]) -> None:
-    keys = ("degree", "linear_solver", "factorization", "petsc_options")
-    if all(k in sv for k in keys) and not any(p.startswith(("solver.degree",
-                                                            "solver.linear_solver",
-                                                            "solver.factorization",
-                                                            "solver.element",
-                                                            "solver.quadrature_degree",
-                                                            "solver.petsc_options"))
-                                            for p in problems):
+    keys = ("element", "degree", "quadrature_degree", "linear_solver", "factorization",
+            "petsc_options")
+    if "quadrature_degree" not in sv and sv.get("degree") in (1, 2):
+        sv["quadrature_degree"] = solver_rules.default_quadrature(sv["degree"])
+    filled = all(k in sv for k in keys if k != "element")  # not when [solver] was no table
+    if filled and not any(p.startswith(tuple(f"solver.{k}" for k in keys)) for p in problems):
         # the one rule table of element, degree, solver and factorisation (any rank count
         # here; fem_sim generate checks its --ranks-per-sim against the same table)
-        problems += solver_rules.problems(sv.get("element", "lagrange"), sv["degree"],
-                                          sv.get("quadrature_degree"), sv["linear_solver"],
-                                          sv["factorization"], sv["petsc_options"])
-    if "quadrature_degree" not in sv and sv.get("degree") in (1, 2):
-        # P1 with one-point quadrature is FEBio's tet4; P2 integrates the (nonlinear) integrand
-        # with a degree-2 rule, enough for its linear strains at the nodes of the reference test.
-        sv["quadrature_degree"] = 1 if sv["degree"] == 1 else 2
+        problems += solver_rules.scene_problems(sv)
 
 
 def _check_cases(raw_cases: Any, data: dict, problems: list[str]) -> list[dict]:

@@ -55,6 +55,13 @@ ROUTES = (
 )
 
 
+def default_quadrature(degree: int) -> int:
+    """The quadrature degree when none is given: 1 for P1 (one point: FEBio's tet4), 2 for P2
+    (enough for its linear strains in the reference tests).
+    """
+    return 1 if degree == 1 else 2
+
+
 def _find(element, degree, qdeg, linear_solver, factorization, petsc_options, ranks):
     pc = "pc_type" in (petsc_options or {})
     for r in ROUTES:
@@ -82,7 +89,7 @@ def problems(element: str, degree: int, quadrature_degree: int | None, linear_so
     """[] if the combination is a row of the table (for some rank count when ``ranks`` is
     None), else one message naming every key of the combination and the supported rows.
     """
-    qdeg = quadrature_degree if quadrature_degree is not None else (1 if degree == 1 else 2)
+    qdeg = quadrature_degree if quadrature_degree is not None else default_quadrature(degree)
     if _find(element, degree, qdeg, linear_solver, factorization, petsc_options,
              ranks) is not None:
         return []
@@ -96,13 +103,19 @@ def problems(element: str, degree: int, quadrature_degree: int | None, linear_so
             + table().replace("\n", "\n  ")]
 
 
+def scene_problems(sv: dict, ranks: int | None = None) -> list[str]:
+    """:func:`problems` of a scene's normalised ``[solver]`` table."""
+    return problems(sv.get("element", "lagrange"), sv["degree"], sv.get("quadrature_degree"),
+                    sv["linear_solver"], sv["factorization"], sv["petsc_options"], ranks)
+
+
 def linear_path(linear_solver: str, factorization: str, petsc_options: dict | None,
                 ranks: int, element: str = "lagrange", degree: int = 1,
                 quadrature_degree: int | None = None) -> str:
     """"serial", "petsc" or "gamg": the path a valid combination takes on ``ranks`` ranks.
     ValueError (naming the keys) for an unsupported one.
     """
-    qdeg = quadrature_degree if quadrature_degree is not None else (1 if degree == 1 else 2)
+    qdeg = quadrature_degree if quadrature_degree is not None else default_quadrature(degree)
     r = _find(element, degree, qdeg, linear_solver, factorization, petsc_options, ranks)
     if r is None:
         raise ValueError("; ".join(problems(element, degree, quadrature_degree, linear_solver,

@@ -155,7 +155,6 @@ class BasisProblem(Problem):
         self.tr, self.va = tr, va
         self.B = min(cfg["batch_size"], tr.size)
         self.steps_per_epoch = tr.size // self.B
-        self.hidden, self.n_loads = tuple(cfg["hidden"]), ds.spec.n_loads
 
     def init(self, key):
         return self.net.init(key, self.data["x"][:1], self.data["f"][:1])["params"]
@@ -218,8 +217,8 @@ class Basis:
     def model(self, problem: BasisProblem, params) -> BasisModel:
         return BasisModel(params=params, modes=problem.modes, x_mean=problem.x_mean,
                           x_std=problem.x_std, c_scale=problem.c_scale,
-                          f_scale=problem.f_scale, hidden=problem.hidden,
-                          n_loads=problem.n_loads)
+                          f_scale=problem.f_scale, hidden=problem.net.hidden,
+                          n_loads=problem.net.n_loads)
 
     def summary(self, problem: BasisProblem) -> str:
         return (f"{problem.modes.shape[0]} modes, projection MEE of the training fields "

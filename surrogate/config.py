@@ -10,6 +10,9 @@ import copy
 
 from data_spec.checks import is_int, is_num
 
+# The designs a config may name (their classes: surrogate/designs.py, which a test keeps equal).
+DESIGN_NAMES = ("nodewise", "basis")
+
 BASE = {
     "design": "nodewise",      # "nodewise": the paper's MLP per node; "basis": a reduced basis
                                # (surrogate/basis.py), one liver only
@@ -54,7 +57,7 @@ CONFIGS = {
 
 # key -> (check, what is expected): every value is checked before training starts.
 CHECKS = {
-    "design": (lambda v: v in ("nodewise", "basis"), "'nodewise' or 'basis'"),
+    "design": (lambda v: v in DESIGN_NAMES, " or ".join(map(repr, DESIGN_NAMES))),
     "modes": (lambda v: is_int(v) and v >= 1, "an integer >= 1"),
     "hidden": (lambda v: isinstance(v, list) and v and all(is_int(w) and w > 0 for w in v),
                "a non-empty list of layer widths > 0"),

@@ -89,10 +89,7 @@ def optimizer(cfg: dict, steps_per_epoch: int) -> optax.GradientTransformationEx
     epoch. ``l2``: l2 w added to the gradient of every weight matrix before Adam, i.e. the
     penalty l2 |w|^2 / 2 in the loss (biases are not decayed).
     """
-    lr = cfg["learning_rate"]
-    if cfg["lr_rule"] == "decay":
-        lr = optax.exponential_decay(lr, transition_steps=steps_per_epoch,
-                                     decay_rate=1 / DECAY_PER_EPOCH, staircase=True)
+    lr = schedule(cfg, steps_per_epoch)
     parts = []
     if cfg["l2"] > 0:
         parts.append(optax.add_decayed_weights(cfg["l2"], mask=kernel_mask))
@@ -102,6 +99,17 @@ def optimizer(cfg: dict, steps_per_epoch: int) -> optax.GradientTransformationEx
             factor=PLATEAU_FACTOR, patience=cfg["lr_patience"], rtol=PLATEAU_RTOL,
             accumulation_size=steps_per_epoch))
     return optax.chain(*parts)
+
+
+def schedule(cfg: dict, steps_per_epoch: int):
+    """The learning rate before the plateau rule: the config's rate, or for "decay" that rate
+    / 1.5 per finished epoch, as a function of the step count (jax arrays inside the optimiser,
+    plain integers for the report).
+    """
+    lr = cfg["learning_rate"]
+    if cfg["lr_rule"] != "decay":
+        return lr
+    return lambda count: lr / DECAY_PER_EPOCH ** (count // steps_per_epoch)
 
 
 def make_train_step(loss, tx):
@@ -253,7 +261,7 @@ def fit(problem: Problem, cfg: dict, seed: int, rng: np.random.Generator, *,
 
 def learning_rate_now(cfg: dict, opt_state, steps_done: int, steps_per_epoch: int) -> float:
     """The learning rate the next step uses (read from the schedule and the optimiser state)."""
-    lr = cfg["learning_rate"]
-    if cfg["lr_rule"] == "decay":
-        return lr / DECAY_PER_EPOCH ** (steps_done // steps_per_epoch)
+    lr = schedule(cfg, steps_per_epoch)
+    if callable(lr):
+        return lr(steps_done)
     return lr * float(optax.tree_utils.tree_get(opt_state, "scale"))

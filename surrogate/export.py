@@ -19,13 +19,13 @@ from pathlib import Path
 import numpy as np
 from flax import traverse_util
 
+from surrogate.config import DESIGN_NAMES
 from surrogate.features import FeatureSpec, node_features, static_node_features
 from surrogate.normalise import Normaliser
 
 MODEL_FORMAT = "liverfem-surrogate"
 MODEL_VERSION = 3          # 3: explicit layer names; 2: the design is recorded
 READABLE_VERSIONS = (1, 2, 3)  # 1-2: flax's automatic names Dense_i; version 1 is node-wise
-DESIGNS = ("nodewise", "basis")
 # Inference precisions: float32 (as trained), or the weights and activations cast to 16 bits.
 PRECISIONS = ("float32", "bfloat16", "float16")
 log = logging.getLogger(__name__)
@@ -87,8 +87,9 @@ def _read_meta(path: Path) -> dict:
         raise ValueError(f"{path}: version {meta.get('version')!r}, this code reads "
                          f"{', '.join(map(str, READABLE_VERSIONS))}")
     design = meta.setdefault("design", "nodewise")
-    if design not in DESIGNS:
-        raise ValueError(f"{path}: design {design!r}, expected one of {', '.join(DESIGNS)}")
+    if design not in DESIGN_NAMES:
+        raise ValueError(f"{path}: design {design!r}, expected one of "
+                         f"{', '.join(DESIGN_NAMES)}")
     return meta
 
 

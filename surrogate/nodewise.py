@@ -100,7 +100,6 @@ class NodeWiseProblem(Problem):
     def validation(self):
         return self.val
 
-
     def loss(self, params, data, batch, key, train):
         return _loss(self.model, float(self.cfg["input_noise"]), self.ds.spec.n_loads,
                      params, data, batch, key, train)

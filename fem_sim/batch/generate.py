@@ -111,11 +111,7 @@ def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool,
     try:
         scene = load_scene(scene_file)
         todo = parse_range(only, scene.n_simulations)  # a bad --only writes nothing
-        sv = scene["solver"]
-        found = solver_rules.problems(sv.get("element", "lagrange"), sv["degree"],
-                                      sv.get("quadrature_degree"), sv["linear_solver"],
-                                      sv["factorization"], sv["petsc_options"],
-                                      ranks=ranks_per_sim)
+        found = solver_rules.scene_problems(scene["solver"], ranks=ranks_per_sim)
         if found:  # the scene allows it on some rank count, not on this one
             raise SceneError(scene_file, found)
         _LOCK = DirectoryLock(out).acquire()

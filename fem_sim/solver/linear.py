@@ -411,11 +411,11 @@ def factorization_mode(settings: SolverSettings, comm_size: int, element: str = 
     return mode
 
 
-def make_linear_solver(settings: SolverSettings, comm, prefix: str,
-                       coordinates: np.ndarray | None = None, element: str = "lagrange",
-                       degree: int = 1, quadrature_degree: int | None = None) -> LinearSolver:
-    """The solver the settings ask for; ``coordinates`` (owned dof blocks) for GAMG."""
-    mode = factorization_mode(settings, comm.size, element, degree, quadrature_degree)
+def make_linear_solver(settings: SolverSettings, comm, prefix: str, mode: str | None,
+                       coordinates: np.ndarray | None = None) -> LinearSolver:
+    """The solver of :func:`factorization_mode`'s ``mode`` (None: PETSc's KSP);
+    ``coordinates`` (owned dof blocks) for GAMG.
+    """
     if mode is not None:
         return SerialLDLTSolver(settings, mode)
     return PetscSolver(settings, comm, prefix, coordinates)

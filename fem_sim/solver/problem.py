@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from data_spec.solver_rules import default_quadrature
 from fem_sim.material.ogden import OgdenMaterial
 from fem_sim.solver.anp import ANPAssembler
 from fem_sim.solver.assembly import Assembler, CAssembler, DolfinxAssembler
@@ -61,16 +62,15 @@ class OgdenProblem:
         if not isinstance(settings, SolverSettings):
             settings = SolverSettings.from_dict(settings)
         self.settings = settings
-        self.qdeg = quadrature_degree or (1 if degree == 1 else 2)
+        self.qdeg = quadrature_degree or default_quadrature(degree)
         # the rule table (data_spec.solver_rules): an unsupported combination fails now
-        factorization_mode(settings, comm.size, element, degree, self.qdeg)
+        mode = factorization_mode(settings, comm.size, element, degree, self.qdeg)
         self.comm = comm
         self.element = element
         self.degree = degree
         self.disc = Discretisation(comm, points, cells, degree, self.qdeg)  # collective
         coords = self.disc.V.tabulate_dof_coordinates()[: self.disc.n_owned]
-        self.linear = make_linear_solver(settings, comm, prefix, coords, element, degree,
-                                         self.qdeg)
+        self.linear = make_linear_solver(settings, comm, prefix, mode, coords)
         self.assembler = make_assembler(self.disc, csr_solver=self.linear.csr, element=element)
         self.equations = Equations(self.disc, self.assembler)
         self.newton = NewtonSolver(settings, self.equations, self.linear)

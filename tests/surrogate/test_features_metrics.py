@@ -123,3 +123,13 @@ def test_weight_decay_is_the_gradient_of_the_l2_penalty_on_the_weight_matrices()
     np.testing.assert_allclose(u["layer"]["kernel"], [0.2, -0.3], rtol=1e-6)
     np.testing.assert_allclose(u["layer"]["bias"], [0.0])
     assert get_config("small", l2=0.1)["l2"] == 0.1
+
+
+def test_config_names_exactly_the_registered_designs():
+    from surrogate.config import DESIGN_NAMES, get_config
+    from surrogate.designs import DESIGNS
+
+    assert tuple(DESIGNS) == DESIGN_NAMES
+    assert all(DESIGNS[n].name == n for n in DESIGN_NAMES)
+    with pytest.raises(ValueError, match="design: expected 'nodewise' or 'basis'"):
+        get_config("small", design="graph")
