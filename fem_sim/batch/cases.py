@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from data_spec import Geometry, OgdenMaterial, Scene
+from data_spec import Geometry, OgdenMaterial, Scene, loads
 
 _MATERIAL_TABLE_STREAM = 2**31 - 1  # rng stream of the scene-wide material table
 
@@ -72,25 +72,8 @@ def output_nodes(scene: Scene, g: Geometry) -> np.ndarray:
 
 
 def eligible_load_nodes(scene: Scene, g: Geometry, fixed: np.ndarray) -> np.ndarray:
-    """Nodes a random load may act on: surface (or all) nodes, not fixed, far enough from the
-    fixed region.
-    """
-    ld = scene["loads"]
-    cand = g.surface_nodes if ld["eligible"] == "surface" else np.arange(g.n_nodes)
-    cand = np.setdiff1d(cand, fixed)
-    dmin = ld["min_distance_to_fixed"]
-    if dmin > 0 and cand.size:
-        d = _min_distance(g.points[cand], g.points[fixed])
-        cand = cand[d >= dmin]
-    return cand
-
-
-def _min_distance(a: np.ndarray, b: np.ndarray, chunk: int = 2048) -> np.ndarray:
-    out = np.empty(a.shape[0])
-    for i in range(0, a.shape[0], chunk):
-        d = a[i:i + chunk, None, :] - b[None, :, :]
-        out[i:i + chunk] = np.sqrt(np.min(np.einsum("ijk,ijk->ij", d, d), axis=1))
-    return out
+    """Nodes a random load may act on (the rule of :mod:`data_spec.loads`)."""
+    return loads.eligible_load_nodes(scene["loads"], g.points, g.surface_nodes, fixed)
 
 
 def _draw(rng: np.random.Generator, spec) -> float:

@@ -5,7 +5,7 @@ import ast
 from pathlib import Path
 
 ROOT = Path(__file__).parents[2]
-PACKAGES = ("data_spec", "fem_sim", "surrogate", "liverviz")
+PACKAGES = ("data_spec", "fem_sim", "surrogate", "liverviz", "liverreg")
 
 
 def module_names(root: Path, packages=PACKAGES) -> dict[str, Path]:
@@ -96,15 +96,30 @@ def test_no_import_circle_in_the_project():
     assert cycles(graph) == []
 
 
-def test_data_spec_needs_numpy_and_h5py_only():
-    third_party = set()
-    for f in (ROOT / "data_spec").rglob("*.py"):
+def imported_roots(package: str) -> set[str]:
+    """Top-level names a package imports (inside functions too), less the standard library
+    and itself."""
+    import sys
+
+    roots = set()
+    for f in (ROOT / package).rglob("*.py"):
         for node in ast.walk(ast.parse(f.read_text())):
             names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
                      [node.module] if isinstance(node, ast.ImportFrom) and not node.level
                      else [])
-            third_party |= {n.split(".")[0] for n in names if n}
-    import sys
+            roots |= {n.split(".")[0] for n in names if n}
+    return roots - set(sys.stdlib_module_names) - {package}
 
-    third_party -= set(sys.stdlib_module_names) | {"data_spec"}
-    assert third_party <= {"numpy", "h5py"}, third_party
+
+def test_data_spec_needs_numpy_and_h5py_only():
+    assert imported_roots("data_spec") <= {"numpy", "h5py"}
+
+
+def test_liverreg_needs_numpy_scipy_and_data_spec_only():
+    """The registration both environments share: no dolfinx, no gmsh, no JAX."""
+    assert imported_roots("liverreg") <= {"numpy", "scipy", "data_spec"}
+
+
+def test_the_trainer_never_imports_the_solver():
+    assert not imported_roots("surrogate") & {"fem_sim", "dolfinx", "petsc4py", "mpi4py",
+                                               "ufl", "ffcx", "gmsh"}

@@ -1,0 +1,172 @@
+"""What a liver the population never contained needs to be placed in it: the template mesh,
+the PCA of the population's template-surface displacements, the registration settings, and
+the population's ranges (to say when a liver lies outside them).
+
+``ShapeModel.place(points, triangles)`` registers the template onto a liver surface with the
+same staged CPD and the same samples as the population was built with, moves every template
+node (interior included: the CPD field is smooth everywhere) and projects the template
+surface's displacement on the components: the liver's shape coefficients. Stored as a plain
+``.npz`` (no pickle) next to an exported model.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+
+from data_spec.geometry import signed_volumes
+from liverreg.cpd import STAGED, chamfer, cpd_nonrigid, dense_surface, farthest_points, project
+
+FORMAT = 1
+INVERTED_WARN = 0.05  # fraction of template tetrahedra a placement may turn inside out
+
+
+@dataclass
+class Placement:
+    """A liver placed in the population: the template moved onto it and its coefficients."""
+
+    points: np.ndarray        # (n_template_nodes, 3) moved template, mm
+    coefficients: np.ndarray  # (K,)
+    residual: float           # symmetric mean distance, moved template surface <-> liver, mm
+    iterations: list          # CPD iterations per stage
+    offset: np.ndarray        # (3,) translation of the liver into the population's frame, mm
+    inverted: int = 0         # template tetrahedra turned inside out by the placement
+
+
+@dataclass
+class ShapeModel:
+    """A population's shape model: template, PCA, registration settings and ranges."""
+
+    template_points: np.ndarray     # (n, 3) mm
+    template_cells: np.ndarray      # (c, 4) tetrahedra
+    surface_triangles: np.ndarray   # (t, 3) template boundary, node ids
+    fixed_nodes: np.ndarray         # the template's fixed region, node ids
+    mean: np.ndarray                # (3 s,) mean displacement of the surface nodes
+    components: np.ndarray          # (K, 3 s) orthonormal rows
+    coefficient_min: np.ndarray     # (K,) over the population
+    coefficient_max: np.ndarray
+    residuals: np.ndarray           # (R,) the population's registration residuals, mm
+    n_points: int = 600             # CPD samples per surface
+    schedule: np.ndarray = None     # (stages, 3): beta, lambda, tolerance
+    loadable_nodes: np.ndarray = None  # template nodes the scene's loads act on (empty: any)
+
+    def __post_init__(self):
+        if self.loadable_nodes is None:
+            self.loadable_nodes = np.zeros(0, dtype=np.int64)
+        if self.schedule is None:
+            self.schedule = np.asarray(STAGED, dtype=np.float64)
+        self.schedule = np.asarray(self.schedule, dtype=np.float64).reshape(-1, 3)
+        self.n_points = int(self.n_points)
+
+    @property
+    def surface_nodes(self) -> np.ndarray:
+        return np.unique(self.surface_triangles)
+
+    @property
+    def n_components(self) -> int:
+        return int(self.components.shape[0])
+
+    def place(self, points: np.ndarray, triangles: np.ndarray, center: bool = True) -> Placement:
+        """Register the template onto the liver surface (points (p, 3) mm, triangles (t, 3)).
+
+        The placement is in the population's frame: the liver translated by ``offset``
+        (``center=False``: as given, for livers already in that frame).
+        """
+        triangles = np.asarray(triangles, dtype=np.int64)
+        surf = self.surface_nodes
+        S = self.template_points[surf]
+        # Livers come in any scanner frame; the population's lie around one place, and the
+        # PCA (of displacements) and the network's node coordinates both see position: the
+        # liver is moved so that its surface centroid is the population's mean one.
+        verts0 = np.asarray(points, dtype=np.float64)[np.unique(triangles)]
+        offset = (S + self.mean.reshape(-1, 3)).mean(axis=0) - verts0.mean(axis=0)
+        if not center:
+            offset = np.zeros(3)
+        points = np.asarray(points, dtype=np.float64) + offset
+        verts = points[np.unique(triangles)]
+        # the samples of liverreg.cpd.surface_samples: farthest points, seed 0
+        X = verts[farthest_points(verts, self.n_points)]
+        Y = S[farthest_points(S, self.n_points)]
+        res = cpd_nonrigid(X, Y, [tuple(r) for r in self.schedule])
+        # The surface follows CPD; the interior follows the surface (harmonic extension): the
+        # CPD field itself, evaluated deep inside, folds the mesh where the surface moved far.
+        moved = self.template_points + harmonic_extension(
+            self.template_points.shape[0], self.template_cells, surf, res.transform(S) - S)
+        coeff = project((moved[surf] - S).ravel(), self.mean, self.components)
+        inverted = int(np.sum(signed_volumes(moved, self.template_cells) <= 0))
+        # as liverreg.cpd.build_population measures it: the dense template surface moved
+        residual = chamfer(res.transform(dense_surface(self.template_points,
+                                                       self.surface_triangles)),
+                           dense_surface(points, triangles))
+        return Placement(points=moved, coefficients=coeff, residual=float(residual),
+                         iterations=res.iterations, offset=offset, inverted=inverted)
+
+    def warnings(self, placement: Placement) -> list[str]:
+        """Ways the liver lies outside the population, with the numbers (empty: inside)."""
+        out = []
+        worst = float(self.residuals.max()) if self.residuals.size else np.inf
+        if placement.residual > 1.5 * worst:
+            out.append(f"registration residual {placement.residual:.2f} mm, the population's "
+                       f"livers {np.median(self.residuals):.2f} mm median, {worst:.2f} mm at "
+                       "worst: the template does not fit this liver's shape well")
+        n_cells = self.template_cells.shape[0]
+        # A surface registration flips a few flat tetrahedra along the surface of any liver,
+        # the population's own included (a few %); many flipped ones mean a folded placement.
+        if placement.inverted > INVERTED_WARN * n_cells:
+            out.append(f"{placement.inverted} of {n_cells} template tetrahedra "
+                       f"({100 * placement.inverted / n_cells:.0f} %) turned inside out by the "
+                       "registration: the liver is far from the population's shapes and the "
+                       "prediction inside it is unreliable")
+        c, lo, hi = placement.coefficients, self.coefficient_min, self.coefficient_max
+        margin = 0.05 * (hi - lo)  # as the predictor's other inputs: 5 % of the range
+        bad = np.flatnonzero((c < lo - margin) | (c > hi + margin))
+        if bad.size:
+            listed = ", ".join(f"shape{i} = {c[i]:.3g} (population {lo[i]:.3g} .. {hi[i]:.3g})"
+                               for i in bad[:5])
+            out.append(f"{bad.size} of {c.size} shape coefficients outside the population's "
+                       f"range: {listed}{' ...' if bad.size > 5 else ''}")
+        return out
+
+    def save(self, path) -> None:
+        arrays = {f.name: np.asarray(getattr(self, f.name)) for f in fields(self)}
+        with open(path, "wb") as fh:  # a file object: np.savez appends no ".npz"
+            np.savez(fh, format=np.asarray(FORMAT), **arrays)
+
+    @classmethod
+    def load(cls, path) -> ShapeModel:
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                if int(z["format"]) != FORMAT:
+                    raise ValueError(f"format {int(z['format'])}, this code reads {FORMAT}")
+                kw = {f.name: z[f.name] for f in fields(cls)}
+        except (OSError, KeyError, ValueError) as exc:
+            raise ValueError(f"{path}: not a readable shape model ({exc})") from None
+        kw["n_points"] = int(kw["n_points"])
+        return cls(**kw)
+
+
+def harmonic_extension(n_nodes: int, cells: np.ndarray, boundary: np.ndarray,
+                       boundary_values: np.ndarray) -> np.ndarray:
+    """(n_nodes, 3): values given on ``boundary`` nodes, extended to the others by the mesh's
+    graph Laplacian (each interior value the mean of its edge neighbours').
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.linalg import splu
+
+    cells = np.asarray(cells, dtype=np.int64)
+    pairs = np.array([(a, b) for a in range(4) for b in range(4) if a != b])
+    i, j = cells[:, pairs[:, 0]].ravel(), cells[:, pairs[:, 1]].ravel()
+    A = coo_matrix((np.ones(i.size), (i, j)), shape=(n_nodes, n_nodes)).tocsr()
+    A.data[:] = 1.0  # an edge shared by many cells counts once
+    L = (coo_matrix((np.asarray(A.sum(axis=1)).ravel(), (np.arange(n_nodes),) * 2),
+                    shape=A.shape) - A).tocsr()
+    out = np.zeros((n_nodes, 3))
+    out[boundary] = boundary_values
+    inner = np.setdiff1d(np.arange(n_nodes), boundary)
+    if inner.size:
+        rhs = -(L[inner][:, boundary] @ boundary_values)
+        out[inner] = splu(L[inner][:, inner].tocsc()).solve(rhs)
+    return out

@@ -1,0 +1,104 @@
+"""The shape model a new liver is placed with (liverreg): the same registration and PCA as the
+population it comes from, in numpy and scipy only. Synthetic "livers": a box mesh bent by
+smooth, different warps (CPD needs no liver shape to be tested)."""
+
+import numpy as np
+import pytest
+
+from data_spec.geometry import Geometry, box_mesh
+from liverreg.cpd import build_population, project
+from liverreg.shape_model import ShapeModel
+
+N_POINTS = 150
+SCHEDULE = ((2.0, 1.5, 1e-3), (0.6, 0.45, 1e-4))  # two stages: fast enough for a test
+
+
+def warped(a: float, b: float, c: float) -> Geometry:
+    g = box_mesh(5, (120.0, 80.0, 60.0))
+    x = g.points - g.points.mean(0)
+    p = x + np.stack([a * np.sin(x[:, 1] / 30), b * np.cos(x[:, 0] / 40),
+                      c * np.sin(x[:, 0] / 50) + 0.05 * a * x[:, 2]], axis=1)
+    # a grid has exact ties of distance, which farthest-point sampling breaks by rounding;
+    # real surfaces have none
+    p += np.random.default_rng([a + 10, b + 10, c + 10]).normal(0, 0.05, p.shape)
+    return Geometry(points=p, cells=g.cells, surface_triangles=g.surface_triangles,
+                    regions={"fixed": np.flatnonzero(g.points[:, 0] == 0)})
+
+
+@pytest.fixture(scope="module")
+def population():
+    params = [(0, 0, 0), (6, 2, 3), (-4, 5, 1), (3, -5, 6), (-6, -2, -4), (2, 6, -5)]
+    livers = [warped(*p) for p in params]
+    pop = build_population(livers, 0, N_POINTS, SCHEDULE)
+    M = livers[0]
+    k = 3
+    coeff = pop.coefficients[:, :k]
+    sm = ShapeModel(template_points=M.points, template_cells=M.cells,
+                    surface_triangles=M.surface_triangles, fixed_nodes=M.regions["fixed"],
+                    mean=pop.mean, components=pop.components[:k],
+                    coefficient_min=coeff.min(0), coefficient_max=coeff.max(0),
+                    residuals=pop.registration_error, n_points=N_POINTS, schedule=SCHEDULE)
+    return livers, pop, sm
+
+
+def test_a_population_liver_gets_the_coefficients_the_population_gave_it(population):
+    """One implementation on both sides: placing liver r (already in the population's frame)
+    repeats the population's registration exactly, so its coefficients are its PCA
+    coefficients and its residual the population's."""
+    livers, pop, sm = population
+    for r in (1, 4):
+        g = livers[r]
+        pl = sm.place(g.points, g.surface_triangles, center=False)
+        np.testing.assert_allclose(pl.coefficients, pop.coefficients[r, :3], rtol=1e-8,
+                                   atol=1e-8 * np.abs(pop.coefficients).max())
+        assert pl.residual == pytest.approx(pop.registration_error[r], rel=1e-8)
+        assert sm.warnings(pl) == []
+
+
+def test_the_registered_template_lies_on_the_liver_and_centering_removes_position(population):
+    livers, pop, sm = population
+    g = livers[3]
+    shift = np.array([130.0, -40.0, 75.0])  # another scanner's frame
+    pl = sm.place(g.points + shift, g.surface_triangles)
+    ref = sm.place(g.points, g.surface_triangles)
+    # moved into the population's frame: the same placement wherever the file put the liver
+    # (up to rounding, which CPD's stopping tolerances can turn into an extra iteration)
+    np.testing.assert_allclose(pl.offset, ref.offset - shift, atol=1e-9)
+    surf = sm.surface_nodes
+    assert np.abs(pl.points - ref.points)[surf].max() < 0.1
+    np.testing.assert_allclose(pl.coefficients, ref.coefficients,
+                               atol=0.02 * np.abs(ref.coefficients).max())
+    # the template moved onto liver 3 is within a fraction of the mesh spacing (24 mm)
+    assert pl.residual < 2.0
+    # coefficients reproduce the registered surface through the PCA (no truncation error
+    # for a population member beyond the first 3 components' share)
+    S = sm.template_points[sm.surface_nodes]
+    d = (ref.points[sm.surface_nodes] - S).ravel()
+    np.testing.assert_allclose(project(d, sm.mean, sm.components), ref.coefficients)
+
+
+def test_a_liver_outside_the_population_is_named_with_its_numbers(population):
+    livers, pop, sm = population
+    g = livers[2]
+    c = g.points.mean(0)
+    big = c + 1.8 * (g.points - c)  # 1.8x larger: the template fits it less well, in mm
+    pl = sm.place(big, g.surface_triangles)
+    assert pl.residual > 1.5 * pop.registration_error.max()
+    assert any(m.startswith("registration residual") and f"{pl.residual:.2f} mm" in m
+               for m in sm.warnings(pl))
+    bent = warped(24, 0, 0)  # four times the population's largest bend
+    msgs = sm.warnings(sm.place(bent.points, bent.surface_triangles))
+    assert any("shape coefficients outside the population's range" in m for m in msgs), msgs
+
+
+def test_save_and_load_give_the_same_model(population, tmp_path):
+    _, _, sm = population
+    sm.save(tmp_path / "sm.npz")
+    back = ShapeModel.load(tmp_path / "sm.npz")
+    for name in ("template_points", "template_cells", "mean", "components", "schedule",
+                 "coefficient_min", "loadable_nodes"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(sm, name))
+    assert back.n_points == sm.n_points
+    (tmp_path / "bad.npz").write_bytes(b"not an npz")
+    with pytest.raises(ValueError, match="bad.npz: not a readable shape model"):
+        ShapeModel.load(tmp_path / "bad.npz")
