@@ -34,7 +34,7 @@ MPIRUN := mpirun -n $(NP)
 
 .PHONY: help setup setup-system setup-solver setup-trainer demo test test-solver test-trainer \
         test-extremes extremes-doc \
-        dataset train population bench tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
+        dataset train population table4 bench tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
         bench-viewer docs-manipulator viewer \
         clean lock-trainer
 
@@ -49,6 +49,7 @@ help:
 	@echo "make bench    run the benchmarks in bench/ (long)"
 	@echo "make tradeoff-fem   FEM speed/accuracy price list -> docs/tradeoff_fem.md (long, resumable)"
 	@echo "make tradeoff-surrogate   surrogate price list + error budget -> docs/ (long, resumable)"
+	@echo "make table4   the paper's Table 4, scenes 1-4 -> docs/table4.md (long, resumable)"
 	@echo "make bench-realtime   real-time surrogate designs -> docs/realtime.md (long, resumable)"
 	@echo "make viewer   RUN=...   the liver manipulator on a trained run (a window)"
 	@echo "make bench-viewer   manipulator frame rate, whole liver and surface -> docs/viewer.md"
@@ -123,10 +124,17 @@ $(TEST_DATA)/.done: data_spec/scenes/ci_scene1.toml | setup-solver
 	$(MPIRUN) $(SPY) -m fem_sim generate $< --out $(TEST_DATA) --no-progress
 	@touch $@
 
-test-trainer: setup-trainer $(TEST_DATA)/.done
+# A population of 6 livers for predict-liver's tests (data_spec/scenes/ci_scene4.toml).
+TEST_DATA4 := runs/test-data/ci_scene4
+$(TEST_DATA4)/.done: data_spec/scenes/ci_scene4.toml | setup-solver
+	$(MPIRUN) $(SPY) -m fem_sim generate $< --out $(TEST_DATA4) --no-progress
+	@touch $@
+
+test-trainer: setup-trainer $(TEST_DATA)/.done $(TEST_DATA4)/.done
 	$(TRAIN_VENV)/bin/ruff check .
-	LIVERFEM_TEST_DATASET=$(TEST_DATA) \
-	    bash scripts/run_pytest.sh $(TPY) tests/data_spec tests/liverviz tests/surrogate tests/reliability -q $(TESTS)
+	LIVERFEM_TEST_DATASET=$(TEST_DATA) LIVERFEM_TEST_DATASET4=$(TEST_DATA4) \
+	    bash scripts/run_pytest.sh $(TPY) tests/data_spec tests/liverviz tests/liverreg \
+	    tests/surrogate tests/reliability -q $(TESTS)
 
 bench: setup
 	@bash scripts/bench.sh "$(SPY)" "$(TPY)"
@@ -149,6 +157,12 @@ RT_DATA ?= bench/results/realtime/data
 bench-realtime: setup
 	$(MPIRUN) $(SPY) -m fem_sim generate data_spec/scenes/scene1_base.toml --out $(RT_DATA)
 	$(TPY) bench/bench_realtime.py --data $(RT_DATA)
+
+# The paper's Table 4, scene by scene (long, resumable; about an hour per scene on 2 cores):
+# generate, train, time -> docs/table4.md. T4="--scenes 1 2 --budget-minutes 90" passes options.
+T4 ?=
+table4: setup
+	$(TPY) bench/table4.py --np $(NP) --solver-python $(SPY) $(T4)
 
 population: setup-solver
 	$(SPY) -m fem_sim population $(SCENE) --out $(OUT)

@@ -1,4 +1,5 @@
-"""``python -m surrogate train --data DIR --run RUN [--config NAME] [--fresh] [key=value ...]``.
+"""``python -m surrogate train --data DIR --run RUN [--config NAME] [--fresh] [key=value ...]``
+and ``python -m surrogate predict-liver RUN LIVER --force X Y Z FX FY FZ [--out DIR]``.
 
 A killed training resumes when the same command is run again (``--fresh`` starts over).
 """
@@ -28,7 +29,28 @@ def main(argv=None) -> int:
                    help="discard RUN/checkpoints instead of resuming from them")
     t.add_argument("overrides", nargs="*", metavar="key=value",
                    help="config overrides, e.g. epochs=20 hidden=[64,64]")
+    p = sub.add_parser("predict-liver", help="place a liver never seen in the training "
+                       "population and predict its displacement (models of scene 4)")
+    p.add_argument("run", help="a run directory whose model was trained on a population")
+    p.add_argument("liver", help="the liver: a surface (.vtk .vtp .stl .obj .ply) or a volume "
+                   "mesh (.vtu, .vtk, data_spec .h5), in mm")
+    p.add_argument("--force", nargs=6, type=float, action="append", default=[],
+                   metavar=("X", "Y", "Z", "FX", "FY", "FZ"), required=True,
+                   help="a force FX FY FZ (N) at the liver surface point nearest to X Y Z "
+                   "(mm); once per load of the model")
+    p.add_argument("--out", default="predict-liver", help="output directory")
+    p.add_argument("--scale-to-mm", type=float, default=1.0,
+                   help="multiply the file's coordinates by this (1000 for metres)")
+    p.add_argument("--no-center", action="store_true",
+                   help="keep the liver where the file puts it (a liver already in the "
+                   "population's frame); by default it is moved to the population's mean "
+                   "position")
+    p.add_argument("--no-picture", action="store_true", help="no PNG (no OpenGL needed)")
     args = parser.parse_args(argv)
+    if args.command == "predict-liver":
+        from surrogate.predict_liver import main as predict_liver
+
+        return predict_liver(args)
 
     from pathlib import Path
 

@@ -18,6 +18,7 @@ import numpy as np
 
 from data_spec import list_shards, load_scene, read_geometry, read_shard
 from data_spec.atomic import atomic_path
+from data_spec.loads import eligible_load_nodes
 from data_spec.shards import geometry_path
 from surrogate.features import FeatureSpec, material_vector, static_node_features
 
@@ -48,6 +49,10 @@ class Dataset:
     targets: np.ndarray         # (E, 3) float32 displacement, mm, examples of all samples
     sample_offset: np.ndarray   # (S + 1,) examples of each sample in ``targets``
     failed_sims: int = 0
+    # per geometry: the nodes the scene's random loads may act on, and those loaded in the
+    # shards (None: the scene lists its cases explicitly)
+    loadable: list | None = None
+    directory: Path | None = None   # the dataset directory it was read from
 
     @property
     def n_samples(self) -> int:
@@ -108,6 +113,7 @@ def load_dataset(directory: str | Path, stream: bool | str = "auto",
         log.info("streaming targets to %s", final)
     geo_index: dict[str, int] = {}
     points, fixed, out_nodes, triangles, shapes, statics = [], [], [], [], [], []
+    loadable = []
     s_geo, s_sim, s_fr, s_f, s_lp, s_ln, s_extra, targets = [], [], [], [], [], [], [], []
     failed = 0
     with stack:  # on leaving: the spill file is closed, then renamed (last in, first out)
@@ -128,6 +134,8 @@ def load_dataset(directory: str | Path, stream: bool | str = "auto",
                 fixed.append(sh.fixed_nodes)
                 out_nodes.append(sh.output_nodes)
                 triangles.append(g.surface_triangles)
+                loadable.append(eligible_load_nodes(scene["loads"], g.points, g.surface_nodes,
+                                                    sh.fixed_nodes))
                 shapes.append(g.shape_coefficients if g.shape_coefficients is not None
                               else np.zeros(0))
                 statics.append(static_node_features(g.points, sh.fixed_nodes)[sh.output_nodes])
@@ -172,7 +180,10 @@ def load_dataset(directory: str | Path, stream: bool | str = "auto",
         sample_fraction=np.asarray(s_fr), forces=np.asarray(s_f, dtype=np.float32),
         load_points=np.asarray(s_lp, dtype=np.float32), load_nodes=np.asarray(s_ln),
         extra=np.asarray(extra, dtype=np.float32), targets=all_targets,
-        sample_offset=np.concatenate([[0], np.cumsum(sizes)]), failed_sims=failed)
+        sample_offset=np.concatenate([[0], np.cumsum(sizes)]), failed_sims=failed,
+        loadable=None if scene.cases else [
+            np.union1d(rule, np.asarray(s_ln)[np.asarray(s_geo) == g].ravel())
+            for g, rule in enumerate(loadable)], directory=directory)
 
 
 def restrict_nodes(ds: Dataset, keep: list[np.ndarray]) -> Dataset:

@@ -6,7 +6,12 @@ model never executes code. ``load_predictor(path)`` returns a jitted predictor i
     RUN/model/params.npz     network parameters, keys "hidden_0/kernel", ..., "output/bias"
                              (the reduced basis: "coefficients/..." for its last layer)
     RUN/model/geometry.npz   the liver (points, fixed nodes, output nodes, outward surface
-                             triangles) when the scene has one liver: enough to draw it
+                             triangles, the nodes the scene loads) when the scene has one
+                             liver: enough to draw it
+    RUN/model/shape_model.npz  when the scene varies the liver: the template, the PCA of the
+                             population and the registration settings
+                             (:class:`liverreg.shape_model.ShapeModel`): what a new liver
+                             needs (``python -m surrogate predict-liver``)
 """
 
 from __future__ import annotations
@@ -65,11 +70,52 @@ def _export(directory, params, design: dict, cfg, ds, unseen=()) -> Path:
         "unseen_simulations": sorted(int(i) for i in unseen),
     }
     meta["embedded_geometry"] = len(ds.points) == 1
+    loadable = getattr(ds, "loadable", None)
     if meta["embedded_geometry"]:
+        extra = {} if loadable is None else {"loadable": loadable[0]}
         np.savez(d / "geometry.npz", points=ds.points[0], fixed=ds.fixed[0],
-                 output_nodes=ds.out_nodes[0], triangles=ds.triangles[0])
+                 output_nodes=ds.out_nodes[0], triangles=ds.triangles[0], **extra)
+    if ds.spec.geometry_dim and getattr(ds, "directory", None) is not None:
+        shape_model = population_shape_model(ds)
+        if shape_model is not None:
+            shape_model.save(d / "shape_model.npz")
+            meta["shape_model"] = "shape_model.npz"
     (d / "model.json").write_text(json.dumps(meta, indent=1))
     return d
+
+
+def population_shape_model(ds):
+    """The dataset's population as a :class:`liverreg.shape_model.ShapeModel` (template = the
+    population's liver 0), from DATA/geometry/population.npz; None when the dataset has none.
+    """
+    from data_spec import read_geometry
+    from data_spec.loads import eligible_load_nodes
+    from data_spec.scene import load_scene
+    from data_spec.shards import geometry_path
+    from liverreg.shape_model import ShapeModel
+
+    path = Path(ds.directory) / "geometry" / "population.npz"
+    if not path.exists():
+        log.warning("%s: missing; the model cannot place a new liver", path)
+        return None
+    k = ds.spec.geometry_dim
+    with np.load(path, allow_pickle=False) as z:
+        ids = [str(i) for i in z["geometry_ids"]]
+        coeff, mean, comps = z["coefficients"][:, :k], z["mean"], z["components"][:k]
+        residuals = z["registration_error"]
+    template = read_geometry(geometry_path(ds.directory, ids[0]))
+    scene = load_scene(Path(ds.directory) / "scene.toml")
+    if ids[0] in ds.geo_ids:
+        fixed = ds.fixed[ds.geo_ids.index(ids[0])]
+    else:  # the template's simulations are not in this dataset: its region, as the scene says
+        fixed = template.regions[scene["fixed"]["name"]]
+    loadable = eligible_load_nodes(scene["loads"], template.points, template.surface_nodes,
+                                   fixed)
+    return ShapeModel(template_points=template.points, template_cells=template.cells,
+                      surface_triangles=template.surface_triangles, fixed_nodes=fixed,
+                      mean=mean, components=comps, coefficient_min=coeff.min(axis=0),
+                      coefficient_max=coeff.max(axis=0), residuals=residuals,
+                      loadable_nodes=loadable)
 
 
 def _read_meta(path: Path) -> dict:
@@ -172,6 +218,7 @@ class Predictor:
                     self.output_nodes = z["output_nodes"]
                     # Models exported before the triangles were stored have none.
                     self.triangles = z["triangles"] if "triangles" in z.files else None
+                    self.loadable = z["loadable"] if "loadable" in z.files else None
             except (OSError, KeyError, ValueError) as exc:
                 raise ValueError(f"{geo}: cannot be read ({exc})") from None
             self.static = jnp.asarray(static_node_features(self.points, self.fixed),
@@ -180,7 +227,9 @@ class Predictor:
             raise ValueError(f"{geo}: missing (the model was exported with its liver)")
         else:
             self.points = self.fixed = self.static = self.output_nodes = None
-            self.triangles = None
+            self.triangles = self.loadable = None
+        self._shape_model_path = d / meta["shape_model"] if meta.get("shape_model") else None
+        self._shape_model = None
         if self.design == "basis":
             self._init_basis(d, meta, hidden, dtype)
             return
@@ -267,6 +316,8 @@ class Predictor:
                               m0 + self.spec.geometry_dim)
             blocks.append(np.broadcast_to(shape, (forces.shape[0], shape.size)))
         extra = np.concatenate(blocks, axis=1) if blocks else np.zeros((forces.shape[0], 0))
+        if geometry is None and self.loadable is not None:
+            check_load_nodes(load_nodes, self.loadable)
         fmax = np.linalg.norm(forces, axis=-1).max()
         if fmax > 1.05 * self.force_norm_max:
             warnings.warn(f"force magnitude {fmax:.3g} N exceeds the training range "
@@ -364,6 +415,17 @@ class Predictor:
             warnings.warn(f"{what} {values.tolist()} outside the training range "
                           f"[{lo.tolist()}, {hi.tolist()}]: extrapolating", stacklevel=3)
 
+    @property
+    def shape_model(self):
+        """The population's :class:`liverreg.shape_model.ShapeModel` (None for a model of one
+        liver, or exported without it).
+        """
+        if self._shape_model is None and self._shape_model_path is not None:
+            from liverreg.shape_model import ShapeModel
+
+            self._shape_model = ShapeModel.load(self._shape_model_path)
+        return self._shape_model
+
     def _geometry(self, geometry):
         """(static node features, points) of the liver to predict on."""
         import jax.numpy as jnp
@@ -384,6 +446,17 @@ class Predictor:
             self._geo_static = jnp.asarray(static_node_features(points, fixed),
                                            dtype=jnp.float32)
         return self._geo_static, points
+
+
+def check_load_nodes(load_nodes, loadable) -> None:
+    """Warn when a load acts on a node the scene never loads (interior, fixed, or closer to the
+    fixed region than its minimum distance): no training example had a load there.
+    """
+    bad = np.setdiff1d(np.asarray(load_nodes).ravel(), loadable)
+    if bad.size:
+        warnings.warn(f"load node(s) {bad[:10].tolist()} never loaded in training (the scene "
+                      "loads surface nodes away from the fixed region; these are interior, "
+                      "fixed or too close to it): extrapolating", stacklevel=3)
 
 
 def load_predictor(directory, dtype: str = "float32") -> Predictor:

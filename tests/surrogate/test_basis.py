@@ -122,3 +122,11 @@ def test_reduced_precision_basis_is_close_to_float32(run, dtype, rel):
     low = load_predictor(out / "model", dtype=dtype)(f, nodes)
     assert low.dtype == np.float32
     assert np.abs(low - full).max() <= rel * np.abs(full).max()
+
+
+def test_a_load_where_the_scene_never_loads_is_flagged_by_the_basis_too(run):
+    pred = load_predictor(run[0] / "model")
+    never = np.setdiff1d(pred.fixed, pred.loadable)[:1]
+    assert never.size
+    with pytest.warns(UserWarning, match="never loaded in training"):
+        pred([[0.0, 0.0, -0.4]], never)

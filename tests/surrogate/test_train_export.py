@@ -376,3 +376,19 @@ def test_restrict_nodes_keeps_the_targets_of_the_kept_nodes(synth_dir):
     assert rows.max() < sub.static.shape[0] and tgt.max() == sub.targets.shape[0] - 1
     with pytest.raises(ValueError, match="2 node lists for 1 geometries"):
         restrict_nodes(ds, [keep, keep])
+
+
+def test_a_load_where_the_scene_never_loads_is_flagged(run, synth_dir):
+    """The exported liver knows which nodes were loaded in training (the scene's rule and the
+    shards' loads): a load elsewhere (here the fixed nodes) gets a warning, a trained one not."""
+    from data_spec import list_shards, read_shard
+
+    pred = load_predictor(run[0] / "model")
+    seen = read_shard(list_shards(synth_dir)[0]).load_nodes
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        pred([[0.0, 0.0, -0.4]], seen)
+    never = np.setdiff1d(pred.fixed, pred.loadable)[:1]
+    assert never.size
+    with pytest.warns(UserWarning, match=rf"load node\(s\) \[{never[0]}\] never loaded"):
+        pred([[0.0, 0.0, -0.4]], never)

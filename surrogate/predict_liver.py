@@ -1,0 +1,272 @@
+"""A liver the model has never seen: place it in the training population and predict on it.
+
+    python -m surrogate predict-liver RUN LIVER --force X Y Z FX FY FZ [--out DIR]
+
+A model trained on a population of livers (a scene that varies the geometry) carries its
+shape model (``RUN/model/shape_model.npz``: template mesh, PCA basis, registration settings;
+:mod:`liverreg.shape_model`). Here the template is registered onto the new liver with the same
+staged CPD as in training (:mod:`liverreg.cpd`, the code the solver used), its shape
+coefficients come from the same PCA, and the network predicts on the registered template: the
+new liver's shape with the template's mesh, nodes and fixed region. A force is placed at the
+surface node of the registered template nearest to the point given.
+
+Warnings, with their numbers, when the liver lies outside the population (registration
+residual, shape coefficients outside the population's range) or a load acts where the scene
+never loaded (interior, fixed, or too near the fixed region). Output: the deformed liver as a
+``.vtu`` (ParaView: the point data ``displacement``; "Warp By Vector" shows the deformed
+shape), a JSON with the placement and warnings, and a picture.
+
+The same as a Python API: :func:`read_liver_surface`, :func:`place_liver`,
+:func:`predict_liver`. numpy, scipy and pyvista (to read surfaces); no dolfinx.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+SURFACE_SUFFIXES = (".vtk", ".vtp", ".vtu", ".stl", ".obj", ".ply", ".h5")
+
+
+class LiverFileError(ValueError):
+    """A liver file that cannot be used; the message names the file and what was expected."""
+
+
+def read_liver_surface(path, scale_to_mm: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """(points (p, 3) mm, triangles (t, 3)): the boundary of a liver file.
+
+    Surfaces (``.vtk``/``.vtp``/``.stl``/``.obj``/``.ply``) and volume meshes (``.vtu``, a
+    legacy ``.vtk`` unstructured grid, a data_spec geometry ``.h5``). Polygons are split into
+    triangles, duplicate points merged, and only the largest connected piece is kept (small
+    loose specks are common in exported surfaces).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise LiverFileError(f"{path}: no such file")
+    suffix = path.suffix.lower()
+    if suffix not in SURFACE_SUFFIXES:
+        raise LiverFileError(f"{path}: unknown liver file type {suffix!r}; expected one of "
+                             f"{', '.join(SURFACE_SUFFIXES)}")
+    if not np.isfinite(scale_to_mm) or scale_to_mm <= 0:
+        raise LiverFileError(f"scale_to_mm: expected a number > 0, got {scale_to_mm}")
+    if suffix == ".h5":
+        from data_spec import read_geometry
+
+        try:
+            g = read_geometry(path)
+        except (OSError, KeyError, ValueError) as exc:
+            raise LiverFileError(f"{path}: not a data_spec geometry ({exc})") from None
+        return _checked(path, g.points * scale_to_mm, g.surface_triangles)
+    from liverviz.pictures import pyvista
+
+    pv = pyvista()
+    try:
+        mesh = pv.read(str(path))
+    except Exception as exc:  # VTK's readers raise many kinds
+        raise LiverFileError(f"{path}: cannot be read ({type(exc).__name__}: {exc})") from None
+    if mesh.n_points == 0 or mesh.n_cells == 0:
+        raise LiverFileError(f"{path}: no points or cells")
+    surf = mesh.extract_surface(algorithm="dataset_surface").triangulate().clean()
+    if surf.n_cells == 0:
+        raise LiverFileError(f"{path}: no surface triangles")
+    surf = surf.connectivity("largest").extract_surface(algorithm="dataset_surface")
+    surf = surf.triangulate().clean()
+    faces = np.asarray(surf.faces).reshape(-1, 4)
+    if faces.size == 0 or not np.all(faces[:, 0] == 3):
+        raise LiverFileError(f"{path}: expected a triangulated surface")
+    return _checked(path, np.asarray(surf.points, dtype=np.float64) * scale_to_mm, faces[:, 1:])
+
+
+def _checked(path, points, triangles):
+    if not np.all(np.isfinite(points)):
+        raise LiverFileError(f"{path}: points contain NaN or inf")
+    if triangles.shape[0] < 100:
+        raise LiverFileError(f"{path}: {triangles.shape[0]} surface triangles; a liver "
+                             "surface needs many more (at least 100)")
+    size = np.ptp(points, axis=0).max()
+    if not 30.0 <= size <= 600.0:
+        raise LiverFileError(f"{path}: the liver spans {size:.3g} units; expected millimetres "
+                             "(30-600 mm): give scale_to_mm (e.g. 1000 for metres)")
+    return points, np.asarray(triangles, dtype=np.int64)
+
+
+@dataclass
+class LiverPrediction:
+    """A prediction on a new liver: the registered template and its displacement."""
+
+    points: np.ndarray          # (n, 3) registered template nodes, mm, in the liver's frame
+    cells: np.ndarray           # (c, 4) template tetrahedra
+    triangles: np.ndarray       # (t, 3) boundary
+    fixed_nodes: np.ndarray
+    displacement: np.ndarray    # (n, 3) mm
+    load_nodes: np.ndarray      # (n_loads,)
+    forces: np.ndarray          # (n_loads, 3) N
+    coefficients: np.ndarray
+    residual: float
+    offset: np.ndarray          # (3,) the liver's translation into the population's frame
+    inverted: int = 0           # template tetrahedra the placement turned inside out
+    warnings: list = field(default_factory=list)
+
+    def write_vtu(self, path) -> Path:
+        """The liver as a ParaView file: tetrahedra, point data displacement and |u|."""
+        from liverviz.pictures import pyvista
+
+        pv = pyvista()
+        cells = np.hstack([np.full((self.cells.shape[0], 1), 4), self.cells]).ravel()
+        grid = pv.UnstructuredGrid(cells, np.full(self.cells.shape[0], 10, np.uint8),
+                                   self.points)
+        grid.point_data["displacement"] = self.displacement
+        grid.point_data["displacement_magnitude"] = np.linalg.norm(self.displacement, axis=1)
+        fixed = np.zeros(self.points.shape[0], np.uint8)
+        fixed[self.fixed_nodes] = 1
+        grid.point_data["fixed"] = fixed
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        grid.save(str(path))
+        return path
+
+    def draw(self, png, title: str = "") -> Path:
+        from liverviz.pictures import Panel, Surface, render_panels
+
+        s = Surface.from_mesh(self.points, self.triangles, self.fixed_nodes)
+        umax = np.linalg.norm(self.displacement, axis=1).max()
+        panel = Panel(surface=s, u=self.displacement[s.nodes], forces=self.forces,
+                      load_nodes=self.load_nodes, f_ref=float(np.linalg.norm(
+                          self.forces, axis=1).max() or 1.0),
+                      label=f"predicted, max displacement {umax:.1f} mm")
+        return render_panels([panel], png, title=title)
+
+
+def place_liver(predictor, points, triangles, center: bool = True):
+    """(placement, warnings): the template registered onto the liver surface, with the
+    reasons (numbers included) it lies outside the training population. ``center``: move the
+    liver to the population's mean position first (a liver from a scanner); False for a liver
+    already in the population's frame (one the solver's population pipeline made).
+    """
+    sm = predictor.shape_model
+    if sm is None:
+        raise ValueError(_no_population(predictor))
+    placement = sm.place(points, triangles, center=center)
+    return placement, sm.warnings(placement)
+
+
+def _no_population(predictor) -> str:
+    if not predictor.spec.geometry_dim:
+        return ("this model was trained on one liver (its scene does not vary the geometry): "
+                "it cannot place a new liver; train on a population scene (scene 4)")
+    return ("this model carries no shape model (RUN/model/shape_model.npz): it was exported "
+            "without its population; train it again on a dataset with geometry/population.npz")
+
+
+def nearest_surface_nodes(points, triangles, at) -> np.ndarray:
+    """For each point of ``at`` (k, 3), the nearest node of the surface."""
+    from scipy.spatial import cKDTree
+
+    surf = np.unique(triangles)
+    return surf[cKDTree(points[surf]).query(np.asarray(at, dtype=np.float64))[1]]
+
+
+def predict_liver(predictor, points, triangles, forces, at=None, load_nodes=None,
+                  placement=None, center: bool = True) -> LiverPrediction:
+    """Place the liver (points, triangles: its surface; :func:`place_liver`) and predict the
+    displacement under ``forces`` (n_loads, 3) N acting at the template nodes nearest to
+    ``at`` (n_loads, 3) mm, or at template node ids ``load_nodes``.
+    """
+    sm = predictor.shape_model
+    if sm is None:
+        raise ValueError(_no_population(predictor))
+    found = []
+    if placement is None:
+        placement, found = place_liver(predictor, points, triangles, center)
+    forces = np.asarray(forces, dtype=np.float64).reshape(-1, 3)
+    if (at is None) == (load_nodes is None):
+        raise ValueError("give either at (points, mm) or load_nodes (template node ids)")
+    if at is not None:  # points in the liver's frame; the placement is in the population's
+        at = np.asarray(at, dtype=np.float64).reshape(-1, 3) + placement.offset
+        load_nodes = nearest_surface_nodes(placement.points, sm.surface_triangles, at)
+    load_nodes = np.asarray(load_nodes, dtype=np.int64).ravel()
+    if load_nodes.size != forces.shape[0]:
+        raise ValueError(f"{forces.shape[0]} force(s) for {load_nodes.size} load node(s)")
+    if sm.loadable_nodes.size:
+        bad = np.setdiff1d(load_nodes, sm.loadable_nodes)
+        if bad.size:
+            found.append(f"load node(s) {bad.tolist()} never loaded in training (the scene "
+                         "loads surface nodes away from the fixed region): extrapolating")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        u = predictor(forces, load_nodes,
+                      geometry=(placement.points, sm.fixed_nodes, placement.coefficients))
+    found += [str(w.message) for w in caught if "shape coefficients" not in str(w.message)]
+    for msg in found:
+        warnings.warn(msg, stacklevel=2)
+    return LiverPrediction(points=placement.points - placement.offset, cells=sm.template_cells,
+                           triangles=sm.surface_triangles, fixed_nodes=sm.fixed_nodes,
+                           displacement=np.asarray(u, dtype=np.float64), load_nodes=load_nodes,
+                           forces=forces, coefficients=placement.coefficients,
+                           residual=placement.residual, offset=placement.offset,
+                           inverted=placement.inverted, warnings=found)
+
+
+def main(args) -> int:
+    """The ``predict-liver`` subcommand (arguments parsed by surrogate.__main__)."""
+    import sys
+
+    from surrogate.export import load_predictor
+
+    def fail(msg):
+        print(f"surrogate predict-liver: {msg}", file=sys.stderr)
+        return 2
+
+    try:
+        predictor = load_predictor(Path(args.run) / "model")
+    except ValueError as exc:
+        return fail(exc)
+    if predictor.shape_model is None:
+        return fail(f"{args.run}: {_no_population(predictor)}")
+    L = predictor.spec.n_loads
+    if len(args.force) != L:
+        return fail(f"--force: the model takes {L} force(s), got {len(args.force)} (each "
+                    "--force X Y Z FX FY FZ: a point near the liver surface in mm and a force "
+                    "in N)")
+    spec = np.asarray(args.force, dtype=np.float64)
+    if not np.all(np.isfinite(spec)):
+        return fail("--force: contains NaN or inf")
+    try:
+        points, triangles = read_liver_surface(args.liver, args.scale_to_mm)
+    except LiverFileError as exc:
+        return fail(exc)
+    print(f"registering the template onto {args.liver} ({points.shape[0]:,} surface points)",
+          file=sys.stderr, flush=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # reported below, once
+        pred = predict_liver(predictor, points, triangles, spec[:, 3:], at=spec[:, :3],
+                             center=not args.no_center)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    vtu = pred.write_vtu(out / "liver_deformed.vtu")
+    summary = {"liver": str(args.liver), "model": str(args.run),
+               "registration_residual_mm": pred.residual,
+               "inverted_template_tetrahedra": pred.inverted,
+               "offset_into_population_frame_mm": pred.offset.tolist(),
+               "population_residual_mm": {"median": float(np.median(
+                   predictor.shape_model.residuals)), "max": float(
+                   predictor.shape_model.residuals.max())},
+               "shape_coefficients": pred.coefficients.tolist(),
+               "load_nodes": pred.load_nodes.tolist(), "forces_N": pred.forces.tolist(),
+               "max_displacement_mm": float(np.linalg.norm(pred.displacement, axis=1).max()),
+               "warnings": pred.warnings}
+    (out / "prediction.json").write_text(json.dumps(summary, indent=1))
+    for msg in pred.warnings:
+        print(f"warning: {msg}", file=sys.stderr)
+    if not args.no_picture:
+        png = pred.draw(out / "liver_deformed.png", title=Path(args.liver).name)
+        print(f"picture: {png}", file=sys.stderr)
+    print(f"registration residual {pred.residual:.2f} mm, {pred.inverted} of "
+          f"{pred.cells.shape[0]} template tetrahedra inverted; max displacement "
+          f"{summary['max_displacement_mm']:.2f} mm; written {vtu} and "
+          f"{out / 'prediction.json'}")
+    return 0

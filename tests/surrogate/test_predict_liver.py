@@ -1,0 +1,126 @@
+"""A liver never seen (``predict-liver``), on a small population dataset that fem_sim generates
+(make test: data_spec/scenes/ci_scene4.toml, 6 phantoms): the exported model carries its
+shape model, places a liver of the population where the population put it, predicts on the
+registered template, writes a ParaView file, and refuses bad files and single-liver models."""
+
+import json
+import os
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from surrogate import load_predictor
+from surrogate.__main__ import main
+from surrogate.config import get_config
+from surrogate.predict_liver import LiverFileError, predict_liver, read_liver_surface
+from surrogate.train import train_and_evaluate
+
+DATA = os.environ.get("LIVERFEM_TEST_DATASET4")
+SOFA = Path(__file__).parents[3] / "shared" / "data" / "livers" / "sofa_liver.vtk"
+pytestmark = pytest.mark.skipif(not DATA, reason="LIVERFEM_TEST_DATASET4 not set (make test "
+                                                 "sets it)")
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("pop_run")
+    cfg = get_config("small", folds=2, epochs=4, hidden=[64, 64], batch_size=1024)
+    train_and_evaluate(DATA, out, cfg, log_fn=lambda m: None)
+    return out
+
+
+def _population_liver(k: int):
+    """(geometry file, its PCA coefficients) of liver k of the dataset's population."""
+    with np.load(Path(DATA) / "geometry" / "population.npz") as z:
+        gid, coeff = str(z["geometry_ids"][k]), z["coefficients"][k]
+    return Path(DATA) / "geometry" / f"{gid}.h5", coeff
+
+
+def test_the_export_carries_the_population(run):
+    pred = load_predictor(run / "model")
+    sm = pred.shape_model
+    assert sm is not None and sm.n_components == pred.spec.geometry_dim == 3
+    assert sm.template_cells.shape[1] == 4 and sm.loadable_nodes.size > 0
+    assert np.all(np.isin(sm.fixed_nodes, sm.surface_nodes))
+
+
+def test_a_population_liver_is_placed_where_the_population_put_it(run):
+    pred = load_predictor(run / "model")
+    path, coeff = _population_liver(3)
+    points, tris = read_liver_surface(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # inside the population: no warning
+        out = predict_liver(pred, points, tris, [[0.0, 0.0, -0.4]],
+                            load_nodes=pred.shape_model.loadable_nodes[:1], center=False)
+    # liver 3 in the population's frame: the solver's registration repeated, the same numbers
+    np.testing.assert_allclose(out.coefficients, coeff[:3], rtol=1e-6,
+                               atol=1e-6 * np.abs(coeff).max())
+    np.testing.assert_array_equal(out.offset, 0.0)
+    assert out.displacement.shape == pred.shape_model.template_points.shape
+    assert np.all(np.isfinite(out.displacement)) and np.abs(out.displacement).max() > 0
+    # the same numbers as the predictor called on the registered template directly
+    sm = pred.shape_model
+    direct = pred([[0.0, 0.0, -0.4]], sm.loadable_nodes[:1],
+                  geometry=(out.points + out.offset, sm.fixed_nodes, out.coefficients))
+    np.testing.assert_allclose(out.displacement, direct, rtol=1e-5, atol=1e-6)
+
+
+def test_a_load_on_an_interior_node_is_flagged(run):
+    pred = load_predictor(run / "model")
+    sm = pred.shape_model
+    path, _ = _population_liver(2)
+    points, tris = read_liver_surface(path)
+    interior = np.setdiff1d(np.arange(sm.template_points.shape[0]), sm.surface_nodes)[:1]
+    with pytest.warns(UserWarning, match=rf"load node\(s\) \[{interior[0]}\] never loaded"):
+        predict_liver(pred, points, tris, [[0.0, 0.0, -0.4]], load_nodes=interior)
+
+
+@pytest.mark.skipif(not SOFA.exists(), reason=f"{SOFA} not present")
+def test_the_command_on_a_real_liver_writes_paraview_and_the_numbers(run, tmp_path, capsys):
+    out = tmp_path / "pl"
+    assert main(["predict-liver", str(run), str(SOFA), "--force", "120", "100", "190", "0",
+                 "0", "-0.4", "--out", str(out), "--no-picture"]) == 0
+    summary = json.loads((out / "prediction.json").read_text())
+    assert summary["registration_residual_mm"] > 0 and len(summary["shape_coefficients"]) == 3
+    assert 0 < summary["max_displacement_mm"] < 100
+    import pyvista as pv
+
+    grid = pv.read(out / "liver_deformed.vtu")
+    assert grid.n_points == load_predictor(run / "model").shape_model.template_points.shape[0]
+    assert grid.point_data["displacement"].shape == (grid.n_points, 3)
+    # the deformed liver lies where the file's liver lies (its own frame, not the population's)
+    # (its bounding box within a fraction of the 20 mm template mesh)
+    liver = read_liver_surface(SOFA)[0]
+    assert np.abs(grid.points.min(axis=0) - liver.min(axis=0)).max() < 8.0
+    assert np.abs(grid.points.max(axis=0) - liver.max(axis=0)).max() < 8.0
+
+
+def test_bad_files_and_single_liver_models_are_refused(run, tmp_path, capsys):
+    bad = tmp_path / "liver.txt"
+    bad.write_text("not a liver")
+    with pytest.raises(LiverFileError, match="liver.txt: unknown liver file type '.txt'"):
+        read_liver_surface(bad)
+    broken = tmp_path / "liver.stl"
+    broken.write_bytes(b"solid x\nfacet broken\n")
+    with pytest.raises(LiverFileError, match="liver.stl"):
+        read_liver_surface(broken)
+    path, _ = _population_liver(1)
+    with pytest.raises(LiverFileError, match="expected millimetres"):
+        read_liver_surface(path, scale_to_mm=1e-3)
+    assert main(["predict-liver", str(run), str(bad), "--force", "0", "0", "0", "0", "0",
+                 "-0.4"]) == 2
+    assert "unknown liver file type" in capsys.readouterr().err
+    assert main(["predict-liver", str(run), str(path), "--force", "0", "0", "0", "0", "0",
+                 "-0.4", "--force", "0", "0", "0", "0", "0", "-0.4"]) == 2
+    assert "takes 1 force(s), got 2" in capsys.readouterr().err
+
+
+def test_a_model_of_one_liver_cannot_place_a_new_one(tmp_path, synth_dir, capsys):
+    run = tmp_path / "one"
+    train_and_evaluate(synth_dir, run, get_config("small", folds=2, epochs=1,
+                                                  final_fit=True), log_fn=lambda m: None)
+    assert main(["predict-liver", str(run), str(SOFA), "--force", "0", "0", "0", "0", "0",
+                 "-0.4"]) == 2
+    assert "trained on one liver" in capsys.readouterr().err
