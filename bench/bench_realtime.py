@@ -25,15 +25,14 @@ import os
 import platform
 import sys
 import tempfile
-import time
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from latency import at_scale, latency  # noqa: E402
 from report import header  # noqa: E402
 
 RESULTS = ROOT / "bench" / "results" / "realtime"
@@ -60,58 +59,6 @@ def train(data: Path, folds: int) -> dict:
     return out
 
 
-def at_scale(run: Path, n_nodes: int, directory: Path, seed: int = 0) -> Path:
-    """A copy of the run's exported model on a synthetic liver-sized cloud of n_nodes."""
-    from surrogate.export import export_model, load_predictor
-
-    pred = load_predictor(run / "model")
-    meta = pred.meta
-    rng = np.random.default_rng(seed)
-    lo, hi = pred.points.min(axis=0), pred.points.max(axis=0)
-    centre, half = (lo + hi) / 2, (hi - lo) / 2
-    pts = centre + half * rng.uniform(-1, 1, size=(n_nodes, 3))
-    ds = SimpleNamespace(forces=np.full((1, 1, 3), meta["training_range"]["force_norm_max"]),
-                         extra=np.zeros((1, 0)), scene_name=meta["scene"], spec=pred.spec,
-                         points=[pts], fixed=[np.arange(100)], out_nodes=[np.arange(n_nodes)],
-                         triangles=[np.zeros((0, 3), dtype=np.int64)])
-    if pred.design == "basis":
-        from surrogate.basis import BasisModel
-
-        k = pred._modes_np.shape[0]
-        modes = np.linalg.qr(rng.standard_normal((3 * n_nodes, k)))[0].T.astype(np.float32)
-        st = meta["stats"]
-        model = BasisModel(params=_params(run), modes=modes,
-                           x_mean=np.asarray(st["x_mean"], np.float32),
-                           x_std=np.asarray(st["x_std"], np.float32), c_scale=st["c_scale"],
-                           f_scale=st["f_scale"], hidden=tuple(meta["config"]["hidden"]),
-                           n_loads=pred.spec.n_loads)
-    else:
-        model = (_params(run), pred.norm)
-    export_model(directory, model, {**meta["config"], "design": pred.design}, ds)
-    return directory
-
-
-def _params(run: Path) -> dict:
-    from flax import traverse_util
-
-    with np.load(run / "model" / "params.npz", allow_pickle=False) as z:
-        return traverse_util.unflatten_dict({k: z[k] for k in z.files}, sep="/")
-
-
-def latency(predict, nodes, calls: int) -> tuple[float, float]:
-    """(median, 99th percentile) seconds per call, after warm-up."""
-    f = np.array([[0.0, 0.0, -0.4]])
-    for _ in range(5):
-        predict(f, [7], nodes=nodes)
-    times = []
-    for i in range(calls):
-        f[0, 2] = -0.4 + 1e-4 * (i % 100)
-        t = time.perf_counter()
-        predict(f, [7], nodes=nodes)
-        times.append(time.perf_counter() - t)
-    return float(np.median(times)), float(np.percentile(times, 99))
-
-
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=str(RESULTS / "data"))
@@ -128,7 +75,7 @@ def main() -> int:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name, (run, metrics) in trained.items():
-            big = at_scale(run, a.nodes, Path(tmp) / run.name)
+            big = at_scale(run / "model", a.nodes, Path(tmp) / run.name)
             surface = np.arange(0, a.nodes, 3)
             for dtype in ("float32", "bfloat16"):
                 predict = load_predictor(big, dtype=dtype)

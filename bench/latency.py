@@ -1,0 +1,89 @@
+"""Latency of an exported model, shared by the reports that quote one (bench_realtime, table4).
+
+``at_scale`` re-exports a trained model's network onto a liver-sized cloud of nodes (the
+node-wise design evaluates its features there; the reduced basis gets orthonormal modes of
+that size, since its own modes live on the scene's mesh): the cost of one call depends on the
+design, the network and the node count, not on the values of the weights or the modes.
+``latency`` times calls through the real ``load_predictor`` path.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+
+def _params(model_dir: Path) -> dict:
+    from flax import traverse_util
+
+    with np.load(Path(model_dir) / "params.npz", allow_pickle=False) as z:
+        return traverse_util.unflatten_dict({k: z[k] for k in z.files}, sep="/")
+
+
+def typical_inputs(pred) -> tuple[np.ndarray, np.ndarray]:
+    """(forces (1, n_loads, 3), extra (1, e)): a force of the largest trained norm per load and
+    the middle of the trained material/shape ranges.
+    """
+    meta = pred.meta
+    rng = meta["training_range"]
+    f = np.zeros((1, pred.spec.n_loads, 3))
+    f[..., 2] = -rng["force_norm_max"]
+    lo, hi = np.asarray(rng["extra_min"], float), np.asarray(rng["extra_max"], float)
+    return f, ((lo + hi) / 2)[None] if lo.size else np.zeros((1, 0))
+
+
+def at_scale(model_dir: Path, n_nodes: int, directory: Path, seed: int = 0) -> Path:
+    """A copy of the exported model in ``model_dir`` on a synthetic cloud of n_nodes."""
+    from surrogate.export import export_model, load_predictor
+
+    pred = load_predictor(model_dir)
+    meta = pred.meta
+    rng = np.random.default_rng(seed)
+    base = pred.points if pred.points is not None else rng.uniform(-100, 100, size=(10, 3))
+    lo, hi = base.min(axis=0), base.max(axis=0)
+    centre, half = (lo + hi) / 2, (hi - lo) / 2
+    pts = centre + half * rng.uniform(-1, 1, size=(n_nodes, 3))
+    forces, extra = typical_inputs(pred)
+    ds = SimpleNamespace(forces=forces, extra=extra, scene_name=meta["scene"], spec=pred.spec,
+                         points=[pts], fixed=[np.arange(100)], out_nodes=[np.arange(n_nodes)],
+                         triangles=[np.zeros((0, 3), dtype=np.int64)])
+    if pred.design == "basis":
+        from surrogate.basis import BasisModel
+
+        k = pred._modes_np.shape[0]
+        modes = np.linalg.qr(rng.standard_normal((3 * n_nodes, k)))[0].T.astype(np.float32)
+        st = meta["stats"]
+        model = BasisModel(params=_params(model_dir), modes=modes,
+                           x_mean=np.asarray(st["x_mean"], np.float32),
+                           x_std=np.asarray(st["x_std"], np.float32), c_scale=st["c_scale"],
+                           f_scale=st["f_scale"], hidden=tuple(meta["config"]["hidden"]),
+                           n_loads=pred.spec.n_loads)
+    else:
+        model = (_params(model_dir), pred.norm)
+    export_model(directory, model, {**meta["config"], "design": pred.design}, ds)
+    return directory
+
+
+def latency(predict, nodes=None, calls: int = 200) -> tuple[float, float]:
+    """(median, 99th percentile) seconds per call of one load case, after warm-up."""
+    f, extra = typical_inputs(predict)
+    spec = predict.spec
+    material = extra[0, :spec.material_dim] if spec.material_dim else None
+    geometry = None
+    if spec.geometry_dim:
+        geometry = (predict.points, predict.fixed, extra[0, spec.material_dim:])
+    load_nodes = np.arange(7, 7 + spec.n_loads)
+    kw = {"nodes": nodes, "material": material, "geometry": geometry}
+    for _ in range(5):
+        predict(f[0], load_nodes, **kw)
+    times = []
+    for i in range(calls):
+        g = f[0].copy()
+        g[:, 2] *= 1.0 - 1e-4 * (i % 100)
+        t = time.perf_counter()
+        predict(g, load_nodes, **kw)
+        times.append(time.perf_counter() - t)
+    return float(np.median(times)), float(np.percentile(times, 99))

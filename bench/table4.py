@@ -1,0 +1,334 @@
+"""The reference paper's Table 4, scene by scene: generate, train with the scene's
+configuration, and write each row beside the paper's into docs/table4.md.
+
+    make table4                                      # scenes 1-4 at the default budget
+    .venv-train/bin/python bench/table4.py --scenes 1 2 [--sims 2=600] [--budget-minutes 60]
+
+For every scene: its simulations are generated with ``mpirun -n NP python -m fem_sim generate
+--only 0..N`` in chunks (``--budget-minutes`` caps the generation at half of the scene's
+budget, ``--sims`` caps the count; the paper's size where it fits), then trained with
+``surrogate.train.train_and_evaluate`` with the scene's ``[surrogate]`` configuration (the
+overrides of the budget are printed in the report), then the exported model is timed. A
+learning curve (skill against training simulations: all of them, then the first half and
+quarter with 3 folds) shows where the paper's size would land when it is not reached.
+
+Resumable: generation skips the shards that exist (``generate`` itself), a run whose
+metrics.json exists is not trained again, and a killed training resumes from its checkpoint.
+Everything lands under ``bench/results/table4/`` (regenerable, not committed); the report is
+rewritten from what is there after every scene, so a partial run gives a partial table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "bench"))
+from latency import at_scale, latency  # noqa: E402
+from report import header  # noqa: E402
+
+RESULTS = ROOT / "bench" / "results" / "table4"
+SCENES = {1: "scene1_base.toml", 2: "scene2_two_forces.toml", 3: "scene3_materials.toml",
+          4: "scene4_livers.toml"}
+# What this machine (2 cores) affords in about an hour per scene; the scene files keep the
+# paper's sizes. folds: scene 4 holds out 1/8 of the livers per fold, as the paper does.
+# Node-wise nets see a tenth of the nodes per epoch (the paper: a quarter).
+BUDGET = {1: {"sims": 400, "folds": 5},
+          2: {"sims": 600, "folds": 5, "epochs": 30, "node_fraction": 0.1},
+          3: {"sims": 600, "folds": 5, "epochs": 30, "node_fraction": 0.1},
+          4: {"sims": 816, "folds": 8, "epochs": 30, "node_fraction": 0.1}}
+CURVE_FOLDS = 3  # the learning curve's smaller points; x = training simulations per fold
+# The paper's Table 4 as far as our sources transcribe it: NN and naive MEE and the skill
+# (DESIGN.md), % of samples within 3 mm (the paper's abstract); scene 4 is the median liver
+# (skill: mean / median over the livers).
+PAPER = {1: {"sims": 400, "mee": 0.239, "naive": 3.066, "skill": "0.078", "lt3": 99.96,
+             "design": "node-wise (500,300,100,50)"},
+         2: {"sims": 1500, "mee": 0.382, "naive": 4.483, "skill": "0.085", "lt3": 99.84,
+             "design": "node-wise (500,500,300,100,50)"},
+         3: {"sims": 3000, "mee": 0.330, "naive": 4.205, "skill": "0.078", "lt3": 98.46,
+             "design": "node-wise (500,500,300,100,50)"},
+         4: {"sims": 10200, "mee": 0.662, "naive": 3.133, "skill": "0.293 / 0.211",
+             "lt3": 99.01, "design": "node-wise (500,)x5"}}
+CURVE = (1.0, 0.5, 0.25)  # the row first: a budget cut keeps it
+PAPER_FOLDS = 10
+LATENCY_NODES = 15400
+
+
+def shard_count(data: Path) -> int:
+    return len(list((data / "sims").glob("sim_*.h5")))
+
+
+def generate(scene: Path, data: Path, n: int, budget_s: float, a) -> dict:
+    """Shards 0..n-1 of the scene in chunks of ``a.chunk``; stops early once ``budget_s`` of
+    generation wall time is spent. Wall seconds accumulate in data/../generation.json.
+    """
+    state_path = data.parent / "generation.json"
+    state = json.loads(state_path.read_text()) if state_path.exists() else {"seconds": 0.0}
+    have = shard_count(data)
+    while have < n and state["seconds"] < budget_s:
+        upto = min(n, have + a.chunk)
+        cmd = ["mpirun", "-n", str(a.np), a.solver_python, "-m", "fem_sim", "generate",
+               str(scene), "--out", str(data), "--only", f"0..{upto}"]
+        print(f"[{scene.stem}] generating simulations {have}..{upto} of {n}", flush=True)
+        t = time.perf_counter()
+        subprocess.run(cmd, check=True, cwd=ROOT)
+        state["seconds"] += time.perf_counter() - t
+        state_path.write_text(json.dumps(state))
+        if shard_count(data) <= have:
+            raise RuntimeError(f"{data}: generate made no new shard")
+        have = shard_count(data)
+    state["sims"] = have
+    state_path.write_text(json.dumps(state))
+    return state
+
+
+def subset(data: Path, n: int) -> Path:
+    """A dataset view of the first n simulations (symbolic links, nothing copied)."""
+    if n >= shard_count(data):
+        return data
+    view = data.parent / f"first_{n}"
+    (view / "sims").mkdir(parents=True, exist_ok=True)
+    for name in ("scene.toml", "geometry"):
+        if not (view / name).exists():
+            (view / name).symlink_to((data / name).resolve())
+    for p in sorted((data / "sims").glob("sim_*.h5"))[:n]:
+        if not (view / "sims" / p.name).exists():
+            (view / "sims" / p.name).symlink_to(p.resolve())
+    return view
+
+
+def train(data: Path, run: Path, name: str, overrides: dict) -> dict:
+    from surrogate.config import get_config
+    from surrogate.train import train_and_evaluate
+
+    metrics = run / "metrics.json"
+    cfg = get_config(name, **overrides)
+    if metrics.exists():
+        done = json.loads((run / "config.json").read_text())
+        if done == cfg:
+            return json.loads(metrics.read_text())
+    print(f"[{run}] training config {name} {overrides}", flush=True)
+    train_and_evaluate(data, run, cfg)
+    return json.loads(metrics.read_text())
+
+
+def fe_error(degree: int, h: float) -> str:
+    """Mean / max relative FE error of the scene's element on the phantom under a nodal
+    load (outside 2h of the load) against the converged answer, from docs/tradeoff_fem.md.
+    """
+    path = ROOT / "docs" / "tradeoff_fem.md"
+    if not path.exists():
+        return "n/a"
+    for line in path.read_text().splitlines():
+        c = [x.strip() for x in line.strip("|").split("|")]
+        if len(c) > 16 and c[:4] == ["phantom", "nodal", "mesh", f"P{degree}"] \
+                and c[4] == f"{h:g}" and c[6] == "200" and c[7] == "10":
+            return f"{c[18]} / {c[19]}"
+    return "not in the price list"
+
+
+def sim_seconds(data: Path) -> float:
+    """Median solver wall time per simulation (one rank), from the shards' statistics."""
+    from data_spec import list_shards, read_shard
+
+    t = [read_shard(p).stats.info.get("total_wall_time", np.nan) for p in list_shards(data)]
+    return float(np.nanmedian(t)) if t else float("nan")
+
+
+def timed(model_dir: Path, calls: int) -> tuple[float, float, int]:
+    """(median ms at the model's own nodes, median ms at ~15k nodes, own node count)."""
+    from surrogate.export import load_predictor
+
+    pred = load_predictor(model_dir)
+    own = pred.points.shape[0] if pred.points is not None else 0
+    med_own, _ = latency(pred, None, calls)
+    with tempfile.TemporaryDirectory() as tmp:
+        big = load_predictor(at_scale(model_dir, LATENCY_NODES, Path(tmp) / "big"))
+        med_big, _ = latency(big, None, calls)
+    return 1e3 * med_own, 1e3 * med_big, own
+
+
+def curve_fit(ns, skills, target):
+    """Power law skill = a n^b through the points (log-log least squares) at n = target."""
+    if len(ns) < 2:
+        return float("nan"), float("nan")
+    b, loga = np.polyfit(np.log(ns), np.log(skills), 1)
+    return float(np.exp(loga) * target**b), float(b)
+
+
+def run_scene(k: int, a) -> dict:
+    from data_spec import load_scene
+
+    scene_file = ROOT / "data_spec" / "scenes" / SCENES[k]
+    scene = load_scene(scene_file)
+    plan = {**BUDGET[k], **a.sims.get(k, {})}
+    n = min(plan.pop("sims"), scene["scene"]["n_simulations"])
+    base = RESULTS / scene_file.stem
+    data = base / "data"
+    gen = generate(scene_file, data, n, 0.5 * a.budget_minutes * 60, a)
+    n = gen["sims"]
+    name = scene["surrogate"]["config"]
+    overrides = {"folds": scene["surrogate"]["folds"],
+                 "node_fraction": scene["surrogate"]["node_fraction"], **plan}
+    out = {"scene": k, "file": scene_file.name, "config": name, "overrides": overrides,
+           "sims": n, "generation_seconds": gen["seconds"], "sim_seconds": sim_seconds(data),
+           "fe_error": fe_error(scene["solver"]["degree"], scene["geometry"]["mesh_size"]),
+           "curve": []}
+    for frac in CURVE:
+        m = max(overrides["folds"], int(round(frac * n)))
+        full = m >= n
+        run = base / ("run" if full else f"run_first_{m}")
+        folds = overrides["folds"] if full else CURVE_FOLDS
+        res = train(subset(data, m), run, name,
+                    {**overrides, "folds": folds, "final_fit": full})
+        out["curve"].append({"sims": res["n_simulations"], "folds": folds,
+                             "train_sims": res["n_simulations"] * (folds - 1) / folds,
+                             "skill": res["skill"], "mee": res["network"]["mee"]})
+        if full:
+            out["metrics"] = res
+            out["run"] = str(run.relative_to(ROOT))
+    ms_own, ms_big, nodes = timed(base / "run" / "model", a.calls)
+    out.update(ms_own=ms_own, ms_big=ms_big, nodes=nodes)
+    out["curve"].sort(key=lambda c: c["train_sims"])
+    out["skill_at_paper_size"], out["curve_slope"] = curve_fit(
+        [c["train_sims"] for c in out["curve"]], [c["skill"] for c in out["curve"]],
+        PAPER[k]["sims"] * (PAPER_FOLDS - 1) / PAPER_FOLDS)
+    (base / "row.json").write_text(json.dumps(out, indent=1))
+    return out
+
+
+def _f(x, fmt="{:.3f}"):
+    return "n/a" if x is None or (isinstance(x, float) and np.isnan(x)) else fmt.format(x)
+
+
+def write_report(rows: dict, a) -> None:
+    cols = ("| scene | who | design | sims | nodes | MAE x / y / z mm | MEE mm | naive MEE mm "
+            "| skill | % EE < 1 mm | % EE < 3 mm | corr x / y / z | FE error mean / max "
+            "| generation | training | ms per call (own nodes / 15.4k) |")
+    lines = [header("Table 4: the paper's scenes end to end").rstrip(), "",
+             "Each scene generated with `fem_sim generate` (MPI, "
+             f"{a.np} ranks), trained with its scene file's `[surrogate]` configuration "
+             "(budget overrides in the notes), cross-validated by simulation (by liver for "
+             "scene 4); the paper's row above ours. Skill = MEE_NN / MEE_naive (the naive "
+             "model predicts the training folds' mean displacement). FE error: the scene's "
+             "element against the converged answer under a nodal load (docs/tradeoff_fem.md). "
+             "Latency: median of one-case calls of the exported model through "
+             "`load_predictor`, two cores.", "",
+             cols, "|" + "---|" * (cols.count("|") - 1)]
+    notes = []
+    for k in sorted(rows):
+        r, p = rows[k], PAPER[k]
+        lines.append(f"| {k} | paper | {p['design']} | {p['sims']:,} | | n/a | {p['mee']:.3f} "
+                     f"| {p['naive']:.3f} | {p['skill']} | n/a | {p['lt3']:.2f} | n/a | | | "
+                     "| GPU: 2-5 ms |")
+        m = r["metrics"]
+        net, nv = m["network"], m["naive"]
+        skill = f"{m['skill']:.3f}"
+        mee = f"{net['mee']:.3f}"
+        if "per_liver_mee" in m:
+            pl = m["per_liver_mee"]
+            mee = f"{pl['median']:.3f} (median liver)"
+            if "skill_mean" in pl:
+                skill = f"{pl['skill_mean']:.3f} / {pl['skill_median']:.3f}"
+        design = f"{r['config']} ({'basis' if r['config'] == 'basis' else 'node-wise'})"
+        lines.append(
+            f"| {k} | ours | {design} | {r['sims']:,} | {r['nodes']:,} | "
+            f"{net['mae_x']:.3f} / {net['mae_y']:.3f} / {net['mae_z']:.3f} | {mee} | "
+            f"{nv['mee']:.3f} | {skill} | {net['pct_ee_lt_1mm']:.2f} | "
+            f"{net['pct_ee_lt_3mm']:.2f} | {net['corr_x']:.4f} / {net['corr_y']:.4f} / "
+            f"{net['corr_z']:.4f} | {r['fe_error']} | {r['generation_seconds'] / 60:.0f} min "
+            f"({r['sim_seconds']:.1f} s/sim) | {m['total_seconds'] / 60:.0f} min | "
+            f"{r['ms_own']:.2f} / {r['ms_big']:.2f} |")
+        curve = ", ".join(f"{c['train_sims']:.0f} ({c['folds']} folds of {c['sims']}): "
+                          f"{c['skill']:.3f}" for c in r["curve"])
+        notes.append(f"- Scene {k} (`{r['file']}`): {r['sims']} of the paper's {p['sims']:,} "
+                     f"simulations; config `{r['config']}` with {r['overrides']}. Learning "
+                     f"curve (training simulations per fold: skill) {curve}; power-law slope "
+                     f"{_f(r['curve_slope'], '{:.2f}')}, extrapolated skill at the paper's "
+                     f"{p['sims'] * (PAPER_FOLDS - 1) // PAPER_FOLDS:,} training simulations "
+                     f"(10 folds of {p['sims']:,}): {_f(r['skill_at_paper_size'])}. "
+                     f"Run: `{r['run']}`.")
+    lines += ["", "Notes:", "", *notes, "",
+              "The paper's MAE, % EE < 1 mm and correlation columns are not transcribed in "
+              "our sources (n/a); its % within 3 mm is from its abstract. Our liver, mesh and "
+              "fixed region differ from the paper's: compare skills, not millimetres."]
+    if a.png:
+        plot_curves(rows, ROOT / "docs" / "table4.png")
+        lines += ["", "![learning curves](table4.png)"]
+    path = Path(a.md)
+    path.write_text("\n".join(lines) + "\n")
+    print(f"report written to {path}", flush=True)
+
+
+def plot_curves(rows: dict, png: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.0, 4.0))
+    for k, r in sorted(rows.items()):
+        n = [c["train_sims"] for c in r["curve"]]
+        line, = ax.loglog(n, [c["skill"] for c in r["curve"]], "o-", label=f"scene {k}")
+        ps = PAPER[k]
+        ax.loglog([ps["sims"] * (PAPER_FOLDS - 1) / PAPER_FOLDS],
+                  [float(ps["skill"].split("/")[-1])], "*", ms=10,
+                  color=line.get_color())
+    ax.set_xlabel("training simulations per fold")
+    ax.set_ylabel("skill = MEE_NN / MEE_naive")
+    ax.set_title("learning curves; stars: the paper", fontsize=9)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+
+
+def _sims_arg(text: str) -> dict:
+    m = re.fullmatch(r"([1-4])=(\d+)", text)
+    if not m:
+        raise argparse.ArgumentTypeError(f"expected SCENE=N, e.g. 2=600, got {text!r}")
+    return {int(m[1]): {"sims": int(m[2])}}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenes", type=int, nargs="+", default=[1, 2, 3, 4],
+                    choices=sorted(SCENES))
+    ap.add_argument("--sims", type=_sims_arg, action="append", default=[],
+                    help="SCENE=N: simulations of that scene (default: the budget table)")
+    ap.add_argument("--budget-minutes", type=float, default=60.0,
+                    help="per scene; generation stops at half of it")
+    ap.add_argument("--np", type=int, default=2, help="MPI ranks for generation")
+    ap.add_argument("--chunk", type=int, default=100, help="simulations per generate call")
+    ap.add_argument("--calls", type=int, default=200, help="timed calls per latency")
+    ap.add_argument("--solver-python", default=str(ROOT / ".venv-solver" / "bin" / "python"))
+    ap.add_argument("--md", default=str(ROOT / "docs" / "table4.md"))
+    ap.add_argument("--no-png", dest="png", action="store_false")
+    a = ap.parse_args()
+    a.sims = {k: v for d in a.sims for k, v in d.items()}
+    os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
+    os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+    rows = {}
+    for k in SCENES:  # rows already done stay in the report
+        done = RESULTS / Path(SCENES[k]).stem / "row.json"
+        if done.exists() and k not in a.scenes:
+            rows[k] = json.loads(done.read_text())
+    for k in a.scenes:
+        rows[k] = run_scene(k, a)
+        write_report(rows, a)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
