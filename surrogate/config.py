@@ -31,6 +31,8 @@ BASE = {
     "node_fraction": 1.0,      # examples per epoch = this fraction of all training examples
     "inner_val_fraction": 0.1,  # simulations of the training folds held out for early stopping
     "folds": 5,
+    "evaluate_folds": 0,       # train and evaluate only the first n folds (0: all): with
+                               # folds = 8 and 1, a hold-out of 1/8 of the simulations/livers
     "final_fit": True,         # train the exported model on all simulations after CV
     "seed": 0,
     "dtype": "float32",
@@ -73,6 +75,7 @@ CHECKS = {
     "node_fraction": (lambda v: is_num(v) and 0 < v <= 1, "a number in (0, 1]"),
     "inner_val_fraction": (lambda v: is_num(v) and 0 <= v < 1, "a number in [0, 1)"),
     "folds": (lambda v: is_int(v) and v >= 2, "an integer >= 2 (k-fold cross-validation)"),
+    "evaluate_folds": (lambda v: is_int(v) and v >= 0, "an integer >= 0 (0: every fold)"),
     "final_fit": (lambda v: isinstance(v, bool), "true or false"),
     "seed": (lambda v: is_int(v) and v >= 0, "an integer >= 0"),
     "dtype": (lambda v: v == "float32", "'float32' (the only training precision)"),

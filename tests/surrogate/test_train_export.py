@@ -392,3 +392,16 @@ def test_a_load_where_the_scene_never_loads_is_flagged(run, synth_dir):
     assert never.size
     with pytest.warns(UserWarning, match=rf"load node\(s\) \[{never[0]}\] never loaded"):
         pred([[0.0, 0.0, -0.4]], never)
+
+
+def test_evaluating_one_fold_is_a_hold_out(synth_dir, tmp_path):
+    """folds = 4, evaluate_folds = 1: one model, its metrics on the quarter it never saw."""
+    cfg = get_config("small", folds=4, evaluate_folds=1, epochs=2, hidden=[16],
+                     final_fit=False)
+    result = train_and_evaluate(synth_dir, tmp_path, cfg, log_fn=lambda m: None)
+    assert (result["folds"], result["evaluated_folds"]) == (4, 1)
+    hist = json.loads((tmp_path / "history.json").read_text())
+    assert list(hist) == ["fold0"]
+    assert "the first 1 of 4 folds held out" in (tmp_path / "metrics.md").read_text()
+    with pytest.raises(ValueError, match="evaluate_folds: expected an integer >= 0"):
+        get_config("small", evaluate_folds=-1)
