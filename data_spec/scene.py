@@ -202,8 +202,9 @@ def _check_geometry(g: dict, problems: list[str]) -> None:
         problems.append(f"geometry.pca_components: {g.get('pca_components', 27)} components "
                         f"need more than {g['population_size']} livers (expected at most "
                         "population_size - 1)")
-    if src != "population" and "population_size" in g:
-        problems.append("geometry.population_size: only used when source = 'population'")
+    for key in ("population_size", "variety"):
+        if src != "population" and key in g:
+            problems.append(f"geometry.{key}: only used when source = 'population'")
 
 
 def _check_fixed(f: dict, problems: list[str]) -> None:

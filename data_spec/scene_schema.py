@@ -159,6 +159,10 @@ _SCHEMA: dict[str, dict[str, Key]] = {
         "population_size": Key(_int(1), OPTIONAL, "number of livers (population)"),
         "population_seed": Key(_int(0), 0, "first phantom seed of the population"),
         "pca_components": Key(_int(1), 27, "shape coefficients per liver (population)"),
+        "variety": Key(_choice("anatomical", "narrow"), OPTIONAL,
+                       "population shapes: anatomical (the default: published ranges of real "
+                       "livers, docs/population.md) or narrow (the first phantoms: two "
+                       "ellipsoids varying a few mm)"),
         "spacing": Key(_vec3, OPTIONAL, "voxel size (mm) of a .npy segmentation mask"),
     },
     "fixed": {

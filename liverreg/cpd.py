@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from data_spec.geometry import Geometry
+from liverreg.morph import SurfaceMorph
 
 STAGED = ((8.0, 6.0, 5e-3), (2.0, 1.5, 1e-3), (1.2, 0.9, 1e-4), (0.6, 0.45, 1e-5),
           (0.3, 0.225, 1e-5))
@@ -141,6 +142,7 @@ class Population:
     coefficients: np.ndarray         # (R, K)
     registration_error: np.ndarray   # (R,) mean surface distance, moved template <-> liver (mm)
     iterations: list
+    inverted: np.ndarray = None      # (R,) template tetrahedra the placement turned inside out
 
     @property
     def explained_variance_ratio(self) -> np.ndarray:
@@ -179,7 +181,8 @@ def build_population(livers: list[Geometry], template: int = 0, n_points: int = 
     Y = surface_samples(M, n_points)
     S = M.points[M.surface_nodes]
     dense = surface_points(M)
-    disp, err, its = [], [], []
+    morph = SurfaceMorph(M.points, M.cells, M.surface_nodes)
+    disp, err, its, inv = [], [], [], []
     for r, g in enumerate(livers):
         X = surface_samples(g, n_points)
         res = cpd_nonrigid(X, Y, schedule)
@@ -187,6 +190,7 @@ def build_population(livers: list[Geometry], template: int = 0, n_points: int = 
         disp.append((moved - S).ravel())
         err.append(chamfer(res.transform(dense), surface_points(g)))
         its.append(res.iterations)
+        inv.append(morph.inverted(morph.move(moved)))
         if progress is not None:
             progress(r)
     D = np.asarray(disp)
@@ -195,7 +199,8 @@ def build_population(livers: list[Geometry], template: int = 0, n_points: int = 
     coeff = project(D, mean, Vt)
     return Population(template=M, displacements=D, mean=mean, components=Vt,
                       singular_values=Sv, coefficients=coeff,
-                      registration_error=np.asarray(err), iterations=its)
+                      registration_error=np.asarray(err), iterations=its,
+                      inverted=np.asarray(inv))
 
 
 def surface_points(g: Geometry, per_triangle: int = 6) -> np.ndarray:

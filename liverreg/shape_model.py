@@ -16,11 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
-from data_spec.geometry import signed_volumes
 from liverreg.cpd import STAGED, chamfer, cpd_nonrigid, dense_surface, farthest_points, project
+from liverreg.morph import SurfaceMorph
 
 FORMAT = 1
-INVERTED_WARN = 0.05  # fraction of template tetrahedra a placement may turn inside out
+INVERTED_FLOOR = 0.01  # fraction of inverted template tetrahedra never worth a warning
 
 
 @dataclass
@@ -51,10 +51,13 @@ class ShapeModel:
     n_points: int = 600             # CPD samples per surface
     schedule: np.ndarray = None     # (stages, 3): beta, lambda, tolerance
     loadable_nodes: np.ndarray = None  # template nodes the scene's loads act on (empty: any)
+    population_inverted: np.ndarray = None  # (R,) template tetrahedra each liver inverted
 
     def __post_init__(self):
         if self.loadable_nodes is None:
             self.loadable_nodes = np.zeros(0, dtype=np.int64)
+        if self.population_inverted is None:
+            self.population_inverted = np.zeros(0, dtype=np.int64)
         if self.schedule is None:
             self.schedule = np.asarray(STAGED, dtype=np.float64)
         self.schedule = np.asarray(self.schedule, dtype=np.float64).reshape(-1, 3)
@@ -90,12 +93,11 @@ class ShapeModel:
         X = verts[farthest_points(verts, self.n_points)]
         Y = S[farthest_points(S, self.n_points)]
         res = cpd_nonrigid(X, Y, [tuple(r) for r in self.schedule])
-        # The surface follows CPD; the interior follows the surface (harmonic extension): the
-        # CPD field itself, evaluated deep inside, folds the mesh where the surface moved far.
-        moved = self.template_points + harmonic_extension(
-            self.template_points.shape[0], self.template_cells, surf, res.transform(S) - S)
+        # the surface follows CPD, the interior the surface (as in liverreg.cpd.build_population)
+        morph = SurfaceMorph(self.template_points, self.template_cells, surf)
+        moved = morph.move(res.transform(S))
         coeff = project((moved[surf] - S).ravel(), self.mean, self.components)
-        inverted = int(np.sum(signed_volumes(moved, self.template_cells) <= 0))
+        inverted = morph.inverted(moved)
         # as liverreg.cpd.build_population measures it: the dense template surface moved
         residual = chamfer(res.transform(dense_surface(self.template_points,
                                                        self.surface_triangles)),
@@ -112,9 +114,12 @@ class ShapeModel:
                        f"livers {np.median(self.residuals):.2f} mm median, {worst:.2f} mm at "
                        "worst: the template does not fit this liver's shape well")
         n_cells = self.template_cells.shape[0]
-        # A surface registration flips a few flat tetrahedra along the surface of any liver,
-        # the population's own included (a few %); many flipped ones mean a folded placement.
-        if placement.inverted > INVERTED_WARN * n_cells:
+        # A surface registration flips some flat tetrahedra along the surface of any liver
+        # unlike the template, the population's own included; more than the population's
+        # worst means a placement folded further than any training liver's.
+        worst_inverted = max(INVERTED_FLOOR * n_cells, 1.5 * self.population_inverted.max(
+            initial=0))
+        if placement.inverted > worst_inverted:
             out.append(f"{placement.inverted} of {n_cells} template tetrahedra "
                        f"({100 * placement.inverted / n_cells:.0f} %) turned inside out by the "
                        "registration: the liver is far from the population's shapes and the "
@@ -147,26 +152,3 @@ class ShapeModel:
         kw["n_points"] = int(kw["n_points"])
         return cls(**kw)
 
-
-def harmonic_extension(n_nodes: int, cells: np.ndarray, boundary: np.ndarray,
-                       boundary_values: np.ndarray) -> np.ndarray:
-    """(n_nodes, 3): values given on ``boundary`` nodes, extended to the others by the mesh's
-    graph Laplacian (each interior value the mean of its edge neighbours').
-    """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.linalg import splu
-
-    cells = np.asarray(cells, dtype=np.int64)
-    pairs = np.array([(a, b) for a in range(4) for b in range(4) if a != b])
-    i, j = cells[:, pairs[:, 0]].ravel(), cells[:, pairs[:, 1]].ravel()
-    A = coo_matrix((np.ones(i.size), (i, j)), shape=(n_nodes, n_nodes)).tocsr()
-    A.data[:] = 1.0  # an edge shared by many cells counts once
-    L = (coo_matrix((np.asarray(A.sum(axis=1)).ravel(), (np.arange(n_nodes),) * 2),
-                    shape=A.shape) - A).tocsr()
-    out = np.zeros((n_nodes, 3))
-    out[boundary] = boundary_values
-    inner = np.setdiff1d(np.arange(n_nodes), boundary)
-    if inner.size:
-        rhs = -(L[inner][:, boundary] @ boundary_values)
-        out[inner] = splu(L[inner][:, inner].tocsc()).solve(rhs)
-    return out

@@ -103,6 +103,7 @@ def population_shape_model(ds):
         ids = [str(i) for i in z["geometry_ids"]]
         coeff, mean, comps = z["coefficients"][:, :k], z["mean"], z["components"][:k]
         residuals = z["registration_error"]
+        inverted = z["inverted"] if "inverted" in z.files else None
     template = read_geometry(geometry_path(ds.directory, ids[0]))
     scene = load_scene(Path(ds.directory) / "scene.toml")
     if ids[0] in ds.geo_ids:
@@ -115,7 +116,7 @@ def population_shape_model(ds):
                       surface_triangles=template.surface_triangles, fixed_nodes=fixed,
                       mean=mean, components=comps, coefficient_min=coeff.min(axis=0),
                       coefficient_max=coeff.max(axis=0), residuals=residuals,
-                      loadable_nodes=loadable)
+                      loadable_nodes=loadable, population_inverted=inverted)
 
 
 def _read_meta(path: Path) -> dict:

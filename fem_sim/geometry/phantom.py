@@ -7,9 +7,30 @@ profile, and a groove carved on the posterior side by a vertical cylinder: the i
 cava. The surface nodes lining that groove are the ``vena_cava`` region, the fixed boundary.
 
 Axes: x to the patient's left... right (x > 0: right lobe), y anterior -> posterior, z up.
-Shape parameters are drawn from a seeded distribution (:func:`phantom_parameters`), so one seed
-gives one liver and a range of seeds gives a population. Nominal size ~200 x 150 x 120 mm and
-~1.3-1.8 L.
+Shape parameters are drawn from a seeded distribution, so one seed gives one liver and a range
+of seeds gives a population. Two distributions:
+
+* ``narrow`` (:func:`phantom_parameters`, the embedded default liver and the first
+  populations): the two ellipsoids vary by a few millimetres; ~200 x 150 x 120 mm, 1.3-1.8 L.
+* ``anatomical`` (:func:`anatomical_parameters`, populations by default): the variety of real
+  livers. Ranges and their sources:
+
+  - volume 1.0-2.5 L, drawn around 1.55 +- 0.38 L: MRI volumetry of 2,773 adults (Kromrey
+    et al., Eur J Radiol 2018, 1505 +- 385 cm^3) and CT volumetry of 369 adults (Feng et al.,
+    World J Gastroenterol 2017, 594-2250 cm^3). The solid is scaled to the drawn volume.
+  - right-lobe craniocaudal extent (dome above the equator plus the part below it to the
+    visceral cut): 14.0 +- 1.7 cm at the midclavicular line, 9.4-21.3 cm, in 2,080 adults
+    (Kratzer et al., J Ultrasound Med 2003); before the volume scaling the drawn extents span
+    about 9-17 cm.
+  - a Riedel's lobe (a tongue of the right lobe reaching down, anterior) in 15 % of livers:
+    reported prevalences range from 3.3 % to 31 % (reviewed in Cureus 2024, PMC10867707).
+  - left-lobe extent, right-lobe depth, dome curvature (the dome's height against the lobe's
+    width, independent of the part below the equator), the sharpness of the inferior edge (an
+    anterior-inferior bevel) and the position of the vena-cava groove: no single study gives
+    their distributions; the ranges here (in :func:`anatomical_parameters`) are ours, wide
+    enough to cover a small left lobe and one that reaches across to the spleen (the
+    "beaver-tail" variant), flat and round domes, blunt and sharp edges. What the population
+    then varies is measured in docs/population.md.
 """
 
 from __future__ import annotations
@@ -41,6 +62,11 @@ class PhantomParameters:
     cava_x: float                            # vena-cava axis position (x, y)
     cava_y: float
     cava_radius: float
+    # anatomical variety (None: the narrow phantom's shape)
+    dome_height: float | None = None         # semi-axis of the right lobe above its equator
+    bevel: tuple[float, float] | None = None  # anterior-inferior bevel: (tilt rad, y position)
+    riedel: tuple | None = None              # Riedel's lobe: centre (3) and semi-axes (3)
+    volume: float | None = None              # the solid is scaled to this volume, mm^3
 
 
 def phantom_parameters(seed: int) -> PhantomParameters:
@@ -56,12 +82,42 @@ def phantom_parameters(seed: int) -> PhantomParameters:
         cava_x=u(-28, -18), cava_y=0.8 * ra[1] + u(-4, 4), cava_radius=u(10, 13))
 
 
-def make_phantom(seed: int = 0, mesh_size: float = 8.0) -> Geometry:
-    """Mesh phantom ``seed`` with target edge length ``mesh_size`` (mm). Needs gmsh."""
+RIEDEL_PREVALENCE = 0.15
+
+
+def anatomical_parameters(seed: int) -> PhantomParameters:
+    """Draw the shape of anatomical phantom ``seed`` (deterministic; ranges: module docstring)."""
+    rng = np.random.default_rng([20251, seed])
+    u = lambda lo, hi: float(rng.uniform(lo, hi))  # noqa: E731
+    ra = (u(65, 95), u(55, 95), u(45, 80))      # right lobe: half width, depth, below-equator
+    la = (u(45, 100), u(35, 62), u(18, 36))     # left lobe: extent, depth, thickness
+    cut = u(0.5, 0.85) * ra[2]
+    riedel = None
+    if rng.uniform() < RIEDEL_PREVALENCE:
+        riedel = (u(0.35, 0.65) * ra[0], u(-0.3, 0.1) * ra[1], -cut,
+                  u(18, 30), u(15, 26), u(38, 60))
+    volume = 1e6 * float(np.clip(rng.normal(1.55, 0.38), 1.0, 2.5))
+    return PhantomParameters(
+        right_axes=ra, left_axes=la,
+        left_offset=(-(0.25 * ra[0] + 0.7 * la[0]), u(-14, 2), u(4, 24)),
+        cut_height=cut, cut_tilt=u(0.02, 0.35),
+        cava_x=u(-42, -10), cava_y=u(0.72, 0.9) * ra[1] + u(-6, 6), cava_radius=u(9, 14),
+        dome_height=u(42, 88), bevel=(u(0.15, 0.65), u(0.1, 0.5) * ra[1]), riedel=riedel,
+        volume=volume)
+
+
+def make_phantom(seed: int = 0, mesh_size: float = 8.0, variety: str = "narrow") -> Geometry:
+    """Mesh phantom ``seed`` of the ``variety`` ("narrow" or "anatomical") with target edge
+    length ``mesh_size`` (mm). Needs gmsh.
+    """
     import gmsh
 
-    prm = phantom_parameters(seed)
+    if variety not in ("narrow", "anatomical"):
+        raise ValueError(f"variety: expected 'narrow' or 'anatomical', got {variety!r}")
+    prm = phantom_parameters(seed) if variety == "narrow" else anatomical_parameters(seed)
     lobes = (np.prod(prm.right_axes) + np.prod(prm.left_axes)) * 4.0 / 3.0 * np.pi
+    if prm.volume is not None:
+        lobes = prm.volume
     check_mesh_size(lobes, mesh_size, f"phantom {seed}")  # an upper bound of its volume
     gmsh.initialize([], readConfigFiles=False)
     try:
@@ -69,8 +125,11 @@ def make_phantom(seed: int = 0, mesh_size: float = 8.0) -> Geometry:
         gmsh.option.setNumber("General.NumThreads", 1)  # reproducible meshes
         gmsh.model.add(f"phantom_{seed}")
         occ = gmsh.model.occ
-        right = occ.addSphere(0, 0, 0, 1.0)
-        occ.dilate([(3, right)], 0, 0, 0, *prm.right_axes)
+        if prm.dome_height is None:
+            right = occ.addSphere(0, 0, 0, 1.0)
+            occ.dilate([(3, right)], 0, 0, 0, *prm.right_axes)
+        else:  # the dome above the equator, its own curvature; the same lobe below it
+            right = _half_ellipsoids(occ, prm.right_axes, prm.dome_height)
         ox, oy, oz = prm.left_offset
         left = occ.addSphere(ox, oy, oz, 1.0)
         occ.dilate([(3, left)], ox, oy, oz, *prm.left_axes)
@@ -81,8 +140,27 @@ def make_phantom(seed: int = 0, mesh_size: float = 8.0) -> Geometry:
         occ.rotate([(3, box)], 0, 0, 0, 0, 1, 0, prm.cut_tilt)
         occ.translate([(3, box)], 0, 0, -prm.cut_height)
         body, _ = occ.cut(body, [(3, box)])
+        if prm.bevel is not None:
+            # the sharp anterior-inferior edge: remove what lies below a plane rising toward
+            # the front from the visceral cut's height at y = -bevel position
+            tilt, y_edge = prm.bevel
+            bev = occ.addBox(-L / 2, -L / 2, -L, L, L, L)
+            occ.rotate([(3, bev)], 0, 0, 0, 1, 0, 0, -tilt)
+            occ.translate([(3, bev)], 0, -y_edge, -prm.cut_height)
+            body, _ = occ.cut(body, [(3, bev)])
+        if prm.riedel is not None:
+            cx, cy, cz, a, b, c = prm.riedel
+            tongue = occ.addSphere(cx, cy, cz, 1.0)
+            occ.dilate([(3, tongue)], cx, cy, cz, a, b, c)
+            body, _ = occ.fuse(body, [(3, tongue)])
         cava = occ.addCylinder(prm.cava_x, prm.cava_y, -L / 2, 0, 0, L, prm.cava_radius)
         body, _ = occ.cut(body, [(3, cava)])
+        scale = 1.0
+        if prm.volume is not None:
+            occ.synchronize()
+            vol = sum(occ.getMass(d, t) for d, t in body)
+            scale = (prm.volume / vol) ** (1.0 / 3.0)
+            occ.dilate(body, 0, 0, 0, scale, scale, scale)
         occ.synchronize()
         vols = gmsh.model.getEntities(3)
         if len(vols) != 1:
@@ -100,9 +178,27 @@ def make_phantom(seed: int = 0, mesh_size: float = 8.0) -> Geometry:
         gmsh.finalize()
     tri = boundary_triangles(cells, points)
     surf = np.unique(tri)
-    axis_dist = np.hypot(points[surf, 0] - prm.cava_x, points[surf, 1] - prm.cava_y)
-    cava = surf[axis_dist <= prm.cava_radius + 0.05 * mesh_size]
+    axis_dist = np.hypot(points[surf, 0] - scale * prm.cava_x,
+                         points[surf, 1] - scale * prm.cava_y)
+    cava = surf[axis_dist <= scale * prm.cava_radius + 0.05 * mesh_size]
     return Geometry(points=points, cells=cells, surface_triangles=tri,
                     regions={"vena_cava": cava},
-                    description=f"liver phantom seed {seed}, mesh size {mesh_size} mm, "
-                                f"parameters {asdict(prm)}")
+                    description=f"liver phantom seed {seed} ({variety}), mesh size "
+                                f"{mesh_size} mm, parameters {asdict(prm)}")
+
+
+def _half_ellipsoids(occ, axes, dome: float) -> int:
+    """A lobe whose upper half has semi-axis ``dome`` in z and lower half ``axes[2]`` (both
+    with the same equator, so the surface is smooth across it).
+    """
+    L = 400.0
+    top = occ.addSphere(0, 0, 0, 1.0)
+    occ.dilate([(3, top)], 0, 0, 0, axes[0], axes[1], dome)
+    below = occ.addBox(-L / 2, -L / 2, -L, L, L, L)
+    top_half, _ = occ.cut([(3, top)], [(3, below)])
+    bottom = occ.addSphere(0, 0, 0, 1.0)
+    occ.dilate([(3, bottom)], 0, 0, 0, *axes)
+    above = occ.addBox(-L / 2, -L / 2, 0, L, L, L)
+    bottom_half, _ = occ.cut([(3, bottom)], [(3, above)])
+    lobe, _ = occ.fuse(top_half, bottom_half)
+    return lobe[0][1]

@@ -141,4 +141,4 @@ def save_population(path, livers: list[Geometry], pop: Population) -> None:
         np.savez(f, geometry_ids=np.array([g.geometry_id for g in livers]),
                  coefficients=pop.coefficients, mean=pop.mean, components=pop.components,
                  singular_values=pop.singular_values,
-                 registration_error=pop.registration_error)
+                 registration_error=pop.registration_error, inverted=pop.inverted)

@@ -45,7 +45,8 @@ def scene_geometry(scene: Scene, index: int = 0) -> Geometry:
     if g["source"] == "population":
         from fem_sim.geometry.phantom import make_phantom
 
-        return make_phantom(g["population_seed"] + index, g["mesh_size"])
+        return make_phantom(g["population_seed"] + index, g["mesh_size"],
+                            g.get("variety", "anatomical"))
     return read_any(g["path"], g["mesh_size"], g["scale_to_mm"], g.get("spacing"))
 
 

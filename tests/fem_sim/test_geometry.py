@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from data_spec.geometry import geometry_problems
-from fem_sim.geometry.phantom import make_phantom, mesh_volume, phantom_parameters
+from fem_sim.geometry.phantom import (
+    RIEDEL_PREVALENCE,
+    anatomical_parameters,
+    make_phantom,
+    mesh_volume,
+    phantom_parameters,
+)
 from fem_sim.geometry.source import GeometryError
 from fem_sim.geometry.surfaces import clean_surface, mesh_surface_file, read_vtk_polydata
 
@@ -43,6 +49,32 @@ def test_phantom_is_deterministic_and_seeds_differ():
     a, b = make_phantom(3, 20.0), make_phantom(3, 20.0)
     assert a.geometry_id == b.geometry_id
     assert phantom_parameters(3) != phantom_parameters(4)
+
+
+def test_anatomical_draws_span_the_published_ranges():
+    """Over 400 seeds: volumes fill 1.0-2.5 L around 1.55 L (Kromrey 2018: 1505 +- 385 cm^3),
+    a Riedel's lobe in about 15 % of livers, and one seed gives one liver."""
+    prm = [anatomical_parameters(s) for s in range(400)]
+    vol = np.array([p.volume for p in prm]) / 1e6
+    assert vol.min() >= 1.0 and vol.max() <= 2.5
+    assert vol.min() < 1.1 and vol.max() > 2.2 and 1.45 < np.median(vol) < 1.65
+    riedel = np.mean([p.riedel is not None for p in prm])
+    assert abs(riedel - RIEDEL_PREVALENCE) < 0.05  # binomial sd 0.018
+    assert anatomical_parameters(7) == anatomical_parameters(7)
+    assert anatomical_parameters(7) != anatomical_parameters(8)
+
+
+@pytest.mark.parametrize("seed", [1002, 1017])  # 1002 has a Riedel's lobe
+def test_anatomical_phantom_is_one_closed_solid_of_its_drawn_volume(seed):
+    prm = anatomical_parameters(seed)
+    assert (prm.riedel is not None) == (seed == 1002)
+    g = make_phantom(seed, 14.0, "anatomical")
+    vol = check_geometry(g)
+    # the solid is scaled to the drawn volume; the mesh's planar facets cut a little off
+    assert prm.volume * 0.95 < vol <= prm.volume * 1.001
+    assert g.regions["vena_cava"].size >= 5
+    with pytest.raises(ValueError, match="variety: expected 'narrow' or 'anatomical'"):
+        make_phantom(seed, 14.0, "wide")
 
 
 @pytest.mark.skipif(not SOFA.exists(), reason="shared/data/livers/sofa_liver.vtk not present")

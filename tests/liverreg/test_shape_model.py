@@ -37,7 +37,8 @@ def population():
                     surface_triangles=M.surface_triangles, fixed_nodes=M.regions["fixed"],
                     mean=pop.mean, components=pop.components[:k],
                     coefficient_min=coeff.min(0), coefficient_max=coeff.max(0),
-                    residuals=pop.registration_error, n_points=N_POINTS, schedule=SCHEDULE)
+                    residuals=pop.registration_error, n_points=N_POINTS, schedule=SCHEDULE,
+                    population_inverted=pop.inverted)
     return livers, pop, sm
 
 
@@ -52,6 +53,7 @@ def test_a_population_liver_gets_the_coefficients_the_population_gave_it(populat
         np.testing.assert_allclose(pl.coefficients, pop.coefficients[r, :3], rtol=1e-8,
                                    atol=1e-8 * np.abs(pop.coefficients).max())
         assert pl.residual == pytest.approx(pop.registration_error[r], rel=1e-8)
+        assert pl.inverted == pop.inverted[r]
         assert sm.warnings(pl) == []
 
 
