@@ -17,7 +17,8 @@ never loaded (interior, fixed, or too near the fixed region). Output: the deform
 shape), a JSON with the placement and warnings, and a picture.
 
 The same as a Python API: :func:`read_liver_surface`, :func:`place_liver`,
-:func:`predict_liver`. numpy, scipy and pyvista (to read surfaces); no dolfinx.
+:func:`predict_liver`, and :func:`predict_at_points` (at the nodes of the liver's own mesh).
+numpy, scipy and pyvista (to read surfaces); no dolfinx.
 """
 
 from __future__ import annotations
@@ -209,6 +210,53 @@ def predict_liver(predictor, points, triangles, forces, at=None, load_nodes=None
                            forces=forces, coefficients=placement.coefficients,
                            residual=placement.residual, offset=placement.offset,
                            inverted=placement.inverted, warnings=found)
+
+
+def interpolation_matrix(nodes: np.ndarray, at: np.ndarray):
+    """Sparse (len(at), len(nodes)) matrix of linear interpolation from values at ``nodes``
+    to the points ``at``: barycentric in the Delaunay tetrahedra of the nodes, the nearest
+    node's value for points outside their hull.
+    """
+    from scipy.sparse import csr_matrix
+    from scipy.spatial import Delaunay, cKDTree
+
+    tri = Delaunay(nodes)
+    at = np.asarray(at, dtype=np.float64)
+    simplex = tri.find_simplex(at)
+    inside = simplex >= 0
+    T = tri.transform[simplex[inside]]
+    b = np.einsum("nij,nj->ni", T[:, :3], at[inside] - T[:, 3])
+    bary = np.c_[b, 1.0 - b.sum(axis=1)]
+    rows = [np.repeat(np.flatnonzero(inside), 4)]
+    cols = [tri.simplices[simplex[inside]].ravel()]
+    vals = [bary.ravel()]
+    out = np.flatnonzero(~inside)
+    if out.size:
+        rows.append(out)
+        cols.append(cKDTree(nodes).query(at[out])[1])
+        vals.append(np.ones(out.size))
+    return csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(at.shape[0], nodes.shape[0]))
+
+
+def predict_at_points(predictor, placement, points, forces, at) -> np.ndarray:
+    """Displacements (n_cases, len(points), 3) mm at ``points`` of the placed liver (e.g. the
+    nodes of its own mesh; the liver's frame) for ``forces`` (n_cases, n_loads, 3) N acting at
+    the template surface nodes nearest to ``at`` (n_cases, n_loads, 3) mm: the registered
+    template's prediction, interpolated (:func:`interpolation_matrix`).
+    """
+    sm = predictor.shape_model
+    if sm is None:
+        raise ValueError(_no_population(predictor))
+    forces = np.asarray(forces, dtype=np.float64)
+    at = np.asarray(at, dtype=np.float64) + placement.offset
+    n_cases, L = forces.shape[:2]
+    load_nodes = nearest_surface_nodes(placement.points, sm.surface_triangles,
+                                       at.reshape(-1, 3)).reshape(n_cases, L)
+    u = predictor(forces, load_nodes,
+                  geometry=(placement.points, sm.fixed_nodes, placement.coefficients))
+    W = interpolation_matrix(placement.points, np.asarray(points) + placement.offset)
+    return np.stack([W @ uc for uc in np.asarray(u, dtype=np.float64)])
 
 
 def main(args) -> int:

@@ -124,3 +124,39 @@ def test_a_model_of_one_liver_cannot_place_a_new_one(tmp_path, synth_dir, capsys
     assert main(["predict-liver", str(run), str(SOFA), "--force", "0", "0", "0", "0", "0",
                  "-0.4"]) == 2
     assert "trained on one liver" in capsys.readouterr().err
+
+
+def test_interpolation_is_exact_for_linear_fields_and_at_the_nodes():
+    """Barycentric interpolation reproduces a linear field inside the hull and the node
+    values at the nodes; outside the hull it takes the nearest node's value."""
+    from surrogate.predict_liver import interpolation_matrix
+
+    rng = np.random.default_rng(0)
+    nodes = rng.uniform(-50, 50, size=(300, 3))
+    field = nodes @ np.array([0.3, -0.2, 0.1]) + 2.0
+    inside = rng.uniform(-20, 20, size=(50, 3))
+    W = interpolation_matrix(nodes, np.vstack([inside, nodes[:5], [[500.0, 0, 0]]]))
+    got = W @ field
+    np.testing.assert_allclose(got[:50], inside @ np.array([0.3, -0.2, 0.1]) + 2.0, rtol=1e-9)
+    np.testing.assert_allclose(got[50:55], field[:5], rtol=1e-9)
+    nearest = np.argmin(np.linalg.norm(nodes - [500.0, 0, 0], axis=1))
+    assert got[55] == pytest.approx(field[nearest])
+
+
+def test_predictions_at_a_livers_own_nodes_match_the_template_at_its_nodes(run):
+    """Asked at the registered template's own nodes, predict_at_points gives the template's
+    prediction back (the interpolation is exact at nodes)."""
+    from surrogate.predict_liver import place_liver, predict_at_points
+
+    pred = load_predictor(run / "model")
+    sm = pred.shape_model
+    path, _ = _population_liver(4)
+    points, tris = read_liver_surface(path)
+    placement, _ = place_liver(pred, points, tris)
+    node = sm.loadable_nodes[:1]
+    at = placement.points[node] - placement.offset
+    got = predict_at_points(pred, placement, placement.points[:200] - placement.offset,
+                            [[[0.0, 0.0, -0.4]]], at[None])
+    want = pred([[0.0, 0.0, -0.4]], node,
+                geometry=(placement.points, sm.fixed_nodes, placement.coefficients))
+    np.testing.assert_allclose(got[0], want[:200], rtol=1e-5, atol=1e-6)
