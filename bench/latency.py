@@ -50,7 +50,7 @@ def at_scale(model_dir: Path, n_nodes: int, directory: Path, seed: int = 0) -> P
     ds = SimpleNamespace(forces=forces, extra=extra, scene_name=meta["scene"], spec=pred.spec,
                          points=[pts], fixed=[np.arange(100)], out_nodes=[np.arange(n_nodes)],
                          triangles=[np.zeros((0, 3), dtype=np.int64)])
-    if pred.design == "basis":
+    if pred.design in ("basis", "population_basis"):
         from surrogate.basis import BasisModel
 
         k = pred._modes_np.shape[0]

@@ -49,6 +49,9 @@ BUDGET = {1: {"sims": 400, "folds": 5},
           3: {"sims": 600, "folds": 5, "epochs": 30, "node_fraction": 0.1},
           4: {"sims": 816, "folds": 8, "evaluate_folds": 1, "epochs": 30,
               "node_fraction": 0.1}}
+# The design trained beside the scene's own on the same folds: the reduced basis for one
+# liver, the population basis for many (the real-time designs, docs/realtime.md).
+SIDE_BY_SIDE = {1: [], 2: ["basis"], 3: ["basis"], 4: ["population_basis"]}
 CURVE_FOLDS = 3  # the learning curve's smaller points; x = training simulations per fold
 # The paper's Table 4 as far as our sources transcribe it: NN and naive MEE and the skill
 # (DESIGN.md), % of samples within 3 mm (the paper's abstract); scene 4 is the median liver
@@ -172,7 +175,7 @@ def curve_fit(ns, skills, target):
     return float(np.exp(loga) * target**b), float(b)
 
 
-def unseen(scene_file: Path, base: Path, a) -> dict | None:
+def unseen(scene_file: Path, base: Path, model_dir: Path, a) -> dict | None:
     """The unseen-liver row: FE truth on ``a.unseen`` (resumable), the population model's
     prediction against it."""
     if not Path(a.unseen).exists():
@@ -185,7 +188,7 @@ def unseen(scene_file: Path, base: Path, a) -> dict | None:
     if not scene.exists() or scene.read_text() != text:
         scene.write_text(text)
     generate(scene, d / "data", UNSEEN_SIMS, float("inf"), a)
-    return {"liver": Path(a.unseen).name, **evaluate_unseen(base / "run" / "model", d / "data",
+    return {"liver": Path(a.unseen).name, **evaluate_unseen(model_dir, d / "data",
                                                              base / "data")}
 
 
@@ -220,10 +223,22 @@ def run_scene(k: int, a) -> dict:
         if full:
             out["metrics"] = res
             out["run"] = str(run.relative_to(ROOT))
-    if scene["geometry"]["source"] == "population" and a.unseen:
-        out["unseen"] = unseen(scene_file, base, a)
+    population = scene["geometry"]["source"] == "population"
+    if population and a.unseen:
+        out["unseen"] = unseen(scene_file, base, base / "run" / "model", a)
     ms_own, ms_big, nodes = timed(base / "run" / "model", a.calls)
     out.update(ms_own=ms_own, ms_big=ms_big, nodes=nodes)
+    out["side_by_side"] = []
+    for other in SIDE_BY_SIDE[k]:  # the other real-time design, same folds, all simulations
+        run = base / f"run_{other}"
+        keep = {key: overrides[key] for key in ("folds", "evaluate_folds") if key in overrides}
+        res = train(data, run, other, keep)
+        row = {"config": other, "overrides": keep, "metrics": res,
+               "run": str(run.relative_to(ROOT))}
+        if population and a.unseen:
+            row["unseen"] = unseen(scene_file, base, run / "model", a)
+        row["ms_own"], row["ms_big"], row["nodes"] = timed(run / "model", a.calls)
+        out["side_by_side"].append(row)
     out["curve"].sort(key=lambda c: c["train_sims"])
     out["skill_at_paper_size"], out["curve_slope"] = curve_fit(
         [c["train_sims"] for c in out["curve"]], [c["skill"] for c in out["curve"]],
@@ -315,6 +330,53 @@ def _f(x, fmt="{:.3f}"):
     return "n/a" if x is None or (isinstance(x, float) and np.isnan(x)) else fmt.format(x)
 
 
+def design_label(config: str) -> str:
+    kind = {"basis": "reduced basis", "population_basis": "population basis"}.get(
+        config, "node-wise")
+    return f"{kind} (`{config}`)"
+
+
+def design_rows(k: int, r: dict, d: dict, gen: str) -> list[str]:
+    """The table rows of one trained design of scene k: cross-validation, and the unseen
+    liver when it was evaluated."""
+    m = d["metrics"]
+    net, nv = m["network"], m["naive"]
+    skill, mee = f"{m['skill']:.3f}", f"{net['mee']:.3f}"
+    if "per_liver_mee" in m:
+        pl = m["per_liver_mee"]
+        mee = f"{pl['median']:.3f} (median liver)"
+        if "skill_mean" in pl:
+            skill = f"{pl['skill_mean']:.3f} / {pl['skill_median']:.3f}"
+    design = design_label(d["config"])
+    out = [f"| {k} | ours | {design} | {r['sims']:,} | {d['nodes']:,} | "
+           f"{net['mae_x']:.3f} / {net['mae_y']:.3f} / {net['mae_z']:.3f} | {mee} | "
+           f"{nv['mee']:.3f} | {skill} | {net['pct_ee_lt_1mm']:.2f} | "
+           f"{net['pct_ee_lt_3mm']:.2f} | {net['corr_x']:.4f} / {net['corr_y']:.4f} / "
+           f"{net['corr_z']:.4f} | {r['fe_error']} | {gen} | {m['total_seconds'] / 60:.0f} min "
+           f"| {d['ms_own']:.2f} / {d['ms_big']:.2f} |"]
+    u = d.get("unseen")
+    if u:
+        un, uv = u["network"], u["naive"]
+        out.append(
+            f"| {k} | ours, unseen liver `{u['liver']}` | {design} | {u['sims']} | "
+            f"{u['nodes']:,} | {un['mae_x']:.3f} / {un['mae_y']:.3f} / {un['mae_z']:.3f} | "
+            f"{un['mee']:.3f} | {uv['mee']:.3f} | {u['skill']:.3f} | "
+            f"{un['pct_ee_lt_1mm']:.2f} | {un['pct_ee_lt_3mm']:.2f} | {un['corr_x']:.4f} / "
+            f"{un['corr_y']:.4f} / {un['corr_z']:.4f} | | | | |")
+    return out
+
+
+def unseen_note(k: int, d: dict) -> str:
+    u = d["unseen"]
+    return (f"- Unseen liver `{u['liver']}` ({design_label(d['config'])}; no training run "
+            f"uses it): {u['sims']} FE simulations on its own {u['nodes']:,}-node mesh with "
+            f"scene {k}'s settings; the model placed it with registration residual "
+            f"{u['residual_mm']:.2f} mm, {u['inverted']} of {u['template_cells']} template "
+            "tetrahedra inverted; predictions on the registered template, interpolated to the "
+            "liver's nodes. " + ("Warnings: " + "; ".join(u["warnings"]) + "."
+                                 if u["warnings"] else "No warning."))
+
+
 def write_report(rows: dict, a) -> None:
     cols = ("| scene | who | design | sims | nodes | MAE x / y / z mm | MEE mm | naive MEE mm "
             "| skill | % EE < 1 mm | % EE < 3 mm | corr x / y / z | FE error mean / max "
@@ -335,42 +397,17 @@ def write_report(rows: dict, a) -> None:
         lines.append(f"| {k} | paper | {p['design']} | {p['sims']:,} | | n/a | {p['mee']:.3f} "
                      f"| {p['naive']:.3f} | {p['skill']} | n/a | {p['lt3']:.2f} | n/a | | | "
                      "| GPU: 2-5 ms |")
-        m = r["metrics"]
-        net, nv = m["network"], m["naive"]
-        skill = f"{m['skill']:.3f}"
-        mee = f"{net['mee']:.3f}"
-        if "per_liver_mee" in m:
-            pl = m["per_liver_mee"]
-            mee = f"{pl['median']:.3f} (median liver)"
-            if "skill_mean" in pl:
-                skill = f"{pl['skill_mean']:.3f} / {pl['skill_median']:.3f}"
-        design = ("reduced basis" if r["config"] == "basis" else "node-wise") + \
-            f" (`{r['config']}`)"
-        lines.append(
-            f"| {k} | ours | {design} | {r['sims']:,} | {r['nodes']:,} | "
-            f"{net['mae_x']:.3f} / {net['mae_y']:.3f} / {net['mae_z']:.3f} | {mee} | "
-            f"{nv['mee']:.3f} | {skill} | {net['pct_ee_lt_1mm']:.2f} | "
-            f"{net['pct_ee_lt_3mm']:.2f} | {net['corr_x']:.4f} / {net['corr_y']:.4f} / "
-            f"{net['corr_z']:.4f} | {r['fe_error']} | {r['generation_seconds'] / 60:.0f} min "
-            f"({r['sim_seconds']:.1f} s/sim) | {m['total_seconds'] / 60:.0f} min | "
-            f"{r['ms_own']:.2f} / {r['ms_big']:.2f} |")
-        u = r.get("unseen")
-        if u:
-            un, uv = u["network"], u["naive"]
-            lines.append(
-                f"| {k} | ours, unseen liver `{u['liver']}` | {design} | {u['sims']} | "
-                f"{u['nodes']:,} | {un['mae_x']:.3f} / {un['mae_y']:.3f} / {un['mae_z']:.3f} | "
-                f"{un['mee']:.3f} | {uv['mee']:.3f} | {u['skill']:.3f} | "
-                f"{un['pct_ee_lt_1mm']:.2f} | {un['pct_ee_lt_3mm']:.2f} | {un['corr_x']:.4f} / "
-                f"{un['corr_y']:.4f} / {un['corr_z']:.4f} | | | | |")
-            notes.append(f"- Unseen liver `{u['liver']}` (no training run uses it): "
-                         f"{u['sims']} FE simulations on its own {u['nodes']:,}-node mesh "
-                         f"with scene {k}'s settings; the model placed it with registration "
-                         f"residual {u['residual_mm']:.2f} mm, {u['inverted']} of "
-                         f"{u['template_cells']} template tetrahedra inverted; predictions "
-                         "on the registered template, interpolated to the liver's nodes. "
-                         + ("Warnings: " + "; ".join(u["warnings"]) + "."
-                            if u["warnings"] else "No warning."))
+        gen = (f"{r['generation_seconds'] / 60:.0f} min ({r['sim_seconds']:.1f} s/sim)")
+        for d in [r, *r.get("side_by_side", [])]:
+            lines += design_rows(k, r, d, gen if d is r else "")
+            if d.get("unseen"):
+                notes.append(unseen_note(k, d))
+            if d is not r:
+                notes.append(f"- Scene {k}, `{d['config']}` beside `{r['config']}`: the same "
+                             f"data and folds ({d['overrides']}). Run: `{d['run']}`.")
+        if k == 1 and not r.get("side_by_side"):
+            notes.append("- Scene 1's node-wise network beside the reduced basis, same scene "
+                         "and folds: docs/realtime.md.")
         curve = ", ".join(f"{c['train_sims']:.0f} ({c['folds']} folds of {c['sims']}): "
                           f"{c['skill']:.3f}" for c in r["curve"])
         notes.append(f"- Scene {k} (`{r['file']}`): {r['sims']} of the paper's {p['sims']:,} "

@@ -44,3 +44,30 @@ class SurfaceMorph:
     def inverted(self, moved: np.ndarray) -> int:
         """Tetrahedra the move turned inside out (non-positive volume)."""
         return int(np.sum(signed_volumes(moved, self.cells) <= 0))
+
+
+def interpolation_matrix(nodes: np.ndarray, at: np.ndarray):
+    """Sparse (len(at), len(nodes)) matrix of linear interpolation from values at ``nodes``
+    to the points ``at``: barycentric in the Delaunay tetrahedra of the nodes, the nearest
+    node's value for points outside their hull.
+    """
+    from scipy.sparse import csr_matrix
+    from scipy.spatial import Delaunay, cKDTree
+
+    tri = Delaunay(nodes)
+    at = np.asarray(at, dtype=np.float64)
+    simplex = tri.find_simplex(at)
+    inside = simplex >= 0
+    T = tri.transform[simplex[inside]]
+    b = np.einsum("nij,nj->ni", T[:, :3], at[inside] - T[:, 3])
+    bary = np.c_[b, 1.0 - b.sum(axis=1)]
+    rows = [np.repeat(np.flatnonzero(inside), 4)]
+    cols = [tri.simplices[simplex[inside]].ravel()]
+    vals = [bary.ravel()]
+    out = np.flatnonzero(~inside)
+    if out.size:
+        rows.append(out)
+        cols.append(cKDTree(nodes).query(at[out])[1])
+        vals.append(np.ones(out.size))
+    return csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(at.shape[0], nodes.shape[0]))

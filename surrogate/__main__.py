@@ -83,6 +83,11 @@ def main(argv=None) -> int:
               f"{args.data}/scene.toml varies the geometry: use a node-wise config",
               file=sys.stderr)
         return 2
+    if cfg["design"] == "population_basis" and not scene.varies["geometry"]:
+        print(f"surrogate train: config {name!r} (design 'population_basis') needs a "
+              f"population of livers; {args.data}/scene.toml has one liver: use config "
+              "'basis'", file=sys.stderr)
+        return 2
     if Path(args.run).exists() and not Path(args.run).is_dir():
         print(f"surrogate train: --run {args.run} is a file, not a directory", file=sys.stderr)
         return 2

@@ -131,9 +131,15 @@ class BasisProblem(Problem):
     an example is one sample (a whole field).
     """
 
-    def __init__(self, ds: Dataset, tr: np.ndarray, va: np.ndarray, cfg: dict, seed: int):
-        check_dataset(ds)
-        U = fields(ds, tr)
+    def __init__(self, ds: Dataset, tr: np.ndarray, va: np.ndarray, cfg: dict, seed: int,
+                 fields_of=None):
+        """``fields_of(samples)``: the samples' fields in the basis' node order (default: the
+        one liver's output nodes, :func:`fields`).
+        """
+        if fields_of is None:
+            check_dataset(ds)
+            fields_of = lambda s: fields(ds, s)  # noqa: E731
+        U = fields_of(tr)
         self.modes = compute_modes(U, cfg["modes"], seed).astype(np.float32)
         self.projection_mee = projection_mee(U, self.modes.astype(np.float64))
         X = load_features(ds.forces, ds.load_points, ds.extra)
@@ -147,7 +153,7 @@ class BasisProblem(Problem):
         target = np.zeros((ds.n_samples, self.modes.shape[0]), dtype=np.float32)
         target[tr] = C / self.c_scale
         if va.size:
-            target[va] = fields(ds, va) @ self.modes.T.astype(np.float64) / self.c_scale
+            target[va] = fields_of(va) @ self.modes.T.astype(np.float64) / self.c_scale
         self.data = {"x": jnp.asarray((X - self.x_mean) / self.x_std, dtype=jnp.float32),
                      "f": jnp.asarray(ds.forces / self.f_scale, dtype=jnp.float32),
                      "target": jnp.asarray(target)}
@@ -184,10 +190,8 @@ def coefficients(model: BasisModel, forces, load_points, extra, *, apply, xp=np)
     return apply(x, forces / model.f_scale) * model.c_scale
 
 
-def predict_samples(ds: Dataset, model: BasisModel, samples: np.ndarray):
-    """Predicted and true displacement (mm) of every output node of ``samples``, laid out
-    as the node-wise design's (sample by sample, output nodes in order).
-    """
+def predict_fields(ds: Dataset, model: BasisModel, samples: np.ndarray) -> np.ndarray:
+    """(len(samples), 3 n) predicted fields (mm) in the basis' node order."""
     net = network(model.hidden, model.modes.shape[0], model.n_loads)
 
     def apply(x, f):
@@ -196,7 +200,14 @@ def predict_samples(ds: Dataset, model: BasisModel, samples: np.ndarray):
 
     c = coefficients(model, ds.forces[samples], ds.load_points[samples], ds.extra[samples],
                      apply=apply)
-    pred = (c @ model.modes).reshape(-1, 3).astype(np.float32)
+    return c @ model.modes
+
+
+def predict_samples(ds: Dataset, model: BasisModel, samples: np.ndarray):
+    """Predicted and true displacement (mm) of every output node of ``samples``, laid out
+    as the node-wise design's (sample by sample, output nodes in order).
+    """
+    pred = predict_fields(ds, model, samples).reshape(-1, 3).astype(np.float32)
     true = fields(ds, samples).reshape(-1, 3)
     n = int(ds.sample_offset[1] - ds.sample_offset[0])
     return pred, true, np.repeat(samples, n)

@@ -11,7 +11,7 @@ import copy
 from data_spec.checks import is_int, is_num
 
 # The designs a config may name (their classes: surrogate/designs.py, which a test keeps equal).
-DESIGN_NAMES = ("nodewise", "basis")
+DESIGN_NAMES = ("nodewise", "basis", "population_basis")
 
 BASE = {
     "design": "nodewise",      # "nodewise": the paper's MLP per node; "basis": a reduced basis
@@ -54,6 +54,11 @@ CONFIGS = {
     # network from the loads to their coefficients; trained on whole fields, not nodes.
     "basis": {"design": "basis", "modes": 64, "hidden": [256, 256], "batch_size": 128,
               "epochs": 400, "early_stopping": 30, "lr_patience": 8, "folds": 10},
+    # Any liver in real time (surrogate/population_basis.py): modes over the population's
+    # fields on the registered template; the network also sees the shape coefficients.
+    "population_basis": {"design": "population_basis", "modes": 64, "hidden": [256, 256],
+                         "batch_size": 128, "epochs": 400, "early_stopping": 30,
+                         "lr_patience": 8, "folds": 8},
 }
 
 

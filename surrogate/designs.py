@@ -9,5 +9,6 @@ from __future__ import annotations
 
 from surrogate.basis import Basis
 from surrogate.nodewise import NodeWise
+from surrogate.population_basis import PopulationBasis
 
-DESIGNS = {d.name: d for d in (NodeWise(), Basis())}
+DESIGNS = {d.name: d for d in (NodeWise(), Basis(), PopulationBasis())}

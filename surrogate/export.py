@@ -33,6 +33,9 @@ MODEL_VERSION = 3          # 3: explicit layer names; 2: the design is recorded
 READABLE_VERSIONS = (1, 2, 3)  # 1-2: flax's automatic names Dense_i; version 1 is node-wise
 # Inference precisions: float32 (as trained), or the weights and activations cast to 16 bits.
 PRECISIONS = ("float32", "bfloat16", "float16")
+# Designs whose field is a combination of stored modes (surrogate/basis.py,
+# surrogate/population_basis.py); the population's modes live on the template's nodes.
+BASIS_DESIGNS = ("basis", "population_basis")
 log = logging.getLogger(__name__)
 
 
@@ -76,47 +79,20 @@ def _export(directory, params, design: dict, cfg, ds, unseen=()) -> Path:
         np.savez(d / "geometry.npz", points=ds.points[0], fixed=ds.fixed[0],
                  output_nodes=ds.out_nodes[0], triangles=ds.triangles[0], **extra)
     if ds.spec.geometry_dim and getattr(ds, "directory", None) is not None:
+        from surrogate.population import population_shape_model
+
         shape_model = population_shape_model(ds)
         if shape_model is not None:
             shape_model.save(d / "shape_model.npz")
             meta["shape_model"] = "shape_model.npz"
+            if design["design"] == "population_basis":  # its modes live on the template
+                np.savez(d / "geometry.npz", points=shape_model.template_points,
+                         fixed=shape_model.fixed_nodes,
+                         output_nodes=np.arange(shape_model.template_points.shape[0]),
+                         triangles=shape_model.surface_triangles,
+                         loadable=shape_model.loadable_nodes)
     (d / "model.json").write_text(json.dumps(meta, indent=1))
     return d
-
-
-def population_shape_model(ds):
-    """The dataset's population as a :class:`liverreg.shape_model.ShapeModel` (template = the
-    population's liver 0), from DATA/geometry/population.npz; None when the dataset has none.
-    """
-    from data_spec import read_geometry
-    from data_spec.loads import eligible_load_nodes
-    from data_spec.scene import load_scene
-    from data_spec.shards import geometry_path
-    from liverreg.shape_model import ShapeModel
-
-    path = Path(ds.directory) / "geometry" / "population.npz"
-    if not path.exists():
-        log.warning("%s: missing; the model cannot place a new liver", path)
-        return None
-    k = ds.spec.geometry_dim
-    with np.load(path, allow_pickle=False) as z:
-        ids = [str(i) for i in z["geometry_ids"]]
-        coeff, mean, comps = z["coefficients"][:, :k], z["mean"], z["components"][:k]
-        residuals = z["registration_error"]
-        inverted = z["inverted"] if "inverted" in z.files else None
-    template = read_geometry(geometry_path(ds.directory, ids[0]))
-    scene = load_scene(Path(ds.directory) / "scene.toml")
-    if ids[0] in ds.geo_ids:
-        fixed = ds.fixed[ds.geo_ids.index(ids[0])]
-    else:  # the template's simulations are not in this dataset: its region, as the scene says
-        fixed = template.regions[scene["fixed"]["name"]]
-    loadable = eligible_load_nodes(scene["loads"], template.points, template.surface_nodes,
-                                   fixed)
-    return ShapeModel(template_points=template.points, template_cells=template.cells,
-                      surface_triangles=template.surface_triangles, fixed_nodes=fixed,
-                      mean=mean, components=comps, coefficient_min=coeff.min(axis=0),
-                      coefficient_max=coeff.max(axis=0), residuals=residuals,
-                      loadable_nodes=loadable, population_inverted=inverted)
 
 
 def _read_meta(path: Path) -> dict:
@@ -224,14 +200,14 @@ class Predictor:
                 raise ValueError(f"{geo}: cannot be read ({exc})") from None
             self.static = jnp.asarray(static_node_features(self.points, self.fixed),
                                       dtype=jnp.float32)
-        elif meta.get("embedded_geometry") or self.design == "basis":
+        elif meta.get("embedded_geometry") or self.design in BASIS_DESIGNS:
             raise ValueError(f"{geo}: missing (the model was exported with its liver)")
         else:
             self.points = self.fixed = self.static = self.output_nodes = None
             self.triangles = self.loadable = None
         self._shape_model_path = d / meta["shape_model"] if meta.get("shape_model") else None
         self._shape_model = None
-        if self.design == "basis":
+        if self.design in BASIS_DESIGNS:
             self._init_basis(d, meta, hidden, dtype)
             return
         params = _read_params(d / "params.npz", self.spec.dim, hidden,
@@ -274,6 +250,10 @@ class Predictor:
                              "trained on only (its modes live on those nodes)")
         static, points = self._geometry(geometry)
         n_nodes = points.shape[0]
+        if self.design == "population_basis" and n_nodes != self.output_nodes.size:
+            raise ValueError(f"geometry: a population-basis model predicts on the registered "
+                             f"template ({self.output_nodes.size} nodes; "
+                             "surrogate.predict_liver places a liver), got {n_nodes} points")
         if not np.issubdtype(load_nodes.dtype, np.integer) or load_nodes.min() < 0 or \
                 load_nodes.max() >= n_nodes:
             raise ValueError(f"load_nodes: expected integer node ids in [0, {n_nodes})")
@@ -288,10 +268,10 @@ class Predictor:
                    nodes.tobytes())
             if getattr(self, "_sel_key", None) != key:
                 self._sel_key = key
-                self._sel = (self._basis_rows(nodes) if self.design == "basis"
+                self._sel = (self._basis_rows(nodes) if self.design in BASIS_DESIGNS
                              else static[jnp.asarray(nodes)])
             static = self._sel
-        elif self.design == "basis":
+        elif self.design in BASIS_DESIGNS:
             static = self._modes
         blocks = []
         if material is not None and not self.spec.material_dim:
@@ -327,7 +307,7 @@ class Predictor:
         args = (jnp.asarray(forces, dtype=jnp.float32),
                 jnp.asarray(points[load_nodes], dtype=jnp.float32),
                 jnp.asarray(extra, dtype=jnp.float32))
-        if self.design == "basis":
+        if self.design in BASIS_DESIGNS:
             out = self._batched_basis(self.params, static, *args)
         else:
             out = self._batched(self.params, self.norm, static, *args)

@@ -30,6 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
+from liverreg.morph import interpolation_matrix
+
 SURFACE_SUFFIXES = (".vtk", ".vtp", ".vtu", ".stl", ".obj", ".ply", ".h5")
 
 
@@ -210,33 +212,6 @@ def predict_liver(predictor, points, triangles, forces, at=None, load_nodes=None
                            forces=forces, coefficients=placement.coefficients,
                            residual=placement.residual, offset=placement.offset,
                            inverted=placement.inverted, warnings=found)
-
-
-def interpolation_matrix(nodes: np.ndarray, at: np.ndarray):
-    """Sparse (len(at), len(nodes)) matrix of linear interpolation from values at ``nodes``
-    to the points ``at``: barycentric in the Delaunay tetrahedra of the nodes, the nearest
-    node's value for points outside their hull.
-    """
-    from scipy.sparse import csr_matrix
-    from scipy.spatial import Delaunay, cKDTree
-
-    tri = Delaunay(nodes)
-    at = np.asarray(at, dtype=np.float64)
-    simplex = tri.find_simplex(at)
-    inside = simplex >= 0
-    T = tri.transform[simplex[inside]]
-    b = np.einsum("nij,nj->ni", T[:, :3], at[inside] - T[:, 3])
-    bary = np.c_[b, 1.0 - b.sum(axis=1)]
-    rows = [np.repeat(np.flatnonzero(inside), 4)]
-    cols = [tri.simplices[simplex[inside]].ravel()]
-    vals = [bary.ravel()]
-    out = np.flatnonzero(~inside)
-    if out.size:
-        rows.append(out)
-        cols.append(cKDTree(nodes).query(at[out])[1])
-        vals.append(np.ones(out.size))
-    return csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                      shape=(at.shape[0], nodes.shape[0]))
 
 
 def predict_at_points(predictor, placement, points, forces, at) -> np.ndarray:

@@ -7,6 +7,7 @@ import pytest
 
 from data_spec.geometry import Geometry, box_mesh
 from liverreg.cpd import build_population, project
+from liverreg.morph import interpolation_matrix
 from liverreg.shape_model import ShapeModel
 
 N_POINTS = 150
@@ -104,3 +105,18 @@ def test_save_and_load_give_the_same_model(population, tmp_path):
     (tmp_path / "bad.npz").write_bytes(b"not an npz")
     with pytest.raises(ValueError, match="bad.npz: not a readable shape model"):
         ShapeModel.load(tmp_path / "bad.npz")
+
+
+def test_interpolation_is_exact_for_linear_fields_and_at_the_nodes():
+    """Barycentric interpolation reproduces a linear field inside the hull and the node
+    values at the nodes; outside the hull it takes the nearest node's value."""
+    rng = np.random.default_rng(0)
+    nodes = rng.uniform(-50, 50, size=(300, 3))
+    field = nodes @ np.array([0.3, -0.2, 0.1]) + 2.0
+    inside = rng.uniform(-20, 20, size=(50, 3))
+    W = interpolation_matrix(nodes, np.vstack([inside, nodes[:5], [[500.0, 0, 0]]]))
+    got = W @ field
+    np.testing.assert_allclose(got[:50], inside @ np.array([0.3, -0.2, 0.1]) + 2.0, rtol=1e-9)
+    np.testing.assert_allclose(got[50:55], field[:5], rtol=1e-9)
+    nearest = np.argmin(np.linalg.norm(nodes - [500.0, 0, 0], axis=1))
+    assert got[55] == pytest.approx(field[nearest])

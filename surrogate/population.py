@@ -1,0 +1,70 @@
+"""A dataset's liver population on the trainer's side: the shape model a population model
+exports (template, PCA, registration settings, ranges), and the template registered onto
+every liver of the dataset (one node order for the whole population: the population basis
+design's fields live there).
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from data_spec import read_geometry
+from data_spec.loads import eligible_load_nodes
+from data_spec.scene import load_scene
+from data_spec.shards import geometry_path
+from liverreg.morph import SurfaceMorph
+from liverreg.shape_model import ShapeModel
+
+log = logging.getLogger(__name__)
+
+
+def population_file(ds) -> Path:
+    return Path(ds.directory) / "geometry" / "population.npz"
+
+
+def population_shape_model(ds):
+    """The dataset's population as a :class:`liverreg.shape_model.ShapeModel` (template = the
+    population's liver 0), from DATA/geometry/population.npz; None when the dataset has none.
+    """
+    path = population_file(ds)
+    if not path.exists():
+        log.warning("%s: missing; the model cannot place a new liver", path)
+        return None
+    k = ds.spec.geometry_dim
+    with np.load(path, allow_pickle=False) as z:
+        ids = [str(i) for i in z["geometry_ids"]]
+        coeff, mean, comps = z["coefficients"][:, :k], z["mean"], z["components"][:k]
+        residuals = z["registration_error"]
+        inverted = z["inverted"] if "inverted" in z.files else None
+    template = read_geometry(geometry_path(ds.directory, ids[0]))
+    scene = load_scene(Path(ds.directory) / "scene.toml")
+    if ids[0] in ds.geo_ids:
+        fixed = ds.fixed[ds.geo_ids.index(ids[0])]
+    else:  # the template's simulations are not in this dataset: its region, as the scene says
+        fixed = template.regions[scene["fixed"]["name"]]
+    loadable = eligible_load_nodes(scene["loads"], template.points, template.surface_nodes,
+                                   fixed)
+    return ShapeModel(template_points=template.points, template_cells=template.cells,
+                      surface_triangles=template.surface_triangles, fixed_nodes=fixed,
+                      mean=mean, components=comps, coefficient_min=coeff.min(axis=0),
+                      coefficient_max=coeff.max(axis=0), residuals=residuals,
+                      loadable_nodes=loadable, population_inverted=inverted)
+
+
+def registered_templates(ds) -> dict[str, np.ndarray]:
+    """The template's nodes registered onto each liver of the population, by geometry id
+    ((n_template, 3) each: (its surface as the population's CPD put it, the interior by harmonic
+    extension, as :meth:`liverreg.shape_model.ShapeModel.place` does for a new liver)).
+    """
+    path = population_file(ds)
+    with np.load(path, allow_pickle=False) as z:
+        ids = [str(i) for i in z["geometry_ids"]]
+        D = z["mean"] + z["coefficients"] @ z["components"]  # every component: exact
+    template = read_geometry(geometry_path(ds.directory, ids[0]))
+    surf = template.surface_nodes
+    morph = SurfaceMorph(template.points, template.cells, surf)
+    S = template.points[surf]
+    return {gid: morph.move(S + d.reshape(-1, 3)) for gid, d in zip(ids, D)}

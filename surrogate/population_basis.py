@@ -1,0 +1,111 @@
+"""The reduced basis over a population of livers (``design = "population_basis"``).
+
+Every liver of a scene-4 population carries the template's nodes once the template is
+registered onto it (:func:`surrogate.population.registered_templates`): each simulation's
+field, interpolated from the liver's own nodes to the registered template's, lives in one node
+order for the whole population. The modes are the leading singular vectors of those fields,
+and the network of :mod:`surrogate.basis` maps the loads (load point, force direction and
+magnitude), the shape coefficients (and the material where the scene varies it) to their
+coefficients. A call costs one small network and one (3 n_template x modes) product, for any
+liver: the registered template is the new liver's mesh (``predict-liver``).
+
+Metrics are taken on each liver's own nodes (the predicted template field interpolated back),
+so they compare with the node-wise design's on the same held-out livers.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from liverreg.morph import interpolation_matrix
+from surrogate.basis import (
+    BasisDesignError,
+    BasisModel,
+    BasisProblem,
+    predict_fields,
+)
+from surrogate.data import Dataset
+
+
+class TemplateFields:
+    """A population dataset's fields in the template's node order, and back to each liver's
+    own output nodes (linear interpolation both ways).
+    """
+
+    def __init__(self, ds: Dataset):
+        from surrogate.population import population_file, registered_templates
+
+        if not ds.spec.geometry_dim:
+            raise BasisDesignError("design 'population_basis' needs a scene that varies the "
+                                   "liver (a population); one liver takes design 'basis'")
+        if ds.directory is None or not population_file(ds).exists():
+            raise BasisDesignError(f"design 'population_basis' needs the population's "
+                                   f"registration ({population_file(ds)}); generate the "
+                                   "dataset with fem_sim, which writes it")
+        reg = registered_templates(ds)
+        missing = [g for g in ds.geo_ids if g not in reg]
+        if missing:
+            raise BasisDesignError(f"livers {missing[:3]} are not in the population file "
+                                   f"{population_file(ds)}")
+        self.to_template, self.to_liver = [], []
+        for g, gid in enumerate(ds.geo_ids):
+            own = ds.points[g][ds.out_nodes[g]]
+            self.to_template.append(interpolation_matrix(own, reg[gid]))
+            self.to_liver.append(interpolation_matrix(reg[gid], own))
+        self.n_template = next(iter(reg.values())).shape[0]
+
+    def fields(self, ds: Dataset, samples: np.ndarray) -> np.ndarray:
+        """(len(samples), 3 n_template) fields of samples on the registered template."""
+        out = np.empty((len(samples), 3 * self.n_template))
+        for i, s in enumerate(samples):
+            u = np.asarray(ds.targets[ds.sample_offset[s]:ds.sample_offset[s + 1]],
+                           dtype=np.float64)
+            out[i] = (self.to_template[ds.sample_geo[s]] @ u).ravel()
+        return out
+
+
+class PopulationBasis:
+    """The design's entry in the registry (:data:`surrogate.designs.DESIGNS`)."""
+
+    name = "population_basis"
+    log_every = 10
+
+    def __init__(self):
+        self._maps = {}  # id(dataset) -> TemplateFields: built once per dataset
+
+    def maps(self, ds: Dataset) -> TemplateFields:
+        if id(ds) not in self._maps:
+            self._maps = {id(ds): TemplateFields(ds)}
+        return self._maps[id(ds)]
+
+    def check(self, ds: Dataset) -> None:
+        self.maps(ds)
+
+    def problem(self, ds, train, val, cfg, rng) -> BasisProblem:
+        maps = self.maps(ds)
+        return BasisProblem(ds, train, val, cfg, int(rng.integers(2**31)),
+                            fields_of=lambda s: maps.fields(ds, s))
+
+    def model(self, problem: BasisProblem, params) -> BasisModel:
+        return BasisModel(params=params, modes=problem.modes, x_mean=problem.x_mean,
+                          x_std=problem.x_std, c_scale=problem.c_scale,
+                          f_scale=problem.f_scale, hidden=problem.net.hidden,
+                          n_loads=problem.net.n_loads)
+
+    def summary(self, problem: BasisProblem) -> str:
+        return (f"{problem.modes.shape[0]} modes over the population, projection MEE of the "
+                f"training fields on the template {problem.projection_mee:.4f} mm")
+
+    def predict_samples(self, ds: Dataset, model: BasisModel, cfg: dict, samples: np.ndarray):
+        """Predicted and true displacement on each sample's own liver nodes."""
+        maps = self.maps(ds)
+        U = predict_fields(ds, model, samples)
+        pred = [maps.to_liver[ds.sample_geo[s]] @ u.reshape(-1, 3)
+                for s, u in zip(samples, U)]
+        true = [ds.targets[ds.sample_offset[s]:ds.sample_offset[s + 1]] for s in samples]
+        rows = [np.full(len(t), s) for s, t in zip(samples, true)]
+        return (np.concatenate(pred).astype(np.float32),
+                np.asarray(np.concatenate(true), dtype=np.float32), np.concatenate(rows))
+
+    def export_parts(self, model: BasisModel) -> tuple[dict, dict, dict]:
+        return model.params, model.stats(), {"basis.npz": {"modes": model.modes}}
