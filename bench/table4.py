@@ -67,7 +67,7 @@ PAPER = {1: {"sims": 400, "mee": 0.239, "naive": 3.066, "skill": "0.078", "lt3":
 # The liver no training run may use: scene 4's model is evaluated on FE simulations of it.
 UNSEEN = ROOT.parent / "shared" / "data" / "livers" / "sofa_liver.vtk"
 UNSEEN_SIMS = 60
-CURVE = (1.0, 0.5, 0.25)  # the row first: a budget cut keeps it
+CURVE = (1.0, 0.5, 0.25)
 PAPER_FOLDS = 10
 LATENCY_NODES = 15400
 
@@ -192,7 +192,7 @@ def unseen(scene_file: Path, base: Path, model_dir: Path, a) -> dict | None:
                                                              base / "data")}
 
 
-def run_scene(k: int, a) -> dict:
+def run_scene(k: int, a, rows: dict | None = None) -> dict:
     from data_spec import load_scene
 
     scene_file = ROOT / "data_spec" / "scenes" / SCENES[k]
@@ -210,25 +210,35 @@ def run_scene(k: int, a) -> dict:
            "sims": n, "generation_seconds": gen["seconds"], "sim_seconds": sim_seconds(data),
            "fe_error": fe_error(scene["solver"]["degree"], scene["geometry"]["mesh_size"]),
            "curve": []}
-    for frac in CURVE:
-        m = max(overrides["folds"], int(round(frac * n)))
-        full = m >= n
-        run = base / ("run" if full else f"run_first_{m}")
-        folds = overrides["folds"] if full else CURVE_FOLDS
-        res = train(subset(data, m), run, name,
-                    {**overrides, "folds": folds, "final_fit": full})
+
+    def save():
+        out["curve"].sort(key=lambda c: c["train_sims"])
+        out["skill_at_paper_size"], out["curve_slope"] = curve_fit(
+            [c["train_sims"] for c in out["curve"]], [c["skill"] for c in out["curve"]],
+            PAPER[k]["sims"] * (PAPER_FOLDS - 1) / PAPER_FOLDS)
+        (base / "row.json").write_text(json.dumps(out, indent=1))
+        if rows is not None:  # the report after every step: a cut run leaves what it did
+            rows[k] = out
+            write_report(rows, a)
+
+    def curve_point(m: int, folds: int, run: Path, final: bool) -> dict:
+        res = train(subset(data, m), run, name, {**overrides, "folds": folds,
+                                                 "final_fit": final})
         out["curve"].append({"sims": res["n_simulations"], "folds": folds,
                              "train_sims": res["n_simulations"] * (folds - 1) / folds,
                              "skill": res["skill"], "mee": res["network"]["mee"]})
-        if full:
-            out["metrics"] = res
-            out["run"] = str(run.relative_to(ROOT))
+        return res
+
+    # the row first (all simulations, the scene's folds, the exported model), then the
+    # other design, then the learning curve's smaller points
+    out["metrics"] = curve_point(n, overrides["folds"], base / "run", True)
+    out["run"] = str((base / "run").relative_to(ROOT))
     population = scene["geometry"]["source"] == "population"
     if population and a.unseen:
         out["unseen"] = unseen(scene_file, base, base / "run" / "model", a)
-    ms_own, ms_big, nodes = timed(base / "run" / "model", a.calls)
-    out.update(ms_own=ms_own, ms_big=ms_big, nodes=nodes)
+    out["ms_own"], out["ms_big"], out["nodes"] = timed(base / "run" / "model", a.calls)
     out["side_by_side"] = []
+    save()
     for other in SIDE_BY_SIDE[k]:  # the other real-time design, same folds, all simulations
         run = base / f"run_{other}"
         keep = {key: overrides[key] for key in ("folds", "evaluate_folds") if key in overrides}
@@ -239,11 +249,11 @@ def run_scene(k: int, a) -> dict:
             row["unseen"] = unseen(scene_file, base, run / "model", a)
         row["ms_own"], row["ms_big"], row["nodes"] = timed(run / "model", a.calls)
         out["side_by_side"].append(row)
-    out["curve"].sort(key=lambda c: c["train_sims"])
-    out["skill_at_paper_size"], out["curve_slope"] = curve_fit(
-        [c["train_sims"] for c in out["curve"]], [c["skill"] for c in out["curve"]],
-        PAPER[k]["sims"] * (PAPER_FOLDS - 1) / PAPER_FOLDS)
-    (base / "row.json").write_text(json.dumps(out, indent=1))
+        save()
+    for frac in CURVE[1:]:
+        m = max(CURVE_FOLDS, int(round(frac * n)))
+        curve_point(m, CURVE_FOLDS, base / f"run_first_{m}", False)
+        save()
     return out
 
 
@@ -486,7 +496,7 @@ def main() -> int:
         if done.exists() and k not in a.scenes:
             rows[k] = json.loads(done.read_text())
     for k in a.scenes:
-        rows[k] = run_scene(k, a)
+        rows[k] = run_scene(k, a, rows)
         write_report(rows, a)
     return 0
 
