@@ -35,9 +35,10 @@ def main(argv=None) -> int:
     p.add_argument("liver", help="the liver: a surface (.vtk .vtp .stl .obj .ply) or a volume "
                    "mesh (.vtu, .vtk, data_spec .h5), in mm")
     p.add_argument("--force", nargs=6, type=float, action="append", default=[],
-                   metavar=("X", "Y", "Z", "FX", "FY", "FZ"), required=True,
+                   metavar=("X", "Y", "Z", "FX", "FY", "FZ"),
                    help="a force FX FY FZ (N) at the liver surface point nearest to X Y Z "
-                   "(mm); once per load of the model")
+                   "(mm); once per load of the model. Without it the manipulator (a window) "
+                   "opens on the placed liver")
     p.add_argument("--out", default="predict-liver", help="output directory")
     p.add_argument("--scale-to-mm", type=float, default=1.0,
                    help="multiply the file's coordinates by this (1000 for metres)")

@@ -1,6 +1,7 @@
 """A liver the model has never seen: place it in the training population and predict on it.
 
     python -m surrogate predict-liver RUN LIVER --force X Y Z FX FY FZ [--out DIR]
+    python -m surrogate predict-liver RUN LIVER          # the manipulator opens on it
 
 A model trained on a population of livers (a scene that varies the geometry) carries its
 shape model (``RUN/model/shape_model.npz``: template mesh, PCA basis, registration settings;
@@ -250,6 +251,12 @@ def main(args) -> int:
         return fail(exc)
     if predictor.shape_model is None:
         return fail(f"{args.run}: {_no_population(predictor)}")
+    if not args.force:  # no force given: the manipulator opens on the placed liver
+        from surrogate.viewer import main as viewer
+
+        argv = [str(args.run), "--place", str(args.liver), "--scale-to-mm",
+                str(args.scale_to_mm)] + (["--no-center"] if args.no_center else [])
+        return viewer(argv)
     L = predictor.spec.n_loads
     if len(args.force) != L:
         return fail(f"--force: the model takes {L} force(s), got {len(args.force)} (each "

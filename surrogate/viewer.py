@@ -479,7 +479,20 @@ def build(args):
     mdir = model_dir(Path(args.run))
     pred = load_predictor(mdir)
     geometry = None
-    if pred.points is None or pred.triangles is None:
+    if getattr(args, "place", None) is not None:  # a liver never seen, placed as predict-liver
+        from surrogate.predict_liver import place_liver, read_liver_surface
+
+        if pred.shape_model is None:
+            raise ViewerError(f"{mdir}: --place needs a model trained on a population of "
+                              "livers (scene 4); this one has no shape model")
+        points, tris = read_liver_surface(args.place, args.scale_to_mm)
+        placement, found = place_liver(pred, points, tris, center=not args.no_center)
+        for msg in found:
+            print(f"{log_prefix}: warning: {msg}", file=sys.stderr)
+        sm = pred.shape_model
+        geometry = (placement.points, sm.fixed_nodes, sm.surface_triangles,
+                    placement.coefficients)
+    elif pred.points is None or pred.triangles is None:
         if args.data is None:
             raise ViewerError(f"{mdir}: the model has no liver of its own (trained on several "
                               "livers, or exported before surfaces were stored): give --data "
@@ -504,6 +517,12 @@ def main(argv=None) -> int:
     ap.add_argument("--sim", type=int, help="simulation to compare (default: the first the "
                     "model never trained on)")
     ap.add_argument("--liver", help="geometry id of --data's liver to show")
+    ap.add_argument("--place", type=Path, help="a liver file never seen (surface or volume "
+                    "mesh, mm), placed in the model's population as predict-liver does")
+    ap.add_argument("--scale-to-mm", type=float, default=1.0,
+                    help="with --place: multiply the file's coordinates by this")
+    ap.add_argument("--no-center", action="store_true",
+                    help="with --place: keep the liver where the file puts it")
     ap.add_argument("--screenshot", type=Path,
                     help="open the window, draw one pull, save this PNG and close")
     ap.add_argument("--size", type=int, nargs=2, default=(900, 700), metavar=("W", "H"))

@@ -184,3 +184,16 @@ def test_the_population_basis_predicts_a_new_liver_on_its_template(tmp_path, syn
         pred([[0.0, 0.0, -0.4]], [0], geometry=(points, [0], out.coefficients))
     with pytest.raises(BasisDesignError, match="needs a scene that varies the liver"):
         train_and_evaluate(synth_dir, tmp_path / "one", cfg, log_fn=lambda m: None)
+
+
+@pytest.mark.skipif(not SOFA.exists(), reason=f"{SOFA} not present")
+def test_the_manipulator_opens_on_a_placed_liver(run, tmp_path):
+    """predict-liver without --force opens the manipulator on the placed liver; off-screen,
+    the same placement drives its frames."""
+    from surrogate.viewer import main as viewer
+
+    out = tmp_path / "vw"
+    assert viewer([str(run), "--place", str(SOFA), "--offscreen", "--out", str(out)]) == 0
+    assert (out / "manipulator.gif").stat().st_size > 0
+    assert viewer([str(run), "--place", str(tmp_path / "none.stl"), "--offscreen", "--out",
+                   str(out)]) == 2
