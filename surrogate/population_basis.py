@@ -19,6 +19,7 @@ import numpy as np
 
 from liverreg.morph import interpolation_matrix
 from surrogate.basis import (
+    Basis,
     BasisDesignError,
     BasisModel,
     BasisProblem,
@@ -64,8 +65,10 @@ class TemplateFields:
         return out
 
 
-class PopulationBasis:
-    """The design's entry in the registry (:data:`surrogate.designs.DESIGNS`)."""
+class PopulationBasis(Basis):
+    """The design's entry in the registry (:data:`surrogate.designs.DESIGNS`); the model and
+    its export are the reduced basis' (modes on the template's nodes).
+    """
 
     name = "population_basis"
     log_every = 10
@@ -86,12 +89,6 @@ class PopulationBasis:
         return BasisProblem(ds, train, val, cfg, int(rng.integers(2**31)),
                             fields_of=lambda s: maps.fields(ds, s))
 
-    def model(self, problem: BasisProblem, params) -> BasisModel:
-        return BasisModel(params=params, modes=problem.modes, x_mean=problem.x_mean,
-                          x_std=problem.x_std, c_scale=problem.c_scale,
-                          f_scale=problem.f_scale, hidden=problem.net.hidden,
-                          n_loads=problem.net.n_loads)
-
     def summary(self, problem: BasisProblem) -> str:
         return (f"{problem.modes.shape[0]} modes over the population, projection MEE of the "
                 f"training fields on the template {problem.projection_mee:.4f} mm")
@@ -106,6 +103,3 @@ class PopulationBasis:
         rows = [np.full(len(t), s) for s, t in zip(samples, true)]
         return (np.concatenate(pred).astype(np.float32),
                 np.asarray(np.concatenate(true), dtype=np.float32), np.concatenate(rows))
-
-    def export_parts(self, model: BasisModel) -> tuple[dict, dict, dict]:
-        return model.params, model.stats(), {"basis.npz": {"modes": model.modes}}
