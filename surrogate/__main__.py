@@ -49,6 +49,12 @@ def main(argv=None) -> int:
     p.add_argument("--no-picture", action="store_true", help="no PNG (no OpenGL needed)")
     args = parser.parse_args(argv)
     if args.command == "predict-liver":
+        if not args.force:  # no force given: the manipulator opens on the placed liver
+            from surrogate.viewer import main as viewer
+
+            return viewer([str(args.run), "--place", str(args.liver), "--scale-to-mm",
+                           str(args.scale_to_mm)] + (["--no-center"] if args.no_center
+                                                     else []))
         from surrogate.predict_liver import main as predict_liver
 
         return predict_liver(args)

@@ -251,12 +251,6 @@ def main(args) -> int:
         return fail(exc)
     if predictor.shape_model is None:
         return fail(f"{args.run}: {_no_population(predictor)}")
-    if not args.force:  # no force given: the manipulator opens on the placed liver
-        from surrogate.viewer import main as viewer
-
-        argv = [str(args.run), "--place", str(args.liver), "--scale-to-mm",
-                str(args.scale_to_mm)] + (["--no-center"] if args.no_center else [])
-        return viewer(argv)
     L = predictor.spec.n_loads
     if len(args.force) != L:
         return fail(f"--force: the model takes {L} force(s), got {len(args.force)} (each "
