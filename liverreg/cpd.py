@@ -164,6 +164,30 @@ class Population:
         return renum[M.surface_triangles]
 
 
+@dataclass
+class Registration:
+    """The template registered onto one liver."""
+
+    points: np.ndarray   # (n_template, 3) every template node moved onto the liver, mm
+    residual: float      # symmetric mean distance, moved template surface <-> liver, mm
+    inverted: int        # template tetrahedra the move turned inside out
+    iterations: list     # CPD iterations per stage
+
+
+def register(morph: SurfaceMorph, Y: np.ndarray, template_dense: np.ndarray, X: np.ndarray,
+             liver_dense: np.ndarray, schedule=STAGED) -> Registration:
+    """One liver's registration, as the population and a new liver both get it: CPD of the
+    template's surface samples Y onto the liver's X, the template surface moved by it and
+    the interior by harmonic extension (``morph``: the template with its surface nodes as
+    boundary), and the residual between the densely sampled surfaces.
+    """
+    res = cpd_nonrigid(X, Y, schedule)
+    moved = morph.move(res.transform(morph.points[morph.boundary]))
+    return Registration(points=moved,
+                        residual=float(chamfer(res.transform(template_dense), liver_dense)),
+                        inverted=morph.inverted(moved), iterations=res.iterations)
+
+
 def project(displacements: np.ndarray, mean: np.ndarray, components: np.ndarray) -> np.ndarray:
     """Shape coefficients of flattened template-surface displacements (..., 3 n_surface):
     their projections, less the population mean, on the orthonormal rows of ``components``.
@@ -184,13 +208,12 @@ def build_population(livers: list[Geometry], template: int = 0, n_points: int = 
     morph = SurfaceMorph(M.points, M.cells, M.surface_nodes)
     disp, err, its, inv = [], [], [], []
     for r, g in enumerate(livers):
-        X = surface_samples(g, n_points)
-        res = cpd_nonrigid(X, Y, schedule)
-        moved = res.transform(S)
-        disp.append((moved - S).ravel())
-        err.append(chamfer(res.transform(dense), surface_points(g)))
-        its.append(res.iterations)
-        inv.append(morph.inverted(morph.move(moved)))
+        reg = register(morph, Y, dense, surface_samples(g, n_points), surface_points(g),
+                       schedule)
+        disp.append((reg.points[M.surface_nodes] - S).ravel())
+        err.append(reg.residual)
+        its.append(reg.iterations)
+        inv.append(reg.inverted)
         if progress is not None:
             progress(r)
     D = np.asarray(disp)

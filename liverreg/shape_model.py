@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from liverreg.cpd import STAGED, chamfer, cpd_nonrigid, dense_surface, farthest_points, project
+from liverreg.cpd import STAGED, dense_surface, farthest_points, project, register
 from liverreg.morph import SurfaceMorph
 
 FORMAT = 1
@@ -89,21 +89,16 @@ class ShapeModel:
             offset = np.zeros(3)
         points = np.asarray(points, dtype=np.float64) + offset
         verts = points[np.unique(triangles)]
-        # the samples of liverreg.cpd.surface_samples: farthest points, seed 0
-        X = verts[farthest_points(verts, self.n_points)]
-        Y = S[farthest_points(S, self.n_points)]
-        res = cpd_nonrigid(X, Y, [tuple(r) for r in self.schedule])
-        # the surface follows CPD, the interior the surface (as in liverreg.cpd.build_population)
-        morph = SurfaceMorph(self.template_points, self.template_cells, surf)
-        moved = morph.move(res.transform(S))
-        coeff = project((moved[surf] - S).ravel(), self.mean, self.components)
-        inverted = morph.inverted(moved)
-        # as liverreg.cpd.build_population measures it: the dense template surface moved
-        residual = chamfer(res.transform(dense_surface(self.template_points,
-                                                       self.surface_triangles)),
-                           dense_surface(points, triangles))
-        return Placement(points=moved, coefficients=coeff, residual=float(residual),
-                         iterations=res.iterations, offset=offset, inverted=inverted)
+        # the samples of liverreg.cpd.surface_samples (farthest points, seed 0) and the
+        # registration of liverreg.cpd.build_population
+        reg = register(SurfaceMorph(self.template_points, self.template_cells, surf),
+                       S[farthest_points(S, self.n_points)],
+                       dense_surface(self.template_points, self.surface_triangles),
+                       verts[farthest_points(verts, self.n_points)],
+                       dense_surface(points, triangles), [tuple(r) for r in self.schedule])
+        coeff = project((reg.points[surf] - S).ravel(), self.mean, self.components)
+        return Placement(points=reg.points, coefficients=coeff, residual=reg.residual,
+                         iterations=reg.iterations, offset=offset, inverted=reg.inverted)
 
     def warnings(self, placement: Placement) -> list[str]:
         """Ways the liver lies outside the population, with the numbers (empty: inside)."""

@@ -73,13 +73,13 @@ class PopulationBasis(Basis):
     name = "population_basis"
     log_every = 10
 
-    def __init__(self):
-        self._maps = {}  # id(dataset) -> TemplateFields: built once per dataset
-
     def maps(self, ds: Dataset) -> TemplateFields:
-        if id(ds) not in self._maps:
-            self._maps = {id(ds): TemplateFields(ds)}
-        return self._maps[id(ds)]
+        """The dataset's TemplateFields, built once and kept with the dataset (so they live
+        and die with it).
+        """
+        if getattr(ds, "_template_fields", None) is None:
+            ds._template_fields = TemplateFields(ds)
+        return ds._template_fields
 
     def check(self, ds: Dataset) -> None:
         self.maps(ds)

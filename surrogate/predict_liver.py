@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from liverreg.morph import interpolation_matrix
+from surrogate.export import check_load_nodes
 
 SURFACE_SUFFIXES = (".vtk", ".vtp", ".vtu", ".stl", ".obj", ".ply", ".h5")
 
@@ -195,13 +196,10 @@ def predict_liver(predictor, points, triangles, forces, at=None, load_nodes=None
     load_nodes = np.asarray(load_nodes, dtype=np.int64).ravel()
     if load_nodes.size != forces.shape[0]:
         raise ValueError(f"{forces.shape[0]} force(s) for {load_nodes.size} load node(s)")
-    if sm.loadable_nodes.size:
-        bad = np.setdiff1d(load_nodes, sm.loadable_nodes)
-        if bad.size:
-            found.append(f"load node(s) {bad.tolist()} never loaded in training (the scene "
-                         "loads surface nodes away from the fixed region): extrapolating")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
+        if sm.loadable_nodes.size:  # the exported model's own check, on the template's nodes
+            check_load_nodes(load_nodes, sm.loadable_nodes)
         u = predictor(forces, load_nodes,
                       geometry=(placement.points, sm.fixed_nodes, placement.coefficients))
     found += [str(w.message) for w in caught if "shape coefficients" not in str(w.message)]
