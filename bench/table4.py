@@ -35,7 +35,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
 from latency import at_scale, latency  # noqa: E402
-from report import header  # noqa: E402
+from report import header, put_section  # noqa: E402
 
 RESULTS = ROOT / "bench" / "results" / "table4"
 SCENES = {1: "scene1_base.toml", 2: "scene2_two_forces.toml", 3: "scene3_materials.toml",
@@ -237,6 +237,7 @@ def run_scene(k: int, a, rows: dict | None = None) -> dict:
     if population and a.unseen:
         out["unseen"] = unseen(scene_file, base, base / "run" / "model", a)
     out["ms_own"], out["ms_big"], out["nodes"] = timed(base / "run" / "model", a.calls)
+    out["calls"] = a.calls
     out["side_by_side"] = []
     save()
     for other in SIDE_BY_SIDE[k]:  # the other real-time design, same folds, all simulations
@@ -437,6 +438,34 @@ def write_report(rows: dict, a) -> None:
     path = Path(a.md)
     path.write_text("\n".join(lines) + "\n")
     print(f"report written to {path}", flush=True)
+    if 4 in rows and a.realtime_md:
+        text = realtime_section(rows[4])
+        if text:
+            put_section(a.realtime_md, "table4-scene4", text)
+            print(f"{a.realtime_md}: {text.splitlines()[-1]}", flush=True)
+
+
+def realtime_section(r: dict) -> str | None:
+    """Scene 4's verdict for docs/realtime.md: the population basis against the node-wise
+    net on the same held-out livers (and on the unseen liver when it was evaluated)."""
+    pb = [d for d in r.get("side_by_side", []) if d["config"] == "population_basis"]
+    if not pb:
+        return None
+    d = pb[0]
+    mee, mee_nw = d["metrics"]["network"]["mee"], r["metrics"]["network"]["mee"]
+    text = (f"Scene 4 (102 livers; `make table4`, docs/table4.md): the population basis "
+            f"(`{d['config']}`) against the node-wise net (`{r['config']}`), trained on the "
+            f"same {r['sims']} simulations and evaluated on the same held-out livers; latency "
+            f"of the exported model at {LATENCY_NODES:,} nodes through `load_predictor`, "
+            f"median of {r.get('calls', 'n/a')} calls, two cores: node-wise "
+            f"{r['ms_big']:.2f} ms, population basis {d['ms_big']:.2f} ms.")
+    if d.get("unseen") and r.get("unseen"):
+        text += (f" On the unseen liver `{d['unseen']['liver']}`: MEE "
+                 f"{d['unseen']['network']['mee']:.3f} mm against the node-wise net's "
+                 f"{r['unseen']['network']['mee']:.3f} mm.")
+    return (text + "\n\n"
+            f"realtime: scene 4, population basis {d['ms_big']:.2f} ms median at "
+            f"{LATENCY_NODES} nodes, MEE {mee:.3f} mm vs node-wise net {mee_nw:.3f} mm\n")
 
 
 def plot_curves(rows: dict, png: Path) -> None:
@@ -483,6 +512,8 @@ def main() -> int:
     ap.add_argument("--calls", type=int, default=200, help="timed calls per latency")
     ap.add_argument("--solver-python", default=str(ROOT / ".venv-solver" / "bin" / "python"))
     ap.add_argument("--md", default=str(ROOT / "docs" / "table4.md"))
+    ap.add_argument("--realtime-md", default=str(ROOT / "docs" / "realtime.md"),
+                    help="where scene 4's realtime line goes ('' for nowhere)")
     ap.add_argument("--no-png", dest="png", action="store_false")
     ap.add_argument("--unseen", default=str(UNSEEN),
                     help="the liver scene 4's model is evaluated on (never trained on)")

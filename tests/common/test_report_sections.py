@@ -1,0 +1,26 @@
+"""A report section that another benchmark owns survives the report's own rewrite, and is
+replaced, not repeated, when its owner writes it again (bench/report.py)."""
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parents[2] / "bench"))
+from report import put_section, sections  # noqa: E402
+
+
+def test_a_section_is_appended_then_replaced_and_kept(tmp_path):
+    md = tmp_path / "r.md"
+    md.write_text("# report\n\nrealtime: scene 1 line\n")
+    put_section(md, "table4", "realtime: scene 4, a 1.00 ms")
+    put_section(md, "table4", "realtime: scene 4, b 2.00 ms")
+    text = md.read_text()
+    assert text.startswith("# report\n\nrealtime: scene 1 line\n\n<!-- begin table4 -->\n")
+    assert "b 2.00 ms" in text and "a 1.00 ms" not in text
+    assert text.count("<!-- begin table4 -->") == 1
+    # the report's own benchmark rewrites the rest and keeps the section
+    kept = sections(md)
+    md.write_text("# report, regenerated\n\n" + kept)
+    assert "realtime: scene 4, b 2.00 ms" in md.read_text()
+    put_section(md, "other", "x")
+    assert sections(md).count("<!-- end ") == 2
+    assert sections(tmp_path / "missing.md") == ""
