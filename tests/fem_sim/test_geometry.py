@@ -77,6 +77,24 @@ def test_anatomical_phantom_is_one_closed_solid_of_its_drawn_volume(seed):
         make_phantom(seed, 14.0, "wide")
 
 
+def test_a_phantom_whose_surface_mesh_crosses_itself_is_meshed_with_the_next_algorithm(
+        monkeypatch, caplog):
+    # phantom 1084 at 16 mm (scene 4's population): Frontal-Delaunay gives a surface that
+    # crosses itself (gmsh "PLC Error"); Delaunay meshes it
+    import fem_sim.geometry.phantom as ph
+
+    with caplog.at_level("INFO", logger="fem_sim.geometry.phantom"):
+        g = make_phantom(1084, 16.0, "anatomical")
+    assert "meshed with surface algorithm 5 after surface algorithm 6: PLC Error" in caplog.text
+    vol = check_geometry(g)
+    assert anatomical_parameters(1084).volume * 0.95 < vol <= \
+        anatomical_parameters(1084).volume * 1.001
+    monkeypatch.setattr(ph, "SURFACE_ALGORITHMS", (6,))
+    with pytest.raises(GeometryError, match=r"phantom 1084 \(anatomical\), mesh size 16.0 mm: "
+                                            "gmsh could not mesh it: surface algorithm 6: PLC"):
+        make_phantom(1084, 16.0, "anatomical")
+
+
 @pytest.mark.skipif(not SOFA.exists(), reason="shared/data/livers/sofa_liver.vtk not present")
 def test_real_liver_imports_and_meshes():
     pts, tris = read_vtk_polydata(SOFA)
