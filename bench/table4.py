@@ -15,7 +15,9 @@ quarter with 3 folds) shows where the paper's size would land when it is not rea
 Resumable: generation skips the shards that exist (``generate`` itself), a run whose
 metrics.json exists is not trained again, and a killed training resumes from its checkpoint.
 Everything lands under ``bench/results/table4/`` (regenerable, not committed); the report is
-rewritten from what is there after every scene, so a partial run gives a partial table.
+rewritten from what is there after every scene, so a partial run gives a partial table. The
+rows go beside the report as ``docs/table4.json``: a run of some scenes keeps the others' rows
+from there when their results are not on this host.
 """
 
 from __future__ import annotations
@@ -437,6 +439,10 @@ def write_report(rows: dict, a) -> None:
         lines += ["", "![learning curves](table4.png)"]
     path = Path(a.md)
     path.write_text("\n".join(lines) + "\n")
+    # the rows themselves beside the report: a later run of other scenes keeps these rows
+    # even where bench/results/ is gone (a fresh clone)
+    path.with_suffix(".json").write_text(json.dumps({str(k): rows[k] for k in sorted(rows)},
+                                                    indent=1) + "\n")
     print(f"report written to {path}", flush=True)
     if 4 in rows and a.realtime_md:
         text = realtime_section(rows[4])
@@ -522,10 +528,17 @@ def main() -> int:
     os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
     os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
     rows = {}
-    for k in SCENES:  # rows already done stay in the report
+    saved = Path(a.md).with_suffix(".json")
+    saved = {int(k): v for k, v in json.loads(saved.read_text()).items()} \
+        if saved.exists() else {}
+    for k in SCENES:  # rows already done stay in the report: this host's, else the saved
         done = RESULTS / Path(SCENES[k]).stem / "row.json"
-        if done.exists() and k not in a.scenes:
+        if k in a.scenes:
+            continue
+        if done.exists():
             rows[k] = json.loads(done.read_text())
+        elif k in saved:
+            rows[k] = saved[k]
     for k in a.scenes:
         rows[k] = run_scene(k, a, rows)
         write_report(rows, a)
