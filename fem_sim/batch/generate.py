@@ -130,17 +130,28 @@ def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool,
         for d in (out, out / "sims", out / "geometry"):  # fail now, not at the first write
             check_writable(d)
         ids = []
-        bar = None
-        if progress and scene["geometry"]["source"] == "population":
-            from tqdm import tqdm
+        bars = {}  # one progress bar per stage (meshing, registration), opened at its first liver
+        population = progress and scene["geometry"]["source"] == "population"
 
-            bar = tqdm(total=scene["geometry"]["population_size"], unit="liver",
-                       desc="shape coefficients (CPD)", file=sys.stderr)
+        def tick(desc):
+            def update(_):
+                from tqdm import tqdm
+
+                for other in [d for d in bars if d != desc]:
+                    bars.pop(other).close()
+                if desc not in bars:
+                    bars[desc] = tqdm(total=scene["geometry"]["population_size"], unit="liver",
+                                      desc=desc, file=sys.stderr)
+                bars[desc].update()
+            return update if population else None
+
         try:
             livers = scene_geometries(scene, cache=out / "geometry" / "population.npz",
-                                      progress=(lambda r: bar.update()) if bar else None)
+                                      meshes=out / "geometry",
+                                      meshed=tick("livers (meshed or read)"),
+                                      progress=tick("shape coefficients (CPD)"))
         finally:
-            if bar is not None:
+            for bar in bars.values():
                 bar.close()
         for gi, g in enumerate(livers):
             scene.check_mesh(g.n_nodes)

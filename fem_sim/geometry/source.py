@@ -6,6 +6,9 @@ Runs on one process (gmsh, meshio); the batch generator calls it on rank 0 befor
 
 from __future__ import annotations
 
+import functools
+import hashlib
+import json
 from pathlib import Path
 
 import numpy as np
@@ -22,17 +25,102 @@ def n_geometries(scene: Scene) -> int:
     return g["population_size"] if g["source"] == "population" else 1
 
 
-def scene_geometries(scene: Scene, cache=None, progress=None) -> list[Geometry]:
+def scene_geometries(scene: Scene, cache=None, progress=None, meshes=None,
+                     meshed=None) -> list[Geometry]:
     """Every geometry of a scene; for a population, with its PCA shape coefficients
     (:mod:`fem_sim.geometry.population`; ``cache``: an .npz file that keeps them between runs).
+
+    ``meshes``: a directory of geometry files (a dataset's ``geometry/``) with an index,
+    ``meshes.json``: a phantom meshed before with the same seed, variety, mesh size, phantom
+    code and gmsh is read from its file instead of being meshed again (the index is written
+    here; the files are the caller's, so an entry whose file is missing or holds another mesh
+    is meshed again). ``meshed(i)`` is called as each geometry is ready; ``progress`` during
+    the registration.
     """
-    livers = [scene_geometry(scene, i) for i in range(n_geometries(scene))]
+    index = _read_index(meshes)
+    livers, new = [], {}
+    for i in range(n_geometries(scene)):
+        key = _mesh_key(scene, i)
+        g = _indexed(meshes, index.get(key)) if key else None
+        if g is None:
+            g = scene_geometry(scene, i)
+            if key:
+                new[key] = g.geometry_id
+        livers.append(g)
+        if meshed:
+            meshed(i)
+    if new and meshes is not None:
+        _write_index(meshes, {**index, **new})
     g = scene["geometry"]
     if g["source"] == "population" and len(livers) > 1:
         from fem_sim.geometry.population import attach_shape_coefficients
 
         attach_shape_coefficients(livers, g["pca_components"], cache=cache, progress=progress)
     return livers
+
+
+MESH_INDEX = "meshes.json"
+
+
+def _mesh_key(scene: Scene, index: int) -> str | None:
+    """What a phantom's mesh depends on; None for a liver file (read, not generated)."""
+    g = scene["geometry"]
+    if g["source"] == "phantom":
+        seed, variety = g["phantom_seed"], "narrow"
+    elif g["source"] == "population":
+        seed, variety = g["population_seed"] + index, g.get("variety", "anatomical")
+    else:
+        return None
+    return f"phantom {seed} {variety}, mesh size {float(g['mesh_size'])!r}, {_phantom_code()}"
+
+
+@functools.cache
+def _phantom_code() -> str:
+    """A digest of the code that meshes a phantom (its modules and gmsh's version)."""
+    import gmsh
+
+    from fem_sim.geometry import meshing, phantom
+
+    h = hashlib.sha256(gmsh.__version__.encode())
+    for module in (phantom, meshing):
+        h.update(Path(module.__file__).read_bytes())
+    return "code " + h.hexdigest()[:16]
+
+
+def _read_index(meshes) -> dict:
+    path = Path(meshes) / MESH_INDEX if meshes is not None else None
+    if path is None or not path.exists():
+        return {}
+    try:
+        index = json.loads(path.read_text())
+        return index if isinstance(index, dict) else {}
+    except (OSError, ValueError):  # unreadable: everything is meshed again and it is rewritten
+        return {}
+
+
+def _write_index(meshes, index: dict) -> None:
+    from data_spec.atomic import atomic_path
+
+    Path(meshes).mkdir(parents=True, exist_ok=True)
+    with atomic_path(Path(meshes) / MESH_INDEX) as tmp:
+        tmp.write_text(json.dumps(index, indent=1, sort_keys=True) + "\n")
+
+
+def _indexed(meshes, geometry_id) -> Geometry | None:
+    """The geometry file the index names, if it holds that mesh (its coefficients dropped:
+    the caller attaches the scene's).
+    """
+    if meshes is None or not geometry_id:
+        return None
+    path = Path(meshes) / f"{geometry_id}.h5"
+    try:
+        g = read_geometry(path) if path.exists() else None
+    except Exception:  # truncated or corrupt: meshed again, and the caller rewrites the file
+        return None
+    if g is None or g.geometry_id != geometry_id:
+        return None
+    g.shape_coefficients = None
+    return g
 
 
 def scene_geometry(scene: Scene, index: int = 0) -> Geometry:

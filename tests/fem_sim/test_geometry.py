@@ -230,3 +230,46 @@ def test_a_surface_in_several_pieces_keeps_the_largest_and_says_so(caplog):
         _, tris = clean_surface(pts, np.concatenate([g.surface_triangles, extra]), "two.stl")
     assert tris.shape[0] == g.surface_triangles.shape[0]
     assert "two.stl: 2 separate surface pieces" in caplog.text and "[4]" in caplog.text
+
+
+def test_a_phantom_meshed_before_is_read_from_the_dataset_not_meshed_again(tmp_path,
+                                                                           monkeypatch):
+    """generate plans with scene_geometries(meshes=DIR/geometry): a phantom whose mesh file is
+    there (the index names it) is read back, not meshed again; another mesh size, variety or
+    seed is another key; a missing or corrupt file is meshed again."""
+    from data_spec import geometry_path, load_scene, write_geometry
+    from fem_sim.geometry import source
+
+    scene_file = tmp_path / "s.toml"
+    text = ('schema_version = 1\n[scene]\nname = "t"\nn_simulations = 2\n[geometry]\n'
+            'source = "phantom"\nmesh_size = 20.0\n[material]\nc = [4.1e-3]\nm = [10.06]\n'
+            '[loads]\nmagnitude = 0.4\n')
+    scene_file.write_text(text)
+    scene = load_scene(scene_file)
+    meshes = tmp_path / "geometry"
+    calls = []
+    mesh = source.scene_geometry
+    monkeypatch.setattr(source, "scene_geometry",
+                        lambda s, i=0: calls.append(i) or mesh(s, i))
+    (g,) = source.scene_geometries(scene, meshes=meshes)
+    assert calls == [0]
+    (g2,) = source.scene_geometries(scene, meshes=meshes)  # the file is not written yet
+    assert calls == [0, 0]
+    write_geometry(geometry_path(tmp_path, g.geometry_id), g)  # generate writes it
+    (g3,) = source.scene_geometries(scene, meshes=meshes)
+    assert calls == [0, 0]
+    np.testing.assert_array_equal(g3.points, g.points)
+    np.testing.assert_array_equal(g3.cells, g.cells)
+    np.testing.assert_array_equal(g3.regions["vena_cava"], g.regions["vena_cava"])
+    assert g3.description == g.description and g3.shape_coefficients is None
+    geometry_path(tmp_path, g.geometry_id).write_bytes(b"not hdf5")  # corrupt: meshed again
+    source.scene_geometries(scene, meshes=meshes)
+    assert calls == [0, 0, 0]
+    scene_file.write_text(text.replace("mesh_size = 20.0", "mesh_size = 22.0"))
+    key = source._mesh_key(load_scene(scene_file), 0)
+    assert key != source._mesh_key(scene, 0) and "22.0" in key
+    pop = tmp_path / "p.toml"
+    pop.write_text(text.replace('source = "phantom"\n', 'source = "population"\n'
+                                'population_size = 3\npca_components = 1\n'))
+    keys = [source._mesh_key(load_scene(pop), i) for i in range(3)]
+    assert len(set(keys)) == 3 and all("anatomical" in k for k in keys)
