@@ -37,7 +37,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
 from latency import at_scale, latency  # noqa: E402
-from report import header, put_section  # noqa: E402
+from report import commit, header, put_section  # noqa: E402
 
 RESULTS = ROOT / "bench" / "results" / "table4"
 SCENES = {1: "scene1_base.toml", 2: "scene2_two_forces.toml", 3: "scene3_materials.toml",
@@ -211,7 +211,8 @@ def run_scene(k: int, a, rows: dict | None = None) -> dict:
     out = {"scene": k, "file": scene_file.name, "config": name, "overrides": overrides,
            "sims": n, "generation_seconds": gen["seconds"], "sim_seconds": sim_seconds(data),
            "fe_error": fe_error(scene["solver"]["degree"], scene["geometry"]["mesh_size"]),
-           "curve": []}
+           "curve": [], "written": {"commit": commit(), "date": time.strftime(
+               "%Y-%m-%d %H:%M UTC", time.gmtime())}}
 
     def save():
         out["curve"].sort(key=lambda c: c["train_sims"])
@@ -402,7 +403,8 @@ def write_report(rows: dict, a) -> None:
              "model predicts the training folds' mean displacement). FE error: the scene's "
              "element against the converged answer under a nodal load (docs/tradeoff_fem.md). "
              "Latency: median of one-case calls of the exported model through "
-             "`load_predictor`, two cores.", "",
+             "`load_predictor`, two cores. Each scene's row comes from its own run (commit and "
+             "date in the notes); the header names the run that wrote this file.", "",
              cols, "|" + "---|" * (cols.count("|") - 1)]
     notes = []
     for k in sorted(rows):
@@ -423,7 +425,11 @@ def write_report(rows: dict, a) -> None:
                          "and folds: docs/realtime.md.")
         curve = ", ".join(f"{c['train_sims']:.0f} ({c['folds']} folds of {c['sims']}): "
                           f"{c['skill']:.3f}" for c in r["curve"])
-        notes.append(f"- Scene {k} (`{r['file']}`): {r['sims']} of the paper's {p['sims']:,} "
+        w = r.get("written", {})
+        notes.append(f"- Scene {k} (`{r['file']}`, row written at commit "
+                     f"{w.get('commit', 'unknown')}, {w.get('date', 'date unknown')}): "
+                     f"{r['sims']} "
+                     f"of the paper's {p['sims']:,} "
                      f"simulations; config `{r['config']}` with {r['overrides']}. Learning "
                      f"curve (training simulations per fold: skill) {curve}; power-law slope "
                      f"{_f(r['curve_slope'], '{:.2f}')}, extrapolated skill at the paper's "
