@@ -74,7 +74,11 @@ def latency(predict, nodes=None, calls: int = 200) -> tuple[float, float]:
     material = extra[0, :spec.material_dim] if spec.material_dim else None
     geometry = None
     if spec.geometry_dim:
-        geometry = (predict.points, predict.fixed, extra[0, spec.material_dim:])
+        points, fixed = predict.points, predict.fixed
+        if points is None and predict.shape_model is not None:  # a population's: its template
+            points = predict.shape_model.template_points
+            fixed = predict.shape_model.fixed_nodes
+        geometry = (points, fixed, extra[0, spec.material_dim:])
     load_nodes = np.arange(7, 7 + spec.n_loads)
     kw = {"nodes": nodes, "material": material, "geometry": geometry}
     for _ in range(5):
