@@ -161,7 +161,8 @@ def timed(model_dir: Path, calls: int) -> tuple[float, float, int]:
     from surrogate.export import load_predictor
 
     pred = load_predictor(model_dir)
-    own = pred.points.shape[0] if pred.points is not None else 0
+    # a population model has no mesh of its own: it is timed on its template (bench/latency)
+    own = (pred.points if pred.points is not None else pred.shape_model.template_points).shape[0]
     med_own, _ = latency(pred, None, calls)
     with tempfile.TemporaryDirectory() as tmp:
         big = load_predictor(at_scale(model_dir, LATENCY_NODES, Path(tmp) / "big"))

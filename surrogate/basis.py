@@ -22,6 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import flax.linen as nn
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -158,6 +159,7 @@ class BasisProblem(Problem):
                      "f": jnp.asarray(ds.forces / self.f_scale, dtype=jnp.float32),
                      "target": jnp.asarray(target)}
         self.net = network(tuple(cfg["hidden"]), self.modes.shape[0], ds.spec.n_loads)
+        self.input_noise = float(cfg["input_noise"])
         self.tr, self.va = tr, va
         self.B = min(cfg["batch_size"], tr.size)
         self.steps_per_epoch = tr.size // self.B
@@ -177,7 +179,10 @@ class BasisProblem(Problem):
 
     def loss(self, params, data, idx, key, train):
         # coefficient loss x c_scale^2 = mean squared field error summed over dofs, mm^2
-        pred = self.net.apply({"params": params}, data["x"][idx], data["f"][idx])
+        x = data["x"][idx]
+        if train and self.input_noise > 0:  # on the normalised features, not the forces
+            x = x + self.input_noise * jax.random.normal(key, x.shape)
+        pred = self.net.apply({"params": params}, x, data["f"][idx])
         return jnp.mean(jnp.sum((pred - data["target"][idx]) ** 2, axis=-1))
 
 

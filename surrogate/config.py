@@ -18,7 +18,7 @@ BASE = {
                                # (surrogate/basis.py), one liver only
     "modes": 64,               # basis: number of modes
     "hidden": [128, 128, 128],
-    "dropout": 0.0,
+    "dropout": 0.0,            # node-wise only
     "l2": 0.0,                 # weight decay coefficient (added to the loss as l2 * |w|^2 / 2)
     "input_noise": 0.0,        # std of Gaussian noise on normalised inputs during training
     "batch_size": 2048,
@@ -58,7 +58,10 @@ CONFIGS = {
     # fields on the registered template; the network also sees the shape coefficients.
     "population_basis": {"design": "population_basis", "modes": 64, "hidden": [256, 256],
                          "batch_size": 128, "epochs": 400, "early_stopping": 30,
-                         "lr_patience": 8, "folds": 8},
+                         "lr_patience": 8, "folds": 8,
+                         # without it the net learns the training livers by their shape
+                         # coefficients (docs/population_basis.md)
+                         "input_noise": 0.3},
 }
 
 
@@ -101,6 +104,9 @@ def get_config(name: str = "small", **overrides) -> dict:
     cfg.update({k: v for k, v in overrides.items() if k in BASE})
     problems += [f"{k}: expected {what}, got {cfg[k]!r}" for k, (ok, what) in CHECKS.items()
                  if not ok(cfg[k])]
+    if not problems and cfg["design"] != "nodewise" and cfg["dropout"] > 0:
+        problems.append(f"dropout: the {cfg['design']} design has no dropout (expected 0, got "
+                        f"{cfg['dropout']!r}; input_noise and l2 regularise it)")
     if problems:
         raise ValueError("trainer config: " + "; ".join(problems))
     cfg["name"] = name

@@ -130,3 +130,29 @@ def test_a_load_where_the_scene_never_loads_is_flagged_by_the_basis_too(run):
     assert never.size
     with pytest.warns(UserWarning, match="never loaded in training"):
         pred([[0.0, 0.0, -0.4]], never)
+
+
+def test_input_noise_regularises_the_basis_in_training_only_and_dropout_is_refused(ds):
+    """input_noise perturbs the basis network's normalised features in training steps (not in
+    validation, not without it); dropout, which the basis network does not have, is refused
+    instead of being ignored."""
+    import jax
+
+    from surrogate.basis import BasisProblem
+
+    tr, va = np.arange(ds.n_samples - 4), np.arange(ds.n_samples - 4, ds.n_samples)
+    noisy = BasisProblem(ds, tr, va, get_config("basis", modes=8, hidden=[16],
+                                                input_noise=0.5), 0)
+    plain = BasisProblem(ds, tr, va, get_config("basis", modes=8, hidden=[16]), 0)
+    params = plain.init(jax.random.PRNGKey(0))
+    idx, key = plain.batch(tr[:8]), jax.random.PRNGKey(1)
+    clean = float(plain.loss(params, plain.data, idx, key, True))
+    assert float(plain.loss(params, plain.data, idx, key, False)) == pytest.approx(clean,
+                                                                                  rel=1e-6)
+    assert float(noisy.loss(params, noisy.data, idx, key, False)) == pytest.approx(clean,
+                                                                                  rel=1e-5)
+    assert float(noisy.loss(params, noisy.data, idx, key, True)) != pytest.approx(clean,
+                                                                                 rel=1e-3)
+    for design in ("basis", "population_basis"):
+        with pytest.raises(ValueError, match=f"dropout: the {design} design has no dropout"):
+            get_config(design, dropout=0.1)
