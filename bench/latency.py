@@ -67,6 +67,14 @@ def at_scale(model_dir: Path, n_nodes: int, directory: Path, seed: int = 0) -> P
     return directory
 
 
+def model_nodes(pred) -> tuple[np.ndarray, np.ndarray]:
+    """(points, fixed node ids) a model is timed on: its own liver, or a population model's
+    template (it has no mesh of its own)."""
+    if pred.points is None and pred.shape_model is not None:
+        return pred.shape_model.template_points, pred.shape_model.fixed_nodes
+    return pred.points, pred.fixed
+
+
 def latency(predict, nodes=None, calls: int = 200) -> tuple[float, float]:
     """(median, 99th percentile) seconds per call of one load case, after warm-up."""
     f, extra = typical_inputs(predict)
@@ -74,11 +82,7 @@ def latency(predict, nodes=None, calls: int = 200) -> tuple[float, float]:
     material = extra[0, :spec.material_dim] if spec.material_dim else None
     geometry = None
     if spec.geometry_dim:
-        points, fixed = predict.points, predict.fixed
-        if points is None and predict.shape_model is not None:  # a population's: its template
-            points = predict.shape_model.template_points
-            fixed = predict.shape_model.fixed_nodes
-        geometry = (points, fixed, extra[0, spec.material_dim:])
+        geometry = (*model_nodes(predict), extra[0, spec.material_dim:])
     load_nodes = np.arange(7, 7 + spec.n_loads)
     kw = {"nodes": nodes, "material": material, "geometry": geometry}
     for _ in range(5):

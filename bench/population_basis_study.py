@@ -11,13 +11,12 @@ differences of a few per cent are noise.
 
     .venv-train/bin/python bench/population_basis_study.py     # after make table4 T4="--scenes 4"
 
-Resumable: a variant whose metrics.json exists is not trained again.
+Resumable: a variant whose run holds metrics for the same config is not trained again.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -46,18 +45,11 @@ VARIANTS = {  # every knob named: the shipped config's defaults move
 
 
 def run(name: str, overrides: dict) -> dict:
-    from surrogate.config import get_config
-    from surrogate.train import train_and_evaluate
+    """The variant's metrics (trained unless its run has them for this very config)."""
+    from table4 import train
 
     run_dir = RESULTS / name.replace(" ", "_").replace("(", "").replace(")", "").replace(",", "")
-    metrics = run_dir / "metrics.json"
-    cfg = get_config("population_basis", **SPLIT, **overrides)
-    done = run_dir / "config.json"
-    if not (metrics.exists() and {**get_config("population_basis"),
-                                  **json.loads(done.read_text())} == cfg):
-        print(f"[{name}] training population_basis with {overrides}", flush=True)
-        train_and_evaluate(DATA, run_dir, cfg)
-    return json.loads(metrics.read_text())
+    return train(DATA, run_dir, "population_basis", {**SPLIT, **overrides})
 
 
 def main() -> int:

@@ -36,7 +36,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
-from latency import at_scale, latency  # noqa: E402
+from latency import at_scale, latency, model_nodes  # noqa: E402
 from report import commit, header, put_section  # noqa: E402
 
 RESULTS = ROOT / "bench" / "results" / "table4"
@@ -162,8 +162,7 @@ def timed(model_dir: Path, calls: int) -> tuple[float, float, int]:
     from surrogate.export import load_predictor
 
     pred = load_predictor(model_dir)
-    # a population model has no mesh of its own: it is timed on its template (bench/latency)
-    own = (pred.points if pred.points is not None else pred.shape_model.template_points).shape[0]
+    own = model_nodes(pred)[0].shape[0]
     med_own, _ = latency(pred, None, calls)
     with tempfile.TemporaryDirectory() as tmp:
         big = load_predictor(at_scale(model_dir, LATENCY_NODES, Path(tmp) / "big"))

@@ -147,7 +147,7 @@ def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool,
 
         try:
             livers = scene_geometries(scene, cache=out / "geometry" / "population.npz",
-                                      meshes=out / "geometry",
+                                      dataset=out,
                                       meshed=tick("livers (meshed or read)"),
                                       progress=tick("shape coefficients (CPD)"))
         finally:

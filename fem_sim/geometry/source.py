@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from data_spec import Geometry, Scene, read_geometry
+from data_spec import Geometry, Scene, geometry_path, read_geometry
 from data_spec.geometry import boundary_triangles, geometry_problems
 from fem_sim.geometry.errors import GeometryError
 from fem_sim.geometry.quality import mesh_problems, orient
@@ -25,23 +25,22 @@ def n_geometries(scene: Scene) -> int:
     return g["population_size"] if g["source"] == "population" else 1
 
 
-def scene_geometries(scene: Scene, cache=None, progress=None, meshes=None,
+def scene_geometries(scene: Scene, cache=None, progress=None, dataset=None,
                      meshed=None) -> list[Geometry]:
     """Every geometry of a scene; for a population, with its PCA shape coefficients
     (:mod:`fem_sim.geometry.population`; ``cache``: an .npz file that keeps them between runs).
 
-    ``meshes``: a directory of geometry files (a dataset's ``geometry/``) with an index,
-    ``meshes.json``: a phantom meshed before with the same seed, variety, mesh size, phantom
-    code and gmsh is read from its file instead of being meshed again (the index is written
-    here; the files are the caller's, so an entry whose file is missing or holds another mesh
-    is meshed again). ``meshed(i)`` is called as each geometry is ready; ``progress`` during
-    the registration.
+    ``dataset``: a dataset directory; its ``geometry/meshes.json`` indexes the phantoms meshed
+    before: one with the same seed, variety, mesh size, phantom code and gmsh is read from its
+    geometry file instead of being meshed again (the index is written here; the files are the
+    caller's, so an entry whose file is missing or holds another mesh is meshed again).
+    ``meshed(i)`` is called as each geometry is ready; ``progress`` during the registration.
     """
-    index = _read_index(meshes)
+    index = _read_index(dataset)
     livers, new = [], {}
     for i in range(n_geometries(scene)):
         key = _mesh_key(scene, i)
-        g = _indexed(meshes, index.get(key)) if key else None
+        g = _indexed(dataset, index.get(key)) if key else None
         if g is None:
             g = scene_geometry(scene, i)
             if key:
@@ -49,8 +48,8 @@ def scene_geometries(scene: Scene, cache=None, progress=None, meshes=None,
         livers.append(g)
         if meshed:
             meshed(i)
-    if new and meshes is not None:
-        _write_index(meshes, {**index, **new})
+    if new and dataset is not None:
+        _write_index(dataset, {**index, **new})
     g = scene["geometry"]
     if g["source"] == "population" and len(livers) > 1:
         from fem_sim.geometry.population import attach_shape_coefficients
@@ -87,8 +86,12 @@ def _phantom_code() -> str:
     return "code " + h.hexdigest()[:16]
 
 
-def _read_index(meshes) -> dict:
-    path = Path(meshes) / MESH_INDEX if meshes is not None else None
+def _index_path(dataset) -> Path:
+    return Path(dataset) / "geometry" / MESH_INDEX
+
+
+def _read_index(dataset) -> dict:
+    path = _index_path(dataset) if dataset is not None else None
     if path is None or not path.exists():
         return {}
     try:
@@ -98,21 +101,22 @@ def _read_index(meshes) -> dict:
         return {}
 
 
-def _write_index(meshes, index: dict) -> None:
+def _write_index(dataset, index: dict) -> None:
     from data_spec.atomic import atomic_path
 
-    Path(meshes).mkdir(parents=True, exist_ok=True)
-    with atomic_path(Path(meshes) / MESH_INDEX) as tmp:
+    path = _index_path(dataset)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
         tmp.write_text(json.dumps(index, indent=1, sort_keys=True) + "\n")
 
 
-def _indexed(meshes, geometry_id) -> Geometry | None:
+def _indexed(dataset, geometry_id) -> Geometry | None:
     """The geometry file the index names, if it holds that mesh (its coefficients dropped:
     the caller attaches the scene's).
     """
-    if meshes is None or not geometry_id:
+    if dataset is None or not geometry_id:
         return None
-    path = Path(meshes) / f"{geometry_id}.h5"
+    path = geometry_path(dataset, geometry_id)
     try:
         g = read_geometry(path) if path.exists() else None
     except Exception:  # truncated or corrupt: meshed again, and the caller rewrites the file

@@ -234,7 +234,7 @@ def test_a_surface_in_several_pieces_keeps_the_largest_and_says_so(caplog):
 
 def test_a_phantom_meshed_before_is_read_from_the_dataset_not_meshed_again(tmp_path,
                                                                            monkeypatch):
-    """generate plans with scene_geometries(meshes=DIR/geometry): a phantom whose mesh file is
+    """generate plans with scene_geometries(dataset=DIR): a phantom whose mesh file is
     there (the index names it) is read back, not meshed again; another mesh size, variety or
     seed is another key; a missing or corrupt file is meshed again."""
     from data_spec import geometry_path, load_scene, write_geometry
@@ -246,24 +246,23 @@ def test_a_phantom_meshed_before_is_read_from_the_dataset_not_meshed_again(tmp_p
             '[loads]\nmagnitude = 0.4\n')
     scene_file.write_text(text)
     scene = load_scene(scene_file)
-    meshes = tmp_path / "geometry"
     calls = []
     mesh = source.scene_geometry
     monkeypatch.setattr(source, "scene_geometry",
                         lambda s, i=0: calls.append(i) or mesh(s, i))
-    (g,) = source.scene_geometries(scene, meshes=meshes)
+    (g,) = source.scene_geometries(scene, dataset=tmp_path)
     assert calls == [0]
-    (g2,) = source.scene_geometries(scene, meshes=meshes)  # the file is not written yet
+    (g2,) = source.scene_geometries(scene, dataset=tmp_path)  # the file is not written yet
     assert calls == [0, 0]
     write_geometry(geometry_path(tmp_path, g.geometry_id), g)  # generate writes it
-    (g3,) = source.scene_geometries(scene, meshes=meshes)
+    (g3,) = source.scene_geometries(scene, dataset=tmp_path)
     assert calls == [0, 0]
     np.testing.assert_array_equal(g3.points, g.points)
     np.testing.assert_array_equal(g3.cells, g.cells)
     np.testing.assert_array_equal(g3.regions["vena_cava"], g.regions["vena_cava"])
     assert g3.description == g.description and g3.shape_coefficients is None
     geometry_path(tmp_path, g.geometry_id).write_bytes(b"not hdf5")  # corrupt: meshed again
-    source.scene_geometries(scene, meshes=meshes)
+    source.scene_geometries(scene, dataset=tmp_path)
     assert calls == [0, 0, 0]
     scene_file.write_text(text.replace("mesh_size = 20.0", "mesh_size = 22.0"))
     key = source._mesh_key(load_scene(scene_file), 0)
