@@ -210,13 +210,13 @@ def _check_geometry(g: dict, problems: list[str]) -> None:
 def _check_fixed(f: dict, problems: list[str]) -> None:
     needs = {"sphere": ("center", "radius"), "box": ("min", "max"),
              "cylinder": ("center", "axis", "radius", "length"), "nodes": ("nodes",),
-             "region": ("name",)}
+             "points": ("points", "radius"), "region": ("name",)}
     kind = f.get("kind")
     for key in needs.get(kind, ()):
         if key not in f:
             problems.append(f"fixed.{key}: missing (needed when kind = {kind!r})")
     used = set(needs.get(kind, ())) | {"kind"}
-    for key in ("center", "radius", "axis", "length", "min", "max", "nodes"):
+    for key in ("center", "radius", "axis", "length", "min", "max", "nodes", "points"):
         if key in f and key not in used:
             problems.append(f"fixed.{key}: not used when kind = {kind!r}")
     if kind != "region":

@@ -79,6 +79,11 @@ def _vec3(v: Any) -> str | None:
     return None if ok else "a list of 3 finite numbers [x, y, z]"
 
 
+def _points(v: Any) -> str | None:
+    ok = isinstance(v, list) and len(v) > 0 and all(_vec3(x) is None for x in v)
+    return None if ok else "a non-empty list of points [[x, y, z], ...]"
+
+
 def _node_ids(v: Any) -> str | None:
     ok = isinstance(v, list) and len(v) > 0 and all(is_int(x) and x >= 0 for x in v)
     return None if ok else "a non-empty list of node ids (integers >= 0)"
@@ -166,16 +171,18 @@ _SCHEMA: dict[str, dict[str, Key]] = {
         "spacing": Key(_vec3, OPTIONAL, "voxel size (mm) of a .npy segmentation mask"),
     },
     "fixed": {
-        "kind": Key(_choice("region", "sphere", "box", "cylinder", "nodes"), "region",
-                    "how the zero-displacement nodes are chosen"),
+        "kind": Key(_choice("region", "sphere", "box", "cylinder", "nodes", "points"),
+                    "region", "how the zero-displacement nodes are chosen"),
         "name": Key(_name, "vena_cava", "named region of the geometry (kind = region)"),
         "center": Key(_vec3, OPTIONAL, "sphere/cylinder centre, mm"),
-        "radius": Key(_num(0.0), OPTIONAL, "sphere/cylinder radius, mm"),
+        "radius": Key(_num(0.0), OPTIONAL, "sphere/cylinder radius; points: distance, mm"),
         "axis": Key(_vec3, OPTIONAL, "cylinder axis direction"),
         "length": Key(_num(0.0), OPTIONAL, "cylinder length along the axis, mm"),
         "min": Key(_vec3, OPTIONAL, "box lower corner, mm"),
         "max": Key(_vec3, OPTIONAL, "box upper corner, mm"),
         "nodes": Key(_node_ids, OPTIONAL, "explicit node ids (kind = nodes)"),
+        "points": Key(_points, OPTIONAL, "surface nodes within radius of any of these points, "
+                      "mm (kind = points; e.g. a region mapped from another mesh)"),
     },
     "material": {
         "law": Key(_choice("ogden"), "ogden", "uncoupled first-order Ogden (FEBio convention)"),

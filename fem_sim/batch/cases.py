@@ -48,6 +48,11 @@ def fixed_nodes(scene: Scene, g: Geometry, source: str = "scene") -> np.ndarray:
         ids = np.asarray(f["nodes"], dtype=np.int64)
     elif kind == "sphere":
         ids = surf[np.linalg.norm(x - f["center"], axis=1) <= f["radius"]]
+    elif kind == "points":
+        from scipy.spatial import cKDTree
+
+        near = cKDTree(np.asarray(f["points"], dtype=np.float64)).query(x)[0]
+        ids = surf[near <= f["radius"]]
     elif kind == "box":
         ids = surf[np.all((x >= f["min"]) & (x <= f["max"]), axis=1)]
     else:  # cylinder

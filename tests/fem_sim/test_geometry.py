@@ -272,3 +272,25 @@ def test_a_phantom_meshed_before_is_read_from_the_dataset_not_meshed_again(tmp_p
                                 'population_size = 3\npca_components = 1\n'))
     keys = [source._mesh_key(load_scene(pop), i) for i in range(3)]
     assert len(set(keys)) == 3 and all("anatomical" in k for k in keys)
+
+
+def test_a_fixed_region_given_as_points_takes_the_surface_nodes_near_them():
+    """kind = points (a region mapped from another mesh): the surface nodes within radius of
+    any point, never an interior node. Box of 10 mm cells: the points on two faces' corners
+    pick the surface nodes within 10.5 mm of them, counted by hand."""
+    from data_spec.geometry import box_mesh
+    from data_spec.scene import parse_scene
+    from fem_sim.batch.cases import fixed_nodes
+
+    g = box_mesh(4, (40.0, 40.0, 40.0))
+    raw = {"scene": {"name": "t", "n_simulations": 1}, "geometry": {"source": "phantom"},
+           "loads": {"magnitude": 0.4},
+           "fixed": {"kind": "points", "points": [[0.0, 0.0, 0.0], [20.0, 20.0, 40.0]],
+                     "radius": 10.5}}
+    ids = fixed_nodes(parse_scene(raw, "t.toml"), g)
+    x = g.points[ids]
+    # corner (0,0,0): itself and its 3 edge neighbours (the face diagonals are 14.1 mm away);
+    # top-face centre (20,20,40): itself, 4 in-face neighbours; the node below it is interior
+    assert ids.size == 4 + 5
+    assert np.isin(ids, g.surface_nodes).all()
+    assert not np.any(np.all(np.isclose(x, [20.0, 20.0, 30.0]), axis=1))
