@@ -2,10 +2,11 @@
 the PCA of the population's template-surface displacements, the registration settings, and
 the population's ranges (to say when a liver lies outside them).
 
-``ShapeModel.place(points, triangles)`` registers the template onto a liver surface with the
-same staged CPD and the same samples as the population was built with, moves every template
-node (interior included: the CPD field is smooth everywhere) and projects the template
-surface's displacement on the components: the liver's shape coefficients. Stored as a plain
+``ShapeModel.place(points, triangles)`` maps the liver into the population's frame
+(:mod:`liverreg.rigid`), registers the template onto its surface with the same staged CPD
+and the same samples as the population was built with, moves every template node (the
+interior by harmonic extension, :mod:`liverreg.morph`) and projects the template surface's
+displacement on the components: the liver's shape coefficients. Stored as a plain
 ``.npz`` (no pickle) next to an exported model.
 """
 
@@ -18,6 +19,7 @@ import numpy as np
 
 from liverreg.cpd import STAGED, dense_surface, farthest_points, project, register
 from liverreg.morph import SurfaceMorph
+from liverreg.rigid import orient
 
 FORMAT = 1
 INVERTED_FLOOR = 0.01  # fraction of inverted template tetrahedra never worth a warning
@@ -33,6 +35,32 @@ class Placement:
     iterations: list          # CPD iterations per stage
     offset: np.ndarray        # (3,) translation of the liver into the population's frame, mm
     inverted: int = 0         # template tetrahedra turned inside out by the placement
+    rotation: np.ndarray = None  # (3, 3) orthogonal map into the population's frame (det -1:
+    #                              a mirror image); x_population = rotation @ x + offset
+    frame: str = "as given"   # how the liver was turned (liverreg.rigid.RigidFit.describe)
+
+    def __post_init__(self):
+        if self.rotation is None:
+            self.rotation = np.eye(3)
+
+    @property
+    def mirrored(self) -> bool:
+        return bool(np.linalg.det(self.rotation) < 0)
+
+    def to_population(self, x) -> np.ndarray:
+        """Points (..., 3) of the liver's frame in the population's."""
+        return np.asarray(x, dtype=np.float64) @ self.rotation.T + self.offset
+
+    def to_liver(self, x) -> np.ndarray:
+        """Points (..., 3) of the population's frame in the liver's."""
+        return (np.asarray(x, dtype=np.float64) - self.offset) @ self.rotation
+
+    def vectors_to_population(self, v) -> np.ndarray:
+        """Forces or displacements (..., 3) of the liver's frame in the population's."""
+        return np.asarray(v, dtype=np.float64) @ self.rotation.T
+
+    def vectors_to_liver(self, v) -> np.ndarray:
+        return np.asarray(v, dtype=np.float64) @ self.rotation
 
 
 @dataclass
@@ -71,23 +99,32 @@ class ShapeModel:
     def n_components(self) -> int:
         return int(self.components.shape[0])
 
-    def place(self, points: np.ndarray, triangles: np.ndarray, center: bool = True) -> Placement:
+    def place(self, points: np.ndarray, triangles: np.ndarray, center: bool = True,
+              frame: str = "auto") -> Placement:
         """Register the template onto the liver surface (points (p, 3) mm, triangles (t, 3)).
 
-        The placement is in the population's frame: the liver translated by ``offset``
-        (``center=False``: as given, for livers already in that frame).
+        The placement is in the population's frame: the liver is first mapped into it
+        (:func:`liverreg.rigid.orient`; ``frame``: the liver's frame, ``LPS``, ``RAS`` or
+        ``population``, or ``auto``: the best rigid fit onto the population's mean surface).
+        ``center=False``: as given, for livers already in that frame and place (those the
+        solver's population pipeline made).
         """
         triangles = np.asarray(triangles, dtype=np.int64)
+        points = np.asarray(points, dtype=np.float64)
         surf = self.surface_nodes
         S = self.template_points[surf]
-        # Livers come in any scanner frame; the population's lie around one place, and the
-        # PCA (of displacements) and the network's node coordinates both see position: the
-        # liver is moved so that its surface centroid is the population's mean one.
-        verts0 = np.asarray(points, dtype=np.float64)[np.unique(triangles)]
-        offset = (S + self.mean.reshape(-1, 3)).mean(axis=0) - verts0.mean(axis=0)
-        if not center:
-            offset = np.zeros(3)
-        points = np.asarray(points, dtype=np.float64) + offset
+        # Livers come in any scanner frame; the population's lie around one place, in one
+        # orientation, and the PCA (of displacements) and the network's node coordinates both
+        # see position: the liver is mapped onto the population's mean surface first.
+        if center:
+            verts = points[np.unique(triangles)]
+            mean_surface = S + self.mean.reshape(-1, 3)
+            fit = orient(verts[farthest_points(verts, self.n_points)],
+                         mean_surface[farthest_points(mean_surface, self.n_points)], frame)
+            rotation, offset, how = fit.Q, fit.t, fit.describe()
+        else:
+            rotation, offset, how = np.eye(3), np.zeros(3), "as given"
+        points = points @ rotation.T + offset
         verts = points[np.unique(triangles)]
         # the samples of liverreg.cpd.surface_samples (farthest points, seed 0) and the
         # registration of liverreg.cpd.build_population
@@ -98,7 +135,8 @@ class ShapeModel:
                        dense_surface(points, triangles), [tuple(r) for r in self.schedule])
         coeff = project((reg.points[surf] - S).ravel(), self.mean, self.components)
         return Placement(points=reg.points, coefficients=coeff, residual=reg.residual,
-                         iterations=reg.iterations, offset=offset, inverted=reg.inverted)
+                         iterations=reg.iterations, offset=offset, inverted=reg.inverted,
+                         rotation=rotation, frame=how)
 
     def warnings(self, placement: Placement) -> list[str]:
         """Ways the liver lies outside the population, with the numbers (empty: inside)."""

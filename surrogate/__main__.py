@@ -44,8 +44,13 @@ def main(argv=None) -> int:
                    help="multiply the file's coordinates by this (1000 for metres)")
     p.add_argument("--no-center", action="store_true",
                    help="keep the liver where the file puts it (a liver already in the "
-                   "population's frame); by default it is moved to the population's mean "
-                   "position")
+                   "population's frame and place); by default it is mapped onto the "
+                   "population's mean liver (--frame)")
+    p.add_argument("--frame", choices=("auto", "LPS", "RAS", "population"), default="auto",
+                   help="the liver file's frame: LPS (DICOM, ITK), RAS (NIfTI, Slicer), "
+                   "population (x toward the right lobe, y posterior, z up), or auto (default: "
+                   "the best rigid fit onto the population's mean liver, mirror images "
+                   "included)")
     p.add_argument("--no-picture", action="store_true", help="no PNG (no OpenGL needed)")
     args = parser.parse_args(argv)
     if args.command == "predict-liver":
@@ -53,8 +58,8 @@ def main(argv=None) -> int:
             from surrogate.viewer import main as viewer
 
             return viewer([str(args.run), "--place", str(args.liver), "--scale-to-mm",
-                           str(args.scale_to_mm)] + (["--no-center"] if args.no_center
-                                                     else []))
+                           str(args.scale_to_mm), "--frame", args.frame]
+                          + (["--no-center"] if args.no_center else []))
         from surrogate.predict_liver import main as predict_liver
 
         return predict_liver(args)

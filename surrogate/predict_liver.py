@@ -5,8 +5,10 @@
 
 A model trained on a population of livers (a scene that varies the geometry) carries its
 shape model (``RUN/model/shape_model.npz``: template mesh, PCA basis, registration settings;
-:mod:`liverreg.shape_model`). Here the template is registered onto the new liver with the same
-staged CPD as in training (:mod:`liverreg.cpd`, the code the solver used), its shape
+:mod:`liverreg.shape_model`). Here the liver is mapped into the population's frame (its frame
+named by ``--frame``, or by default the best rigid fit, turns and mirror images included:
+:mod:`liverreg.rigid`), the template is registered onto it with the same staged CPD as in
+training (:mod:`liverreg.cpd`, the code the solver used), its shape
 coefficients come from the same PCA, and the network predicts on the registered template: the
 new liver's shape with the template's mesh, nodes and fixed region. A force is placed at the
 surface node of the registered template nearest to the point given.
@@ -112,7 +114,9 @@ class LiverPrediction:
     forces: np.ndarray          # (n_loads, 3) N
     coefficients: np.ndarray
     residual: float
-    offset: np.ndarray          # (3,) the liver's translation into the population's frame
+    offset: np.ndarray          # (3,) and rotation (3, 3): the liver's map into the
+    rotation: np.ndarray        # population's frame, x_population = rotation @ x + offset
+    frame: str = "as given"     # how the liver was turned into the population's frame
     inverted: int = 0           # template tetrahedra the placement turned inside out
     warnings: list = field(default_factory=list)
 
@@ -146,16 +150,19 @@ class LiverPrediction:
         return render_panels([panel], png, title=title)
 
 
-def place_liver(predictor, points, triangles, center: bool = True):
+def place_liver(predictor, points, triangles, center: bool = True, frame: str = "auto"):
     """(placement, warnings): the template registered onto the liver surface, with the
-    reasons (numbers included) it lies outside the training population. ``center``: move the
-    liver to the population's mean position first (a liver from a scanner); False for a liver
-    already in the population's frame (one the solver's population pipeline made).
+    reasons (numbers included) it lies outside the training population. The liver is first
+    mapped into the population's frame: ``frame`` names its frame (``LPS``: DICOM, ITK;
+    ``RAS``: NIfTI, Slicer; ``population``: x toward the right lobe, y posterior, z up), or
+    ``auto`` finds the best rigid fit (turns and mirror images) onto the population's mean
+    liver. ``center=False``: as given, for a liver already in the population's frame and place
+    (one the solver's population pipeline made).
     """
     sm = predictor.shape_model
     if sm is None:
         raise ValueError(_no_population(predictor))
-    placement = sm.place(points, triangles, center=center)
+    placement = sm.place(points, triangles, center=center, frame=frame)
     return placement, sm.warnings(placement)
 
 
@@ -176,22 +183,23 @@ def nearest_surface_nodes(points, triangles, at) -> np.ndarray:
 
 
 def predict_liver(predictor, points, triangles, forces, at=None, load_nodes=None,
-                  placement=None, center: bool = True) -> LiverPrediction:
+                  placement=None, center: bool = True, frame: str = "auto") -> LiverPrediction:
     """Place the liver (points, triangles: its surface; :func:`place_liver`) and predict the
     displacement under ``forces`` (n_loads, 3) N acting at the template nodes nearest to
-    ``at`` (n_loads, 3) mm, or at template node ids ``load_nodes``.
+    ``at`` (n_loads, 3) mm, or at template node ids ``load_nodes``. Points, forces and the
+    result are in the liver's frame (the file's).
     """
     sm = predictor.shape_model
     if sm is None:
         raise ValueError(_no_population(predictor))
     found = []
     if placement is None:
-        placement, found = place_liver(predictor, points, triangles, center)
+        placement, found = place_liver(predictor, points, triangles, center, frame)
     forces = np.asarray(forces, dtype=np.float64).reshape(-1, 3)
     if (at is None) == (load_nodes is None):
         raise ValueError("give either at (points, mm) or load_nodes (template node ids)")
     if at is not None:  # points in the liver's frame; the placement is in the population's
-        at = np.asarray(at, dtype=np.float64).reshape(-1, 3) + placement.offset
+        at = placement.to_population(np.asarray(at, dtype=np.float64).reshape(-1, 3))
         load_nodes = nearest_surface_nodes(placement.points, sm.surface_triangles, at)
     load_nodes = np.asarray(load_nodes, dtype=np.int64).ravel()
     if load_nodes.size != forces.shape[0]:
@@ -200,37 +208,44 @@ def predict_liver(predictor, points, triangles, forces, at=None, load_nodes=None
         warnings.simplefilter("always")
         if sm.loadable_nodes.size:  # the exported model's own check, on the template's nodes
             check_load_nodes(load_nodes, sm.loadable_nodes)
-        u = predictor(forces, load_nodes,
+        u = predictor(placement.vectors_to_population(forces), load_nodes,
                       geometry=(placement.points, sm.fixed_nodes, placement.coefficients))
     found += [str(w.message) for w in caught if "shape coefficients" not in str(w.message)]
     for msg in found:
         warnings.warn(msg, stacklevel=2)
-    return LiverPrediction(points=placement.points - placement.offset, cells=sm.template_cells,
-                           triangles=sm.surface_triangles, fixed_nodes=sm.fixed_nodes,
-                           displacement=np.asarray(u, dtype=np.float64), load_nodes=load_nodes,
+    # in the liver's frame; a mirror image turns the template's cells inside out: two of
+    # their nodes swap, so that they stay positively oriented
+    swap = [0, 2, 1, 3] if placement.mirrored else [0, 1, 2, 3]
+    return LiverPrediction(points=placement.to_liver(placement.points),
+                           cells=sm.template_cells[:, swap],
+                           triangles=sm.surface_triangles[:, swap[:3]],
+                           fixed_nodes=sm.fixed_nodes,
+                           displacement=placement.vectors_to_liver(u), load_nodes=load_nodes,
                            forces=forces, coefficients=placement.coefficients,
                            residual=placement.residual, offset=placement.offset,
+                           rotation=placement.rotation, frame=placement.frame,
                            inverted=placement.inverted, warnings=found)
 
 
 def predict_at_points(predictor, placement, points, forces, at) -> np.ndarray:
     """Displacements (n_cases, len(points), 3) mm at ``points`` of the placed liver (e.g. the
     nodes of its own mesh; the liver's frame) for ``forces`` (n_cases, n_loads, 3) N acting at
-    the template surface nodes nearest to ``at`` (n_cases, n_loads, 3) mm: the registered
-    template's prediction, interpolated (:func:`interpolation_matrix`).
+    the template surface nodes nearest to ``at`` (n_cases, n_loads, 3) mm, all in the liver's
+    frame: the registered template's prediction, interpolated (:func:`interpolation_matrix`).
     """
     sm = predictor.shape_model
     if sm is None:
         raise ValueError(_no_population(predictor))
     forces = np.asarray(forces, dtype=np.float64)
-    at = np.asarray(at, dtype=np.float64) + placement.offset
+    at = placement.to_population(at)
     n_cases, L = forces.shape[:2]
     load_nodes = nearest_surface_nodes(placement.points, sm.surface_triangles,
                                        at.reshape(-1, 3)).reshape(n_cases, L)
-    u = predictor(forces, load_nodes,
+    u = predictor(placement.vectors_to_population(forces), load_nodes,
                   geometry=(placement.points, sm.fixed_nodes, placement.coefficients))
-    W = interpolation_matrix(placement.points, np.asarray(points) + placement.offset)
-    return np.stack([W @ uc for uc in np.asarray(u, dtype=np.float64)])
+    W = interpolation_matrix(placement.points, placement.to_population(points))
+    return np.stack([placement.vectors_to_liver(W @ uc)
+                     for uc in np.asarray(u, dtype=np.float64)])
 
 
 def main(args) -> int:
@@ -266,14 +281,17 @@ def main(args) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # reported below, once
         pred = predict_liver(predictor, points, triangles, spec[:, 3:], at=spec[:, :3],
-                             center=not args.no_center)
+                             center=not args.no_center, frame=args.frame)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     vtu = pred.write_vtu(out / "liver_deformed.vtu")
     summary = {"liver": str(args.liver), "model": str(args.run),
                "registration_residual_mm": pred.residual,
                "inverted_template_tetrahedra": pred.inverted,
-               "offset_into_population_frame_mm": pred.offset.tolist(),
+               "into_population_frame": {"rotation": pred.rotation.tolist(),
+                                         "offset_mm": pred.offset.tolist(),
+                                         "mirrored": bool(np.linalg.det(pred.rotation) < 0),
+                                         "how": pred.frame},
                "population_residual_mm": {"median": float(np.median(
                    predictor.shape_model.residuals)), "max": float(
                    predictor.shape_model.residuals.max())},
@@ -287,7 +305,8 @@ def main(args) -> int:
     if not args.no_picture:
         png = pred.draw(out / "liver_deformed.png", title=Path(args.liver).name)
         print(f"picture: {png}", file=sys.stderr)
-    print(f"registration residual {pred.residual:.2f} mm, {pred.inverted} of "
+    print(f"placed as {pred.frame}; registration residual {pred.residual:.2f} mm, "
+          f"{pred.inverted} of "
           f"{pred.cells.shape[0]} template tetrahedra inverted; max displacement "
           f"{summary['max_displacement_mm']:.2f} mm; written {vtu} and "
           f"{out / 'prediction.json'}")

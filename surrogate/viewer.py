@@ -486,7 +486,8 @@ def build(args):
             raise ViewerError(f"{mdir}: --place needs a model trained on a population of "
                               "livers (scene 4); this one has no shape model")
         points, tris = read_liver_surface(args.place, args.scale_to_mm)
-        placement, found = place_liver(pred, points, tris, center=not args.no_center)
+        placement, found = place_liver(pred, points, tris, center=not args.no_center,
+                                       frame=args.frame)
         for msg in found:
             print(f"{log_prefix}: warning: {msg}", file=sys.stderr)
         sm = pred.shape_model
@@ -523,6 +524,9 @@ def main(argv=None) -> int:
                     help="with --place: multiply the file's coordinates by this")
     ap.add_argument("--no-center", action="store_true",
                     help="with --place: keep the liver where the file puts it")
+    ap.add_argument("--frame", choices=("auto", "LPS", "RAS", "population"), default="auto",
+                    help="with --place: the file's frame (auto: the best rigid fit; the liver "
+                    "is shown in the population's frame)")
     ap.add_argument("--screenshot", type=Path,
                     help="open the window, draw one pull, save this PNG and close")
     ap.add_argument("--size", type=int, nargs=2, default=(900, 700), metavar=("W", "H"))

@@ -66,7 +66,8 @@ def test_the_registered_template_lies_on_the_liver_and_centering_removes_positio
     ref = sm.place(g.points, g.surface_triangles)
     # moved into the population's frame: the same placement wherever the file put the liver
     # (up to rounding, which CPD's stopping tolerances can turn into an extra iteration)
-    np.testing.assert_allclose(pl.offset, ref.offset - shift, atol=1e-9)
+    np.testing.assert_allclose(pl.rotation, ref.rotation, atol=1e-6)
+    np.testing.assert_allclose(pl.offset, ref.offset - ref.rotation @ shift, atol=1e-4)
     surf = sm.surface_nodes
     assert np.abs(pl.points - ref.points)[surf].max() < 0.1
     np.testing.assert_allclose(pl.coefficients, ref.coefficients,
@@ -90,7 +91,9 @@ def test_a_liver_outside_the_population_is_named_with_its_numbers(population):
     assert any(m.startswith("registration residual") and f"{pl.residual:.2f} mm" in m
                for m in sm.warnings(pl))
     bent = warped(24, 0, 0)  # four times the population's largest bend
-    msgs = sm.warnings(sm.place(bent.points, bent.surface_triangles))
+    # in the population's frame as declared (a box is nearly symmetric: a free rigid fit may
+    # turn the bend into a tilt)
+    msgs = sm.warnings(sm.place(bent.points, bent.surface_triangles, frame="population"))
     assert any("shape coefficients outside the population's range" in m for m in msgs), msgs
 
 

@@ -137,12 +137,54 @@ def test_predictions_at_a_livers_own_nodes_match_the_template_at_its_nodes(run):
     points, tris = read_liver_surface(path)
     placement, _ = place_liver(pred, points, tris)
     node = sm.loadable_nodes[:1]
-    at = placement.points[node] - placement.offset
-    got = predict_at_points(pred, placement, placement.points[:200] - placement.offset,
+    at = placement.to_liver(placement.points[node])
+    got = predict_at_points(pred, placement, placement.to_liver(placement.points[:200]),
                             [[[0.0, 0.0, -0.4]]], at[None])
-    want = pred([[0.0, 0.0, -0.4]], node,
-                geometry=(placement.points, sm.fixed_nodes, placement.coefficients))
+    want = placement.vectors_to_liver(pred(
+        placement.vectors_to_population([[0.0, 0.0, -0.4]]), node,
+        geometry=(placement.points, sm.fixed_nodes, placement.coefficients)))
     np.testing.assert_allclose(got[0], want[:200], rtol=1e-5, atol=1e-6)
+
+
+def test_a_turned_mirrored_liver_gets_the_same_prediction_in_its_own_frame(run):
+    """Frame invariance: the file's frame changes nothing but the frame of the answer. A
+    population liver turned by 50 degrees, mirrored (an LPS-like frame) and shifted is placed
+    where the same liver as given is placed (the rigid fit finds the map), with the same
+    shape coefficients; the force turned with it gives the displacement turned with it."""
+    from surrogate.predict_liver import place_liver
+
+    pred = load_predictor(run / "model")
+    sm = pred.shape_model
+    path, _ = _population_liver(2)
+    points, tris = read_liver_surface(path)
+    a = np.radians(50.0)
+    A = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]]) \
+        @ np.diag([-1.0, 1.0, 1.0])
+    b = np.array([150.0, -80.0, 40.0])
+    turned = points @ A.T + b
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ref, _ = place_liver(pred, points, tris)
+        got, _ = place_liver(pred, turned, tris)
+    assert got.mirrored and not ref.mirrored
+    np.testing.assert_allclose(got.rotation @ A, ref.rotation, atol=1e-3)
+    assert np.abs(got.points - ref.points)[sm.surface_nodes].max() < 0.5  # mm
+    np.testing.assert_allclose(got.coefficients, ref.coefficients,
+                               atol=0.02 * np.abs(ref.coefficients).max())
+    f = np.array([[0.1, -0.25, -0.3]])
+    node = sm.loadable_nodes[:1]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        u_ref = predict_liver(pred, points, tris, f, load_nodes=node, placement=ref)
+        u_got = predict_liver(pred, turned, tris, f @ A.T, load_nodes=node, placement=got)
+    scale = np.abs(u_ref.displacement).max()
+    np.testing.assert_allclose(u_got.displacement, u_ref.displacement @ A.T, atol=0.03 * scale)
+    np.testing.assert_allclose(u_got.points, u_ref.points @ A.T + b, atol=0.5)
+    # the template's cells keep their orientation in the mirrored frame: the inside-out ones
+    # are those the registration folded, no more
+    from data_spec.geometry import signed_volumes
+
+    assert np.sum(signed_volumes(u_got.points, u_got.cells) <= 0) == u_got.inverted
 
 
 def test_population_fields_move_to_the_template_and_back():
