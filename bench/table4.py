@@ -68,7 +68,9 @@ PAPER = {1: {"sims": 400, "mee": 0.239, "naive": 3.066, "skill": "0.078", "lt3":
              "design": "node-wise (500,500,300,100,50)"},
          4: {"sims": 10200, "mee": 0.662, "naive": 3.133, "skill": "0.293 / 0.211",
              "lt3": 99.01, "design": "node-wise (500,)x5"}}
-# The liver no training run may use: scene 4's model is evaluated on FE simulations of it.
+# The liver no training run may use: scene 4's model is evaluated on FE simulations of it. Its
+# file is in LPS (right lobe toward -x, dome toward +z, vena-cava notch toward +y), the frame
+# predict-liver assumes by default.
 UNSEEN = ROOT.parent / "shared" / "data" / "livers" / "sofa_liver.vtk"
 UNSEEN_SIMS = 60
 CURVE = (1.0, 0.5, 0.25)
@@ -180,21 +182,56 @@ def curve_fit(ns, skills, target):
     return float(np.exp(loga) * target**b), float(b)
 
 
-def unseen(scene_file: Path, base: Path, model_dir: Path, a) -> dict | None:
-    """The unseen-liver row: FE truth on ``a.unseen`` (resumable), the population model's
-    prediction against it."""
-    if not Path(a.unseen).exists():
-        print(f"{a.unseen}: missing; no unseen-liver row", flush=True)
-        return None
-    d = RESULTS / "unseen"
+def place_unseen(model_dir: Path, liver: Path, frame: str):
+    """(placement, warnings): predict-liver's placement of the liver file (as a user gets it,
+    ``frame`` as its --frame)."""
+    import warnings
+
+    from surrogate.export import load_predictor
+    from surrogate.predict_liver import place_liver, read_liver_surface
+
+    points, tris = read_liver_surface(liver)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return place_liver(load_predictor(model_dir), points, tris, frame=frame)
+
+
+def unseen_truth(scene_file: Path, liver: Path, placement, sm, a, name: str) -> Path:
+    """The FE truth of the unseen liver (resumable): ``placement`` given, fixed where it puts
+    the template's fixed region (the boundary condition the model assumes); None: the file's
+    own default region (the most posterior surface in the population's axes)."""
+    import shutil
+
+    d = RESULTS / name
     d.mkdir(parents=True, exist_ok=True)
+    fixed = None if placement is None else placement.to_liver(
+        placement.points[sm.fixed_nodes])
+    text = unseen_scene(scene_file, liver, UNSEEN_SIMS, fixed)
     scene = d / "scene.toml"
-    text = unseen_scene(scene_file, Path(a.unseen), UNSEEN_SIMS)
     if not scene.exists() or scene.read_text() != text:
+        if (d / "data").exists():  # another placement's truth: not this one's
+            shutil.rmtree(d / "data")
+        (d / "generation.json").unlink(missing_ok=True)
         scene.write_text(text)
     generate(scene, d / "data", UNSEEN_SIMS, float("inf"), a)
-    return {"liver": Path(a.unseen).name, **evaluate_unseen(model_dir, d / "data",
-                                                             base / "data")}
+    return d / "data"
+
+
+def unseen(scene_file: Path, base: Path, model_dir: Path, a) -> dict | None:
+    """The unseen-liver row: the liver placed as predict-liver places it (``a.unseen_frame``),
+    FE truth on it with the fixed region the placement gives (resumable), the population
+    model's prediction against it."""
+    liver = Path(a.unseen)
+    if not liver.exists():
+        print(f"{liver}: missing; no unseen-liver row", flush=True)
+        return None
+    from surrogate.export import load_predictor
+
+    placement, found = place_unseen(model_dir, liver, a.unseen_frame)
+    sm = load_predictor(model_dir).shape_model
+    data = unseen_truth(scene_file, liver, placement, sm, a, f"unseen_{a.unseen_frame}")
+    return {"liver": liver.name, "frame": a.unseen_frame, "placed_as": placement.frame,
+            **evaluate_unseen(model_dir, data, base / "data", placement, found)}
 
 
 def run_scene(k: int, a, rows: dict | None = None) -> dict:
@@ -286,9 +323,11 @@ def toml_text(d: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def unseen_scene(scene_file: Path, liver: Path, n: int) -> str:
+def unseen_scene(scene_file: Path, liver: Path, n: int, fixed=None) -> str:
     """The scene of the unseen-liver truth: the population scene's loads, material, steps and
-    solver on one liver file (its own mesh at the scene's mesh size).
+    solver on one liver file (its own mesh at the scene's mesh size). ``fixed`` (k, 3) mm: the
+    surface nodes within half an element of these points are fixed (the template's fixed
+    region where a placement puts it); None: the file's default region.
     """
     import tomllib
 
@@ -298,15 +337,19 @@ def unseen_scene(scene_file: Path, liver: Path, n: int) -> str:
                                    "training run uses: the truth of the unseen-liver row."}
     raw["geometry"] = {"source": "file", "path": str(liver.resolve()),
                        "mesh_size": raw["geometry"]["mesh_size"]}
+    if fixed is not None:
+        raw["fixed"] = {"kind": "points", "radius": 0.5 * raw["geometry"]["mesh_size"],
+                        "points": [[round(float(v), 3) for v in p] for p in fixed]}
     raw["surrogate"] = {"config": "small"}
     return toml_text(raw)
 
 
-def evaluate_unseen(model_dir: Path, data: Path, population_data: Path) -> dict:
-    """The population model on the FE simulations of a liver it never saw: placed with
-    predict-liver's registration, predicted at the liver's own mesh nodes (the registered
+def evaluate_unseen(model_dir: Path, data: Path, population_data: Path, placement,
+                    found: list) -> dict:
+    """The population model on the FE simulations of a liver it never saw, placed by
+    ``placement`` (predict-liver's), predicted at the liver's own mesh nodes (the registered
     template's prediction interpolated), against the FE solution. Naive model: the mean
-    displacement of the population's simulations.
+    displacement of the population's simulations (turned into the liver's frame).
     """
     import warnings
 
@@ -314,14 +357,12 @@ def evaluate_unseen(model_dir: Path, data: Path, population_data: Path) -> dict:
     from data_spec.shards import geometry_path
     from surrogate.export import load_predictor
     from surrogate.metrics import displacement_metrics
-    from surrogate.predict_liver import place_liver, predict_at_points
+    from surrogate.predict_liver import predict_at_points
 
     pred = load_predictor(model_dir)
+    sm = pred.shape_model
     shards = [sh for sh in map(read_shard, list_shards(data)) if sh.n_done]
     g = read_geometry(geometry_path(data, shards[0].geometry_id))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        placement, found = place_liver(pred, g.points, g.surface_triangles)
     P, T = [], []
     for sh in shards:
         fr = np.asarray(sh.load_fractions[:sh.n_done])
@@ -336,11 +377,16 @@ def evaluate_unseen(model_dir: Path, data: Path, population_data: Path) -> dict:
     mean = np.mean([np.asarray(read_shard(p).displacement).reshape(-1, 3).mean(axis=0)
                     for p in list_shards(population_data)], axis=0)
     m_nn = displacement_metrics(pred_all, true_all)
-    m_naive = displacement_metrics(np.broadcast_to(mean, true_all.shape), true_all)
+    m_naive = displacement_metrics(np.broadcast_to(placement.vectors_to_liver(mean),
+                                                   true_all.shape), true_all)
+    c, lo, hi = placement.coefficients, sm.coefficient_min, sm.coefficient_max
+    margin = 0.05 * (hi - lo)
     return {"sims": len(shards), "nodes": g.n_nodes, "network": m_nn, "naive": m_naive,
             "skill": m_nn["mee"] / m_naive["mee"], "residual_mm": placement.residual,
-            "inverted": placement.inverted, "template_cells": int(
-                pred.shape_model.template_cells.shape[0]), "warnings": found}
+            "inverted": placement.inverted, "template_cells": int(sm.template_cells.shape[0]),
+            "coefficients_out": int(np.sum((c < lo - margin) | (c > hi + margin))),
+            "coefficients": int(c.size), "fixed_nodes": int(shards[0].fixed_nodes.size),
+            "warnings": found}
 
 
 def _f(x, fmt="{:.3f}"):
@@ -385,13 +431,23 @@ def design_rows(k: int, r: dict, d: dict, gen: str) -> list[str]:
 
 def unseen_note(k: int, d: dict) -> str:
     u = d["unseen"]
-    return (f"- Unseen liver `{u['liver']}` ({design_label(d['config'])}; no training run "
-            f"uses it): {u['sims']} FE simulations on its own {u['nodes']:,}-node mesh with "
-            f"scene {k}'s settings; the model placed it with registration residual "
-            f"{u['residual_mm']:.2f} mm, {u['inverted']} of {u['template_cells']} template "
-            "tetrahedra inverted; predictions on the registered template, interpolated to the "
-            "liver's nodes. " + ("Warnings: " + "; ".join(u["warnings"]) + "."
-                                 if u["warnings"] else "No warning."))
+    placed = (f"placed as predict-liver places it (`--frame {u['frame']}`: {u['placed_as']}), "
+              if "frame" in u else "placed by translation only, ")
+    fixed = (f"fixed where the placement puts the template's fixed region ({u['fixed_nodes']} "
+             "nodes: the boundary condition the model assumes; docs/unseen_liver.md compares "
+             "the placements and the file's own region)"
+             if "fixed_nodes" in u else "fixed at the file's default region")
+    out = (f"- Unseen liver `{u['liver']}` ({design_label(d['config'])}; no training run "
+           f"uses it): {u['sims']} FE simulations on its own {u['nodes']:,}-node mesh with "
+           f"scene {k}'s settings, {fixed}. The model {placed}with registration residual "
+           f"{u['residual_mm']:.2f} mm, {u['inverted']} of {u['template_cells']} template "
+           "tetrahedra folded")
+    if "coefficients_out" in u:
+        out += (f", {u['coefficients_out']} of {u['coefficients']} shape coefficients outside "
+                "the population's range")
+    return out + ("; predictions on the registered template, interpolated to the liver's "
+                  "nodes. " + ("Warnings: " + "; ".join(u["warnings"]) + "."
+                               if u["warnings"] else "No warning."))
 
 
 def shortfall(k: int, r: dict) -> list[str]:
@@ -419,11 +475,13 @@ def shortfall(k: int, r: dict) -> list[str]:
         if u and u["skill"] > 0.5:
             out.append(
                 f"- The unseen liver is not predicted usefully by `{d['config']}` (skill "
-                f"{u['skill']:.2f}): it lies outside the population (the warnings above). What "
-                "would fix it: turning the liver into the population's orientation before the "
-                "non-rigid registration (which only translates it), registering the volume and "
-                "not only the surface so that no template tetrahedron folds, and a population "
-                "whose shapes span such livers.")
+                f"{u['skill']:.2f}): it lies outside the population (the warnings above), and "
+                "the networks extrapolate in its shape coefficients (docs/unseen_liver.md: "
+                "told the population's mean shape instead, the population basis does "
+                "better). What would fix it: a population whose shapes span such livers "
+                "(real segmented livers beside the phantoms), fewer or regularised shape "
+                "inputs, and registering the volume and not only the surface so that no "
+                "template tetrahedron folds.")
             break
     return out
 
@@ -570,6 +628,10 @@ def main() -> int:
                          "or timing)")
     ap.add_argument("--unseen", default=str(UNSEEN),
                     help="the liver scene 4's model is evaluated on (never trained on)")
+    ap.add_argument("--unseen-frame", default="LPS", choices=("LPS", "RAS", "population",
+                                                              "auto"),
+                    help="its placement's frame (predict-liver's --frame; the SOFA liver's "
+                    "is LPS)")
     a = ap.parse_args()
     a.sims = {k: v for d in a.sims for k, v in d.items()}
     os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")

@@ -23,6 +23,7 @@ from liverreg.rigid import orient
 
 FORMAT = 1
 INVERTED_FLOOR = 0.01  # fraction of inverted template tetrahedra never worth a warning
+DEFAULT_FRAME = "LPS"  # the frame of DICOM and ITK, hence of most segmented livers
 
 
 @dataclass
@@ -100,12 +101,14 @@ class ShapeModel:
         return int(self.components.shape[0])
 
     def place(self, points: np.ndarray, triangles: np.ndarray, center: bool = True,
-              frame: str = "auto") -> Placement:
+              frame: str = DEFAULT_FRAME) -> Placement:
         """Register the template onto the liver surface (points (p, 3) mm, triangles (t, 3)).
 
         The placement is in the population's frame: the liver is first mapped into it
-        (:func:`liverreg.rigid.orient`; ``frame``: the liver's frame, ``LPS``, ``RAS`` or
-        ``population``, or ``auto``: the best rigid fit onto the population's mean surface).
+        (:func:`liverreg.rigid.orient`; ``frame``: the liver's frame, ``LPS`` (DICOM, ITK: the
+        default), ``RAS`` or ``population``, or ``auto``: the best rigid fit onto the
+        population's mean surface, which may turn a liver unlike the population's away from
+        its anatomy).
         ``center=False``: as given, for livers already in that frame and place (those the
         solver's population pipeline made).
         """

@@ -46,11 +46,12 @@ def main(argv=None) -> int:
                    help="keep the liver where the file puts it (a liver already in the "
                    "population's frame and place); by default it is mapped onto the "
                    "population's mean liver (--frame)")
-    p.add_argument("--frame", choices=("auto", "LPS", "RAS", "population"), default="auto",
-                   help="the liver file's frame: LPS (DICOM, ITK), RAS (NIfTI, Slicer), "
-                   "population (x toward the right lobe, y posterior, z up), or auto (default: "
-                   "the best rigid fit onto the population's mean liver, mirror images "
-                   "included)")
+    p.add_argument("--frame", choices=("LPS", "RAS", "population", "auto"), default="LPS",
+                   help="the liver file's frame: LPS (DICOM, ITK; the default), RAS (NIfTI, "
+                   "Slicer), population (x toward the right lobe, y posterior, z up), or auto "
+                   "(the best rigid fit onto the population's mean liver, mirror images "
+                   "included; it may turn a liver unlike the population's away from its "
+                   "anatomy)")
     p.add_argument("--no-picture", action="store_true", help="no PNG (no OpenGL needed)")
     args = parser.parse_args(argv)
     if args.command == "predict-liver":

@@ -6,7 +6,7 @@
 A model trained on a population of livers (a scene that varies the geometry) carries its
 shape model (``RUN/model/shape_model.npz``: template mesh, PCA basis, registration settings;
 :mod:`liverreg.shape_model`). Here the liver is mapped into the population's frame (its frame
-named by ``--frame``, or by default the best rigid fit, turns and mirror images included:
+named by ``--frame``, LPS by default, or the best rigid fit, turns and mirror images included:
 :mod:`liverreg.rigid`), the template is registered onto it with the same staged CPD as in
 training (:mod:`liverreg.cpd`, the code the solver used), its shape
 coefficients come from the same PCA, and the network predicts on the registered template: the
@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from liverreg.morph import interpolation_matrix
+from liverreg.shape_model import DEFAULT_FRAME
 from surrogate.export import check_load_nodes
 
 SURFACE_SUFFIXES = (".vtk", ".vtp", ".vtu", ".stl", ".obj", ".ply", ".h5")
@@ -150,14 +151,17 @@ class LiverPrediction:
         return render_panels([panel], png, title=title)
 
 
-def place_liver(predictor, points, triangles, center: bool = True, frame: str = "auto"):
+def place_liver(predictor, points, triangles, center: bool = True,
+                frame: str = DEFAULT_FRAME):
     """(placement, warnings): the template registered onto the liver surface, with the
     reasons (numbers included) it lies outside the training population. The liver is first
-    mapped into the population's frame: ``frame`` names its frame (``LPS``: DICOM, ITK;
-    ``RAS``: NIfTI, Slicer; ``population``: x toward the right lobe, y posterior, z up), or
-    ``auto`` finds the best rigid fit (turns and mirror images) onto the population's mean
-    liver. ``center=False``: as given, for a liver already in the population's frame and place
-    (one the solver's population pipeline made).
+    mapped into the population's frame: ``frame`` names its frame (``LPS``, the default:
+    DICOM, ITK; ``RAS``: NIfTI, Slicer; ``population``: x toward the right lobe, y posterior,
+    z up), or ``auto`` takes the best rigid fit (turns and mirror images) onto the
+    population's mean liver, which may turn a liver unlike the population's away from its
+    anatomy.
+    ``center=False``: as given, for a liver already in the population's frame and place (one
+    the solver's population pipeline made).
     """
     sm = predictor.shape_model
     if sm is None:
@@ -183,7 +187,8 @@ def nearest_surface_nodes(points, triangles, at) -> np.ndarray:
 
 
 def predict_liver(predictor, points, triangles, forces, at=None, load_nodes=None,
-                  placement=None, center: bool = True, frame: str = "auto") -> LiverPrediction:
+                  placement=None, center: bool = True,
+                  frame: str = DEFAULT_FRAME) -> LiverPrediction:
     """Place the liver (points, triangles: its surface; :func:`place_liver`) and predict the
     displacement under ``forces`` (n_loads, 3) N acting at the template nodes nearest to
     ``at`` (n_loads, 3) mm, or at template node ids ``load_nodes``. Points, forces and the

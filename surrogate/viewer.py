@@ -524,9 +524,9 @@ def main(argv=None) -> int:
                     help="with --place: multiply the file's coordinates by this")
     ap.add_argument("--no-center", action="store_true",
                     help="with --place: keep the liver where the file puts it")
-    ap.add_argument("--frame", choices=("auto", "LPS", "RAS", "population"), default="auto",
-                    help="with --place: the file's frame (auto: the best rigid fit; the liver "
-                    "is shown in the population's frame)")
+    ap.add_argument("--frame", choices=("LPS", "RAS", "population", "auto"), default="LPS",
+                    help="with --place: the file's frame (as predict-liver; the liver is "
+                    "shown in the population's frame)")
     ap.add_argument("--screenshot", type=Path,
                     help="open the window, draw one pull, save this PNG and close")
     ap.add_argument("--size", type=int, nargs=2, default=(900, 700), metavar=("W", "H"))

@@ -164,8 +164,8 @@ def test_a_turned_mirrored_liver_gets_the_same_prediction_in_its_own_frame(run):
     turned = points @ A.T + b
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        ref, _ = place_liver(pred, points, tris)
-        got, _ = place_liver(pred, turned, tris)
+        ref, _ = place_liver(pred, points, tris, frame="auto")
+        got, _ = place_liver(pred, turned, tris, frame="auto")
     assert got.mirrored and not ref.mirrored
     np.testing.assert_allclose(got.rotation @ A, ref.rotation, atol=1e-3)
     assert np.abs(got.points - ref.points)[sm.surface_nodes].max() < 0.5  # mm
