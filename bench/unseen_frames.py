@@ -59,6 +59,30 @@ FRAMES = ("population", "LPS", "auto")
 PHANTOMS = 4  # livers of the population in the frame-distance table
 
 
+def placement_panel(placement, sm, label: str):
+    """The registered template in the liver file's frame, its fixed region marked."""
+    from liverviz.pictures import Panel, Surface
+
+    swap = [0, 2, 1] if placement.mirrored else [0, 1, 2]  # outward in a mirrored frame
+    # the camera looks at the fixed region (a panel's load nodes only aim it when u is None)
+    return Panel(surface=Surface.from_mesh(placement.to_liver(placement.points),
+                                           sm.surface_triangles[:, swap], sm.fixed_nodes),
+                 label=label, load_nodes=sm.fixed_nodes)
+
+
+def file_region_picture(panels: list, file_truth: Path, png: Path) -> Path:
+    from data_spec import read_geometry
+    from liverviz.pictures import Panel, Surface, render_panels
+
+    g = read_geometry(next((file_truth / "geometry").glob("*.h5")))
+    region = g.regions["vena_cava"]
+    panels = panels + [Panel(surface=Surface.from_mesh(g.points, g.surface_triangles, region),
+                             label="the liver's mesh, the file's default region",
+                             load_nodes=region)]
+    return render_panels(panels, png, title="Where each placement fixes the unseen liver",
+                         cols=2)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", nargs="+", choices=FRAMES, default=list(FRAMES))
@@ -96,13 +120,15 @@ def main() -> int:
         return {f: orient(X, Y, f).distance for f in ("population", "LPS", "RAS", "auto")}
 
     unseen_dist = distances(liver)
-    rows, out = [], {}
+    rows, out, panels = [], {}, []
     for frame in a.frames:
         placement, found = place_unseen(DESIGNS["paper_scene4"], liver, frame)
         own = unseen_truth(scene_file, liver, placement, sm, a, f"unseen_{frame}")
         # the same placement told the population's mean shape (coefficients 0): how much of
         # the error is the networks' answer to this liver's shape coefficients
         mean_shape = dataclasses.replace(placement, coefficients=0.0 * placement.coefficients)
+        panels.append(placement_panel(placement, sm, f"--frame {frame}: {placement.frame}, "
+                                      f"{placement.inverted} tetrahedra folded"))
         res = {name: {truth: evaluate_unseen(model, data, BASE / "data", pl, found)
                       for truth, data, pl in (("own", own, placement),
                                               ("file", file_truth, placement),
@@ -161,6 +187,10 @@ def main() -> int:
         prow.append(f"| {name} | " + " | ".join(
             f"{dist[f]:.2f} ({100 * (dist[f] / dist['auto'] - 1):+.0f} %)"
             for f in ("population", "LPS", "RAS")) + f" | {dist['auto']:.2f} |")
+    png = file_region_picture(panels, file_truth, Path(a.md).with_suffix(".png"))
+    text += (f"\n![the registered template in the file's frame]({png.name})\n\nThe "
+             "registered template in the file's frame, its fixed region (the truth's) marked, "
+             "for each placement; last, the liver's own mesh with the file's default region.\n")
     text += ("\nDistance to the mean liver (mm, and against the free fit) of livers read in "
              "each frame:\n\n| liver | population | LPS | RAS | auto |\n|---|---|---|---|---|\n"
              + "\n".join(prow) + "\n")
