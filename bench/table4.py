@@ -23,6 +23,7 @@ from there when their results are not on this host.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import re
@@ -182,18 +183,17 @@ def curve_fit(ns, skills, target):
     return float(np.exp(loga) * target**b), float(b)
 
 
-def place_unseen(model_dir: Path, liver: Path, frame: str):
-    """(placement, warnings): predict-liver's placement of the liver file (as a user gets it,
-    ``frame`` as its --frame)."""
+def place_unseen(pred, liver: Path, frame: str):
+    """(placement, warnings): predict-liver's placement of the liver file by the loaded
+    model ``pred`` (as a user gets it, ``frame`` as its --frame)."""
     import warnings
 
-    from surrogate.export import load_predictor
     from surrogate.predict_liver import place_liver, read_liver_surface
 
     points, tris = read_liver_surface(liver)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return place_liver(load_predictor(model_dir), points, tris, frame=frame)
+        return place_liver(pred, points, tris, frame=frame)
 
 
 def unseen_truth(scene_file: Path, liver: Path, placement, sm, a, name: str) -> Path:
@@ -227,11 +227,12 @@ def unseen(scene_file: Path, base: Path, model_dir: Path, a) -> dict | None:
         return None
     from surrogate.export import load_predictor
 
-    placement, found = place_unseen(model_dir, liver, a.unseen_frame)
-    sm = load_predictor(model_dir).shape_model
-    data = unseen_truth(scene_file, liver, placement, sm, a, f"unseen_{a.unseen_frame}")
+    pred = load_predictor(model_dir)
+    placement, found = place_unseen(pred, liver, a.unseen_frame)
+    data = unseen_truth(scene_file, liver, placement, pred.shape_model, a,
+                        f"unseen_{a.unseen_frame}")
     return {"liver": liver.name, "frame": a.unseen_frame, "placed_as": placement.frame,
-            **evaluate_unseen(model_dir, data, base / "data", placement, found)}
+            **evaluate_unseen(pred, data, base / "data", placement, found)}
 
 
 def run_scene(k: int, a, rows: dict | None = None) -> dict:
@@ -344,9 +345,19 @@ def unseen_scene(scene_file: Path, liver: Path, n: int, fixed=None) -> str:
     return toml_text(raw)
 
 
-def evaluate_unseen(model_dir: Path, data: Path, population_data: Path, placement,
+@functools.lru_cache(maxsize=4)
+def population_mean_displacement(population_data: Path) -> np.ndarray:
+    """(3,) mm: the mean displacement of a population's simulations (the naive model)."""
+    from data_spec import list_shards, read_shard
+
+    return np.mean([np.asarray(read_shard(p).displacement).reshape(-1, 3).mean(axis=0)
+                    for p in list_shards(population_data)], axis=0)
+
+
+def evaluate_unseen(pred, data: Path, population_data: Path, placement,
                     found: list) -> dict:
-    """The population model on the FE simulations of a liver it never saw, placed by
+    """The loaded population model ``pred`` on the FE simulations of a liver it never saw,
+    placed by
     ``placement`` (predict-liver's), predicted at the liver's own mesh nodes (the registered
     template's prediction interpolated), against the FE solution. Naive model: the mean
     displacement of the population's simulations (turned into the liver's frame).
@@ -355,11 +366,9 @@ def evaluate_unseen(model_dir: Path, data: Path, population_data: Path, placemen
 
     from data_spec import list_shards, read_geometry, read_shard
     from data_spec.shards import geometry_path
-    from surrogate.export import load_predictor
     from surrogate.metrics import displacement_metrics
     from surrogate.predict_liver import predict_at_points
 
-    pred = load_predictor(model_dir)
     sm = pred.shape_model
     shards = [sh for sh in map(read_shard, list_shards(data)) if sh.n_done]
     g = read_geometry(geometry_path(data, shards[0].geometry_id))
@@ -374,18 +383,16 @@ def evaluate_unseen(model_dir: Path, data: Path, population_data: Path, placemen
         P.append(u[:, sh.output_nodes].reshape(-1, 3))
         T.append(np.asarray(sh.displacement[:sh.n_done]).reshape(-1, 3))
     pred_all, true_all = np.concatenate(P), np.concatenate(T)
-    mean = np.mean([np.asarray(read_shard(p).displacement).reshape(-1, 3).mean(axis=0)
-                    for p in list_shards(population_data)], axis=0)
+    mean = population_mean_displacement(population_data)
     m_nn = displacement_metrics(pred_all, true_all)
     m_naive = displacement_metrics(np.broadcast_to(placement.vectors_to_liver(mean),
                                                    true_all.shape), true_all)
-    c, lo, hi = placement.coefficients, sm.coefficient_min, sm.coefficient_max
-    margin = 0.05 * (hi - lo)
     return {"sims": len(shards), "nodes": g.n_nodes, "network": m_nn, "naive": m_naive,
             "skill": m_nn["mee"] / m_naive["mee"], "residual_mm": placement.residual,
             "inverted": placement.inverted, "template_cells": int(sm.template_cells.shape[0]),
-            "coefficients_out": int(np.sum((c < lo - margin) | (c > hi + margin))),
-            "coefficients": int(c.size), "fixed_nodes": int(shards[0].fixed_nodes.size),
+            "coefficients_out": int(sm.outside_range(placement.coefficients).size),
+            "coefficients": int(placement.coefficients.size),
+            "fixed_nodes": int(shards[0].fixed_nodes.size),
             "warnings": found}
 
 

@@ -63,10 +63,10 @@ def placement_panel(placement, sm, label: str):
     """The registered template in the liver file's frame, its fixed region marked."""
     from liverviz.pictures import Panel, Surface
 
-    swap = [0, 2, 1] if placement.mirrored else [0, 1, 2]  # outward in a mirrored frame
     # the camera looks at the fixed region (a panel's load nodes only aim it when u is None)
     return Panel(surface=Surface.from_mesh(placement.to_liver(placement.points),
-                                           sm.surface_triangles[:, swap], sm.fixed_nodes),
+                                           placement.oriented(sm.surface_triangles),
+                                           sm.fixed_nodes),
                  label=label, load_nodes=sm.fixed_nodes)
 
 
@@ -104,36 +104,31 @@ def main() -> int:
 
     scene_file = ROOT / "data_spec" / "scenes" / SCENES[4]
     liver = Path(a.unseen)
-    sm = load_predictor(DESIGNS["paper_scene4"]).shape_model
+    preds = {name: load_predictor(model) for name, model in DESIGNS.items()}
+    sm = preds["paper_scene4"].shape_model
     file_truth = unseen_truth(scene_file, liver, None, sm, a, "unseen_file_region")
-    from liverreg.cpd import farthest_points
-    from liverreg.rigid import orient
     from surrogate.predict_liver import read_liver_surface
-
-    mean_surface = sm.template_points[sm.surface_nodes] + sm.mean.reshape(-1, 3)
-    Y = mean_surface[farthest_points(mean_surface, sm.n_points)]
 
     def distances(path: Path) -> dict:
         points, tris = read_liver_surface(path)
-        verts = points[np.unique(tris)]
-        X = verts[farthest_points(verts, sm.n_points)]
-        return {f: orient(X, Y, f).distance for f in ("population", "LPS", "RAS", "auto")}
+        return {f: sm.rigid_fit(points, tris, f).distance
+                for f in ("population", "LPS", "RAS", "auto")}
 
     unseen_dist = distances(liver)
     rows, out, panels = [], {}, []
     for frame in a.frames:
-        placement, found = place_unseen(DESIGNS["paper_scene4"], liver, frame)
+        placement, found = place_unseen(preds["paper_scene4"], liver, frame)
         own = unseen_truth(scene_file, liver, placement, sm, a, f"unseen_{frame}")
         # the same placement told the population's mean shape (coefficients 0): how much of
         # the error is the networks' answer to this liver's shape coefficients
         mean_shape = dataclasses.replace(placement, coefficients=0.0 * placement.coefficients)
         panels.append(placement_panel(placement, sm, f"--frame {frame}: {placement.frame}, "
                                       f"{placement.inverted} tetrahedra folded"))
-        res = {name: {truth: evaluate_unseen(model, data, BASE / "data", pl, found)
+        res = {name: {truth: evaluate_unseen(pred, data, BASE / "data", pl, found)
                       for truth, data, pl in (("own", own, placement),
                                               ("file", file_truth, placement),
                                               ("own_mean_shape", own, mean_shape))}
-               for name, model in DESIGNS.items()}
+               for name, pred in preds.items()}
         out[frame] = res
         first = res["paper_scene4"]["own"]
         cells = first["template_cells"]

@@ -19,7 +19,7 @@ import numpy as np
 
 from liverreg.cpd import STAGED, dense_surface, farthest_points, project, register
 from liverreg.morph import SurfaceMorph
-from liverreg.rigid import orient
+from liverreg.rigid import RigidFit, orient
 
 FORMAT = 1
 INVERTED_FLOOR = 0.01  # fraction of inverted template tetrahedra never worth a warning
@@ -62,6 +62,14 @@ class Placement:
 
     def vectors_to_liver(self, v) -> np.ndarray:
         return np.asarray(v, dtype=np.float64) @ self.rotation
+
+    def oriented(self, simplices) -> np.ndarray:
+        """Template cells (c, 4) or boundary triangles (t, 3) as seen in the liver's frame: a
+        mirror image turns them inside out, so two of their nodes swap.
+        """
+        simplices = np.asarray(simplices)
+        return simplices[:, [0, 2, 1, *range(3, simplices.shape[1])]] if self.mirrored \
+            else simplices
 
 
 @dataclass
@@ -120,10 +128,7 @@ class ShapeModel:
         # orientation, and the PCA (of displacements) and the network's node coordinates both
         # see position: the liver is mapped onto the population's mean surface first.
         if center:
-            verts = points[np.unique(triangles)]
-            mean_surface = S + self.mean.reshape(-1, 3)
-            fit = orient(verts[farthest_points(verts, self.n_points)],
-                         mean_surface[farthest_points(mean_surface, self.n_points)], frame)
+            fit = self.rigid_fit(points, triangles, frame)
             rotation, offset, how = fit.Q, fit.t, fit.describe()
         else:
             rotation, offset, how = np.eye(3), np.zeros(3), "as given"
@@ -140,6 +145,23 @@ class ShapeModel:
         return Placement(points=reg.points, coefficients=coeff, residual=reg.residual,
                          iterations=reg.iterations, offset=offset, inverted=reg.inverted,
                          rotation=rotation, frame=how)
+
+    def rigid_fit(self, points, triangles, frame: str = DEFAULT_FRAME) -> RigidFit:
+        """The map of a liver surface into the population's frame (:func:`orient` of the
+        surfaces' farthest-point samples: the liver's and the population's mean surface).
+        """
+        verts = np.asarray(points, dtype=np.float64)[np.unique(triangles)]
+        mean_surface = self.template_points[self.surface_nodes] + self.mean.reshape(-1, 3)
+        return orient(verts[farthest_points(verts, self.n_points)],
+                      mean_surface[farthest_points(mean_surface, self.n_points)], frame)
+
+    def outside_range(self, coefficients) -> np.ndarray:
+        """Indices of shape coefficients outside the population's range (by more than 5 % of
+        it, as the predictor's other inputs).
+        """
+        c, lo, hi = np.asarray(coefficients), self.coefficient_min, self.coefficient_max
+        margin = 0.05 * (hi - lo)
+        return np.flatnonzero((c < lo - margin) | (c > hi + margin))
 
     def warnings(self, placement: Placement) -> list[str]:
         """Ways the liver lies outside the population, with the numbers (empty: inside)."""
@@ -161,8 +183,7 @@ class ShapeModel:
                        "registration: the liver is far from the population's shapes and the "
                        "prediction inside it is unreliable")
         c, lo, hi = placement.coefficients, self.coefficient_min, self.coefficient_max
-        margin = 0.05 * (hi - lo)  # as the predictor's other inputs: 5 % of the range
-        bad = np.flatnonzero((c < lo - margin) | (c > hi + margin))
+        bad = self.outside_range(c)
         if bad.size:
             listed = ", ".join(f"shape{i} = {c[i]:.3g} (population {lo[i]:.3g} .. {hi[i]:.3g})"
                                for i in bad[:5])

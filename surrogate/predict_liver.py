@@ -218,12 +218,9 @@ def predict_liver(predictor, points, triangles, forces, at=None, load_nodes=None
     found += [str(w.message) for w in caught if "shape coefficients" not in str(w.message)]
     for msg in found:
         warnings.warn(msg, stacklevel=2)
-    # in the liver's frame; a mirror image turns the template's cells inside out: two of
-    # their nodes swap, so that they stay positively oriented
-    swap = [0, 2, 1, 3] if placement.mirrored else [0, 1, 2, 3]
     return LiverPrediction(points=placement.to_liver(placement.points),
-                           cells=sm.template_cells[:, swap],
-                           triangles=sm.surface_triangles[:, swap[:3]],
+                           cells=placement.oriented(sm.template_cells),
+                           triangles=placement.oriented(sm.surface_triangles),
                            fixed_nodes=sm.fixed_nodes,
                            displacement=placement.vectors_to_liver(u), load_nodes=load_nodes,
                            forces=forces, coefficients=placement.coefficients,
