@@ -60,7 +60,9 @@ def at_scale(model_dir: Path, n_nodes: int, directory: Path, seed: int = 0) -> P
                            x_mean=np.asarray(st["x_mean"], np.float32),
                            x_std=np.asarray(st["x_std"], np.float32), c_scale=st["c_scale"],
                            f_scale=st["f_scale"], hidden=tuple(meta["config"]["hidden"]),
-                           n_loads=pred.spec.n_loads)
+                           n_loads=pred.spec.n_loads,
+                           n_extra=st.get("n_extra", extra.shape[1]),
+                           context=st.get("context", 0))
     else:
         model = (_params(model_dir), pred.norm)
     export_model(directory, model, {**meta["config"], "design": pred.design}, ds)

@@ -8,13 +8,15 @@ the displacement field of a load case is a combination of ``modes`` fixed fields
 with phi_i the leading right singular vectors of the training displacement fields (orthonormal,
 so the loss on c is the loss on u in mm^2, and the basis error is known before any training:
 ``projection_mee``), x the global load features (per load: the load node's coordinates, the
-force direction and magnitude; then the material and shape inputs when the scene varies them),
-and M(x) a (modes x 3 n_loads) matrix from a small MLP: the field is linear in the force at a
-fixed direction and magnitude, and zero without load. A call costs one small network plus one
-(3N x modes) product, for any number of nodes (docs/realtime.md).
+force direction and magnitude; then the material and shape inputs when the scene varies them;
+``shape_inputs`` tells the population design only the leading shape coefficients), and M(x) a
+(modes x 3 n_loads) matrix from a small MLP: the field is linear in the force at a fixed
+direction and magnitude, and zero without load. A call costs one small network plus one (3N x
+modes) product, for any number of nodes (docs/realtime.md).
 
-It needs one liver (the basis lives on its nodes): a scene that varies the geometry keeps the
-node-wise design. Pure functions of arrays; trained by the one loop of :mod:`surrogate.engine`.
+It needs one liver (the basis lives on its nodes); a scene that varies the geometry takes the
+population basis (:mod:`surrogate.population_basis`) or the node-wise design. Pure functions of
+arrays; trained by the one loop of :mod:`surrogate.engine`.
 """
 
 from __future__ import annotations
@@ -48,20 +50,24 @@ class BasisModel:
     f_scale: float          # force scale, N
     hidden: tuple
     n_loads: int
+    n_extra: int            # leading columns of the extra inputs the network is told
+    context: int = 0        # per-load context features (the population design's), or 0
 
     def stats(self) -> dict:
         return {"x_mean": self.x_mean.tolist(), "x_std": self.x_std.tolist(),
-                "c_scale": self.c_scale, "f_scale": self.f_scale}
+                "c_scale": self.c_scale, "f_scale": self.f_scale, "n_extra": self.n_extra,
+                "context": self.context}
 
 
-def load_features(forces, load_points, extra, xp=np):
-    """(..., 7 n_loads + e) global features of load cases: per load its point, force
-    direction and magnitude; then ``extra``.
+def load_features(forces, load_points, extra, xp=np, context=None):
+    """(..., (7 + c) n_loads + e) global features of load cases: per load its point, force
+    direction and magnitude, then its ``context`` (..., n_loads, c) if given; then ``extra``.
     """
     mag = xp.sqrt(xp.sum(forces * forces, axis=-1, keepdims=True))
     direction = forces / xp.maximum(mag, 1e-12)
-    per = xp.concatenate([load_points, direction, mag], axis=-1)  # (..., L, 7)
-    flat = per.reshape(per.shape[:-2] + (per.shape[-2] * LOAD_FEATURES,))
+    per = [load_points, direction, mag] + ([] if context is None else [context])
+    per = xp.concatenate(per, axis=-1)  # (..., L, 7 + c)
+    flat = per.reshape(per.shape[:-2] + (per.shape[-2] * per.shape[-1],))
     return xp.concatenate([flat, extra], axis=-1)
 
 
@@ -101,6 +107,16 @@ def check_dataset(ds: Dataset) -> None:
                                "design 'nodewise'")
 
 
+def extra_inputs(spec, cfg: dict) -> int:
+    """How many leading columns of the extra inputs (material, then shape coefficients in
+    order of explained variance) the network is told: all of them, or the material and the
+    first ``cfg["shape_inputs"]`` shape coefficients.
+    """
+    k = cfg.get("shape_inputs", "all")
+    shapes = spec.geometry_dim if k == "all" else min(int(k), spec.geometry_dim)
+    return spec.material_dim + shapes
+
+
 def compute_modes(U: np.ndarray, k: int, seed: int = 0) -> np.ndarray:
     """The ``k`` leading right singular vectors of the fields ``U`` (S, 3n), as rows.
 
@@ -133,9 +149,10 @@ class BasisProblem(Problem):
     """
 
     def __init__(self, ds: Dataset, tr: np.ndarray, va: np.ndarray, cfg: dict, seed: int,
-                 fields_of=None):
+                 fields_of=None, context=None):
         """``fields_of(samples)``: the samples' fields in the basis' node order (default: the
-        one liver's output nodes, :func:`fields`).
+        one liver's output nodes, :func:`fields`); ``context``: (n_samples, n_loads, c)
+        per-load features beside the load's own (default: none).
         """
         if fields_of is None:
             check_dataset(ds)
@@ -143,7 +160,10 @@ class BasisProblem(Problem):
         U = fields_of(tr)
         self.modes = compute_modes(U, cfg["modes"], seed).astype(np.float32)
         self.projection_mee = projection_mee(U, self.modes.astype(np.float64))
-        X = load_features(ds.forces, ds.load_points, ds.extra)
+        self.n_extra = extra_inputs(ds.spec, cfg)
+        self.context = 0 if context is None else int(context.shape[-1])
+        X = load_features(ds.forces, ds.load_points, ds.extra[:, :self.n_extra],
+                          context=context)
         self.x_mean = X[tr].mean(axis=0).astype(np.float32)
         std = X[tr].std(axis=0)
         self.x_std = np.where(std > 1e-8 * (np.abs(X[tr]).max(axis=0) + 1e-30), std,
@@ -186,17 +206,23 @@ class BasisProblem(Problem):
         return jnp.mean(jnp.sum((pred - data["target"][idx]) ** 2, axis=-1))
 
 
-def coefficients(model: BasisModel, forces, load_points, extra, *, apply, xp=np):
+def coefficients(model: BasisModel, forces, load_points, extra, *, apply, xp=np,
+                 context=None):
     """Mode coefficients (..., k) in mm of load cases: the one definition of training,
     evaluation and the exported predictor (pure; ``apply(x, f)`` is the network, only the
-    model's statistics are read here).
+    model's statistics are read here). ``context``: the loads' context features, as the model
+    was trained with (``model.context`` per load).
     """
-    x = (load_features(forces, load_points, extra, xp) - model.x_mean) / model.x_std
+    x = load_features(forces, load_points, extra[..., :model.n_extra], xp, context)
+    x = (x - model.x_mean) / model.x_std
     return apply(x, forces / model.f_scale) * model.c_scale
 
 
-def predict_fields(ds: Dataset, model: BasisModel, samples: np.ndarray) -> np.ndarray:
-    """(len(samples), 3 n) predicted fields (mm) in the basis' node order."""
+def predict_fields(ds: Dataset, model: BasisModel, samples: np.ndarray,
+                   context=None) -> np.ndarray:
+    """(len(samples), 3 n) predicted fields (mm) in the basis' node order; ``context``: the
+    dataset's (n_samples, n_loads, c) load context when the model takes one.
+    """
     net = network(model.hidden, model.modes.shape[0], model.n_loads)
 
     def apply(x, f):
@@ -204,7 +230,7 @@ def predict_fields(ds: Dataset, model: BasisModel, samples: np.ndarray) -> np.nd
                                     jnp.asarray(f, jnp.float32)))
 
     c = coefficients(model, ds.forces[samples], ds.load_points[samples], ds.extra[samples],
-                     apply=apply)
+                     apply=apply, context=None if context is None else context[samples])
     return c @ model.modes
 
 
@@ -234,7 +260,8 @@ class Basis:
         return BasisModel(params=params, modes=problem.modes, x_mean=problem.x_mean,
                           x_std=problem.x_std, c_scale=problem.c_scale,
                           f_scale=problem.f_scale, hidden=problem.net.hidden,
-                          n_loads=problem.net.n_loads)
+                          n_loads=problem.net.n_loads, n_extra=problem.n_extra,
+                          context=problem.context)
 
     def summary(self, problem: BasisProblem) -> str:
         return (f"{problem.modes.shape[0]} modes, projection MEE of the training fields "

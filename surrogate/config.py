@@ -18,6 +18,11 @@ BASE = {
                                # (surrogate/basis.py), one liver only
     "modes": 64,               # basis: number of modes
     "hidden": [128, 128, 128],
+    "shape_inputs": "all",     # population_basis: how many leading shape coefficients the
+                               # network is told ("all" or a number; the rest it never sees)
+    "load_context": False,     # population_basis: tell the network where each load sits on
+                               # the liver (template place, offset and distance to the fixed
+                               # region; surrogate/population_basis.py)
     "dropout": 0.0,            # node-wise only
     "l2": 0.0,                 # weight decay coefficient (added to the loss as l2 * |w|^2 / 2)
     "input_noise": 0.0,        # std of Gaussian noise on normalised inputs during training
@@ -61,7 +66,10 @@ CONFIGS = {
                          "lr_patience": 8, "folds": 8,
                          # without it the net learns the training livers by their shape
                          # coefficients (docs/population_basis.md)
-                         "input_noise": 0.3},
+                         "input_noise": 0.3,
+                         # where each load sits relative to the fixed region and on the
+                         # template: the knob that matters most (docs/population_basis.md)
+                         "load_context": True},
 }
 
 
@@ -74,6 +82,8 @@ CHECKS = {
     "dropout": (lambda v: is_num(v) and 0 <= v < 1, "a number in [0, 1)"),
     "l2": (lambda v: is_num(v) and v >= 0, "a finite number >= 0"),
     "input_noise": (lambda v: is_num(v) and v >= 0, "a finite number >= 0"),
+    "load_context": (lambda v: isinstance(v, bool), "true or false"),
+    "shape_inputs": (lambda v: v == "all" or is_int(v) and v >= 0, "'all' or an integer >= 0"),
     "batch_size": (lambda v: is_int(v) and v >= 1, "an integer >= 1"),
     "learning_rate": (lambda v: is_num(v) and v > 0, "a finite number > 0"),
     "lr_rule": (lambda v: v in ("plateau", "decay"), "'plateau' or 'decay'"),
@@ -107,6 +117,11 @@ def get_config(name: str = "small", **overrides) -> dict:
     if not problems and cfg["design"] != "nodewise" and cfg["dropout"] > 0:
         problems.append(f"dropout: the {cfg['design']} design has no dropout (expected 0, got "
                         f"{cfg['dropout']!r}; input_noise and l2 regularise it)")
+    if not problems and cfg["design"] != "population_basis":
+        for key, default in (("shape_inputs", "all"), ("load_context", False)):
+            if cfg[key] != default:
+                problems.append(f"{key}: only the population_basis design takes it (expected "
+                                f"{default!r} for {cfg['design']}, got {cfg[key]!r})")
     if problems:
         raise ValueError("trainer config: " + "; ".join(problems))
     cfg["name"] = name

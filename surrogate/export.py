@@ -308,7 +308,8 @@ class Predictor:
                 jnp.asarray(points[load_nodes], dtype=jnp.float32),
                 jnp.asarray(extra, dtype=jnp.float32))
         if self.design in BASIS_DESIGNS:
-            out = self._batched_basis(self.params, static, *args)
+            out = self._batched_basis(self.params, static, *args,
+                                      self._load_context(points, load_nodes, geometry))
         else:
             out = self._batched(self.params, self.norm, static, *args)
         out = np.asarray(out)
@@ -323,6 +324,7 @@ class Predictor:
         import jax.numpy as jnp
 
         from surrogate.basis import LOAD_FEATURES, BasisModel, coefficients, network
+        from surrogate.population_basis import CONTEXT
 
         where = d / "basis.npz"
         try:
@@ -338,18 +340,28 @@ class Predictor:
             raise ValueError(f"{where}: modes must be a finite (k, {3 * n_out}) array for the "
                              f"{n_out} output nodes, got shape {modes.shape}")
         L, e = self.spec.n_loads, self.spec.material_dim + self.spec.geometry_dim
-        dim = LOAD_FEATURES * L + e
-        k = modes.shape[0]
-        params = _read_params(d / "params.npz", dim, hidden, out=3 * k * L,
-                              version=meta["version"], last="coefficients")
         st = meta.get("stats")
         try:
             x_mean = np.asarray(st["x_mean"], dtype=np.float32)
             x_std = np.asarray(st["x_std"], dtype=np.float32)
             c_scale, f_scale = float(st["c_scale"]), float(st["f_scale"])
-        except (KeyError, TypeError, ValueError):
+            n_extra = st.get("n_extra", e)  # models written before shape_inputs: all
+            context = st.get("context", 0)  # and before load_context: none
+        except (KeyError, TypeError, ValueError, AttributeError):
             raise ValueError(f"{d / 'model.json'}: stats: expected x_mean, x_std, c_scale, "
                              "f_scale") from None
+        if not (isinstance(n_extra, int) and self.spec.material_dim <= n_extra <= e):
+            raise ValueError(f"{d / 'model.json'}: stats: n_extra: expected an integer from "
+                             f"{self.spec.material_dim} to {e}, got {n_extra!r}")
+        if context not in (0, CONTEXT) or (context and self.design != "population_basis"):
+            raise ValueError(f"{d / 'model.json'}: stats: context: expected 0"
+                             + (f" or {CONTEXT}" if self.design == "population_basis" else "")
+                             + f", got {context!r}")
+        self._context = context
+        dim = (LOAD_FEATURES + context) * L + n_extra
+        k = modes.shape[0]
+        params = _read_params(d / "params.npz", dim, hidden, out=3 * k * L,
+                              version=meta["version"], last="coefficients")
         if x_mean.shape != (dim,) or x_std.shape != (dim,) or not (
                 np.all(np.isfinite(x_mean)) and np.all(x_std > 0) and c_scale > 0
                 and f_scale > 0 and np.isfinite(c_scale) and np.isfinite(f_scale)):
@@ -362,17 +374,40 @@ class Predictor:
         self.params = jax.tree_util.tree_map(lambda w: jnp.asarray(w, dtype=dtype), params)
         self.norm = None
         stats = BasisModel(params=None, modes=None, x_mean=x_mean, x_std=x_std,
-                           c_scale=c_scale, f_scale=f_scale, hidden=hidden, n_loads=L)
+                           c_scale=c_scale, f_scale=f_scale, hidden=hidden, n_loads=L,
+                           n_extra=n_extra, context=context)
         net = network(hidden, k, L)
 
-        def one_case(params, modes, forces, load_points, extra):
+        def one_case(params, modes, forces, load_points, extra, ctx):
             def apply(x, f):
                 return net.apply({"params": params}, x.astype(dtype), f.astype(dtype))
 
-            c = coefficients(stats, forces, load_points, extra, xp=jnp, apply=apply)
+            c = coefficients(stats, forces, load_points, extra, xp=jnp, apply=apply,
+                             context=ctx if context else None)
             return (c.astype(dtype) @ modes).astype(jnp.float32).reshape(-1, 3)
 
-        self._batched_basis = jax.jit(jax.vmap(one_case, in_axes=(None, None, 0, 0, 0)))
+        self._batched_basis = jax.jit(jax.vmap(one_case, in_axes=(None, None, 0, 0, 0, 0)))
+
+    def _load_context(self, points, load_nodes, geometry):
+        """(n_cases, n_loads, c) the loads' context on the liver predicted on (the population
+        basis's, c = 0 for a model without it): a load node of the registered template is the
+        template's node of the same id.
+        """
+        import jax.numpy as jnp
+
+        if not self._context:
+            return jnp.zeros(load_nodes.shape + (0,), dtype=jnp.float32)
+        from surrogate.population_basis import load_context
+
+        # once per (liver, load nodes): a manipulator drags one node with changing forces
+        key = (None if geometry is None else self._geo_key, load_nodes.dtype.str,
+               load_nodes.shape, load_nodes.tobytes())
+        if getattr(self, "_ctx_key", None) != key:
+            fixed = self.fixed if geometry is None else np.asarray(geometry[1])
+            self._ctx_key = key
+            self._ctx = jnp.asarray(load_context(points[load_nodes], self.points[load_nodes],
+                                                 points[fixed]), dtype=jnp.float32)
+        return self._ctx
 
     def _basis_rows(self, nodes: np.ndarray):
         import jax.numpy as jnp

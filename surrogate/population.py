@@ -54,6 +54,13 @@ def population_shape_model(ds):
                       loadable_nodes=loadable, population_inverted=inverted)
 
 
+def template_points(ds) -> np.ndarray:
+    """(n_template, 3) the template's own nodes (the population's liver 0), mm."""
+    with np.load(population_file(ds), allow_pickle=False) as z:
+        first = str(z["geometry_ids"][0])
+    return read_geometry(geometry_path(ds.directory, first)).points
+
+
 def registered_templates(ds) -> dict[str, np.ndarray]:
     """The template's nodes registered onto each liver of the population, by geometry id
     ((n_template, 3) each: (its surface as the population's CPD put it, the interior by harmonic

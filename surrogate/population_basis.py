@@ -9,6 +9,12 @@ magnitude), the shape coefficients (and the material where the scene varies it) 
 coefficients. A call costs one small network and one (3 n_template x modes) product, for any
 liver: the registered template is the new liver's mesh (``predict-liver``).
 
+Each load is also described by where it sits on the liver, in terms every liver shares
+(:func:`load_context`, ``load_context = true``): its place on the template (the same anatomical
+point on every liver, whatever the liver's shape), its offset from the fixed region's centroid
+and its distance to the fixed region (what the response depends on most). Training reads them
+through each liver's registered template; a prediction, from the load's template node.
+
 Metrics are taken on each liver's own nodes (the predicted template field interpolated back),
 so they compare with the node-wise design's on the same held-out livers.
 """
@@ -27,6 +33,20 @@ from surrogate.basis import (
 )
 from surrogate.data import Dataset
 
+CONTEXT = 7  # per load: place on the template (3), offset from the fixed centroid (3), distance
+
+
+def load_context(load_points, anatomical, fixed_points) -> np.ndarray:
+    """(..., n_loads, 7) context of loads on one liver: ``anatomical`` (..., n_loads, 3), the
+    template's coordinates of the points under them; their offset from the centroid of
+    ``fixed_points`` (n_fixed, 3) and their distance to the nearest of those points, mm.
+    """
+    P = np.asarray(load_points, dtype=np.float64)
+    F = np.asarray(fixed_points, dtype=np.float64)
+    d2 = ((P[..., None, :] - F) ** 2).sum(axis=-1).min(axis=-1)
+    return np.concatenate([np.asarray(anatomical, dtype=np.float64), P - F.mean(axis=0),
+                           np.sqrt(d2)[..., None]], axis=-1)
+
 
 class TemplateFields:
     """A population dataset's fields in the template's node order, and back to each liver's
@@ -34,7 +54,7 @@ class TemplateFields:
     """
 
     def __init__(self, ds: Dataset):
-        from surrogate.population import population_file, registered_templates
+        from surrogate.population import population_file, registered_templates, template_points
 
         if not ds.spec.geometry_dim:
             raise BasisDesignError("design 'population_basis' needs a scene that varies the "
@@ -54,6 +74,15 @@ class TemplateFields:
             self.to_template.append(interpolation_matrix(own, reg[gid]))
             self.to_liver.append(interpolation_matrix(reg[gid], own))
         self.n_template = next(iter(reg.values())).shape[0]
+        # every sample's load context, each liver's loads through its registered template
+        template = template_points(ds)
+        self.context = np.zeros(ds.load_points.shape[:2] + (CONTEXT,), dtype=np.float32)
+        for g, gid in enumerate(ds.geo_ids):
+            sel = np.flatnonzero(ds.sample_geo == g)
+            P = np.asarray(ds.load_points[sel], dtype=np.float64)
+            anatomical = interpolation_matrix(reg[gid], P.reshape(-1, 3)) @ template
+            self.context[sel] = load_context(P, anatomical.reshape(P.shape),
+                                             ds.points[g][ds.fixed[g]])
 
     def fields(self, ds: Dataset, samples: np.ndarray) -> np.ndarray:
         """(len(samples), 3 n_template) fields of samples on the registered template."""
@@ -87,7 +116,8 @@ class PopulationBasis(Basis):
     def problem(self, ds, train, val, cfg, rng) -> BasisProblem:
         maps = self.maps(ds)
         return BasisProblem(ds, train, val, cfg, int(rng.integers(2**31)),
-                            fields_of=lambda s: maps.fields(ds, s))
+                            fields_of=lambda s: maps.fields(ds, s),
+                            context=maps.context if cfg["load_context"] else None)
 
     def summary(self, problem: BasisProblem) -> str:
         return (f"{problem.modes.shape[0]} modes over the population, projection MEE of the "
@@ -96,7 +126,7 @@ class PopulationBasis(Basis):
     def predict_samples(self, ds: Dataset, model: BasisModel, cfg: dict, samples: np.ndarray):
         """Predicted and true displacement on each sample's own liver nodes."""
         maps = self.maps(ds)
-        U = predict_fields(ds, model, samples)
+        U = predict_fields(ds, model, samples, maps.context if model.context else None)
         pred = [maps.to_liver[ds.sample_geo[s]] @ u.reshape(-1, 3)
                 for s, u in zip(samples, U)]
         true = [ds.targets[ds.sample_offset[s]:ds.sample_offset[s + 1]] for s in samples]

@@ -154,6 +154,11 @@ def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
               "naive": m_naive, "skill": m_nn["mee"] / m_naive["mee"],
               "n_simulations": int(np.unique(ds.sample_sim).size),
               "n_samples": int(ds.n_samples), "n_examples": int(ds.targets.shape[0]),
+              # each evaluated fold's own MEE and skill (the spread of the held-out sets)
+              "per_fold": [{"mee": float(np.linalg.norm(p - y, axis=1).mean()),
+                            "skill": float(np.linalg.norm(p - y, axis=1).mean()
+                                           / np.linalg.norm(n - y, axis=1).mean())}
+                           for p, y, n in zip(preds, trues, naive)],
               "training_seconds": train_time,
               "training_examples_per_s": examples / train_time if train_time else 0.0}
     if ds.spec.geometry_dim or len(ds.geo_ids) > 1:

@@ -156,3 +156,11 @@ def test_input_noise_regularises_the_basis_in_training_only_and_dropout_is_refus
     for design in ("basis", "population_basis"):
         with pytest.raises(ValueError, match=f"dropout: the {design} design has no dropout"):
             get_config(design, dropout=0.1)
+    for key, value in (("shape_inputs", 3), ("load_context", True)):
+        for design in ("nodewise", "basis"):
+            with pytest.raises(ValueError, match=f"{key}: only the population_basis design"):
+                get_config("small", design=design, **{key: value})
+    with pytest.raises(ValueError, match="shape_inputs: expected 'all' or an integer >= 0"):
+        get_config("population_basis", shape_inputs=-1)
+    with pytest.raises(ValueError, match="load_context: expected true or false"):
+        get_config("population_basis", load_context=1)

@@ -211,7 +211,8 @@ def test_the_population_basis_predicts_a_new_liver_on_its_template(tmp_path, syn
     from surrogate.population_basis import BasisDesignError
 
     run = tmp_path / "pb"
-    cfg = get_config("population_basis", folds=2, epochs=20, modes=16, hidden=[32])
+    cfg = get_config("population_basis", folds=2, epochs=20, modes=16, hidden=[32],
+                     load_context=True)
     result = train_and_evaluate(DATA, run, cfg, log_fn=lambda m: None)
     assert np.isfinite(result["network"]["mee"]) and result["n_simulations"] == 36
     pred = load_predictor(run / "model")
@@ -226,6 +227,58 @@ def test_the_population_basis_predicts_a_new_liver_on_its_template(tmp_path, syn
         pred([[0.0, 0.0, -0.4]], [0], geometry=(points, [0], out.coefficients))
     with pytest.raises(BasisDesignError, match="needs a scene that varies the liver"):
         train_and_evaluate(synth_dir, tmp_path / "one", cfg, log_fn=lambda m: None)
+
+
+def test_the_population_basis_exports_what_it_trained(tmp_path):
+    """The exported predictor computes what training computes from the same inputs (the
+    template's own mesh, loads at template nodes, whose place on the template is the node
+    itself), reads only the shape coefficients it was told (``shape_inputs``) and reads the
+    load context (another fixed region, another prediction)."""
+    from types import SimpleNamespace
+
+    from surrogate.basis import predict_fields
+    from surrogate.data import load_dataset
+    from surrogate.export import export_model
+    from surrogate.population_basis import load_context
+    from surrogate.train import fit_design
+
+    ds = load_dataset(DATA)
+    cfg = get_config("population_basis", epochs=5, modes=8, hidden=[16], load_context=True,
+                     shape_inputs=2)
+    model, _ = fit_design(ds, np.arange(ds.n_samples), cfg, 0, log_fn=lambda m: None)
+    assert (model.n_extra, model.context) == (ds.spec.material_dim + 2, 7)
+    pred = load_predictor(export_model(tmp_path / "m", model, cfg, ds))
+    sm = pred.shape_model
+    T, fixed = sm.template_points, sm.fixed_nodes
+    nodes = sm.loadable_nodes[[0, 5, 11]][:, None]
+    forces = np.random.default_rng(0).normal(scale=0.1, size=(3, ds.spec.n_loads, 3))
+    shape = ds.extra[0, ds.spec.material_dim:].astype(np.float64)
+    got = pred(forces, nodes, geometry=(T, fixed, shape))
+    inputs = SimpleNamespace(forces=forces, load_points=T[nodes],
+                             extra=np.broadcast_to(ds.extra[0], (3, ds.extra.shape[1])))
+    ctx = load_context(T[nodes], T[nodes], T[fixed])
+    want = predict_fields(inputs, model, np.arange(3), ctx).reshape(got.shape)
+    assert np.abs(want).max() > 0
+    np.testing.assert_allclose(got, want, atol=1e-4 * np.abs(want).max())
+    later, first = shape.copy(), shape.copy()
+    later[2:] += 100.0
+    first[0] += 100.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # outside the population's range: warned, on purpose
+        np.testing.assert_array_equal(pred(forces, nodes, geometry=(T, fixed, later)), got)
+        assert np.abs(pred(forces, nodes, geometry=(T, fixed, first)) - got).max() > 1e-4
+    other = np.setdiff1d(np.arange(40), nodes)[:10]
+    assert np.abs(pred(forces, nodes, geometry=(T, other, shape)) - got).max() > 1e-4
+
+
+def test_the_load_context_by_hand():
+    """Two fixed points (0,0,0) and (2,0,0), centroid (1,0,0); a load at (1,3,0): offset
+    (0,3,0), distance sqrt(1 + 9) to either; its place on the template passes through."""
+    from surrogate.population_basis import load_context
+
+    F = np.array([[0.0, 0, 0], [2, 0, 0]])
+    ctx = load_context([[[1.0, 3, 0]]], [[[7.0, 8, 9]]], F)
+    np.testing.assert_allclose(ctx, [[[7, 8, 9, 0, 3, 0, np.sqrt(10)]]])
 
 
 @pytest.mark.skipif(not SOFA.exists(), reason=f"{SOFA} not present")
