@@ -1,5 +1,5 @@
-"""Regularising the population basis: scene 4's real-time design with one knob changed at a
-time, on held-out livers and on the unseen liver, into docs/population_basis.md.
+"""The population basis, one knob at a time: scene 4's real-time design on held-out livers and
+on the unseen liver, into docs/population_basis.md.
 
 The population basis (``surrogate/population_basis.py``) is told each liver's shape
 coefficients; with 8 simulations per liver it can learn the training livers by their
@@ -127,7 +127,7 @@ def main() -> int:
                     f"{f1:.3f} | {f1_skill:.3f} | {fmt(u.get('network', {}).get('mee'))} | "
                     f"{fmt(u.get('skill'))} | {m['training_seconds']:.0f} s |")
         naive = u.get("naive", {}).get("mee")
-        text = (header("The population basis, regularised one knob at a time").rstrip()
+        text = (header("The population basis, one knob at a time").rstrip()
                 + "\n\n" + " ".join(__doc__.split("\n\n")[1].split()) + "\n\n"
                 + "| variant | config overrides | MEE mm, folds 2-8 (choice) | skill, folds 2-8 | "
                 "MEE mm, fold 1 (table4's held-out livers) | skill, fold 1 | "
