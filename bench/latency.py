@@ -9,6 +9,7 @@ design, the network and the node count, not on the values of the weights or the 
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 from types import SimpleNamespace
@@ -51,18 +52,9 @@ def at_scale(model_dir: Path, n_nodes: int, directory: Path, seed: int = 0) -> P
                          points=[pts], fixed=[np.arange(100)], out_nodes=[np.arange(n_nodes)],
                          triangles=[np.zeros((0, 3), dtype=np.int64)])
     if pred.design in ("basis", "population_basis"):
-        from surrogate.basis import BasisModel
-
         k = pred._modes_np.shape[0]
         modes = np.linalg.qr(rng.standard_normal((3 * n_nodes, k)))[0].T.astype(np.float32)
-        st = meta["stats"]
-        model = BasisModel(params=_params(model_dir), modes=modes,
-                           x_mean=np.asarray(st["x_mean"], np.float32),
-                           x_std=np.asarray(st["x_std"], np.float32), c_scale=st["c_scale"],
-                           f_scale=st["f_scale"], hidden=tuple(meta["config"]["hidden"]),
-                           n_loads=pred.spec.n_loads,
-                           n_extra=st.get("n_extra", extra.shape[1]),
-                           context=st.get("context", 0))
+        model = dataclasses.replace(pred._basis_stats, params=_params(model_dir), modes=modes)
     else:
         model = (_params(model_dir), pred.norm)
     export_model(directory, model, {**meta["config"], "design": pred.design}, ds)

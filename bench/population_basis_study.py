@@ -62,8 +62,8 @@ def run(name: str, overrides: dict) -> dict:
 
 
 def pooled(m: dict, folds: slice) -> tuple[float, float]:
-    """(MEE, skill) over the folds in ``folds``, each fold weighted as its node count is
-    unknown here: the mean of the folds' MEE and of their skills."""
+    """(MEE, skill) over the folds in ``folds``: the mean of the folds' MEE and of their
+    skills (each fold counts once)."""
     f = m["per_fold"][folds]
     return float(np.mean([x["mee"] for x in f])), float(np.mean([x["skill"] for x in f]))
 

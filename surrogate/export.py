@@ -376,6 +376,7 @@ class Predictor:
         stats = BasisModel(params=None, modes=None, x_mean=x_mean, x_std=x_std,
                            c_scale=c_scale, f_scale=f_scale, hidden=hidden, n_loads=L,
                            n_extra=n_extra, context=context)
+        self._basis_stats = stats  # the model without its parameters and modes
         net = network(hidden, k, L)
 
         def one_case(params, modes, forces, load_points, extra, ctx):

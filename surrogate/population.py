@@ -39,7 +39,7 @@ def population_shape_model(ds):
         coeff, mean, comps = z["coefficients"][:, :k], z["mean"], z["components"][:k]
         residuals = z["registration_error"]
         inverted = z["inverted"] if "inverted" in z.files else None
-    template = read_geometry(geometry_path(ds.directory, ids[0]))
+    template = template_geometry(ds)
     scene = load_scene(Path(ds.directory) / "scene.toml")
     if ids[0] in ds.geo_ids:
         fixed = ds.fixed[ds.geo_ids.index(ids[0])]
@@ -54,11 +54,11 @@ def population_shape_model(ds):
                       loadable_nodes=loadable, population_inverted=inverted)
 
 
-def template_points(ds) -> np.ndarray:
-    """(n_template, 3) the template's own nodes (the population's liver 0), mm."""
+def template_geometry(ds):
+    """The template's own mesh: the population's liver 0 (:class:`data_spec.Geometry`)."""
     with np.load(population_file(ds), allow_pickle=False) as z:
         first = str(z["geometry_ids"][0])
-    return read_geometry(geometry_path(ds.directory, first)).points
+    return read_geometry(geometry_path(ds.directory, first))
 
 
 def registered_templates(ds) -> dict[str, np.ndarray]:
@@ -70,7 +70,7 @@ def registered_templates(ds) -> dict[str, np.ndarray]:
     with np.load(path, allow_pickle=False) as z:
         ids = [str(i) for i in z["geometry_ids"]]
         D = z["mean"] + z["coefficients"] @ z["components"]  # every component: exact
-    template = read_geometry(geometry_path(ds.directory, ids[0]))
+    template = template_geometry(ds)
     surf = template.surface_nodes
     morph = SurfaceMorph(template.points, template.cells, surf)
     S = template.points[surf]

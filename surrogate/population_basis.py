@@ -54,7 +54,7 @@ class TemplateFields:
     """
 
     def __init__(self, ds: Dataset):
-        from surrogate.population import population_file, registered_templates, template_points
+        from surrogate.population import population_file, registered_templates, template_geometry
 
         if not ds.spec.geometry_dim:
             raise BasisDesignError("design 'population_basis' needs a scene that varies the "
@@ -68,21 +68,21 @@ class TemplateFields:
         if missing:
             raise BasisDesignError(f"livers {missing[:3]} are not in the population file "
                                    f"{population_file(ds)}")
+        # every sample's load context too: each liver's loads through its registered template
+        # (one interpolation from it per liver, to its output nodes and its load points)
+        template = template_geometry(ds).points
+        self.context = np.zeros(ds.load_points.shape[:2] + (CONTEXT,), dtype=np.float32)
         self.to_template, self.to_liver = [], []
         for g, gid in enumerate(ds.geo_ids):
             own = ds.points[g][ds.out_nodes[g]]
-            self.to_template.append(interpolation_matrix(own, reg[gid]))
-            self.to_liver.append(interpolation_matrix(reg[gid], own))
-        self.n_template = next(iter(reg.values())).shape[0]
-        # every sample's load context, each liver's loads through its registered template
-        template = template_points(ds)
-        self.context = np.zeros(ds.load_points.shape[:2] + (CONTEXT,), dtype=np.float32)
-        for g, gid in enumerate(ds.geo_ids):
             sel = np.flatnonzero(ds.sample_geo == g)
             P = np.asarray(ds.load_points[sel], dtype=np.float64)
-            anatomical = interpolation_matrix(reg[gid], P.reshape(-1, 3)) @ template
-            self.context[sel] = load_context(P, anatomical.reshape(P.shape),
-                                             ds.points[g][ds.fixed[g]])
+            W = interpolation_matrix(reg[gid], np.vstack([own, P.reshape(-1, 3)]))
+            self.to_template.append(interpolation_matrix(own, reg[gid]))
+            self.to_liver.append(W[:len(own)])
+            anatomical = (W[len(own):] @ template).reshape(P.shape)
+            self.context[sel] = load_context(P, anatomical, ds.points[g][ds.fixed[g]])
+        self.n_template = next(iter(reg.values())).shape[0]
 
     def fields(self, ds: Dataset, samples: np.ndarray) -> np.ndarray:
         """(len(samples), 3 n_template) fields of samples on the registered template."""
