@@ -26,6 +26,24 @@ INVERTED_FLOOR = 0.01  # fraction of inverted template tetrahedra never worth a 
 DEFAULT_FRAME = "LPS"  # the frame of DICOM and ITK, hence of most segmented livers
 
 
+SHAPE_RULES = ("own", "range", "radius", "hull")
+
+
+def nearest_convex_combination(points: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The point of the convex hull of ``points`` (R, K) nearest to ``x`` (K,): min |P^T w - x|
+    over w >= 0, sum w = 1, solved as a non-negative least-squares problem whose extra row,
+    weighted far above the data's scale, holds the sum to 1 (to about 1e-8 relative).
+    """
+    from scipy.optimize import nnls
+
+    P = np.asarray(points, dtype=np.float64)
+    x = np.asarray(x, dtype=np.float64)
+    heavy = 1e4 * max(1.0, float(np.abs(P).max()), float(np.abs(x).max()))
+    A = np.vstack([P.T, np.full((1, P.shape[0]), heavy)])
+    w, _ = nnls(A, np.concatenate([x, [heavy]]), maxiter=50 * P.shape[0])
+    return P.T @ (w / w.sum())
+
+
 @dataclass
 class Placement:
     """A liver placed in the population: the template moved onto it and its coefficients."""
@@ -89,12 +107,15 @@ class ShapeModel:
     schedule: np.ndarray = None     # (stages, 3): beta, lambda, tolerance
     loadable_nodes: np.ndarray = None  # template nodes the scene's loads act on (empty: any)
     population_inverted: np.ndarray = None  # (R,) template tetrahedra each liver inverted
+    population_coefficients: np.ndarray = None  # (R, K) each liver's shape coefficients
 
     def __post_init__(self):
         if self.loadable_nodes is None:
             self.loadable_nodes = np.zeros(0, dtype=np.int64)
         if self.population_inverted is None:
             self.population_inverted = np.zeros(0, dtype=np.int64)
+        if self.population_coefficients is None:  # a model exported before they were kept
+            self.population_coefficients = np.zeros((0, self.components.shape[0]))
         if self.schedule is None:
             self.schedule = np.asarray(STAGED, dtype=np.float64)
         self.schedule = np.asarray(self.schedule, dtype=np.float64).reshape(-1, 3)
@@ -163,6 +184,44 @@ class ShapeModel:
         margin = 0.05 * (hi - lo)
         return np.flatnonzero((c < lo - margin) | (c > hi + margin))
 
+    def shape_told(self, coefficients, rule: str = "hull") -> tuple[np.ndarray, str]:
+        """(coefficients, rule applied): the shape a network is told for a liver with these
+        coefficients. A network answers shapes unlike its training livers' by extrapolating;
+        for a liver outside the population each rule but ``own`` tells it a shape inside
+        instead (the template is still registered onto the liver itself: only the network's
+        shape input changes). A liver inside is told its own shape by every rule.
+
+        * ``own``: the liver's coefficients;
+        * ``range``: each coefficient clipped to the population's range;
+        * ``radius``: beyond the population's largest Mahalanobis radius (coefficients over
+          the population's standard deviations), scaled toward the mean shape onto it;
+        * ``hull``: beyond that radius, the nearest convex combination of the population's
+          livers (nearest in the same whitened metric): a shape between livers it saw.
+
+        The rule applied is ``own`` when the rule changed nothing. A model exported without
+        its population's coefficients (older files) knows only the ranges: ``radius`` and
+        ``hull`` fall back to ``range``.
+        """
+        c = np.asarray(coefficients, dtype=np.float64)
+        if rule not in SHAPE_RULES:
+            raise ValueError(f"shape rule {rule!r}: expected one of {', '.join(SHAPE_RULES)}")
+        C = self.population_coefficients
+        if rule in ("radius", "hull") and C.shape[0] < 2:
+            rule = "range"
+        if rule == "range":
+            told = np.clip(c, self.coefficient_min, self.coefficient_max)
+            return (told, "range") if np.any(told != c) else (c, "own")
+        if rule == "own":
+            return c, rule
+        std = C.std(axis=0)
+        std = np.where(std > 0, std, 1.0)
+        r, r_max = np.linalg.norm(c / std), np.linalg.norm(C / std, axis=1).max()
+        if r <= r_max:
+            return c, "own"
+        if rule == "radius":
+            return c * (r_max / r), rule
+        return nearest_convex_combination(C / std, c / std) * std, rule
+
     def warnings(self, placement: Placement) -> list[str]:
         """Ways the liver lies outside the population, with the numbers (empty: inside)."""
         out = []
@@ -203,7 +262,9 @@ class ShapeModel:
             with np.load(path, allow_pickle=False) as z:
                 if int(z["format"]) != FORMAT:
                     raise ValueError(f"format {int(z['format'])}, this code reads {FORMAT}")
-                kw = {f.name: z[f.name] for f in fields(cls)}
+                # fields a newer code added (defaults None) may be absent from older files
+                kw = {f.name: z[f.name] for f in fields(cls)
+                      if f.name in z.files or f.default is not None}
         except (OSError, KeyError, ValueError) as exc:
             raise ValueError(f"{path}: not a readable shape model ({exc})") from None
         kw["n_points"] = int(kw["n_points"])

@@ -19,6 +19,8 @@ def _value(text: str):
 
 
 def main(argv=None) -> int:
+    from liverreg.shape_model import SHAPE_RULES
+
     parser = argparse.ArgumentParser(prog="python -m surrogate")
     sub = parser.add_subparsers(dest="command", required=True)
     t = sub.add_parser("train", help="k-fold CV, metrics, plots and an exported model")
@@ -52,6 +54,13 @@ def main(argv=None) -> int:
                    "(the best rigid fit onto the population's mean liver, mirror images "
                    "included; it may turn a liver unlike the population's away from its "
                    "anatomy)")
+    p.add_argument("--shape", choices=SHAPE_RULES,
+                   help="the shape the network is told for a liver outside the population: "
+                   "own (the liver's coefficients), range (clipped to the population's "
+                   "ranges), radius (scaled back to the population's largest Mahalanobis "
+                   "radius) or hull (the nearest mix of the population's livers); default: "
+                   "the design's (node-wise: radius, population basis: hull; "
+                   "docs/shape_rule.md)")
     p.add_argument("--no-picture", action="store_true", help="no PNG (no OpenGL needed)")
     args = parser.parse_args(argv)
     if args.command == "predict-liver":
@@ -59,7 +68,8 @@ def main(argv=None) -> int:
             from surrogate.viewer import main as viewer
 
             return viewer([str(args.run), "--place", str(args.liver), "--scale-to-mm",
-                           str(args.scale_to_mm), "--frame", args.frame]
+                           str(args.scale_to_mm), "--frame", args.frame,
+                           *(["--shape", args.shape] if args.shape else [])]
                           + (["--no-center"] if args.no_center else []))
         from surrogate.predict_liver import main as predict_liver
 

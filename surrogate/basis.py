@@ -249,6 +249,7 @@ class Basis:
 
     name = "basis"
     log_every = 10
+    shape_rule = "own"  # predicts on its own liver only
 
     def check(self, ds: Dataset) -> None:
         check_dataset(ds)

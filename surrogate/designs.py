@@ -2,7 +2,8 @@
 
 A design is an object with ``name``, ``check(ds)``, ``problem(ds, train, val, cfg, rng)`` (an
 :class:`surrogate.engine.Problem`), ``model(problem, params)``, ``predict_samples(ds, model,
-cfg, samples)`` and ``export_parts(model)``; adding one is adding an entry here.
+cfg, samples)``, ``export_parts(model)`` and ``shape_rule`` (the shape a model trained on a
+population is told for a liver outside it); adding one is adding an entry here.
 """
 
 from __future__ import annotations

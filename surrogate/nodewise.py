@@ -141,6 +141,10 @@ class NodeWise:
     """The design's entry in the registry (:data:`surrogate.designs.DESIGNS`)."""
 
     name = "nodewise"
+    # the shape it is told for a liver outside its population (ShapeModel.shape_told): it
+    # also sees the registered nodes, which a shape far from its coefficients contradicts
+    # (chosen on phantoms outside the training livers, docs/shape_rule.md)
+    shape_rule = "radius"
 
     def check(self, ds: Dataset) -> None:
         """Every dataset takes the node-wise design."""

@@ -51,7 +51,8 @@ def population_shape_model(ds):
                       surface_triangles=template.surface_triangles, fixed_nodes=fixed,
                       mean=mean, components=comps, coefficient_min=coeff.min(axis=0),
                       coefficient_max=coeff.max(axis=0), residuals=residuals,
-                      loadable_nodes=loadable, population_inverted=inverted)
+                      loadable_nodes=loadable, population_inverted=inverted,
+                      population_coefficients=coeff)
 
 
 def template_geometry(ds):

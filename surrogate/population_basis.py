@@ -101,6 +101,9 @@ class PopulationBasis(Basis):
 
     name = "population_basis"
     log_every = 10
+    # the shape it is told for a liver outside its population (ShapeModel.shape_told): the
+    # shape coefficients are all it knows of the liver's shape (docs/shape_rule.md)
+    shape_rule = "hull"
 
     def maps(self, ds: Dataset) -> TemplateFields:
         """The dataset's TemplateFields, built once and kept with the dataset (so they live

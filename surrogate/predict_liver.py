@@ -113,7 +113,9 @@ class LiverPrediction:
     displacement: np.ndarray    # (n, 3) mm
     load_nodes: np.ndarray      # (n_loads,)
     forces: np.ndarray          # (n_loads, 3) N
-    coefficients: np.ndarray
+    coefficients: np.ndarray    # the liver's shape coefficients
+    shape_told: np.ndarray      # the shape the network was told (ShapeModel.shape_told)
+    shape_rule: str
     residual: float
     offset: np.ndarray          # (3,) and rotation (3, 3): the liver's map into the
     rotation: np.ndarray        # population's frame, x_population = rotation @ x + offset
@@ -170,6 +172,15 @@ def place_liver(predictor, points, triangles, center: bool = True,
     return placement, sm.warnings(placement)
 
 
+def shape_rule(predictor) -> str:
+    """The rule that tells the predictor's design a shape for a liver outside its population
+    (the design's ``shape_rule``, :data:`surrogate.designs.DESIGNS`).
+    """
+    from surrogate.designs import DESIGNS
+
+    return getattr(DESIGNS.get(predictor.design), "shape_rule", "own")
+
+
 def _no_population(predictor) -> str:
     if not predictor.spec.geometry_dim:
         return ("this model was trained on one liver (its scene does not vary the geometry): "
@@ -187,12 +198,14 @@ def nearest_surface_nodes(points, triangles, at) -> np.ndarray:
 
 
 def predict_liver(predictor, points, triangles, forces, at=None, load_nodes=None,
-                  placement=None, center: bool = True,
-                  frame: str = DEFAULT_FRAME) -> LiverPrediction:
+                  placement=None, center: bool = True, frame: str = DEFAULT_FRAME,
+                  shape: str | None = None) -> LiverPrediction:
     """Place the liver (points, triangles: its surface; :func:`place_liver`) and predict the
     displacement under ``forces`` (n_loads, 3) N acting at the template nodes nearest to
     ``at`` (n_loads, 3) mm, or at template node ids ``load_nodes``. Points, forces and the
-    result are in the liver's frame (the file's).
+    result are in the liver's frame (the file's). ``shape``: the shape the network is told for
+    a liver outside the population (:meth:`liverreg.shape_model.ShapeModel.shape_told`:
+    ``own``, ``range``, ``radius`` or ``hull``; None: the design's, :func:`shape_rule`).
     """
     sm = predictor.shape_model
     if sm is None:
@@ -213,8 +226,9 @@ def predict_liver(predictor, points, triangles, forces, at=None, load_nodes=None
         warnings.simplefilter("always")
         if sm.loadable_nodes.size:  # the exported model's own check, on the template's nodes
             check_load_nodes(load_nodes, sm.loadable_nodes)
+        told, rule = sm.shape_told(placement.coefficients, shape or shape_rule(predictor))
         u = predictor(placement.vectors_to_population(forces), load_nodes,
-                      geometry=(placement.points, sm.fixed_nodes, placement.coefficients))
+                      geometry=(placement.points, sm.fixed_nodes, told))
     found += [str(w.message) for w in caught if "shape coefficients" not in str(w.message)]
     for msg in found:
         warnings.warn(msg, stacklevel=2)
@@ -224,16 +238,19 @@ def predict_liver(predictor, points, triangles, forces, at=None, load_nodes=None
                            fixed_nodes=sm.fixed_nodes,
                            displacement=placement.vectors_to_liver(u), load_nodes=load_nodes,
                            forces=forces, coefficients=placement.coefficients,
-                           residual=placement.residual, offset=placement.offset,
+                           shape_told=told, shape_rule=rule, residual=placement.residual,
+                           offset=placement.offset,
                            rotation=placement.rotation, frame=placement.frame,
                            inverted=placement.inverted, warnings=found)
 
 
-def predict_at_points(predictor, placement, points, forces, at) -> np.ndarray:
+def predict_at_points(predictor, placement, points, forces, at,
+                      shape: str | None = None) -> np.ndarray:
     """Displacements (n_cases, len(points), 3) mm at ``points`` of the placed liver (e.g. the
     nodes of its own mesh; the liver's frame) for ``forces`` (n_cases, n_loads, 3) N acting at
     the template surface nodes nearest to ``at`` (n_cases, n_loads, 3) mm, all in the liver's
     frame: the registered template's prediction, interpolated (:func:`interpolation_matrix`).
+    ``shape`` as :func:`predict_liver`'s.
     """
     sm = predictor.shape_model
     if sm is None:
@@ -243,8 +260,9 @@ def predict_at_points(predictor, placement, points, forces, at) -> np.ndarray:
     n_cases, L = forces.shape[:2]
     load_nodes = nearest_surface_nodes(placement.points, sm.surface_triangles,
                                        at.reshape(-1, 3)).reshape(n_cases, L)
+    told, _ = sm.shape_told(placement.coefficients, shape or shape_rule(predictor))
     u = predictor(placement.vectors_to_population(forces), load_nodes,
-                  geometry=(placement.points, sm.fixed_nodes, placement.coefficients))
+                  geometry=(placement.points, sm.fixed_nodes, told))
     W = interpolation_matrix(placement.points, placement.to_population(points))
     return np.stack([placement.vectors_to_liver(W @ uc)
                      for uc in np.asarray(u, dtype=np.float64)])
@@ -283,7 +301,7 @@ def main(args) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # reported below, once
         pred = predict_liver(predictor, points, triangles, spec[:, 3:], at=spec[:, :3],
-                             center=not args.no_center, frame=args.frame)
+                             center=not args.no_center, frame=args.frame, shape=args.shape)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     vtu = pred.write_vtu(out / "liver_deformed.vtu")
@@ -298,6 +316,7 @@ def main(args) -> int:
                    predictor.shape_model.residuals)), "max": float(
                    predictor.shape_model.residuals.max())},
                "shape_coefficients": pred.coefficients.tolist(),
+               "shape_rule": pred.shape_rule, "shape_told": pred.shape_told.tolist(),
                "load_nodes": pred.load_nodes.tolist(), "forces_N": pred.forces.tolist(),
                "max_displacement_mm": float(np.linalg.norm(pred.displacement, axis=1).max()),
                "warnings": pred.warnings}

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from liverreg.shape_model import SHAPE_RULES
 from liverviz.pictures import (
     FORCE,
     LiverView,
@@ -480,7 +481,7 @@ def build(args):
     pred = load_predictor(mdir)
     geometry = None
     if getattr(args, "place", None) is not None:  # a liver never seen, placed as predict-liver
-        from surrogate.predict_liver import place_liver, read_liver_surface
+        from surrogate.predict_liver import place_liver, read_liver_surface, shape_rule
 
         if pred.shape_model is None:
             raise ViewerError(f"{mdir}: --place needs a model trained on a population of "
@@ -491,8 +492,9 @@ def build(args):
         for msg in found:
             print(f"{log_prefix}: warning: {msg}", file=sys.stderr)
         sm = pred.shape_model
-        geometry = (placement.points, sm.fixed_nodes, sm.surface_triangles,
-                    placement.coefficients)
+        told, _ = sm.shape_told(placement.coefficients,
+                                getattr(args, "shape", None) or shape_rule(pred))
+        geometry = (placement.points, sm.fixed_nodes, sm.surface_triangles, told)
     elif pred.points is None or pred.triangles is None:
         if args.data is None:
             raise ViewerError(f"{mdir}: the model has no liver of its own (trained on several "
@@ -527,6 +529,9 @@ def main(argv=None) -> int:
     ap.add_argument("--frame", choices=("LPS", "RAS", "population", "auto"), default="LPS",
                     help="with --place: the file's frame (as predict-liver; the liver is "
                     "shown in the population's frame)")
+    ap.add_argument("--shape", choices=SHAPE_RULES,
+                    help="with --place: the shape the network is told for a liver outside the "
+                    "population (as predict-liver; default: the design's)")
     ap.add_argument("--screenshot", type=Path,
                     help="open the window, draw one pull, save this PNG and close")
     ap.add_argument("--size", type=int, nargs=2, default=(900, 700), metavar=("W", "H"))

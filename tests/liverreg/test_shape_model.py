@@ -8,7 +8,7 @@ import pytest
 from data_spec.geometry import Geometry, box_mesh
 from liverreg.cpd import build_population, project
 from liverreg.morph import interpolation_matrix
-from liverreg.shape_model import ShapeModel
+from liverreg.shape_model import ShapeModel, nearest_convex_combination
 
 N_POINTS = 150
 SCHEDULE = ((2.0, 1.5, 1e-3), (0.6, 0.45, 1e-4))  # two stages: fast enough for a test
@@ -39,7 +39,7 @@ def population():
                     mean=pop.mean, components=pop.components[:k],
                     coefficient_min=coeff.min(0), coefficient_max=coeff.max(0),
                     residuals=pop.registration_error, n_points=N_POINTS, schedule=SCHEDULE,
-                    population_inverted=pop.inverted)
+                    population_inverted=pop.inverted, population_coefficients=coeff)
     return livers, pop, sm
 
 
@@ -102,12 +102,72 @@ def test_save_and_load_give_the_same_model(population, tmp_path):
     sm.save(tmp_path / "sm.npz")
     back = ShapeModel.load(tmp_path / "sm.npz")
     for name in ("template_points", "template_cells", "mean", "components", "schedule",
-                 "coefficient_min", "loadable_nodes"):
+                 "coefficient_min", "loadable_nodes", "population_coefficients"):
         np.testing.assert_array_equal(getattr(back, name), getattr(sm, name))
     assert back.n_points == sm.n_points
+    # a file written before the population's coefficients were kept still loads; the rules
+    # that need them fall back to the ranges, and say so
+    with np.load(tmp_path / "sm.npz") as z:
+        old = {k: z[k] for k in z.files if k != "population_coefficients"}
+    np.savez(tmp_path / "old.npz", **old)
+    older = ShapeModel.load(tmp_path / "old.npz")
+    assert older.population_coefficients.shape == (0, sm.n_components)
+    far = 3 * sm.coefficient_max
+    told, rule = older.shape_told(far, "hull")
+    assert rule == "range"
+    np.testing.assert_allclose(told, sm.coefficient_max)
     (tmp_path / "bad.npz").write_bytes(b"not an npz")
     with pytest.raises(ValueError, match="bad.npz: not a readable shape model"):
         ShapeModel.load(tmp_path / "bad.npz")
+
+
+def test_the_nearest_convex_combination_by_hand():
+    """Corners of the unit square: a point beside it goes to the nearest edge, a point beyond
+    a corner to the corner, a point inside stays; a point above a triangle in 3-D drops onto
+    it."""
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    for x, want in (([2.0, 0.5], [1.0, 0.5]), ([2.0, 2.0], [1.0, 1.0]),
+                    ([0.3, 0.6], [0.3, 0.6]), ([-1.0, 0.25], [0.0, 0.25])):
+        np.testing.assert_allclose(nearest_convex_combination(square, np.array(x)), want,
+                                   atol=1e-7)
+    tri = np.array([[0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [0.0, 4.0, 0.0]])
+    np.testing.assert_allclose(nearest_convex_combination(tri, np.array([1.0, 1.0, 5.0])),
+                               [1.0, 1.0, 0.0], atol=1e-7)
+
+
+def test_the_shape_a_network_is_told(population):
+    """A population liver, and one between them, is told its own shape by every rule; a liver
+    beyond the population is told one inside it: clipped to the ranges, scaled back to the
+    population's largest Mahalanobis radius along the same direction, or the nearest convex
+    combination of the population's livers (no farther than any of them, and inside the
+    largest radius)."""
+    _, _, sm = population
+    C = sm.population_coefficients
+    std = C.std(axis=0)
+    for c in [*C, 0.5 * (C[1] + C[3])]:
+        for rule in ("own", "range", "radius", "hull"):
+            told, used = sm.shape_told(c, rule)
+            assert used == "own"
+            np.testing.assert_array_equal(told, c)
+    far = 2.5 * C[1] - 1.5 * C[2]
+    radius, used = sm.shape_told(far, "radius")
+    assert used == "radius"
+    r = np.linalg.norm(radius / std)
+    assert r == pytest.approx(np.linalg.norm(C / std, axis=1).max(), rel=1e-9)
+    np.testing.assert_allclose(radius / np.linalg.norm(radius), far / np.linalg.norm(far))
+    clipped, _ = sm.shape_told(far, "range")
+    assert np.all(clipped >= sm.coefficient_min) and np.all(clipped <= sm.coefficient_max)
+    hull, _ = sm.shape_told(far, "hull")
+    d_hull = np.linalg.norm((hull - far) / std)
+    assert d_hull <= np.linalg.norm((C - far) / std, axis=1).min() + 1e-9
+    # the hull lies inside the ball of the largest radius, whose nearest point is the scaled
+    # one: the hull is never nearer
+    assert d_hull >= np.linalg.norm((radius - far) / std) - 1e-9
+    assert np.linalg.norm(hull / std) <= r + 1e-9
+    np.testing.assert_array_equal(sm.shape_told(far, "own")[0], far)
+    assert sm.shape_told(far, "hull")[1] == "hull" and sm.shape_told(far, "range")[1] == "range"
+    with pytest.raises(ValueError, match="shape rule 'nearest': expected one of own, range"):
+        sm.shape_told(far, "nearest")
 
 
 def test_interpolation_is_exact_for_linear_fields_and_at_the_nodes():

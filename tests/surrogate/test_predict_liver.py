@@ -44,27 +44,45 @@ def test_the_export_carries_the_population(run):
     assert sm is not None and sm.n_components == pred.spec.geometry_dim == 3
     assert sm.template_cells.shape[1] == 4 and sm.loadable_nodes.size > 0
     assert np.all(np.isin(sm.fixed_nodes, sm.surface_nodes))
+    with np.load(Path(DATA) / "geometry" / "population.npz") as z:
+        np.testing.assert_array_equal(sm.population_coefficients, z["coefficients"][:, :3])
 
 
-def test_a_population_liver_is_placed_where_the_population_put_it(run):
+def test_a_liver_beyond_the_population_is_told_a_shape_inside_it(run):
+    """A liver within the population's largest Mahalanobis radius is told its own shape; one
+    beyond it is told the design's rule's shape (node-wise: scaled back onto that radius) or
+    the rule asked for: the prediction is the predictor's on the registered template told that
+    shape, and says which."""
+    import dataclasses
+
+    from surrogate.predict_liver import place_liver, shape_rule
+
     pred = load_predictor(run / "model")
-    path, coeff = _population_liver(3)
-    points, tris = read_liver_surface(path)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")  # inside the population: no warning
-        out = predict_liver(pred, points, tris, [[0.0, 0.0, -0.4]],
-                            load_nodes=pred.shape_model.loadable_nodes[:1], center=False)
-    # liver 3 in the population's frame: the solver's registration repeated, the same numbers
-    np.testing.assert_allclose(out.coefficients, coeff[:3], rtol=1e-6,
-                               atol=1e-6 * np.abs(coeff).max())
-    np.testing.assert_array_equal(out.offset, 0.0)
-    assert out.displacement.shape == pred.shape_model.template_points.shape
-    assert np.all(np.isfinite(out.displacement)) and np.abs(out.displacement).max() > 0
-    # the same numbers as the predictor called on the registered template directly
+    assert pred.design == "nodewise" and shape_rule(pred) == "radius"
     sm = pred.shape_model
-    direct = pred([[0.0, 0.0, -0.4]], sm.loadable_nodes[:1],
-                  geometry=(out.points + out.offset, sm.fixed_nodes, out.coefficients))
-    np.testing.assert_allclose(out.displacement, direct, rtol=1e-5, atol=1e-6)
+    path, _ = _population_liver(3)
+    points, tris = read_liver_surface(path)
+    inside, _ = place_liver(pred, points, tris, center=False)
+    C = sm.population_coefficients
+    radius = [np.linalg.norm(c / C.std(axis=0)) for c in (inside.coefficients, *C)]
+    beyond = 2.0 * max(radius[1:]) / radius[0]  # twice the population's largest radius
+    far = dataclasses.replace(inside, coefficients=beyond * inside.coefficients)
+    node, f = sm.loadable_nodes[:1], [[0.0, 0.0, -0.4]]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        got = [predict_liver(pred, points, tris, f, load_nodes=node, placement=pl, shape=rule)
+               for pl, rule in ((inside, None), (far, None), (far, "hull"))]
+    assert got[0].shape_rule == "own"
+    np.testing.assert_array_equal(got[0].shape_told, inside.coefficients)
+    for out, rule in zip(got[1:], ("radius", "hull")):
+        assert out.shape_rule == rule
+        want, _ = sm.shape_told(far.coefficients, rule)
+        np.testing.assert_allclose(out.shape_told, want)
+        np.testing.assert_array_equal(out.coefficients, far.coefficients)
+        direct = pred(f, node, geometry=(far.points, sm.fixed_nodes, want))
+        np.testing.assert_allclose(out.displacement, direct, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(np.linalg.norm(got[1].shape_told / C.std(axis=0)),
+                               max(radius[1:]), rtol=1e-9)
 
 
 def test_a_load_on_an_interior_node_is_flagged(run):
@@ -85,6 +103,11 @@ def test_the_command_on_a_real_liver_writes_paraview_and_the_numbers(run, tmp_pa
     summary = json.loads((out / "prediction.json").read_text())
     assert summary["registration_residual_mm"] > 0 and len(summary["shape_coefficients"]) == 3
     assert 0 < summary["max_displacement_mm"] < 100
+    assert summary["shape_rule"] in ("own", "radius") and len(summary["shape_told"]) == 3
+    assert main(["predict-liver", str(run), str(SOFA), "--force", "120", "100", "190", "0",
+                 "0", "-0.4", "--out", str(out), "--no-picture", "--shape", "own"]) == 0
+    own = json.loads((out / "prediction.json").read_text())
+    assert own["shape_rule"] == "own" and own["shape_told"] == own["shape_coefficients"]
     import pyvista as pv
 
     grid = pv.read(out / "liver_deformed.vtu")
