@@ -161,8 +161,9 @@ bench-realtime: setup
 # The paper's Table 4, scene by scene (long, resumable; about an hour per scene on 2 cores):
 # generate, train, time -> docs/table4.md. T4="--scenes 1 2 --budget-minutes 90" passes options.
 T4 ?=
-table4: setup
-	$(TPY) bench/table4.py --np $(NP) --solver-python $(SPY) $(T4)
+table4: setup  # latency on both cores: the trainer keeps its BLAS threads (the ranks get one)
+	env -u OMP_NUM_THREADS -u OPENBLAS_NUM_THREADS \
+	    $(TPY) bench/table4.py --np $(NP) --solver-python $(SPY) $(T4)
 
 population: setup-solver
 	$(SPY) -m fem_sim population $(SCENE) --out $(OUT)

@@ -19,9 +19,12 @@ mapped (farthest-point samples both ways). The free fit (auto) is closest by con
 second table asks whether that distance could tell a file's frame, on livers of the population
 read in each frame.
 
-The "mean shape" columns give the same placement the population's mean shape coefficients
-(zeros) instead of the liver's own: how much of the error is the networks' answer to shape
-coefficients unlike any training liver's.
+The networks are told the shape predict-liver tells them by default: the liver's own
+coefficients within the population's largest Mahalanobis radius, beyond it the design's rule
+(node-wise: scaled back onto that radius, ``radius``; population basis: the nearest mix of
+the population's livers, ``hull``; docs/shape_rule.md); the "shape told" column says which.
+The "mean shape" columns tell them the population's mean shape (coefficients zero) instead:
+how much of the error is the networks' answer to the shape they are told.
 
     .venv-train/bin/python bench/unseen_frames.py    # after make table4 T4="--scenes 4"
 
@@ -139,6 +142,7 @@ def main() -> int:
             f"{first['residual_mm']:.2f} | "
             f"{first['inverted']} ({100 * first['inverted'] / cells:.1f} %) | "
             f"{first['coefficients_out']} of {first['coefficients']} | "
+            + " / ".join(res[n]["own"]["shape_rule"] for n in DESIGNS) + " | "
             f"{first['fixed_nodes']} | {mee['paper_scene4', 'own']:.2f} | "
             f"{mee['population_basis', 'own']:.2f} | {first['naive']['mee']:.2f} | "
             f"{mee['paper_scene4', 'own_mean_shape']:.2f} | "
@@ -157,7 +161,7 @@ def main() -> int:
                         f"than naive), {mean:.2f} mm told the mean shape")
         findings.append(f"- `{frame}`: naive {nv:.2f} mm; " + "; ".join(line) + ".")
     text = (header("The unseen liver, placed each way").rstrip() + "\n\n"
-            + "\n\n".join(__doc__.split("\n\n")[1:4]) + "\n\n"
+            + "\n\n".join(__doc__.split("\n\n")[1:5]) + "\n\n"
             + f"Liver `{liver.name}`; the models of `make table4` scene 4 ("
             + ", ".join(design_label(n) for n in DESIGNS) + "), their population of "
             f"{sm.residuals.size} livers registered with residual "
@@ -167,10 +171,11 @@ def main() -> int:
             "population's mean displacement.\n\n"
             "| --frame | placed as | distance to the mean liver mm | residual mm | folded "
             "tetrahedra | coefficients out of "
-            "range | truth's fixed nodes | MEE node-wise | MEE population basis | naive "
+            "range | shape told (node-wise / population basis) | truth's fixed nodes "
+            "| MEE node-wise | MEE population basis | naive "
             "| MEE node-wise, mean shape | MEE population basis, mean shape "
             "| MEE node-wise, file's region | MEE population basis, file's region | naive, "
-            "file's region |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+            "file's region |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
             + "\n".join(rows) + "\n\nAgainst the truth fixed where the placement puts the "
             "template's fixed region:\n\n" + "\n".join(findings) + "\n")
     phantoms = [geometry_path(BASE / "data", g) for g in sorted(
