@@ -69,8 +69,13 @@ def model_nodes(pred) -> tuple[np.ndarray, np.ndarray]:
     return pred.points, pred.fixed
 
 
-def latency(predict, nodes=None, calls: int = 200) -> tuple[float, float]:
-    """(median, 99th percentile) seconds per call of one load case, after warm-up."""
+def latency(predict, nodes=None, calls: int = 200,
+            new_load_nodes: bool = False) -> tuple[float, float]:
+    """(median, 99th percentile) seconds per call of one load case, after warm-up; the same
+    load node(s) every call (a manipulator dragging one node), or with ``new_load_nodes`` other
+    ones every call (what a call pays for a load where the last one was not: the population
+    basis's load context, a node-wise model's load features).
+    """
     f, extra = typical_inputs(predict)
     spec = predict.spec
     material = extra[0, :spec.material_dim] if spec.material_dim else None
@@ -85,7 +90,8 @@ def latency(predict, nodes=None, calls: int = 200) -> tuple[float, float]:
     for i in range(calls):
         g = f[0].copy()
         g[:, 2] *= 1.0 - 1e-4 * (i % 100)
+        at = load_nodes + (i + 1) * spec.n_loads if new_load_nodes else load_nodes
         t = time.perf_counter()
-        predict(g, load_nodes, **kw)
+        predict(g, at, **kw)
         times.append(time.perf_counter() - t)
     return float(np.median(times)), float(np.percentile(times, 99))
