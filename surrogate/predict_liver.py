@@ -323,6 +323,10 @@ def main(args) -> int:
     (out / "prediction.json").write_text(json.dumps(summary, indent=1))
     for msg in pred.warnings:
         print(f"warning: {msg}", file=sys.stderr)
+    if pred.shape_rule != "own":
+        print(f"the liver lies beyond the population: the network is told a shape inside it "
+              f"(--shape {pred.shape_rule}, docs/shape_rule.md; --shape own: its own)",
+              file=sys.stderr)
     if not args.no_picture:
         png = pred.draw(out / "liver_deformed.png", title=Path(args.liver).name)
         print(f"picture: {png}", file=sys.stderr)

@@ -492,8 +492,11 @@ def build(args):
         for msg in found:
             print(f"{log_prefix}: warning: {msg}", file=sys.stderr)
         sm = pred.shape_model
-        told, _ = sm.shape_told(placement.coefficients,
-                                getattr(args, "shape", None) or shape_rule(pred))
+        told, rule = sm.shape_told(placement.coefficients,
+                                   getattr(args, "shape", None) or shape_rule(pred))
+        if rule != "own":
+            print(f"{log_prefix}: the liver lies beyond the population: the network is told "
+                  f"a shape inside it (--shape {rule}, docs/shape_rule.md)", file=sys.stderr)
         geometry = (placement.points, sm.fixed_nodes, sm.surface_triangles, told)
     elif pred.points is None or pred.triangles is None:
         if args.data is None:

@@ -104,6 +104,8 @@ def test_the_command_on_a_real_liver_writes_paraview_and_the_numbers(run, tmp_pa
     assert summary["registration_residual_mm"] > 0 and len(summary["shape_coefficients"]) == 3
     assert 0 < summary["max_displacement_mm"] < 100
     assert summary["shape_rule"] in ("own", "radius") and len(summary["shape_told"]) == 3
+    told_another = "the network is told a shape inside it" in capsys.readouterr().err
+    assert told_another == (summary["shape_rule"] != "own")
     assert main(["predict-liver", str(run), str(SOFA), "--force", "120", "100", "190", "0",
                  "0", "-0.4", "--out", str(out), "--no-picture", "--shape", "own"]) == 0
     own = json.loads((out / "prediction.json").read_text())
