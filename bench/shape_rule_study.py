@@ -97,12 +97,7 @@ def every_liver(placement, sm):
     livers (inside the population or not)."""
     import dataclasses
 
-    from liverreg.shape_model import nearest_convex_combination
-
-    C = sm.population_coefficients
-    std = C.std(axis=0)
-    mix = nearest_convex_combination(C / std, placement.coefficients / std) * std
-    return dataclasses.replace(placement, coefficients=mix)
+    return dataclasses.replace(placement, coefficients=sm.nearest_mix(placement.coefficients))
 
 
 def told_population(pred, C: np.ndarray):

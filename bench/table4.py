@@ -407,7 +407,7 @@ def evaluate_unseen(pred, data: Path, population_data: Path, placement,
     from data_spec import list_shards, read_geometry, read_shard
     from data_spec.shards import geometry_path
     from surrogate.metrics import displacement_metrics
-    from surrogate.predict_liver import predict_at_points, shape_rule
+    from surrogate.predict_liver import predict_at_points, shape_rule, told_shape
 
     sm = pred.shape_model
     paths = list_shards(data) if geometry_id is None else shards_by_liver(data)[geometry_id]
@@ -433,8 +433,8 @@ def evaluate_unseen(pred, data: Path, population_data: Path, placement,
             "inverted": placement.inverted, "template_cells": int(sm.template_cells.shape[0]),
             "coefficients_out": int(sm.outside_range(placement.coefficients).size),
             "coefficients": int(placement.coefficients.size),
-            "shape_asked": (asked := shape or shape_rule(pred)),
-            "shape_rule": sm.shape_told(placement.coefficients, asked)[1],
+            "shape_asked": shape or shape_rule(pred),
+            "shape_rule": told_shape(pred, placement.coefficients, shape)[1],
             "fixed_nodes": int(shards[0].fixed_nodes.size),
             "warnings": found}
 

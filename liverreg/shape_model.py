@@ -213,14 +213,26 @@ class ShapeModel:
             return (told, "range") if np.any(told != c) else (c, "own")
         if rule == "own":
             return c, rule
-        std = C.std(axis=0)
-        std = np.where(std > 0, std, 1.0)
+        std = self._spread()
         r, r_max = np.linalg.norm(c / std), np.linalg.norm(C / std, axis=1).max()
         if r <= r_max:
             return c, "own"
         if rule == "radius":
             return c * (r_max / r), rule
-        return nearest_convex_combination(C / std, c / std) * std, rule
+        return self.nearest_mix(c), rule
+
+    def nearest_mix(self, coefficients) -> np.ndarray:
+        """The nearest convex combination of the population's livers' coefficients, nearest in
+        the whitened metric (coefficients over the population's standard deviations).
+        """
+        std = self._spread()
+        C = self.population_coefficients
+        return nearest_convex_combination(C / std, np.asarray(coefficients, float) / std) * std
+
+    def _spread(self) -> np.ndarray:
+        """The population's standard deviation per coefficient (1 where it does not vary)."""
+        std = self.population_coefficients.std(axis=0)
+        return np.where(std > 0, std, 1.0)
 
     def warnings(self, placement: Placement) -> list[str]:
         """Ways the liver lies outside the population, with the numbers (empty: inside)."""

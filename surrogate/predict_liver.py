@@ -181,6 +181,14 @@ def shape_rule(predictor) -> str:
     return getattr(DESIGNS.get(predictor.design), "shape_rule", "own")
 
 
+def told_shape(predictor, coefficients, shape: str | None = None) -> tuple[np.ndarray, str]:
+    """(coefficients, rule applied): the shape the predictor's network is told for a liver
+    with these shape coefficients, by the rule ``shape`` or (None) the design's
+    (:meth:`liverreg.shape_model.ShapeModel.shape_told`, :func:`shape_rule`).
+    """
+    return predictor.shape_model.shape_told(coefficients, shape or shape_rule(predictor))
+
+
 def _no_population(predictor) -> str:
     if not predictor.spec.geometry_dim:
         return ("this model was trained on one liver (its scene does not vary the geometry): "
@@ -226,7 +234,7 @@ def predict_liver(predictor, points, triangles, forces, at=None, load_nodes=None
         warnings.simplefilter("always")
         if sm.loadable_nodes.size:  # the exported model's own check, on the template's nodes
             check_load_nodes(load_nodes, sm.loadable_nodes)
-        told, rule = sm.shape_told(placement.coefficients, shape or shape_rule(predictor))
+        told, rule = told_shape(predictor, placement.coefficients, shape)
         u = predictor(placement.vectors_to_population(forces), load_nodes,
                       geometry=(placement.points, sm.fixed_nodes, told))
     found += [str(w.message) for w in caught if "shape coefficients" not in str(w.message)]
@@ -260,7 +268,7 @@ def predict_at_points(predictor, placement, points, forces, at,
     n_cases, L = forces.shape[:2]
     load_nodes = nearest_surface_nodes(placement.points, sm.surface_triangles,
                                        at.reshape(-1, 3)).reshape(n_cases, L)
-    told, _ = sm.shape_told(placement.coefficients, shape or shape_rule(predictor))
+    told, _ = told_shape(predictor, placement.coefficients, shape)
     u = predictor(placement.vectors_to_population(forces), load_nodes,
                   geometry=(placement.points, sm.fixed_nodes, told))
     W = interpolation_matrix(placement.points, placement.to_population(points))

@@ -481,7 +481,7 @@ def build(args):
     pred = load_predictor(mdir)
     geometry = None
     if getattr(args, "place", None) is not None:  # a liver never seen, placed as predict-liver
-        from surrogate.predict_liver import place_liver, read_liver_surface, shape_rule
+        from surrogate.predict_liver import place_liver, read_liver_surface, told_shape
 
         if pred.shape_model is None:
             raise ViewerError(f"{mdir}: --place needs a model trained on a population of "
@@ -492,8 +492,7 @@ def build(args):
         for msg in found:
             print(f"{log_prefix}: warning: {msg}", file=sys.stderr)
         sm = pred.shape_model
-        told, rule = sm.shape_told(placement.coefficients,
-                                   getattr(args, "shape", None) or shape_rule(pred))
+        told, rule = told_shape(pred, placement.coefficients, getattr(args, "shape", None))
         if rule != "own":
             print(f"{log_prefix}: the liver lies beyond the population: the network is told "
                   f"a shape inside it (--shape {rule}, docs/shape_rule.md)", file=sys.stderr)
