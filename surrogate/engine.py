@@ -133,15 +133,17 @@ def config_hash(cfg: dict, extra: dict | None = None) -> str:
 
 
 class Checkpoint:
-    """The state of one fit after an epoch, in ``directory`` (written atomically)."""
+    """The state of one fit after an epoch, in ``directory``.
+
+    A kill at any moment leaves a loadable checkpoint: each save writes the state under a name
+    of its own (``state-<sha256>.msgpack``), then replaces ``state.json``, which names it, and
+    only then removes the states it no longer names. Until ``state.json`` is replaced it names
+    the previous state, which is still on disk.
+    """
 
     def __init__(self, directory: str | Path, identity: str):
         self.dir = Path(directory)
         self.identity = identity
-
-    @property
-    def state_file(self) -> Path:
-        return self.dir / "state.msgpack"
 
     @property
     def meta_file(self) -> Path:
@@ -150,27 +152,39 @@ class Checkpoint:
     def save(self, tree: dict, meta: dict) -> None:
         self.dir.mkdir(parents=True, exist_ok=True)
         blob = serialization.to_bytes(tree)
-        meta = {**meta, "identity": self.identity,
-                "sha256": hashlib.sha256(blob).hexdigest()}
-        with atomic_path(self.state_file) as tmp:
+        digest = hashlib.sha256(blob).hexdigest()
+        name = f"state-{digest[:32]}.msgpack"
+        self._write_state(name, blob)
+        self._write_meta({**meta, "identity": self.identity, "sha256": digest, "state": name})
+        for old in self.dir.glob("state-*.msgpack"):
+            if old.name != name:
+                old.unlink(missing_ok=True)
+
+    def _write_state(self, name: str, blob: bytes) -> None:
+        with atomic_path(self.dir / name) as tmp:
             Path(tmp).write_bytes(blob)
-        with atomic_path(self.meta_file) as tmp:  # last: it names the state it belongs to
+
+    def _write_meta(self, meta: dict) -> None:
+        with atomic_path(self.meta_file) as tmp:
             Path(tmp).write_text(json.dumps(meta))
 
     def load(self, template: dict) -> tuple[dict, dict] | None:
         """(tree, meta) of the last epoch saved, or None: no checkpoint, one of another
-        configuration or dataset (then it is ignored and overwritten), or a torn one.
+        configuration or dataset (then it is ignored and overwritten), or an unreadable one.
         """
         try:
             meta = json.loads(self.meta_file.read_text())
-            blob = self.state_file.read_bytes()
-        except (OSError, ValueError):
+            name = Path(str(meta.get("state", ""))).name  # a file of this directory only
+            blob = (self.dir / name).read_bytes() if name.startswith("state-") else b""
+        except (OSError, ValueError, AttributeError):
             return None
         if meta.get("identity") != self.identity:
             log.warning("%s: a checkpoint of another configuration or dataset; starting over",
                         self.dir)
             return None
         if hashlib.sha256(blob).hexdigest() != meta.get("sha256"):
+            log.warning("%s: the state named by %s is missing or damaged; starting over",
+                        self.dir, self.meta_file.name)
             return None
         return serialization.from_bytes(template, blob), meta
 

@@ -62,6 +62,57 @@ def test_killed_fit_resumes_and_ends_where_an_uninterrupted_fit_ends(synth_dir, 
     np.testing.assert_allclose(flat_b, flat_a, rtol=1e-4, atol=1e-6 * np.abs(flat_a).max())
 
 
+class KilledBetween(engine.Checkpoint):
+    """A checkpoint whose process dies while saving epoch ``epoch``: after the new state is on
+    disk but before ``state.json`` names it ("state"), or after that but before the states it
+    no longer names are removed ("cleanup")."""
+
+    def __init__(self, directory, identity, epoch, where):
+        super().__init__(directory, identity)
+        self.kill_at, self.where = epoch, where
+
+    def _write_meta(self, meta):
+        if meta["epoch"] == self.kill_at and self.where == "state":
+            raise Killed(meta["epoch"])
+        super()._write_meta(meta)
+        if meta["epoch"] == self.kill_at and self.where == "cleanup":
+            raise Killed(meta["epoch"])
+
+
+@pytest.mark.parametrize("where, resumed_after", [("state", 2), ("cleanup", 3)])
+def test_a_kill_in_the_middle_of_a_save_leaves_a_loadable_checkpoint(synth_dir, tmp_path,
+                                                                     where, resumed_after):
+    ds = load_dataset(synth_dir, stream=False)
+    cfg = get_config("small", hidden=[8], epochs=5, early_stopping=10, batch_size=256)
+    train = np.arange(ds.n_samples - 9)
+    whole, hist = fit_design(ds, train, cfg, 1, "", lambda m: None)
+    ck = tmp_path / "ck"
+    with pytest.raises(Killed):
+        fit_design(ds, train, cfg, 1, "", lambda m: None, KilledBetween(ck, "id", 3, where))
+    # "state": epoch 3's state and epoch 2's, which state.json still names, are both on disk
+    assert len(list(ck.glob("state-*.msgpack"))) == 2
+    said = []
+    resumed, hist2 = fit_design(ds, train, cfg, 1, "", said.append,
+                                engine.Checkpoint(ck, "id"))
+    assert said[0].startswith(f"resumed after epoch {resumed_after}"), said[0]
+    assert [h["epoch"] for h in hist2] == [h["epoch"] for h in hist]
+    np.testing.assert_allclose([h["val_loss"] for h in hist2], [h["val_loss"] for h in hist],
+                               rtol=1e-4)
+    assert len(list(ck.glob("state-*.msgpack"))) == 1  # the states no longer named are gone
+
+
+def test_a_checkpoint_whose_state_is_missing_is_not_used(synth_dir, tmp_path):
+    ds = load_dataset(synth_dir, stream=False)
+    cfg = get_config("small", hidden=[8], epochs=2, batch_size=256)
+    train = np.arange(ds.n_samples - 9)
+    fit_design(ds, train, cfg, 0, "", lambda m: None, engine.Checkpoint(tmp_path, "id"))
+    for f in tmp_path.glob("state-*.msgpack"):
+        f.unlink()
+    said = []
+    fit_design(ds, train, cfg, 0, "", said.append, engine.Checkpoint(tmp_path, "id"))
+    assert not any("resumed" in m for m in said)
+
+
 def _leaves(tree):
     import jax
 
@@ -86,8 +137,9 @@ def test_a_training_killed_by_sigkill_resumes_from_the_command_line(synth_dir, t
     metrics of a run never interrupted."""
     run = tmp_path / "run"
     cmd = [sys.executable, "-m", "surrogate", "train", "--data", str(synth_dir), "--run",
-           str(run), "--config", "small", "hidden=[16,16]", "epochs=8", "folds=3",
-           "early_stopping=20", "batch_size=512", "final_fit=false"]
+           str(run), "--config", "small", "hidden=[16,16]", "epochs=60", "folds=3",
+           "early_stopping=100", "batch_size=512", "final_fit=false"]
+    # 60 epochs of several ms each: the second fold is still training when the kill lands
     env = {**os.environ, "JAX_PLATFORMS": "cpu"}
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     target = run / "checkpoints" / "fold1" / "state.json"
