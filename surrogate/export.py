@@ -304,9 +304,11 @@ class Predictor:
             warnings.warn(f"force magnitude {fmax:.3g} N exceeds the training range "
                           f"({self.force_norm_max:.3g} N): "
                           "extrapolating", stacklevel=2)
-        args = (jnp.asarray(forces, dtype=jnp.float32),
-                jnp.asarray(points[load_nodes], dtype=jnp.float32),
-                jnp.asarray(extra, dtype=jnp.float32))
+        # numpy in: the jitted call takes host arrays on its fast path (jnp.asarray here would
+        # dispatch one eager conversion per argument, most of a small model's call)
+        args = (np.asarray(forces, dtype=np.float32),
+                np.asarray(points[load_nodes], dtype=np.float32),
+                np.asarray(extra, dtype=np.float32))
         if self.design in BASIS_DESIGNS:
             out = self._batched_basis(self.params, static, *args,
                                       self._load_context(points, load_nodes, geometry))
@@ -397,7 +399,7 @@ class Predictor:
         import jax.numpy as jnp
 
         if not self._context:
-            return jnp.zeros(load_nodes.shape + (0,), dtype=jnp.float32)
+            return np.zeros(load_nodes.shape + (0,), dtype=np.float32)
         from surrogate.population_basis import load_context
 
         # once per (liver, load nodes): a manipulator drags one node with changing forces
