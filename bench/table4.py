@@ -244,7 +244,39 @@ def unseen(scene_file: Path, base: Path, model_dir: Path, a) -> dict | None:
     data = unseen_truth(scene_file, liver, placement, pred.shape_model, a,
                         f"unseen_{a.unseen_frame}")
     return {"liver": liver.name, "frame": a.unseen_frame, "placed_as": placement.frame,
-            **evaluate_unseen(pred, data, base / "data", placement, found)}
+            **evaluate_unseen(pred, data, base / "data", placement, found),
+            "ms_placed": timed_placed(pred, placement, LATENCY_NODES, a.calls),
+            "placed_nodes": LATENCY_NODES}
+
+
+def timed_placed(pred, placement, n_nodes: int, calls: int) -> float:
+    """Median ms per call of :class:`surrogate.predict_liver.PlacedModel` on the placed liver
+    meshed at ``n_nodes`` nodes (points drawn inside the registered template's tetrahedra,
+    in the liver's frame: what a user's mesh of the liver gives): the model on the template,
+    one sparse interpolation to the nodes, the turn into the liver's frame; the same load
+    node every call, the force changing."""
+    import warnings
+
+    from surrogate.predict_liver import PlacedModel
+
+    sm = pred.shape_model
+    rng = np.random.default_rng(0)
+    cells = sm.template_cells[rng.integers(0, sm.template_cells.shape[0], n_nodes)]
+    w = rng.dirichlet(np.ones(4), n_nodes)
+    nodes = placement.to_liver(np.einsum("nk,nkd->nd", w, placement.points[cells]))
+    placed = PlacedModel(pred, nodes=nodes, placement=placement)
+    at = placed.load_nodes(placement.to_liver(
+        placement.points[sm.loadable_nodes[:pred.spec.n_loads]]))
+    f = np.tile([[0.0, 0.0, -0.4]], (pred.spec.n_loads, 1))
+    times = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for i in range(calls + 5):
+            g = f * (1.0 - 1e-4 * (i % 100))
+            t = time.perf_counter()
+            placed(g, at)
+            times.append(time.perf_counter() - t)
+    return 1e3 * float(np.median(times[5:]))
 
 
 def budget(k: int, config: str, overrides: dict) -> dict:
@@ -633,6 +665,12 @@ def realtime_section(r: dict) -> str | None:
         text += (f"; a new load node every call: node-wise {r['ms_big_new_load']:.2f} ms, "
                  f"population basis {d['ms_big_new_load']:.2f} ms")
     text += ")."
+    if "ms_placed" in d.get("unseen", {}) and "ms_placed" in r.get("unseen", {}):
+        u, v = d["unseen"], r["unseen"]
+        text += (f" On a liver's own mesh (the unseen liver `{u['liver']}` at "
+                 f"{u['placed_nodes']:,} nodes, `PlacedModel`: the model on the registered "
+                 f"template's {d['nodes']:,} nodes, then one sparse interpolation): population "
+                 f"basis {u['ms_placed']:.2f} ms, node-wise {v['ms_placed']:.2f} ms.")
     if d.get("unseen") and r.get("unseen"):
         text += (f" On the unseen liver `{d['unseen']['liver']}`: MEE "
                  f"{d['unseen']['network']['mee']:.3f} mm against the node-wise net's "

@@ -20,7 +20,8 @@ never loaded (interior, fixed, or too near the fixed region). Output: the deform
 shape), a JSON with the placement and warnings, and a picture.
 
 The same as a Python API: :func:`read_liver_surface`, :func:`place_liver`,
-:func:`predict_liver`, and :func:`predict_at_points` (at the nodes of the liver's own mesh).
+:func:`predict_liver`, :func:`predict_at_points` (at the nodes of the liver's own mesh) and
+:class:`PlacedModel` (the same, placed once for repeated calls: real time on the liver's mesh).
 numpy, scipy and pyvista (to read surfaces); no dolfinx.
 """
 
@@ -252,28 +253,85 @@ def predict_liver(predictor, points, triangles, forces, at=None, load_nodes=None
                            inverted=placement.inverted, warnings=found)
 
 
+class PlacedModel:
+    """A population model placed on one liver, for repeated calls at the nodes of the liver's
+    own mesh: the real-time form of :func:`predict_at_points`.
+
+    Built once per liver: the placement (:func:`place_liver`, or one given), the shape the
+    network is told (:func:`told_shape`) and the sparse interpolation from the registered
+    template to ``nodes`` (the liver's mesh nodes, its frame; default: the surface points).
+    A call then costs the network on the template, one sparse product and a turn into the
+    liver's frame, whatever the number of nodes.
+
+        placed = PlacedModel(load_predictor("RUN/model"), points, triangles, nodes=mesh_nodes)
+        at = placed.load_nodes([[120.0, 100.0, 190.0]])      # once per grasped point
+        u = placed([[0.0, 0.0, -0.4]], at)                    # (n_nodes, 3) mm, every frame
+    """
+
+    def __init__(self, predictor, points=None, triangles=None, nodes=None, *,
+                 placement=None, center: bool = True, frame: str = DEFAULT_FRAME,
+                 shape: str | None = None):
+        sm = predictor.shape_model
+        if sm is None:
+            raise ValueError(_no_population(predictor))
+        self.warnings: list[str] = []
+        if placement is None:
+            if points is None or triangles is None:
+                raise ValueError("give the liver's surface (points, triangles) or a placement")
+            placement, self.warnings = place_liver(predictor, points, triangles, center, frame)
+        if nodes is None:
+            if points is None:
+                raise ValueError("nodes: give the points to predict at (a placement alone "
+                                 "does not carry the liver's mesh)")
+            nodes = points
+        nodes = np.asarray(nodes, dtype=np.float64)
+        if nodes.ndim != 2 or nodes.shape[1] != 3 or not np.all(np.isfinite(nodes)):
+            raise ValueError(f"nodes: expected a finite (n, 3) array in mm, got shape "
+                             f"{nodes.shape}")
+        self.predictor, self.placement, self.nodes = predictor, placement, nodes
+        self.shape_told, self.shape_rule = told_shape(predictor, placement.coefficients, shape)
+        self.geometry = (placement.points, sm.fixed_nodes, self.shape_told)
+        self.interpolation = interpolation_matrix(placement.points,
+                                                  placement.to_population(nodes)).tocsr()
+
+    def load_nodes(self, at) -> np.ndarray:
+        """Template node ids under the points ``at`` (..., 3) mm of the liver's frame: the
+        registered template's surface nodes nearest to them (what a call takes).
+        """
+        at = np.asarray(at, dtype=np.float64)
+        flat = self.placement.to_population(at.reshape(-1, 3))
+        ids = nearest_surface_nodes(self.placement.points,
+                                    self.predictor.shape_model.surface_triangles, flat)
+        return ids.reshape(at.shape[:-1])
+
+    def __call__(self, forces, load_nodes) -> np.ndarray:
+        """Displacements (n_nodes, 3), or (n_cases, n_nodes, 3) for forces (n_cases, n_loads,
+        3), mm in the liver's frame, for ``forces`` N (the liver's frame) at the template node
+        ids ``load_nodes`` (:meth:`load_nodes`).
+        """
+        f = self.placement.vectors_to_population(forces)
+        u = np.asarray(self.predictor(f, np.asarray(load_nodes), geometry=self.geometry),
+                       dtype=np.float64)
+        single = u.ndim == 2
+        u = u[None] if single else u
+        n_cases, n_t = u.shape[:2]
+        out = self.interpolation @ u.transpose(1, 0, 2).reshape(n_t, -1)  # all cases at once
+        out = self.placement.vectors_to_liver(
+            out.reshape(-1, n_cases, 3).transpose(1, 0, 2))
+        return out[0] if single else out
+
+
 def predict_at_points(predictor, placement, points, forces, at,
                       shape: str | None = None) -> np.ndarray:
     """Displacements (n_cases, len(points), 3) mm at ``points`` of the placed liver (e.g. the
     nodes of its own mesh; the liver's frame) for ``forces`` (n_cases, n_loads, 3) N acting at
     the template surface nodes nearest to ``at`` (n_cases, n_loads, 3) mm, all in the liver's
-    frame: the registered template's prediction, interpolated (:func:`interpolation_matrix`).
-    ``shape`` as :func:`predict_liver`'s.
+    frame: the registered template's prediction, interpolated (:class:`PlacedModel`, which
+    keeps the interpolation for repeated calls). ``shape`` as :func:`predict_liver`'s.
     """
-    sm = predictor.shape_model
-    if sm is None:
-        raise ValueError(_no_population(predictor))
+    placed = PlacedModel(predictor, nodes=points, placement=placement, shape=shape)
     forces = np.asarray(forces, dtype=np.float64)
-    at = placement.to_population(at)
-    n_cases, L = forces.shape[:2]
-    load_nodes = nearest_surface_nodes(placement.points, sm.surface_triangles,
-                                       at.reshape(-1, 3)).reshape(n_cases, L)
-    told, _ = told_shape(predictor, placement.coefficients, shape)
-    u = predictor(placement.vectors_to_population(forces), load_nodes,
-                  geometry=(placement.points, sm.fixed_nodes, told))
-    W = interpolation_matrix(placement.points, placement.to_population(points))
-    return np.stack([placement.vectors_to_liver(W @ uc)
-                     for uc in np.asarray(u, dtype=np.float64)])
+    return placed(forces, placed.load_nodes(np.broadcast_to(at, forces.shape)))
 
 
 def main(args) -> int:

@@ -171,6 +171,42 @@ def test_predictions_at_a_livers_own_nodes_match_the_template_at_its_nodes(run):
     np.testing.assert_allclose(got[0], want[:200], rtol=1e-5, atol=1e-6)
 
 
+def test_a_placed_model_predicts_many_cases_at_the_livers_nodes_as_one_by_one(run):
+    """PlacedModel (placed once, called per frame): a batch of cases gives what each case
+    gives alone; at a point inside a tetrahedron of the registered template's nodes the
+    answer is the barycentric mix of its four nodes' (linear interpolation, by hand); on the
+    nodes of the liver's own surface it agrees with predict_at_points."""
+    from surrogate.predict_liver import PlacedModel, place_liver, predict_at_points
+
+    pred = load_predictor(run / "model")
+    sm = pred.shape_model
+    path, _ = _population_liver(4)
+    points, tris = read_liver_surface(path)
+    placement, _ = place_liver(pred, points, tris)
+    from scipy.spatial import Delaunay
+
+    cell = Delaunay(placement.points).simplices[10]  # the interpolation's tetrahedra
+    corners = placement.to_liver(placement.points[cell])
+    inside = np.array([0.1, 0.2, 0.3, 0.4]) @ corners
+    placed = PlacedModel(pred, nodes=np.vstack([corners, inside[None]]), placement=placement)
+    at = placement.to_liver(placement.points[sm.loadable_nodes[:2]])
+    nodes = placed.load_nodes(at[:, None])
+    np.testing.assert_array_equal(nodes[:, 0], sm.loadable_nodes[:2])
+    forces = np.array([[[0.0, 0.1, -0.4]], [[0.2, 0.0, -0.1]]])
+    both = placed(forces, nodes)
+    assert both.shape == (2, 5, 3)
+    for k in range(2):
+        np.testing.assert_allclose(both[k], placed(forces[k], nodes[k]), rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(both[k, 4], [0.1, 0.2, 0.3, 0.4] @ both[k, :4],
+                                   rtol=1e-5, atol=1e-6)
+    on_surface = PlacedModel(pred, points, tris, placement=placement)
+    np.testing.assert_allclose(on_surface(forces, nodes),
+                               predict_at_points(pred, placement, points, forces, at[:, None]),
+                               rtol=1e-6, atol=1e-7)
+    with pytest.raises(ValueError, match="nodes"):
+        PlacedModel(pred, placement=placement)
+
+
 def test_a_turned_mirrored_liver_gets_the_same_prediction_in_its_own_frame(run):
     """Frame invariance: the file's frame changes nothing but the frame of the answer. A
     population liver turned by 50 degrees, mirrored (an LPS-like frame) and shifted is placed
