@@ -52,11 +52,12 @@ class BasisModel:
     n_loads: int
     n_extra: int            # leading columns of the extra inputs the network is told
     context: int = 0        # per-load context features (the population design's), or 0
+    members: int = 1        # networks of an ensemble (their arrays: a leading axis), or 1
 
     def stats(self) -> dict:
         return {"x_mean": self.x_mean.tolist(), "x_std": self.x_std.tolist(),
                 "c_scale": self.c_scale, "f_scale": self.f_scale, "n_extra": self.n_extra,
-                "context": self.context}
+                "context": self.context, "members": self.members}
 
 
 def load_features(forces, load_points, extra, xp=np, context=None):
@@ -91,6 +92,18 @@ class BasisMLP(nn.Module):
 
 def network(hidden, modes: int, n_loads: int) -> BasisMLP:
     return BasisMLP(hidden=tuple(hidden), modes=int(modes), n_loads=int(n_loads))
+
+
+def member_mean(net: BasisMLP, params, members: int = 1, cast=lambda a: a):
+    """``apply(x, f)``: the network's coefficients, or for an ensemble (parameters with a
+    leading member axis) the mean of its members' (``cast``: the inputs' precision).
+    """
+    def one(p, x, f):
+        return net.apply({"params": p}, cast(x), cast(f))
+
+    if members == 1:
+        return lambda x, f: one(params, x, f)
+    return lambda x, f: jnp.mean(jax.vmap(one, in_axes=(0, None, None))(params, x, f), axis=0)
 
 
 def fields(ds: Dataset, samples: np.ndarray) -> np.ndarray:
@@ -224,10 +237,11 @@ def predict_fields(ds: Dataset, model: BasisModel, samples: np.ndarray,
     dataset's (n_samples, n_loads, c) load context when the model takes one.
     """
     net = network(model.hidden, model.modes.shape[0], model.n_loads)
+    mean = member_mean(net, model.params, model.members,
+                       cast=lambda a: jnp.asarray(a, jnp.float32))
 
     def apply(x, f):
-        return np.asarray(net.apply({"params": model.params}, jnp.asarray(x, jnp.float32),
-                                    jnp.asarray(f, jnp.float32)))
+        return np.asarray(mean(x, f))
 
     c = coefficients(model, ds.forces[samples], ds.load_points[samples], ds.extra[samples],
                      apply=apply, context=None if context is None else context[samples])
@@ -257,12 +271,12 @@ class Basis:
     def problem(self, ds, train, val, cfg, rng) -> BasisProblem:
         return BasisProblem(ds, train, val, cfg, int(rng.integers(2**31)))
 
-    def model(self, problem: BasisProblem, params) -> BasisModel:
+    def model(self, problem: BasisProblem, params, members: int = 1) -> BasisModel:
         return BasisModel(params=params, modes=problem.modes, x_mean=problem.x_mean,
                           x_std=problem.x_std, c_scale=problem.c_scale,
                           f_scale=problem.f_scale, hidden=problem.net.hidden,
                           n_loads=problem.net.n_loads, n_extra=problem.n_extra,
-                          context=problem.context)
+                          context=problem.context, members=members)
 
     def summary(self, problem: BasisProblem) -> str:
         return (f"{problem.modes.shape[0]} modes, projection MEE of the training fields "

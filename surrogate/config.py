@@ -23,6 +23,9 @@ BASE = {
     "load_context": False,     # population_basis: tell the network where each load sits on
                                # the liver (template place, offset and distance to the fixed
                                # region; surrogate/population_basis.py)
+    "ensemble": 1,             # basis designs: networks trained on the same modes from other
+                               # initialisations and batch orders; their coefficients averaged
+                               # (one mode product per call whatever their number)
     "dropout": 0.0,            # node-wise only
     "l2": 0.0,                 # weight decay coefficient (added to the loss as l2 * |w|^2 / 2)
     "input_noise": 0.0,        # std of Gaussian noise on normalised inputs during training
@@ -83,6 +86,7 @@ CHECKS = {
     "l2": (lambda v: is_num(v) and v >= 0, "a finite number >= 0"),
     "input_noise": (lambda v: is_num(v) and v >= 0, "a finite number >= 0"),
     "load_context": (lambda v: isinstance(v, bool), "true or false"),
+    "ensemble": (lambda v: is_int(v) and v >= 1, "an integer >= 1"),
     "shape_inputs": (lambda v: v == "all" or is_int(v) and v >= 0, "'all' or an integer >= 0"),
     "batch_size": (lambda v: is_int(v) and v >= 1, "an integer >= 1"),
     "learning_rate": (lambda v: is_num(v) and v > 0, "a finite number > 0"),
@@ -117,6 +121,10 @@ def get_config(name: str = "small", **overrides) -> dict:
     if not problems and cfg["design"] != "nodewise" and cfg["dropout"] > 0:
         problems.append(f"dropout: the {cfg['design']} design has no dropout (expected 0, got "
                         f"{cfg['dropout']!r}; input_noise and l2 regularise it)")
+    if not problems and cfg["design"] == "nodewise" and cfg["ensemble"] != 1:
+        problems.append(f"ensemble: only the basis designs take it (expected 1 for nodewise, "
+                        f"got {cfg['ensemble']!r}: a node-wise ensemble's call costs its "
+                        "number of networks over every node)")
     if not problems and cfg["design"] != "population_basis":
         for key, default in (("shape_inputs", "all"), ("load_context", False)):
             if cfg[key] != default:

@@ -121,10 +121,11 @@ def layer_names(n_hidden: int, last: str) -> list[str]:
 
 
 def _read_params(path: Path, dim: int, hidden: tuple[int, ...], out: int = 3,
-                 version: int = MODEL_VERSION, last: str = "output") -> dict:
+                 version: int = MODEL_VERSION, last: str = "output", members: int = 1) -> dict:
     """The network's parameters, checked against the architecture in the config: every layer
-    present with the right shapes, every value finite. Models before version 3 name their
-    layers Dense_0, Dense_1, ... in order; they are read under the explicit names.
+    present with the right shapes, every value finite; an ensemble's arrays carry its
+    ``members`` along a leading axis. Models before version 3 name their layers Dense_0,
+    Dense_1, ... in order; they are read under the explicit names.
     """
     try:
         with np.load(path, allow_pickle=False) as z:
@@ -140,9 +141,10 @@ def _read_params(path: Path, dim: int, hidden: tuple[int, ...], out: int = 3,
                 for k, v in flat.items()}
     widths = (dim, *hidden, out)
     want = {}
+    lead = (members,) if members > 1 else ()
     for i, name in enumerate(names):
-        want[f"{name}/kernel"] = (widths[i], widths[i + 1])
-        want[f"{name}/bias"] = (widths[i + 1],)
+        want[f"{name}/kernel"] = (*lead, widths[i], widths[i + 1])
+        want[f"{name}/bias"] = (*lead, widths[i + 1])
     problems = [f"'{k}' has shape {flat[k].shape}, the config says {shape}"
                 for k, shape in want.items() if k in flat and flat[k].shape != shape]
     problems += [f"'{k}' is missing" for k in want if k not in flat]
@@ -325,7 +327,13 @@ class Predictor:
         import jax
         import jax.numpy as jnp
 
-        from surrogate.basis import LOAD_FEATURES, BasisModel, coefficients, network
+        from surrogate.basis import (
+            LOAD_FEATURES,
+            BasisModel,
+            coefficients,
+            member_mean,
+            network,
+        )
         from surrogate.population_basis import CONTEXT
 
         where = d / "basis.npz"
@@ -349,9 +357,13 @@ class Predictor:
             c_scale, f_scale = float(st["c_scale"]), float(st["f_scale"])
             n_extra = st.get("n_extra", e)  # models written before shape_inputs: all
             context = st.get("context", 0)  # and before load_context: none
+            members = st.get("members", 1)  # and before ensembles: one network
         except (KeyError, TypeError, ValueError, AttributeError):
             raise ValueError(f"{d / 'model.json'}: stats: expected x_mean, x_std, c_scale, "
                              "f_scale") from None
+        if not (isinstance(members, int) and members >= 1):
+            raise ValueError(f"{d / 'model.json'}: stats: members: expected an integer >= 1, "
+                             f"got {members!r}")
         if not (isinstance(n_extra, int) and self.spec.material_dim <= n_extra <= e):
             raise ValueError(f"{d / 'model.json'}: stats: n_extra: expected an integer from "
                              f"{self.spec.material_dim} to {e}, got {n_extra!r}")
@@ -363,7 +375,7 @@ class Predictor:
         dim = (LOAD_FEATURES + context) * L + n_extra
         k = modes.shape[0]
         params = _read_params(d / "params.npz", dim, hidden, out=3 * k * L,
-                              version=meta["version"], last="coefficients")
+                              version=meta["version"], last="coefficients", members=members)
         if x_mean.shape != (dim,) or x_std.shape != (dim,) or not (
                 np.all(np.isfinite(x_mean)) and np.all(x_std > 0) and c_scale > 0
                 and f_scale > 0 and np.isfinite(c_scale) and np.isfinite(f_scale)):
@@ -377,14 +389,12 @@ class Predictor:
         self.norm = None
         stats = BasisModel(params=None, modes=None, x_mean=x_mean, x_std=x_std,
                            c_scale=c_scale, f_scale=f_scale, hidden=hidden, n_loads=L,
-                           n_extra=n_extra, context=context)
+                           n_extra=n_extra, context=context, members=members)
         self._basis_stats = stats  # the model without its parameters and modes
         net = network(hidden, k, L)
 
         def one_case(params, modes, forces, load_points, extra, ctx):
-            def apply(x, f):
-                return net.apply({"params": params}, x.astype(dtype), f.astype(dtype))
-
+            apply = member_mean(net, params, members, cast=lambda a: a.astype(dtype))
             c = coefficients(stats, forces, load_points, extra, xp=jnp, apply=apply,
                              context=ctx if context else None)
             return (c.astype(dtype) @ modes).astype(jnp.float32).reshape(-1, 3)

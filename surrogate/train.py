@@ -57,12 +57,37 @@ def fit_design(ds: Dataset, train_samples: np.ndarray, cfg: dict, seed: int, lab
     design.check(ds)
     tr, va, rng = early_stopping_split(ds, train_samples, cfg, seed)
     problem = design.problem(ds, tr, va, cfg, rng)
-    params, history = engine.fit(problem, cfg, seed, rng, label=label, log_fn=log_fn,
-                                 log_every=getattr(design, "log_every", 1),
-                                 checkpoint=checkpoint)
+    members = cfg.get("ensemble", 1)
+    if members == 1:
+        params, history = engine.fit(problem, cfg, seed, rng, label=label, log_fn=log_fn,
+                                     log_every=getattr(design, "log_every", 1),
+                                     checkpoint=checkpoint)
+        if hasattr(design, "summary"):
+            log_fn(f"{label}stopped after {len(history)} epochs; {design.summary(problem)}")
+        return design.model(problem, params), history
+    # An ensemble: the same problem (modes, statistics, held-out simulations) fitted from
+    # other initialisations, batch orders and noise; the first member is the single model.
+    fitted, history = [], []
+    for m in range(members):
+        ck = None if checkpoint is None else engine.Checkpoint(checkpoint.dir / f"member{m}",
+                                                               checkpoint.identity)
+        r = rng if m == 0 else np.random.default_rng([seed, m])
+        params, hist = engine.fit(problem, cfg, seed + 7919 * m, r,
+                                  label=f"{label}member {m + 1}/{members} ", log_fn=log_fn,
+                                  log_every=getattr(design, "log_every", 1), checkpoint=ck)
+        fitted.append(params)
+        history += [{**h, "member": m} for h in hist]
+        log_fn(f"{label}member {m + 1}/{members} stopped after {len(hist)} epochs")
     if hasattr(design, "summary"):
-        log_fn(f"{label}stopped after {len(history)} epochs; {design.summary(problem)}")
-    return design.model(problem, params), history
+        log_fn(f"{label}{members} members; {design.summary(problem)}")
+    return design.model(problem, stack_members(fitted), members=members), history
+
+
+def stack_members(params: list):
+    """One parameter tree whose arrays carry the members along a new leading axis."""
+    import jax
+
+    return jax.tree_util.tree_map(lambda *a: np.stack([np.asarray(x) for x in a]), *params)
 
 
 def predict_design(ds: Dataset, model, cfg: dict, samples: np.ndarray):

@@ -164,3 +164,43 @@ def test_input_noise_regularises_the_basis_in_training_only_and_dropout_is_refus
         get_config("population_basis", shape_inputs=-1)
     with pytest.raises(ValueError, match="load_context: expected true or false"):
         get_config("population_basis", load_context=1)
+
+
+def test_an_ensemble_predicts_the_mean_of_its_members(ds, tmp_path):
+    """ensemble = 3: three networks on the same modes; its first member is the single model
+    (same seed and batches), the members differ, and the exported ensemble predicts the mean
+    of its members' predictions (each member as a model of its own). A node-wise ensemble and
+    a params file with another number of members are refused."""
+    import dataclasses
+
+    import jax
+
+    from surrogate.export import export_model
+
+    train = np.arange(ds.n_samples - 6)
+    held = np.arange(ds.n_samples - 6, ds.n_samples)
+    cfg = get_config("basis", epochs=15, modes=12, hidden=[24])
+    single, _ = fit_design(ds, train, cfg, 0, "", lambda m: None)
+    ens, hist = fit_design(ds, train, {**cfg, "ensemble": 3}, 0, "", lambda m: None)
+    assert ens.members == 3 and sorted({h["member"] for h in hist}) == [0, 1, 2]
+    member = [dataclasses.replace(ens, members=1,
+                                  params=jax.tree_util.tree_map(lambda a, m=m: a[m],
+                                                                ens.params))
+              for m in range(3)]
+    each = [predict_samples(ds, m, held)[0] for m in member]
+    first, _, _ = predict_samples(ds, single, held)
+    scale = np.abs(first).max()
+    np.testing.assert_allclose(each[0], first, rtol=1e-4, atol=1e-5 * scale)
+    assert np.abs(each[1] - each[0]).max() > 1e-3 * scale  # other initialisations
+    mean, _, _ = predict_samples(ds, ens, held)
+    np.testing.assert_allclose(mean, np.mean(each, axis=0), rtol=1e-4, atol=1e-5 * scale)
+    export_model(tmp_path / "e", ens, {**cfg, "ensemble": 3}, ds)
+    got = load_predictor(tmp_path / "e")(ds.forces[held], ds.load_nodes[held])
+    np.testing.assert_allclose(got.reshape(-1, 3), mean, rtol=1e-4, atol=1e-5 * scale)
+    meta = json.loads((tmp_path / "e" / "model.json").read_text())
+    meta["stats"]["members"] = 2
+    (tmp_path / "e" / "model.json").write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match="params.npz: 'hidden_0/kernel' has shape"):
+        load_predictor(tmp_path / "e")
+    with pytest.raises(ValueError, match="ensemble: only the basis designs"):
+        get_config("small", ensemble=2)
