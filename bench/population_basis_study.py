@@ -11,7 +11,8 @@ node-wise network was measured, and is reported on its own. The exported model (
 livers) then predicts the unseen SOFA liver against table4's FE truth on its own mesh
 (``--frame LPS``, fixed where the placement puts the template's fixed region), told the liver's
 own shape coefficients (``--shape own``: the network's own answer to a shape it never saw;
-docs/shape_rule.md gives the shapes predict-liver can tell it instead). One seed:
+docs/shape_rule.md gives the shapes predict-liver can tell it instead). One seed per variant
+(an ensemble: its members, from other initialisations and batch orders, averaged):
 differences of a few per cent are noise.
 
     .venv-train/bin/python bench/population_basis_study.py     # after make table4 T4="--scenes 4"
@@ -37,19 +38,46 @@ DATA = TABLE4 / "scene4_livers" / "data"
 UNSEEN_DATA = TABLE4 / "unseen_LPS" / "data"
 RESULTS = ROOT / "bench" / "results" / "population_basis_study"
 SPLIT = {"folds": 8, "evaluate_folds": 0, "final_fit": True}
-NOISE = {"input_noise": 0.3, "l2": 0.0, "load_context": False}
+NOISE = {"input_noise": 0.3, "l2": 0.0, "load_context": False, "ensemble": 1}
 CONTEXT = {**NOISE, "load_context": True}
 VARIANTS = {  # every knob named: the shipped config's defaults move
-    "no regularisation": {"input_noise": 0.0, "l2": 0.0, "load_context": False},
+    "no regularisation": {"input_noise": 0.0, "l2": 0.0, "load_context": False, "ensemble": 1},
     "input noise 0.3": {**NOISE},
     "input noise 0.3, 5 shape inputs": {**NOISE, "shape_inputs": 5},
     "input noise 0.3, no shape input": {**NOISE, "shape_inputs": 0},
-    "input noise 0.3, load context (shipped)": {**CONTEXT},
+    "input noise 0.3, load context": {**CONTEXT},
     "input noise 0.3, load context, 5 shape inputs": {**CONTEXT, "shape_inputs": 5},
     "input noise 0.3, load context, no shape input": {**CONTEXT, "shape_inputs": 0},
     "input noise 0.5, load context": {**CONTEXT, "input_noise": 0.5},
     "input noise 0.3, load context, weight decay 1e-2": {**CONTEXT, "l2": 1e-2},
+    "input noise 0.3, load context, ensemble of 5": {**CONTEXT, "ensemble": 5},
 }
+
+
+def label(name: str) -> str:
+    """The variant's name, marked when its knobs are the shipped config's."""
+    from surrogate.config import get_config
+
+    shipped = get_config("population_basis")
+    same = all(shipped.get(k) == v for k, v in VARIANTS[name].items())
+    return f"{name} (shipped)" if same else name
+
+
+def ms_per_call(model_dir: Path, calls: int = 200) -> float:
+    """Median ms of one-case calls of the variant's exported model at table4's latency size
+    (its modes moved onto a liver-sized cloud, as table4 times the scene-4 designs)."""
+    import tempfile
+    import warnings
+
+    from latency import at_scale, latency
+    from table4 import LATENCY_NODES
+
+    from surrogate.export import load_predictor
+
+    with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the cloud's nodes were never loaded: timing only
+        big = load_predictor(at_scale(model_dir, LATENCY_NODES, Path(tmp) / "big"))
+        return 1e3 * latency(big, None, calls)[0]
 
 
 def run_dir(name: str) -> Path:
@@ -124,24 +152,30 @@ def main() -> int:
                     f"`{r['overrides']}` | n/a | n/a | {r['metrics']['network']['mee']:.3f} | "
                     f"{r['metrics']['skill']:.3f} | "
                     f"{fmt(u.get('network', {}).get('mee'))} | {fmt(u.get('skill'))} | "
-                    f"{r['metrics']['training_seconds'] / 60:.0f} min |")
+                    f"{r['metrics']['training_seconds'] / 60:.0f} min | "
+                    f"{r['ms_big']:.0f} |")
     for name in a.only:
         m = run(name, VARIANTS[name])
         sel, sel_skill = pooled(m, slice(1, None))
         f1, f1_skill = pooled(m, slice(0, 1))
         u = unseen.evaluate(run_dir(name) / "model") or {}
-        rows.append(f"| {name} | `{VARIANTS[name] or '-'}` | {sel:.3f} | {sel_skill:.3f} | "
+        rows.append(f"| {label(name)} | `{VARIANTS[name] or '-'}` | {sel:.3f} | {sel_skill:.3f} | "
                     f"{f1:.3f} | {f1_skill:.3f} | {fmt(u.get('network', {}).get('mee'))} | "
-                    f"{fmt(u.get('skill'))} | {m['training_seconds']:.0f} s |")
+                    f"{fmt(u.get('skill'))} | {m['training_seconds']:.0f} s | "
+                    f"{ms_per_call(run_dir(name) / 'model'):.2f} |")
         naive = u.get("naive", {}).get("mee")
         text = (header("The population basis, one knob at a time").rstrip()
                 + "\n\n" + " ".join(__doc__.split("\n\n")[1].split()) + "\n\n"
                 + "| variant | config overrides | MEE mm, folds 2-8 (choice) | skill, folds 2-8 | "
                 "MEE mm, fold 1 (table4's held-out livers) | skill, fold 1 | "
-                "MEE mm, unseen liver | skill, unseen liver | training (all folds) |\n"
-                + "|---|---|---|---|---|---|---|---|---|\n" + "\n".join(rows) + "\n\n"
+                "MEE mm, unseen liver | skill, unseen liver | training (all folds) | "
+                "ms per call at 15.4k nodes |\n"
+                + "|---|---|---|---|---|---|---|---|---|---|\n" + "\n".join(rows) + "\n\n"
                 + f"MEE and skill over folds: the mean of the folds'. The unseen liver's naive "
-                f"model (the population's mean displacement) has MEE {fmt(naive)} mm.\n")
+                f"model (the population's mean displacement) has MEE {fmt(naive)} mm. "
+                "ms per call: median of 200 one-case calls of the exported model at "
+                "15,400 nodes, measured one variant after another in this run (the node-wise "
+                "network's: table4's run); this shared host varies 10-30 % between runs.\n")
         Path(a.md).write_text(text)
     print(f"report written to {a.md}")
     return 0

@@ -273,7 +273,7 @@ def test_the_population_basis_predicts_a_new_liver_on_its_template(tmp_path, syn
 
     run = tmp_path / "pb"
     cfg = get_config("population_basis", folds=2, epochs=20, modes=16, hidden=[32],
-                     load_context=True)
+                     load_context=True, ensemble=1)  # one network: the next test, two
     result = train_and_evaluate(DATA, run, cfg, log_fn=lambda m: None)
     assert np.isfinite(result["network"]["mee"]) and result["n_simulations"] == 36
     pred = load_predictor(run / "model")
@@ -294,7 +294,8 @@ def test_the_population_basis_exports_what_it_trained(tmp_path):
     """The exported predictor computes what training computes from the same inputs (the
     template's own mesh, loads at template nodes, whose place on the template is the node
     itself), reads only the shape coefficients it was told (``shape_inputs``) and reads the
-    load context (another fixed region, another prediction)."""
+    load context (another fixed region, another prediction); as an ensemble of two, the
+    shipped config's form."""
     from types import SimpleNamespace
 
     from surrogate.basis import predict_fields
@@ -305,9 +306,9 @@ def test_the_population_basis_exports_what_it_trained(tmp_path):
 
     ds = load_dataset(DATA)
     cfg = get_config("population_basis", epochs=5, modes=8, hidden=[16], load_context=True,
-                     shape_inputs=2)
+                     shape_inputs=2, ensemble=2)
     model, _ = fit_design(ds, np.arange(ds.n_samples), cfg, 0, log_fn=lambda m: None)
-    assert (model.n_extra, model.context) == (ds.spec.material_dim + 2, 7)
+    assert (model.n_extra, model.context, model.members) == (ds.spec.material_dim + 2, 7, 2)
     pred = load_predictor(export_model(tmp_path / "m", model, cfg, ds))
     sm = pred.shape_model
     T, fixed = sm.template_points, sm.fixed_nodes
