@@ -127,8 +127,9 @@ def phantom_results(split: str, design: str) -> dict:
         ids = [str(i) for i in z["geometry_ids"]]
         C = z["coefficients"][:, :ds.spec.geometry_dim]
     held = held_livers(ds, ids, C, split, cfg)
-    if done.get("held") != held:
+    if done.get("held") != held or done.get("config", cfg) != cfg:  # another model's results
         done = {"held": held, "livers": {}}
+    done["config"] = cfg
     pred = load_predictor(trained(ds, cfg, held, out))
     train_C = C[[i for i, g in enumerate(ids) if g not in held]]
     sm = told_population(pred, train_C)
