@@ -24,8 +24,8 @@ random, inside the population) says what a rule costs a liver like the training 
 the models of ``make table4`` predict the unseen SOFA liver (``--frame LPS``, table4's FE
 truth) with each rule: reported, not used for the choice (its numbers under the first four
 rules were seen in an exploratory run before this study was written; the choice is the lowest
-mean on the outlying phantoms, computed below). One seed per design; MEE per liver over its
-simulations' nodes and load steps.
+mean on the outlying phantoms, computed below). One seed per design (the population basis: its
+shipped ensemble); MEE per liver over its simulations' nodes and load steps.
 
     .venv-train/bin/python bench/shape_rule_study.py     # after make table4 T4="--scenes 4"
 
