@@ -50,6 +50,7 @@ VARIANTS = {  # every knob named: the shipped config's defaults move
     "input noise 0.3, load context, no shape input": {**CONTEXT, "shape_inputs": 0},
     "input noise 0.5, load context": {**CONTEXT, "input_noise": 0.5},
     "input noise 0.3, load context, weight decay 1e-2": {**CONTEXT, "l2": 1e-2},
+    "input noise 0.3, load context, ensemble of 3": {**CONTEXT, "ensemble": 3},
     "input noise 0.3, load context, ensemble of 5": {**CONTEXT, "ensemble": 5},
 }
 
@@ -63,9 +64,11 @@ def label(name: str) -> str:
     return f"{name} (shipped)" if same else name
 
 
-def ms_per_call(model_dir: Path, calls: int = 200) -> float:
-    """Median ms of one-case calls of the variant's exported model at table4's latency size
-    (its modes moved onto a liver-sized cloud, as table4 times the scene-4 designs)."""
+def ms_per_call(model_dirs: dict, calls: int = 200, rounds: int = 5) -> dict:
+    """{name: median ms} of one-case calls of each exported model at table4's latency size
+    (its modes moved onto a liver-sized cloud, as table4 times the scene-4 designs): every
+    model timed once per round, the rounds interleaved so that the host's drifts fall on all
+    of them alike; the median over the rounds of each round's median."""
     import tempfile
     import warnings
 
@@ -74,10 +77,15 @@ def ms_per_call(model_dir: Path, calls: int = 200) -> float:
 
     from surrogate.export import load_predictor
 
+    out = {name: [] for name in model_dirs}
     with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the cloud's nodes were never loaded: timing only
-        big = load_predictor(at_scale(model_dir, LATENCY_NODES, Path(tmp) / "big"))
-        return 1e3 * latency(big, None, calls)[0]
+        big = {name: load_predictor(at_scale(d, LATENCY_NODES, Path(tmp) / f"m{i}"))
+               for i, (name, d) in enumerate(model_dirs.items())}
+        for _ in range(rounds):
+            for name, pred in big.items():
+                out[name].append(1e3 * latency(pred, None, calls)[0])
+    return {name: float(np.median(v)) for name, v in out.items()}
 
 
 def run_dir(name: str) -> Path:
@@ -154,6 +162,9 @@ def main() -> int:
                     f"{fmt(u.get('network', {}).get('mee'))} | {fmt(u.get('skill'))} | "
                     f"{r['metrics']['training_seconds'] / 60:.0f} min | "
                     f"{r['ms_big']:.0f} |")
+    for name in a.only:  # trained first, then timed side by side
+        run(name, VARIANTS[name])
+    ms = ms_per_call({name: run_dir(name) / "model" for name in a.only})
     for name in a.only:
         m = run(name, VARIANTS[name])
         sel, sel_skill = pooled(m, slice(1, None))
@@ -162,7 +173,7 @@ def main() -> int:
         rows.append(f"| {label(name)} | `{VARIANTS[name] or '-'}` | {sel:.3f} | {sel_skill:.3f} | "
                     f"{f1:.3f} | {f1_skill:.3f} | {fmt(u.get('network', {}).get('mee'))} | "
                     f"{fmt(u.get('skill'))} | {m['training_seconds']:.0f} s | "
-                    f"{ms_per_call(run_dir(name) / 'model'):.2f} |")
+                    f"{ms[name]:.2f} |")
         naive = u.get("naive", {}).get("mee")
         text = (header("The population basis, one knob at a time").rstrip()
                 + "\n\n" + " ".join(__doc__.split("\n\n")[1].split()) + "\n\n"
@@ -173,9 +184,10 @@ def main() -> int:
                 + "|---|---|---|---|---|---|---|---|---|---|\n" + "\n".join(rows) + "\n\n"
                 + f"MEE and skill over folds: the mean of the folds'. The unseen liver's naive "
                 f"model (the population's mean displacement) has MEE {fmt(naive)} mm. "
-                "ms per call: median of 200 one-case calls of the exported model at "
-                "15,400 nodes, measured one variant after another in this run (the node-wise "
-                "network's: table4's run); this shared host varies 10-30 % between runs.\n")
+                "ms per call: one-case calls of the exported model at 15,400 nodes, median "
+                "over 5 rounds of each round's median of 200 calls, the variants interleaved "
+                "in each round (the node-wise network's: table4's run); this shared host "
+                "varies 10-30 % between runs.\n")
         Path(a.md).write_text(text)
     print(f"report written to {a.md}")
     return 0
