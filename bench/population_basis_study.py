@@ -162,11 +162,9 @@ def main() -> int:
                     f"{fmt(u.get('network', {}).get('mee'))} | {fmt(u.get('skill'))} | "
                     f"{r['metrics']['training_seconds'] / 60:.0f} min | "
                     f"{r['ms_big']:.0f} |")
-    for name in a.only:  # trained first, then timed side by side
-        run(name, VARIANTS[name])
+    metrics = {name: run(name, VARIANTS[name]) for name in a.only}  # then timed side by side
     ms = ms_per_call({name: run_dir(name) / "model" for name in a.only})
-    for name in a.only:
-        m = run(name, VARIANTS[name])
+    for name, m in metrics.items():
         sel, sel_skill = pooled(m, slice(1, None))
         f1, f1_skill = pooled(m, slice(0, 1))
         u = unseen.evaluate(run_dir(name) / "model") or {}

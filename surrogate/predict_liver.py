@@ -190,6 +190,12 @@ def told_shape(predictor, coefficients, shape: str | None = None) -> tuple[np.nd
     return predictor.shape_model.shape_told(coefficients, shape or shape_rule(predictor))
 
 
+def told_note(rule: str) -> str:
+    """What the command and the manipulator say when a liver is told a shape not its own."""
+    return (f"the liver lies beyond the population: the network is told a shape inside it "
+            f"(--shape {rule}, docs/shape_rule.md; --shape own: its own)")
+
+
 def _no_population(predictor) -> str:
     if not predictor.spec.geometry_dim:
         return ("this model was trained on one liver (its scene does not vary the geometry): "
@@ -390,9 +396,7 @@ def main(args) -> int:
     for msg in pred.warnings:
         print(f"warning: {msg}", file=sys.stderr)
     if pred.shape_rule != "own":
-        print(f"the liver lies beyond the population: the network is told a shape inside it "
-              f"(--shape {pred.shape_rule}, docs/shape_rule.md; --shape own: its own)",
-              file=sys.stderr)
+        print(told_note(pred.shape_rule), file=sys.stderr)
     if not args.no_picture:
         png = pred.draw(out / "liver_deformed.png", title=Path(args.liver).name)
         print(f"picture: {png}", file=sys.stderr)

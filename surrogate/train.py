@@ -57,29 +57,29 @@ def fit_design(ds: Dataset, train_samples: np.ndarray, cfg: dict, seed: int, lab
     design.check(ds)
     tr, va, rng = early_stopping_split(ds, train_samples, cfg, seed)
     problem = design.problem(ds, tr, va, cfg, rng)
+    # An ensemble (cfg "ensemble" > 1): the same problem (modes, statistics, held-out
+    # simulations) fitted from other initialisations, batch orders and noise, each member
+    # checkpointed in a folder of its own; the first member is the single model.
     members = cfg.get("ensemble", 1)
-    if members == 1:
-        params, history = engine.fit(problem, cfg, seed, rng, label=label, log_fn=log_fn,
-                                     log_every=getattr(design, "log_every", 1),
-                                     checkpoint=checkpoint)
-        if hasattr(design, "summary"):
-            log_fn(f"{label}stopped after {len(history)} epochs; {design.summary(problem)}")
-        return design.model(problem, params), history
-    # An ensemble: the same problem (modes, statistics, held-out simulations) fitted from
-    # other initialisations, batch orders and noise; the first member is the single model.
+    one = members == 1
+    summary = design.summary(problem) if hasattr(design, "summary") else None
     fitted, history = [], []
     for m in range(members):
-        ck = None if checkpoint is None else engine.Checkpoint(checkpoint.dir / f"member{m}",
-                                                               checkpoint.identity)
-        r = rng if m == 0 else np.random.default_rng([seed, m])
-        params, hist = engine.fit(problem, cfg, seed + 7919 * m, r,
-                                  label=f"{label}member {m + 1}/{members} ", log_fn=log_fn,
+        who = label if one else f"{label}member {m + 1}/{members} "
+        ck = checkpoint if one or checkpoint is None else engine.Checkpoint(
+            checkpoint.dir / f"member{m}", checkpoint.identity)
+        params, hist = engine.fit(problem, cfg, seed + 7919 * m,
+                                  rng if m == 0 else np.random.default_rng([seed, m]),
+                                  label=who, log_fn=log_fn,
                                   log_every=getattr(design, "log_every", 1), checkpoint=ck)
         fitted.append(params)
-        history += [{**h, "member": m} for h in hist]
-        log_fn(f"{label}member {m + 1}/{members} stopped after {len(hist)} epochs")
-    if hasattr(design, "summary"):
-        log_fn(f"{label}{members} members; {design.summary(problem)}")
+        history += hist if one else [{**h, "member": m} for h in hist]
+        if summary is not None:
+            log_fn(f"{who}stopped after {len(hist)} epochs" + (f"; {summary}" if one else ""))
+    if one:
+        return design.model(problem, fitted[0]), history
+    if summary is not None:
+        log_fn(f"{label}{members} members; {summary}")
     return design.model(problem, stack_members(fitted), members=members), history
 
 

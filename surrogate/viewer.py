@@ -481,7 +481,12 @@ def build(args):
     pred = load_predictor(mdir)
     geometry = None
     if getattr(args, "place", None) is not None:  # a liver never seen, placed as predict-liver
-        from surrogate.predict_liver import place_liver, read_liver_surface, told_shape
+        from surrogate.predict_liver import (
+            place_liver,
+            read_liver_surface,
+            told_note,
+            told_shape,
+        )
 
         if pred.shape_model is None:
             raise ViewerError(f"{mdir}: --place needs a model trained on a population of "
@@ -494,8 +499,7 @@ def build(args):
         sm = pred.shape_model
         told, rule = told_shape(pred, placement.coefficients, getattr(args, "shape", None))
         if rule != "own":
-            print(f"{log_prefix}: the liver lies beyond the population: the network is told "
-                  f"a shape inside it (--shape {rule}, docs/shape_rule.md)", file=sys.stderr)
+            print(f"{log_prefix}: {told_note(rule)}", file=sys.stderr)
         geometry = (placement.points, sm.fixed_nodes, sm.surface_triangles, told)
     elif pred.points is None or pred.triangles is None:
         if args.data is None:
