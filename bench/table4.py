@@ -57,9 +57,11 @@ BUDGET = {1: {"sims": 400, "folds": 5},
 NODEWISE_BUDGET = {2: {"epochs": 30, "node_fraction": 0.1},
                    3: {"epochs": 30, "node_fraction": 0.1},
                    4: {"epochs": 30, "node_fraction": 0.1}}
-# The design trained beside the scene's own on the same folds (the scene file names the one
-# that wins: docs/realtime.md): a reduced basis beside the node-wise net, and back.
-SIDE_BY_SIDE = {1: [], 2: ["basis"], 3: ["paper_scene3"], 4: ["population_basis"]}
+# The designs trained beside the scene's own on the same folds (the scene file names the one
+# that wins: docs/realtime.md), as (config, overrides): a reduced basis beside the node-wise
+# net, and back; scene 2 also the basis with one network block per load (shared_loads off).
+SIDE_BY_SIDE = {1: [], 2: [("basis", {}), ("basis", {"shared_loads": False})],
+                3: [("paper_scene3", {})], 4: [("population_basis", {})]}
 CURVE_FOLDS = 3  # the learning curve's smaller points; x = training simulations per fold
 # The paper's Table 4 as far as our sources transcribe it: NN and naive MEE and the skill
 # (DESIGN.md), % of samples within 3 mm (the paper's abstract); scene 4 is the median liver
@@ -341,12 +343,13 @@ def run_scene(k: int, a, rows: dict | None = None) -> dict:
     out["calls"] = a.calls
     out["side_by_side"] = []
     save()
-    for other in SIDE_BY_SIDE[k]:  # the other real-time design, same folds, all simulations
-        run = base / f"run_{other}"
-        keep = budget(k, other, {key: overrides[key] for key in ("folds", "evaluate_folds")
-                                 if key in overrides})
+    for other, variant in SIDE_BY_SIDE[k]:  # other designs, same folds, all simulations
+        run = base / ("run_" + "_".join([other] + [f"{key}-{json.dumps(v)}"
+                                                   for key, v in variant.items()]))
+        keep = budget(k, other, {**{key: overrides[key] for key in ("folds", "evaluate_folds")
+                                    if key in overrides}, **variant})
         res = train(data, run, other, keep)
-        row = {"config": other, "overrides": keep, "metrics": res,
+        row = {"config": other, "variant": variant, "overrides": keep, "metrics": res,
                "run": str(run.relative_to(ROOT))}
         if population and a.unseen:
             row["unseen"] = unseen(scene_file, base, run / "model", a)
@@ -476,10 +479,12 @@ def _f(x, fmt="{:.3f}"):
     return "n/a" if x is None or (isinstance(x, float) and np.isnan(x)) else fmt.format(x)
 
 
-def design_label(config: str) -> str:
+def design_label(config: str, variant: dict | None = None) -> str:
+    """The design's name, its config and the overrides that make it a variant of it."""
     kind = {"basis": "reduced basis", "population_basis": "population basis"}.get(
         config, "node-wise")
-    return f"{kind} (`{config}`)"
+    knobs = "".join(f", {key} = {json.dumps(v)}" for key, v in (variant or {}).items())
+    return f"{kind} (`{config}`{knobs})"
 
 
 def design_rows(k: int, r: dict, d: dict, gen: str) -> list[str]:
@@ -493,7 +498,7 @@ def design_rows(k: int, r: dict, d: dict, gen: str) -> list[str]:
         mee = f"{pl['median']:.3f} (median liver)"
         if "skill_mean" in pl:
             skill = f"{pl['skill_mean']:.3f} / {pl['skill_median']:.3f}"
-    design = design_label(d["config"])
+    design = design_label(d["config"], d.get("variant"))
     out = [f"| {k} | ours | {design} | {r['sims']:,} | {d['nodes']:,} | "
            f"{net['mae_x']:.3f} / {net['mae_y']:.3f} / {net['mae_z']:.3f} | {mee} | "
            f"{nv['mee']:.3f} | {skill} | {net['pct_ee_lt_1mm']:.2f} | "
@@ -607,7 +612,8 @@ def write_report(rows: dict, a) -> None:
             if d.get("unseen"):
                 notes.append(unseen_note(k, d))
             if d is not r:
-                notes.append(f"- Scene {k}, `{d['config']}` beside `{r['config']}`: the same "
+                notes.append(f"- Scene {k}, {design_label(d['config'], d.get('variant'))} "
+                             f"beside `{r['config']}`: the same "
                              f"data and folds ({d['overrides']}). Run: `{d['run']}`.")
         if k == 1 and not r.get("side_by_side"):
             notes.append("- Scene 1's node-wise network beside the reduced basis, same scene "

@@ -14,6 +14,12 @@ force direction and magnitude; then the material and shape inputs when the scene
 direction and magnitude, and zero without load. A call costs one small network plus one (3N x
 modes) product, for any number of nodes (docs/realtime.md).
 
+With several loads and ``shared_loads``, one network serves every load: load l's (modes x 3)
+block is M(x_l, mean of the other loads' x, extra), and c = sum_l M_l f_l / f_scale. The
+prediction then does not depend on the order in which the loads are listed, and each training
+case teaches the one map once per load (a sum of one-load responses, corrected by what the
+other loads are doing). With one load it is the same network as without.
+
 It needs one liver (the basis lives on its nodes); a scene that varies the geometry takes the
 population basis (:mod:`surrogate.population_basis`) or the node-wise design. Pure functions of
 arrays; trained by the one loop of :mod:`surrogate.engine`.
@@ -53,11 +59,18 @@ class BasisModel:
     n_extra: int            # leading columns of the extra inputs the network is told
     context: int = 0        # per-load context features (the population design's), or 0
     members: int = 1        # networks of an ensemble (their arrays: a leading axis), or 1
+    shared_loads: bool = False  # one network for every load (module docstring)
+    modes_count: int = 0    # k (the modes may be absent: an exported model's statistics)
+
+    def __post_init__(self):
+        if self.modes is not None:
+            self.modes_count = int(self.modes.shape[0])
 
     def stats(self) -> dict:
         return {"x_mean": self.x_mean.tolist(), "x_std": self.x_std.tolist(),
                 "c_scale": self.c_scale, "f_scale": self.f_scale, "n_extra": self.n_extra,
-                "context": self.context, "members": self.members}
+                "context": self.context, "members": self.members,
+                "shared_loads": self.shared_loads}
 
 
 def load_features(forces, load_points, extra, xp=np, context=None):
@@ -72,26 +85,65 @@ def load_features(forces, load_points, extra, xp=np, context=None):
     return xp.concatenate([flat, extra], axis=-1)
 
 
+def per_load_inputs(x, n_loads: int, per: int):
+    """(..., n_loads, in) the shared network's input of each load from the global features
+    (..., per n_loads + e): the load's own ``per`` features, the mean of the other loads'
+    (with two or more loads), then the extra inputs.
+    """
+    own = x[..., :n_loads * per].reshape(x.shape[:-1] + (n_loads, per))
+    extra = jnp.broadcast_to(x[..., None, n_loads * per:],
+                             x.shape[:-1] + (n_loads, x.shape[-1] - n_loads * per))
+    parts = [own]
+    if n_loads > 1:
+        parts.append((own.sum(axis=-2, keepdims=True) - own) / (n_loads - 1))
+    return jnp.concatenate(parts + [extra], axis=-1)
+
+
+def input_width(n_loads: int, per: int, n_extra: int, shared: bool) -> int:
+    """The first layer's input width."""
+    if shared:
+        return per * (2 if n_loads > 1 else 1) + n_extra
+    return per * n_loads + n_extra
+
+
 class BasisMLP(nn.Module):
     """(features, forces / f_scale) -> mode coefficients (modes,): hidden GELU layers
-    ``hidden_i``, then ``coefficients``, the (modes x 3 n_loads) matrix applied to the forces.
+    ``hidden_i``, then ``coefficients``, the (modes x 3 n_loads) matrix applied to the forces;
+    ``shared``: one network per load (inputs :func:`per_load_inputs`, ``per`` features per
+    load), its (modes x 3) blocks applied to each load's force and summed.
     """
 
     hidden: tuple
     modes: int
     n_loads: int
+    shared: bool = False
+    per: int = LOAD_FEATURES
 
     @nn.compact
     def __call__(self, x, f):
+        if self.shared:
+            x = per_load_inputs(x, self.n_loads, self.per)
         for i, width in enumerate(self.hidden):
             x = nn.gelu(nn.Dense(width, name=f"hidden_{i}")(x))
+        if self.shared:
+            M = nn.Dense(self.modes * 3, name="coefficients")(x)
+            M = M.reshape(x.shape[:-1] + (self.modes, 3))  # (..., n_loads, modes, 3)
+            return jnp.einsum("...lkj,...lj->...k", M, f)
         M = nn.Dense(self.modes * 3 * self.n_loads, name="coefficients")(x)
         M = M.reshape(x.shape[:-1] + (self.modes, 3 * self.n_loads))
         return jnp.einsum("...kj,...j->...k", M, f.reshape(f.shape[:-2] + (-1,)))
 
 
-def network(hidden, modes: int, n_loads: int) -> BasisMLP:
-    return BasisMLP(hidden=tuple(hidden), modes=int(modes), n_loads=int(n_loads))
+def network(hidden, modes: int, n_loads: int, shared: bool = False,
+            per: int = LOAD_FEATURES) -> BasisMLP:
+    return BasisMLP(hidden=tuple(hidden), modes=int(modes), n_loads=int(n_loads),
+                    shared=bool(shared), per=int(per))
+
+
+def model_network(model: BasisModel) -> BasisMLP:
+    """The network of a trained or exported model (its statistics say which)."""
+    return network(model.hidden, model.modes_count, model.n_loads, model.shared_loads,
+                   LOAD_FEATURES + model.context)
 
 
 def member_mean(net: BasisMLP, params, members: int = 1, cast=lambda a: a):
@@ -177,10 +229,19 @@ class BasisProblem(Problem):
         self.context = 0 if context is None else int(context.shape[-1])
         X = load_features(ds.forces, ds.load_points, ds.extra[:, :self.n_extra],
                           context=context)
-        self.x_mean = X[tr].mean(axis=0).astype(np.float32)
-        std = X[tr].std(axis=0)
-        self.x_std = np.where(std > 1e-8 * (np.abs(X[tr]).max(axis=0) + 1e-30), std,
-                              1.0).astype(np.float32)
+        L, per = ds.spec.n_loads, LOAD_FEATURES + self.context
+        self.shared = bool(cfg.get("shared_loads", False))
+        Xs = X[tr]
+        if self.shared:  # one network reads every load: the loads share their statistics
+            pooled = Xs[:, :L * per].reshape(-1, per)
+            mean = np.concatenate([np.tile(pooled.mean(axis=0), L), Xs[:, L * per:].mean(0)])
+            std = np.concatenate([np.tile(pooled.std(axis=0), L), Xs[:, L * per:].std(0)])
+            big = np.concatenate([np.tile(np.abs(pooled).max(axis=0), L),
+                                  np.abs(Xs[:, L * per:]).max(axis=0, initial=0.0)])
+        else:
+            mean, std, big = Xs.mean(axis=0), Xs.std(axis=0), np.abs(Xs).max(axis=0)
+        self.x_mean = mean.astype(np.float32)
+        self.x_std = np.where(std > 1e-8 * (big + 1e-30), std, 1.0).astype(np.float32)
         C = U @ self.modes.T.astype(np.float64)
         self.c_scale = float(np.sqrt(np.mean(C**2))) or 1.0
         self.f_scale = float(np.linalg.norm(ds.forces[tr], axis=-1).mean()) or 1.0
@@ -191,7 +252,7 @@ class BasisProblem(Problem):
         self.data = {"x": jnp.asarray((X - self.x_mean) / self.x_std, dtype=jnp.float32),
                      "f": jnp.asarray(ds.forces / self.f_scale, dtype=jnp.float32),
                      "target": jnp.asarray(target)}
-        self.net = network(tuple(cfg["hidden"]), self.modes.shape[0], ds.spec.n_loads)
+        self.net = network(tuple(cfg["hidden"]), self.modes.shape[0], L, self.shared, per)
         self.input_noise = float(cfg["input_noise"])
         self.tr, self.va = tr, va
         self.B = min(cfg["batch_size"], tr.size)
@@ -236,7 +297,7 @@ def predict_fields(ds: Dataset, model: BasisModel, samples: np.ndarray,
     """(len(samples), 3 n) predicted fields (mm) in the basis' node order; ``context``: the
     dataset's (n_samples, n_loads, c) load context when the model takes one.
     """
-    net = network(model.hidden, model.modes.shape[0], model.n_loads)
+    net = model_network(model)
     mean = member_mean(net, model.params, model.members,
                        cast=lambda a: jnp.asarray(a, jnp.float32))
 
@@ -276,7 +337,8 @@ class Basis:
                           x_std=problem.x_std, c_scale=problem.c_scale,
                           f_scale=problem.f_scale, hidden=problem.net.hidden,
                           n_loads=problem.net.n_loads, n_extra=problem.n_extra,
-                          context=problem.context, members=members)
+                          context=problem.context, members=members,
+                          shared_loads=problem.shared)
 
     def summary(self, problem: BasisProblem) -> str:
         return (f"{problem.modes.shape[0]} modes, projection MEE of the training fields "

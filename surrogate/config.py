@@ -26,6 +26,8 @@ BASE = {
     "ensemble": 1,             # basis designs: networks trained on the same modes from other
                                # initialisations and batch orders; their coefficients averaged
                                # (one mode product per call whatever their number)
+    "shared_loads": False,     # basis designs with several loads: one network for every load
+                               # (its blocks summed over the loads; surrogate/basis.py)
     "dropout": 0.0,            # node-wise only
     "l2": 0.0,                 # weight decay coefficient (added to the loss as l2 * |w|^2 / 2)
     "input_noise": 0.0,        # std of Gaussian noise on normalised inputs during training
@@ -61,7 +63,9 @@ CONFIGS = {
     # The real-time design (docs/realtime.md): 64 modes of the training fields, a 256 x 2
     # network from the loads to their coefficients; trained on whole fields, not nodes.
     "basis": {"design": "basis", "modes": 64, "hidden": [256, 256], "batch_size": 128,
-              "epochs": 400, "early_stopping": 30, "lr_patience": 8, "folds": 10},
+              "epochs": 400, "early_stopping": 30, "lr_patience": 8, "folds": 10,
+              # two forces: one network for both (docs/table4.md, scene 2)
+              "shared_loads": True},
     # Any liver in real time (surrogate/population_basis.py): modes over the population's
     # fields on the registered template; the network also sees the shape coefficients.
     "population_basis": {"design": "population_basis", "modes": 64, "hidden": [256, 256],
@@ -89,6 +93,7 @@ CHECKS = {
     "l2": (lambda v: is_num(v) and v >= 0, "a finite number >= 0"),
     "input_noise": (lambda v: is_num(v) and v >= 0, "a finite number >= 0"),
     "load_context": (lambda v: isinstance(v, bool), "true or false"),
+    "shared_loads": (lambda v: isinstance(v, bool), "true or false"),
     "ensemble": (lambda v: is_int(v) and v >= 1, "an integer >= 1"),
     "shape_inputs": (lambda v: v == "all" or is_int(v) and v >= 0, "'all' or an integer >= 0"),
     "batch_size": (lambda v: is_int(v) and v >= 1, "an integer >= 1"),
@@ -124,6 +129,9 @@ def get_config(name: str = "small", **overrides) -> dict:
     if not problems and cfg["design"] != "nodewise" and cfg["dropout"] > 0:
         problems.append(f"dropout: the {cfg['design']} design has no dropout (expected 0, got "
                         f"{cfg['dropout']!r}; input_noise and l2 regularise it)")
+    if not problems and cfg["design"] == "nodewise" and cfg["shared_loads"]:
+        problems.append("shared_loads: only the basis designs take it (expected false for "
+                        "nodewise, got True)")
     if not problems and cfg["design"] == "nodewise" and cfg["ensemble"] != 1:
         problems.append(f"ensemble: only the basis designs take it (expected 1 for nodewise, "
                         f"got {cfg['ensemble']!r}: a node-wise ensemble's call costs its "

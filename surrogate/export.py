@@ -331,8 +331,9 @@ class Predictor:
             LOAD_FEATURES,
             BasisModel,
             coefficients,
+            input_width,
             member_mean,
-            network,
+            model_network,
         )
         from surrogate.population_basis import CONTEXT
 
@@ -358,12 +359,16 @@ class Predictor:
             n_extra = st.get("n_extra", e)  # models written before shape_inputs: all
             context = st.get("context", 0)  # and before load_context: none
             members = st.get("members", 1)  # and before ensembles: one network
+            shared = st.get("shared_loads", False)  # and before shared loads: one per load
         except (KeyError, TypeError, ValueError, AttributeError):
             raise ValueError(f"{d / 'model.json'}: stats: expected x_mean, x_std, c_scale, "
                              "f_scale") from None
         if not (isinstance(members, int) and members >= 1):
             raise ValueError(f"{d / 'model.json'}: stats: members: expected an integer >= 1, "
                              f"got {members!r}")
+        if not isinstance(shared, bool):
+            raise ValueError(f"{d / 'model.json'}: stats: shared_loads: expected true or "
+                             f"false, got {shared!r}")
         if not (isinstance(n_extra, int) and self.spec.material_dim <= n_extra <= e):
             raise ValueError(f"{d / 'model.json'}: stats: n_extra: expected an integer from "
                              f"{self.spec.material_dim} to {e}, got {n_extra!r}")
@@ -374,7 +379,9 @@ class Predictor:
         self._context = context
         dim = (LOAD_FEATURES + context) * L + n_extra
         k = modes.shape[0]
-        params = _read_params(d / "params.npz", dim, hidden, out=3 * k * L,
+        params = _read_params(d / "params.npz",
+                              input_width(L, LOAD_FEATURES + context, n_extra, shared), hidden,
+                              out=3 * k * (1 if shared else L),
                               version=meta["version"], last="coefficients", members=members)
         if x_mean.shape != (dim,) or x_std.shape != (dim,) or not (
                 np.all(np.isfinite(x_mean)) and np.all(x_std > 0) and c_scale > 0
@@ -389,9 +396,10 @@ class Predictor:
         self.norm = None
         stats = BasisModel(params=None, modes=None, x_mean=x_mean, x_std=x_std,
                            c_scale=c_scale, f_scale=f_scale, hidden=hidden, n_loads=L,
-                           n_extra=n_extra, context=context, members=members)
+                           n_extra=n_extra, context=context, members=members,
+                           shared_loads=shared, modes_count=k)
         self._basis_stats = stats  # the model without its parameters and modes
-        net = network(hidden, k, L)
+        net = model_network(stats)
 
         def one_case(params, modes, forces, load_points, extra, ctx):
             apply = member_mean(net, params, members, cast=lambda a: a.astype(dtype))

@@ -13,21 +13,28 @@ from data_spec.shards import OgdenMaterial, Shard, SolverStats, geometry_path, w
 
 
 def synthetic_shard(geometry: Geometry, index: int, *, n_steps: int = 3, seed: int = 0,
-                    scene_name: str = "synthetic", scene_hash: str = "0" * 64) -> Shard:
-    """A shard whose displacement is a smooth made-up field (not a solution of anything)."""
+                    scene_name: str = "synthetic", scene_hash: str = "0" * 64,
+                    n_loads: int = 1) -> Shard:
+    """A shard whose displacement is a smooth made-up field (not a solution of anything): a
+    bump around each load node along its force, summed over the loads.
+    """
     rng = np.random.default_rng([seed, index])
     fixed = geometry.regions.get("x0", np.arange(3))
-    node = int(rng.integers(geometry.n_nodes))
-    force = rng.normal(size=3)
-    force *= 0.4 / np.linalg.norm(force)
+    nodes, forces = [], []
+    for _ in range(n_loads):
+        nodes.append(int(rng.integers(geometry.n_nodes)))
+        force = rng.normal(size=3)
+        forces.append(force * 0.4 / np.linalg.norm(force))
     fr = np.arange(1, n_steps + 1) / n_steps
     x = geometry.points
-    shape = (x[:, :1] - x[:, 0].min()) * np.exp(-np.sum((x - x[node]) ** 2, axis=1))[:, None]
-    disp = fr[:, None, None] * shape[None] * force[None, None, :] * 10.0
+    disp = 0.0
+    for node, force in zip(nodes, forces):
+        shape = (x[:, :1] - x[:, 0].min()) * np.exp(-np.sum((x - x[node]) ** 2, axis=1))[:, None]
+        disp = disp + fr[:, None, None] * shape[None] * force[None, None, :] * 10.0
     return Shard(
         scene_name=scene_name, scene_hash=scene_hash, sim_index=index, seed=seed,
-        geometry_id=geometry.geometry_id, load_kind="nodal", load_nodes=[node],
-        forces=force[None], material=OgdenMaterial(c=[4.1e-3], m=[10.06], K=0.41),
+        geometry_id=geometry.geometry_id, load_kind="nodal", load_nodes=nodes,
+        forces=np.array(forces), material=OgdenMaterial(c=[4.1e-3], m=[10.06], K=0.41),
         fixed_nodes=fixed, load_fractions=fr, output_nodes=np.arange(geometry.n_nodes),
         displacement=disp,
         stats=SolverStats(newton_iterations=np.full(n_steps, 3), residual_norms=np.full(
@@ -52,7 +59,7 @@ def write_test_scene(directory: str | Path, scene_file: str | Path = TEST_SCENE)
 def synthetic_dataset(directory: str | Path, n_sims: int = 3, n: int = 3,
                       n_steps: int = 3, scene_file: str | Path = TEST_SCENE) -> Path:
     """Write a scene, a geometry and ``n_sims`` synthetic shards into ``directory`` (the
-    shards carry the scene's name and hash, so the dataset validates).
+    shards carry the scene's name and hash and its number of loads, so the dataset validates).
     """
     directory = Path(directory)
     scene = write_test_scene(directory, scene_file)
@@ -60,5 +67,6 @@ def synthetic_dataset(directory: str | Path, n_sims: int = 3, n: int = 3,
     write_geometry(geometry_path(directory, geo.geometry_id), geo)
     for i in range(n_sims):
         write_shard(directory, synthetic_shard(geo, i, n_steps=n_steps, scene_name=scene.name,
-                                               scene_hash=scene.hash))
+                                               scene_hash=scene.hash,
+                                               n_loads=scene["loads"]["count"]))
     return directory

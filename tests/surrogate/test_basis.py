@@ -204,3 +204,72 @@ def test_an_ensemble_predicts_the_mean_of_its_members(ds, tmp_path):
         load_predictor(tmp_path / "e")
     with pytest.raises(ValueError, match="ensemble: only the basis designs"):
         get_config("small", ensemble=2)
+
+
+@pytest.fixture(scope="module")
+def two_loads(tmp_path_factory):
+    """A synthetic two-force dataset: the tiny scene with two loads, each case's field the sum
+    of a bump around each load node along its force."""
+    from tests.fixtures import TEST_SCENE, synthetic_dataset
+
+    d = tmp_path_factory.mktemp("two_loads")
+    scene = d / "two_loads.toml"
+    scene.write_text(TEST_SCENE.read_text().replace("count = 1", "count = 2"))
+    return load_dataset(synthetic_dataset(d / "data", n_sims=30, n=5, n_steps=2,
+                                          scene_file=scene))
+
+
+def test_shared_loads_predict_the_same_field_whichever_load_is_listed_first(two_loads,
+                                                                          tmp_path):
+    """shared_loads: one network reads both loads, so swapping the two loads of a case
+    (nodes and forces) leaves the exported model's field unchanged, while the network with
+    one block per load (shared_loads = false) changes it. The loads share their feature
+    statistics, and the exported model agrees with the model in memory."""
+    from surrogate.export import export_model
+
+    ds = two_loads
+    assert ds.spec.n_loads == 2
+    train = np.arange(ds.n_samples - 8)
+    held = np.arange(ds.n_samples - 8, ds.n_samples)
+    swap = np.array([1, 0])
+    swapped = {}
+    for shared in (True, False):
+        cfg = get_config("basis", epochs=20, modes=12, hidden=[24], shared_loads=shared)
+        model, _ = fit_design(ds, train, cfg, 0, "", lambda m: None)
+        out = tmp_path / str(shared)
+        export_model(out, model, cfg, ds)
+        predict = load_predictor(out)
+        mine = predict_samples(ds, model, held)[0].reshape(held.size, -1, 3)
+        got = predict(ds.forces[held], ds.load_nodes[held])
+        scale = np.abs(mine).max()
+        assert scale > 0
+        np.testing.assert_allclose(got, mine, rtol=1e-4, atol=1e-5 * scale)
+        swapped[shared] = np.abs(predict(ds.forces[held][:, swap],
+                                         ds.load_nodes[held][:, swap]) - got).max() / scale
+        stats = json.loads((out / "model.json").read_text())["stats"]
+        assert stats["shared_loads"] is shared
+        per = np.array(stats["x_mean"][:14]).reshape(2, 7)
+        assert np.allclose(per[0], per[1]) == shared  # the loads' statistics: pooled or not
+    assert swapped[True] < 1e-5, swapped
+    assert swapped[False] > 1e-3, swapped
+
+
+def test_with_one_load_the_shared_network_is_the_network_per_load():
+    """One load: shared_loads builds the same layers and, from the same parameters, the same
+    coefficients (so the one-load scenes' models are unchanged by the key)."""
+    import jax
+
+    from surrogate.basis import network
+
+    rng = np.random.default_rng(0)
+    x, f = rng.normal(size=(5, 9)).astype(np.float32), rng.normal(size=(5, 1, 3))
+    f = f.astype(np.float32)
+    joint, shared = network([16, 8], 6, 1), network([16, 8], 6, 1, shared=True)
+    params = joint.init(jax.random.PRNGKey(0), x, f)["params"]
+    shapes = jax.tree_util.tree_map(np.shape, params)
+    assert jax.tree_util.tree_map(np.shape, shared.init(jax.random.PRNGKey(0), x, f)[
+        "params"]) == shapes
+    np.testing.assert_allclose(shared.apply({"params": params}, x, f),
+                               joint.apply({"params": params}, x, f), rtol=1e-5, atol=1e-6)
+    with pytest.raises(ValueError, match="shared_loads: only the basis designs"):
+        get_config("small", shared_loads=True)
