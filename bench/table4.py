@@ -60,7 +60,7 @@ NODEWISE_BUDGET = {2: {"epochs": 30, "node_fraction": 0.1},
 # The designs trained beside the scene's own on the same folds (the scene file names the one
 # that wins: docs/realtime.md), as (config, overrides): a reduced basis beside the node-wise
 # net, and back; scene 2 also the basis with one network block per load (shared_loads off).
-SIDE_BY_SIDE = {1: [], 2: [("basis", {}), ("basis", {"shared_loads": False})],
+SIDE_BY_SIDE = {1: [], 2: [("paper_scene2", {}), ("basis", {"shared_loads": False})],
                 3: [("paper_scene3", {})], 4: [("population_basis", {})]}
 CURVE_FOLDS = 3  # the learning curve's smaller points; x = training simulations per fold
 # The paper's Table 4 as far as our sources transcribe it: NN and naive MEE and the skill
