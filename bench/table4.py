@@ -460,6 +460,8 @@ def evaluate_unseen(pred, data: Path, population_data: Path, placement,
         P.append(u[:, sh.output_nodes].reshape(-1, 3))
         T.append(np.asarray(sh.displacement[:sh.n_done]).reshape(-1, 3))
     pred_all, true_all = np.concatenate(P), np.concatenate(T)
+    floor = ({"modes_floor_mm": modes_floor(pred, placement, g.points, shards)}
+             if getattr(pred, "_modes_np", None) is not None else {})
     mean = population_mean_displacement(population_data)
     m_nn = displacement_metrics(pred_all, true_all)
     m_naive = displacement_metrics(np.broadcast_to(placement.vectors_to_liver(mean),
@@ -472,7 +474,26 @@ def evaluate_unseen(pred, data: Path, population_data: Path, placement,
             "shape_asked": shape or shape_rule(pred),
             "shape_rule": told_shape(pred, placement.coefficients, shape)[1],
             "fixed_nodes": int(shards[0].fixed_nodes.size),
-            "warnings": found}
+            "warnings": found, **floor}
+
+
+def modes_floor(pred, placement, points: np.ndarray, shards: list) -> float:
+    """MEE (mm) of the best a basis model's modes can do on a liver: each load step's FE field
+    at the liver's nodes fitted by least squares with the modes carried there as a prediction
+    is (interpolated from the registered template, turned into the liver's frame). The rest of
+    the model's error is in the coefficients its network gives.
+    """
+    from liverreg.morph import interpolation_matrix
+
+    interp = interpolation_matrix(placement.points, placement.to_population(points)).tocsr()
+    A = np.stack([placement.vectors_to_liver(interp @ m) for m in pred._modes_np], axis=-1)
+    errors = []
+    for sh in shards:
+        a = A[sh.output_nodes].reshape(-1, A.shape[-1])  # (3 n_out, modes)
+        t = np.asarray(sh.displacement[:sh.n_done], dtype=np.float64).reshape(sh.n_done, -1).T
+        c = np.linalg.lstsq(a, t, rcond=None)[0]
+        errors.append(np.linalg.norm((a @ c - t).T.reshape(sh.n_done, -1, 3), axis=-1).ravel())
+    return float(np.mean(np.concatenate(errors)))
 
 
 def _f(x, fmt="{:.3f}"):
@@ -542,6 +563,10 @@ def unseen_note(k: int, d: dict) -> str:
                         "largest Mahalanobis radius)"}.get(u["shape_rule"], u["shape_rule"])
         out += (f"; the network told {told} (`--shape {u['shape_asked']}`, "
                 "docs/shape_rule.md)")
+    if "modes_floor_mm" in u:
+        out += (f"; its modes, fitted to the FE fields by least squares, would give MEE "
+                f"{u['modes_floor_mm']:.3f} mm: the rest of its error is in the coefficients "
+                "its network gives this liver")
     return out + ("; predictions on the registered template, interpolated to the liver's "
                   "nodes. " + ("Warnings: " + "; ".join(u["warnings"]) + "."
                                if u["warnings"] else "No warning."))
