@@ -417,6 +417,19 @@ def population_mean_displacement(population_data: Path) -> np.ndarray:
 
 
 @functools.cache
+def fixed_extents(data: Path) -> np.ndarray:
+    """(livers, 3) mm: the extent along x, y, z of each liver's fixed nodes in a dataset."""
+    from data_spec import read_geometry, read_shard
+    from data_spec.shards import geometry_path
+
+    out = []
+    for gid, paths in shards_by_liver(data).items():
+        points = read_geometry(geometry_path(data, gid)).points
+        out.append(np.ptp(points[read_shard(paths[0]).fixed_nodes], axis=0))
+    return np.array(out)
+
+
+@functools.cache
 def shards_by_liver(data: Path) -> dict[str, list[Path]]:
     """The shard files of a dataset by liver (geometry id), read once per dataset."""
     from data_spec import list_shards, read_shard
@@ -462,6 +475,8 @@ def evaluate_unseen(pred, data: Path, population_data: Path, placement,
     pred_all, true_all = np.concatenate(P), np.concatenate(T)
     floor = ({"modes_floor_mm": modes_floor(pred, placement, g.points, shards)}
              if getattr(pred, "_modes_np", None) is not None else {})
+    # too large or too small as a whole: the one scale that fits the truth best
+    scale = float(np.sum(pred_all * true_all) / max(float(np.sum(pred_all ** 2)), 1e-30))
     mean = population_mean_displacement(population_data)
     m_nn = displacement_metrics(pred_all, true_all)
     m_naive = displacement_metrics(np.broadcast_to(placement.vectors_to_liver(mean),
@@ -474,7 +489,14 @@ def evaluate_unseen(pred, data: Path, population_data: Path, placement,
             "shape_asked": shape or shape_rule(pred),
             "shape_rule": told_shape(pred, placement.coefficients, shape)[1],
             "fixed_nodes": int(shards[0].fixed_nodes.size),
-            "warnings": found, **floor}
+            "warnings": found, **floor, "best_scale": scale,
+            "mee_best_scale": float(np.linalg.norm(scale * pred_all - true_all, axis=1).mean()),
+            # the fixed region the placement gives against the template's (population frame)
+            "fixed_extent_mm": np.ptp(placement.points[sm.fixed_nodes], axis=0).tolist(),
+            "template_fixed_extent_mm": np.ptp(sm.template_points[sm.fixed_nodes],
+                                               axis=0).tolist(),
+            "population_fixed_extent_max_mm": fixed_extents(population_data).max(
+                axis=0).tolist()}
 
 
 def modes_floor(pred, placement, points: np.ndarray, shards: list) -> float:
@@ -563,6 +585,9 @@ def unseen_note(k: int, d: dict) -> str:
                         "largest Mahalanobis radius)"}.get(u["shape_rule"], u["shape_rule"])
         out += (f"; the network told {told} (`--shape {u['shape_asked']}`, "
                 "docs/shape_rule.md)")
+    if "best_scale" in u:
+        out += (f"; the one scale that fits its prediction best to the FE fields is "
+                f"{u['best_scale']:.2f} (MEE {u['mee_best_scale']:.3f} mm with it)")
     if "modes_floor_mm" in u:
         out += (f"; its modes, fitted to the FE fields by least squares, would give MEE "
                 f"{u['modes_floor_mm']:.3f} mm: the rest of its error is in the coefficients "
@@ -602,10 +627,30 @@ def shortfall(k: int, r: dict) -> list[str]:
                 "where a network told its own shape coefficients extrapolates; predict-liver "
                 f"tells it a shape inside the population instead (`--shape "
                 f"{u.get('shape_rule', 'own')}`, docs/shape_rule.md), which is not the liver's "
-                "own (docs/unseen_liver.md: the placements and the mean shape). What "
-                "would fix it: a population whose shapes span such livers (real segmented "
-                "livers beside the phantoms), and registering the volume and not only the "
-                "surface so that no template tetrahedron folds.")
+                "own (docs/unseen_liver.md: the placements and the mean shape).")
+            rows = [(e["config"], e["unseen"]) for e in [r, *r.get("side_by_side", [])]
+                    if e.get("unseen")]
+            if "fixed_extent_mm" in u and all(v.get("best_scale", 1.0) < 0.9 for _, v in rows):
+                ext = " x ".join(f"{v:.0f}" for v in u["fixed_extent_mm"])
+                tmpl = " x ".join(f"{v:.0f}" for v in u["template_fixed_extent_mm"])
+                most = " x ".join(f"{v:.0f}" for v in u["population_fixed_extent_max_mm"])
+                each = "; ".join(f"`{c}` {v['best_scale']:.2f} (MEE {v['mee_best_scale']:.3f} "
+                                 f"mm with it against {v['network']['mee']:.3f})"
+                                 for c, v in rows)
+                out.append(
+                    "- Much of that error is the displacement's size: every design predicts "
+                    "the unseen liver too soft. The one scale that fits each prediction best to "
+                    f"the FE fields: {each}. The placement stretches the template's fixed "
+                    "region to "
+                    f"{ext} mm (extent along x, y, z) from the template's {tmpl} mm; the "
+                    f"training livers' largest extents are {most} mm. The FE truth is clamped "
+                    "where the models assume, but over a patch of a size they never saw: a "
+                    "likely cause of the excess, not isolated here.")
+            out.append(
+                "- What would fix it: a population whose shapes span such livers (real "
+                "segmented livers beside the phantoms), and registering the volume and not only "
+                "the surface (or with the vena cava as a landmark), so that no template "
+                "tetrahedron folds and the fixed region keeps its size.")
             break
     return out
 
