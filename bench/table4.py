@@ -211,16 +211,19 @@ def place_unseen(pred, liver: Path, frame: str):
         return place_liver(pred, points, tris, frame=frame)
 
 
-def unseen_truth(scene_file: Path, liver: Path, placement, sm, a, name: str) -> Path:
+def unseen_truth(scene_file: Path, liver: Path, placement, sm, a, name: str,
+                 fixed=None) -> Path:
     """The FE truth of the unseen liver (resumable): ``placement`` given, fixed where it puts
     the template's fixed region (the boundary condition the model assumes); None: the file's
-    own default region (the most posterior surface in the population's axes)."""
+    own default region (the most posterior surface in the population's axes). ``fixed``
+    (k, 3) mm in the liver's frame: fixed at these points instead.
+    """
     import shutil
 
     d = RESULTS / name
     d.mkdir(parents=True, exist_ok=True)
-    fixed = None if placement is None else placement.to_liver(
-        placement.points[sm.fixed_nodes])
+    if fixed is None and placement is not None:
+        fixed = placement.to_liver(placement.points[sm.fixed_nodes])
     text = unseen_scene(scene_file, liver, UNSEEN_SIMS, fixed)
     scene = d / "scene.toml"
     if not scene.exists() or scene.read_text() != text:
@@ -490,6 +493,8 @@ def evaluate_unseen(pred, data: Path, population_data: Path, placement,
             "shape_rule": told_shape(pred, placement.coefficients, shape)[1],
             "fixed_nodes": int(shards[0].fixed_nodes.size),
             "warnings": found, **floor, "best_scale": scale,
+            "truth_mean_mm": float(np.linalg.norm(true_all, axis=1).mean()),
+            "predicted_mean_mm": float(np.linalg.norm(pred_all, axis=1).mean()),
             "mee_best_scale": float(np.linalg.norm(scale * pred_all - true_all, axis=1).mean()),
             # the fixed region the placement gives against the template's (population frame)
             "fixed_extent_mm": np.ptp(placement.points[sm.fixed_nodes], axis=0).tolist(),
@@ -644,8 +649,9 @@ def shortfall(k: int, r: dict) -> list[str]:
                     "region to "
                     f"{ext} mm (extent along x, y, z) from the template's {tmpl} mm; the "
                     f"training livers' largest extents are {most} mm. The FE truth is clamped "
-                    "where the models assume, but over a patch of a size they never saw: a "
-                    "likely cause of the excess, not isolated here.")
+                    "where the models assume, but over a patch of a size they never saw "
+                    "(docs/unseen_liver.md weighs the clamp's size: the same liver clamped by "
+                    "a patch of the template's size, the models placed the same way).")
             out.append(
                 "- What would fix it: a population whose shapes span such livers (real "
                 "segmented livers beside the phantoms), and registering the volume and not only "
