@@ -459,24 +459,25 @@ def evaluate_unseen(pred, data: Path, population_data: Path, placement,
     from data_spec import list_shards, read_geometry, read_shard
     from data_spec.shards import geometry_path
     from surrogate.metrics import displacement_metrics
-    from surrogate.predict_liver import predict_at_points, shape_rule, told_shape
+    from surrogate.predict_liver import PlacedModel, shape_rule, told_shape
 
     sm = pred.shape_model
     paths = list_shards(data) if geometry_id is None else shards_by_liver(data)[geometry_id]
     shards = [sh for sh in map(read_shard, paths) if sh.n_done]
     g = read_geometry(geometry_path(data, shards[0].geometry_id))
     P, T = [], []
-    for sh in shards:
-        fr = np.asarray(sh.load_fractions[:sh.n_done])
-        forces = fr[:, None, None] * np.asarray(sh.forces)[None]
-        at = np.broadcast_to(g.points[sh.load_nodes], forces.shape)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            u = predict_at_points(pred, placement, g.points, forces, at, shape)
-        P.append(u[:, sh.output_nodes].reshape(-1, 3))
-        T.append(np.asarray(sh.displacement[:sh.n_done]).reshape(-1, 3))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        placed = PlacedModel(pred, nodes=g.points, placement=placement, shape=shape)  # once
+        for sh in shards:
+            fr = np.asarray(sh.load_fractions[:sh.n_done])
+            forces = fr[:, None, None] * np.asarray(sh.forces)[None]
+            at = np.broadcast_to(g.points[sh.load_nodes], forces.shape)
+            u = placed(forces, placed.load_nodes(at))
+            P.append(u[:, sh.output_nodes].reshape(-1, 3))
+            T.append(np.asarray(sh.displacement[:sh.n_done]).reshape(-1, 3))
     pred_all, true_all = np.concatenate(P), np.concatenate(T)
-    floor = ({"modes_floor_mm": modes_floor(pred, placement, g.points, shards)}
+    floor = ({"modes_floor_mm": modes_floor(pred, placement, placed.interpolation, shards)}
              if getattr(pred, "_modes_np", None) is not None else {})
     # too large or too small as a whole: the one scale that fits the truth best
     scale = float(np.sum(pred_all * true_all) / max(float(np.sum(pred_all ** 2)), 1e-30))
@@ -504,15 +505,13 @@ def evaluate_unseen(pred, data: Path, population_data: Path, placement,
                 axis=0).tolist()}
 
 
-def modes_floor(pred, placement, points: np.ndarray, shards: list) -> float:
+def modes_floor(pred, placement, interp, shards: list) -> float:
     """MEE (mm) of the best a basis model's modes can do on a liver: each load step's FE field
     at the liver's nodes fitted by least squares with the modes carried there as a prediction
-    is (interpolated from the registered template, turned into the liver's frame). The rest of
+    is (``interp``: the sparse interpolation from the registered template to the liver's
+    nodes, :attr:`PlacedModel.interpolation`; then turned into the liver's frame). The rest of
     the model's error is in the coefficients its network gives.
     """
-    from liverreg.morph import interpolation_matrix
-
-    interp = interpolation_matrix(placement.points, placement.to_population(points)).tocsr()
     A = np.stack([placement.vectors_to_liver(interp @ m) for m in pred._modes_np], axis=-1)
     errors = []
     for sh in shards:

@@ -124,9 +124,10 @@ def main() -> int:
                 for f in ("population", "LPS", "RAS", "auto")}
 
     unseen_dist = distances(liver)
-    rows, out, panels = [], {}, []
+    rows, out, panels, placed = [], {}, [], {}
     for frame in a.frames:
         placement, found = place_unseen(preds["paper_scene4"], liver, frame)
+        placed[frame] = (placement, found)
         own = unseen_truth(scene_file, liver, placement, sm, a, f"unseen_{frame}")
         # the same placement told the population's mean shape (coefficients 0): how much of
         # the error is the networks' answer to this liver's shape coefficients
@@ -185,19 +186,19 @@ def main() -> int:
             + "\n".join(rows) + "\n\nAgainst the truth fixed where the placement puts the "
             "template's fixed region:\n\n" + "\n".join(findings) + "\n")
     if "LPS" in out:  # the clamp's size, in predict-liver's default placement
-        placement, found = place_unseen(preds["paper_scene4"], liver, "LPS")
+        placement, found = placed["LPS"]
         fx = sm.fixed_nodes
         tp = sm.template_points[fx]
         compact = tp - tp.mean(axis=0) + placement.points[fx].mean(axis=0)
-        truths = {"where the placement puts the template's fixed region":
-                  (RESULTS / "unseen_LPS" / "data", placement.points[fx]),
+        data = unseen_truth(scene_file, liver, placement, sm, a, "unseen_LPS_compact",
+                            fixed=placement.to_liver(compact))
+        truths = {"where the placement puts the template's fixed region":  # evaluated above
+                  ({n: out["LPS"][n]["own"] for n in DESIGNS}, placement.points[fx]),
                   "a patch of the template's size, centred there":
-                  (unseen_truth(scene_file, liver, placement, sm, a, "unseen_LPS_compact",
-                                fixed=placement.to_liver(compact)), compact)}
+                  ({n: evaluate_unseen(p, data, BASE / "data", placement, found)
+                    for n, p in preds.items()}, compact)}
         crow = []
-        for label, (data, pts) in truths.items():
-            res = {n: evaluate_unseen(p, data, BASE / "data", placement, found)
-                   for n, p in preds.items()}
+        for label, (res, pts) in truths.items():
             first = res["paper_scene4"]
             crow.append(f"| {label} | {first['fixed_nodes']} | "
                         + " x ".join(f"{v:.0f}" for v in np.ptp(pts, axis=0)) + " | "

@@ -60,11 +60,6 @@ class BasisModel:
     context: int = 0        # per-load context features (the population design's), or 0
     members: int = 1        # networks of an ensemble (their arrays: a leading axis), or 1
     shared_loads: bool = False  # one network for every load (module docstring)
-    modes_count: int = 0    # k (the modes may be absent: an exported model's statistics)
-
-    def __post_init__(self):
-        if self.modes is not None:
-            self.modes_count = int(self.modes.shape[0])
 
     def stats(self) -> dict:
         return {"x_mean": self.x_mean.tolist(), "x_std": self.x_std.tolist(),
@@ -140,9 +135,11 @@ def network(hidden, modes: int, n_loads: int, shared: bool = False,
                     shared=bool(shared), per=int(per))
 
 
-def model_network(model: BasisModel) -> BasisMLP:
-    """The network of a trained or exported model (its statistics say which)."""
-    return network(model.hidden, model.modes_count, model.n_loads, model.shared_loads,
+def model_network(model: BasisModel, modes: int) -> BasisMLP:
+    """The network of a trained or exported model with ``modes`` modes (its statistics say
+    which network).
+    """
+    return network(model.hidden, modes, model.n_loads, model.shared_loads,
                    LOAD_FEATURES + model.context)
 
 
@@ -297,7 +294,7 @@ def predict_fields(ds: Dataset, model: BasisModel, samples: np.ndarray,
     """(len(samples), 3 n) predicted fields (mm) in the basis' node order; ``context``: the
     dataset's (n_samples, n_loads, c) load context when the model takes one.
     """
-    net = model_network(model)
+    net = model_network(model, model.modes.shape[0])
     mean = member_mean(net, model.params, model.members,
                        cast=lambda a: jnp.asarray(a, jnp.float32))
 

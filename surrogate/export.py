@@ -397,9 +397,9 @@ class Predictor:
         stats = BasisModel(params=None, modes=None, x_mean=x_mean, x_std=x_std,
                            c_scale=c_scale, f_scale=f_scale, hidden=hidden, n_loads=L,
                            n_extra=n_extra, context=context, members=members,
-                           shared_loads=shared, modes_count=k)
+                           shared_loads=shared)
         self._basis_stats = stats  # the model without its parameters and modes
-        net = model_network(stats)
+        net = model_network(stats, k)
 
         def one_case(params, modes, forces, load_points, extra, ctx):
             apply = member_mean(net, params, members, cast=lambda a: a.astype(dtype))
