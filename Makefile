@@ -158,7 +158,8 @@ bench-realtime: setup
 	$(MPIRUN) $(SPY) -m fem_sim generate data_spec/scenes/scene1_base.toml --out $(RT_DATA)
 	$(TPY) bench/bench_realtime.py --data $(RT_DATA)
 
-# The paper's Table 4, scene by scene (long, resumable; about an hour per scene on 2 cores):
+# The paper's Table 4, scene by scene (long, resumable; about an hour per scene on 2 cores,
+# an hour and a half for scene 4):
 # generate, train, time -> docs/table4.md. T4="--scenes 1 2 --budget-minutes 90" passes options.
 T4 ?=
 table4: setup  # latency on both cores: the trainer keeps its BLAS threads (the ranks get one)

@@ -1,0 +1,46 @@
+"""make table4's resume (bench/table4.py: train): a finished run is reused only for the same
+config and as many simulations as the dataset holds now; its generation going on (or another
+config) trains it again."""
+
+import json
+import sys
+from pathlib import Path
+
+import surrogate.train
+
+sys.path.insert(0, str(Path(__file__).parents[2] / "bench"))
+import table4  # noqa: E402
+
+
+def test_a_run_is_trained_again_when_the_dataset_grows_or_the_config_changes(tmp_path,
+                                                                              monkeypatch):
+    data, run = tmp_path / "data", tmp_path / "run"
+    (data / "sims").mkdir(parents=True)
+    calls = []
+
+    def fake_train(d, r, cfg):  # what train_and_evaluate leaves: the config and the metrics
+        calls.append(cfg)
+        r.mkdir(exist_ok=True)
+        (r / "config.json").write_text(json.dumps(cfg))
+        n = len(list((d / "sims").glob("sim_*.h5")))
+        (r / "metrics.json").write_text(json.dumps({"n_simulations": n, "calls": len(calls)}))
+
+    monkeypatch.setattr(surrogate.train, "train_and_evaluate", fake_train)
+
+    def shards(n):
+        for i in range(n):
+            (data / "sims" / f"sim_{i:06d}.h5").touch()
+
+    shards(4)
+    assert table4.train(data, run, "small", {"folds": 2})["calls"] == 1
+    assert table4.train(data, run, "small", {"folds": 2})["calls"] == 1  # reused
+    assert table4.train(data, run, "small", {"folds": 3})["calls"] == 2  # another config
+    shards(6)  # the generation went on
+    m = table4.train(data, run, "small", {"folds": 3})
+    assert (m["calls"], m["n_simulations"]) == (3, 6)
+    assert table4.train(data, run, "small", {"folds": 3})["calls"] == 3
+    # a run from before the count was kept beside it: its metrics' simulations stand in
+    (run / "table4_data.json").unlink()
+    assert table4.train(data, run, "small", {"folds": 3})["calls"] == 3
+    shards(7)
+    assert table4.train(data, run, "small", {"folds": 3})["calls"] == 4
