@@ -17,9 +17,10 @@ Resumable: generation skips the shards that exist (``generate`` itself), a run w
 metrics.json exists for the same config and as many simulations as the dataset holds is not
 trained again, and a killed training resumes from its checkpoint.
 Everything lands under ``bench/results/table4/`` (regenerable, not committed); the report is
-rewritten from what is there after every scene, so a partial run gives a partial table. The
-rows go beside the report as ``docs/table4.json``: a run of some scenes keeps the others' rows
-from there when their results are not on this host.
+rewritten after every step, a scene not yet run this time keeping its last row (each row's
+note gives the commit and date it was written at). The rows go beside the report as
+``docs/table4.json``: a run keeps the other scenes' rows from there when their results are not
+on this host.
 """
 
 from __future__ import annotations
@@ -847,10 +848,10 @@ def main() -> int:
     saved = Path(a.md).with_suffix(".json")
     saved = {int(k): v for k, v in json.loads(saved.read_text()).items()} \
         if saved.exists() else {}
-    for k in SCENES:  # rows already done stay in the report: this host's, else the saved
+    # every scene's last row stays in the report until this run writes its own (each row's
+    # note gives its commit and date): this host's, else the saved
+    for k in SCENES:
         done = RESULTS / Path(SCENES[k]).stem / "row.json"
-        if k in a.scenes and not a.report_only:
-            continue
         if done.exists():
             rows[k] = json.loads(done.read_text())
         elif k in saved:
