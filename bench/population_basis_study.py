@@ -64,6 +64,12 @@ def label(name: str) -> str:
     return f"{name} (shipped)" if same else name
 
 
+# how ms_per_call times, for the reports that quote it
+TIMING_NOTE = ("ms per call: one-case calls of the exported model at 15,400 nodes, median over 5 "
+               "rounds of each round's median of 200 calls, the variants interleaved in each "
+               "round")
+
+
 def ms_per_call(model_dirs: dict, calls: int = 200, rounds: int = 5) -> dict:
     """{name: median ms} of one-case calls of each exported model at table4's latency size
     (its modes moved onto a liver-sized cloud, as table4 times the scene-4 designs): every
@@ -182,9 +188,7 @@ def main() -> int:
                 + "|---|---|---|---|---|---|---|---|---|---|\n" + "\n".join(rows) + "\n\n"
                 + f"MEE and skill over folds: the mean of the folds'. The unseen liver's naive "
                 f"model (the population's mean displacement) has MEE {fmt(naive)} mm. "
-                "ms per call: one-case calls of the exported model at 15,400 nodes, median "
-                "over 5 rounds of each round's median of 200 calls, the variants interleaved "
-                "in each round (the node-wise network's: table4's run); this shared host "
+                + TIMING_NOTE + " (the node-wise network's: table4's run); this shared host "
                 "varies 10-30 % between runs.\n")
         Path(a.md).write_text(text)
     print(f"report written to {a.md}")
