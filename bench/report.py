@@ -51,13 +51,16 @@ def _memory_gib() -> float:
 
 
 def commit() -> str:
+    """HEAD's short hash, "+ local changes" when tracked files outside docs/ differ from it
+    (docs/ holds the reports and pictures the benchmarks write, a run's own output)."""
     def git(*args):
         return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True,
                               timeout=30).stdout.strip()
 
     try:
         sha = git("rev-parse", "--short", "HEAD")
-        dirty = git("status", "--porcelain", "--untracked-files=no")
+        dirty = git("status", "--porcelain", "--untracked-files=no", "--", ".",
+                    ":(exclude)docs")
     except (OSError, subprocess.SubprocessError):
         return "unknown (no git)"
     return (sha or "unknown") + (" + local changes" if dirty else "")
