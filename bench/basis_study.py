@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
 from population_basis_study import TIMING_NOTE, ms_per_call, pooled  # noqa: E402
 from report import header  # noqa: E402
-from table4 import BUDGET, RESULTS, SCENES, train  # noqa: E402
+from table4 import BUDGET, SCENES, scene_dir, train  # noqa: E402
 
 OUT = ROOT / "bench" / "results" / "basis_study"
 VARIANTS = {  # config overrides of ``basis``; the first is the shipped config
@@ -47,7 +47,7 @@ def run_dir(k: int, name: str) -> Path:
 
 def section(k: int, names: list[str]) -> str:
     """Scene ``k``'s table: every variant trained (or reused), then timed side by side."""
-    data = RESULTS / Path(SCENES[k]).stem / "data"
+    data = scene_dir(k) / "data"
     split = {"folds": BUDGET[k]["folds"], "evaluate_folds": 0, "final_fit": True}
     reported = BUDGET[k].get("evaluate_folds") or BUDGET[k]["folds"]
     metrics = {n: train(data, run_dir(k, n), "basis", {**split, **VARIANTS[n]})
@@ -62,7 +62,7 @@ def section(k: int, names: list[str]) -> str:
                     f"{ms[n]:.2f} |")
     best = min(metrics, key=lambda n: pooled(metrics[n], slice(reported, None))[0])
     nodewise = ""
-    row = RESULTS / Path(SCENES[k]).stem / "row.json"
+    row = scene_dir(k) / "row.json"
     if row.exists():
         r = json.loads(row.read_text())
         side = [s for s in r.get("side_by_side", []) if s["config"].startswith("paper")]
@@ -86,8 +86,7 @@ def main() -> int:
     ap.add_argument("--md", default=str(ROOT / "docs" / "basis_study.md"))
     a = ap.parse_args()
     names = ["shipped"] + [n for n in a.only if n != "shipped"]
-    missing = [k for k in a.scenes
-               if not (RESULTS / Path(SCENES[k]).stem / "data" / "sims").is_dir()]
+    missing = [k for k in a.scenes if not (scene_dir(k) / "data" / "sims").is_dir()]
     if missing:
         print(f"scenes {missing}: no dataset; run make table4 T4=\"--scenes "
               f"{' '.join(map(str, missing))}\" first", file=sys.stderr)

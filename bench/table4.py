@@ -91,6 +91,11 @@ LATENCY_NODES = 15400
 POPULATION = 102  # livers of scene 4, ours and the paper's
 
 
+def scene_dir(k: int) -> Path:
+    """Where scene ``k``'s dataset, runs and row live."""
+    return RESULTS / Path(SCENES[k]).stem
+
+
 def shard_count(data: Path) -> int:
     return len(list((data / "sims").glob("sim_*.h5")))
 
@@ -146,16 +151,17 @@ def train(data: Path, run: Path, name: str, overrides: dict) -> dict:
     shards = shard_count(data)
     if metrics.exists():
         done = json.loads((run / "config.json").read_text())
+        same = {**BASE, **done} == cfg
         m = json.loads(metrics.read_text())
         # keys added to the trainer since that run: the base default, the behaviour before
         # the key existed (a named config that turns it on needs a new run); a run of fewer
         # simulations than the dataset now holds (its generation went on) is trained again
         trained_on = json.loads(seen.read_text())["shards"] if seen.exists() \
             else m["n_simulations"]
-        if {**BASE, **done} == cfg and trained_on == shards:
+        if same and trained_on == shards:
             return m
         print(f"[{run}] trained on {trained_on} simulations with "
-              f"{'the same' if {**BASE, **done} == cfg else 'another'} config; the dataset "
+              f"{'the same' if same else 'another'} config; the dataset "
               f"holds {shards}: training again", flush=True)
     print(f"[{run}] training config {name} {overrides}", flush=True)
     train_and_evaluate(data, run, cfg)
@@ -320,7 +326,7 @@ def run_scene(k: int, a, rows: dict | None = None) -> dict:
     n = min(plan.pop("sims"), scene["scene"]["n_simulations"])
     minutes = plan.pop("minutes")
     minutes = minutes if a.budget_minutes is None else a.budget_minutes
-    base = RESULTS / scene_file.stem
+    base = scene_dir(k)
     data = base / "data"
     gen = generate(scene_file, data, n, 0.5 * minutes * 60, a)
     n = gen["sims"]
@@ -851,7 +857,7 @@ def main() -> int:
     # every scene's last row stays in the report until this run writes its own (each row's
     # note gives its commit and date): this host's, else the saved
     for k in SCENES:
-        done = RESULTS / Path(SCENES[k]).stem / "row.json"
+        done = scene_dir(k) / "row.json"
         if done.exists():
             rows[k] = json.loads(done.read_text())
         elif k in saved:

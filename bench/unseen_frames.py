@@ -111,7 +111,7 @@ def clamp_response(data: Path) -> np.ndarray:
     converged: mean displacement (mm, over output nodes and load steps), area of the fixed
     surface (mm^2), distance of the load to the nearest fixed node (mm), volume (mL).
     """
-    from data_spec.geometry import read_geometry
+    from data_spec.geometry import read_geometry, signed_volumes
     from data_spec.shards import geometry_path, list_shards, read_shard
 
     per: dict[str, list] = {}
@@ -122,10 +122,7 @@ def clamp_response(data: Path) -> np.ndarray:
             continue
         if s.geometry_id not in geo:
             g = read_geometry(geometry_path(data, s.geometry_id))
-            C = g.points[g.cells]
-            vol = np.abs(np.einsum("ij,ij->i", np.cross(C[:, 1] - C[:, 0], C[:, 2] - C[:, 0]),
-                                   C[:, 3] - C[:, 0])).sum() / 6.0
-            geo[s.geometry_id] = (g, vol / 1e3)
+            geo[s.geometry_id] = (g, np.abs(signed_volumes(g.points, g.cells)).sum() / 1e3)
         g, vol = geo[s.geometry_id]
         F = g.points[s.fixed_nodes]
         dist = np.sqrt(((g.points[s.load_nodes][:, None] - F) ** 2).sum(axis=-1)).min()
@@ -179,8 +176,8 @@ def main() -> int:
     rows, out, panels, placed = [], {}, [], {}
     for frame in a.frames:
         placement, found = place_unseen(preds["paper_scene4"], liver, frame)
-        placed[frame] = (placement, found)
         own = unseen_truth(scene_file, liver, placement, sm, a, f"unseen_{frame}")
+        placed[frame] = (placement, found, own)
         # the same placement told the population's mean shape (coefficients 0): how much of
         # the error is the networks' answer to this liver's shape coefficients
         mean_shape = dataclasses.replace(placement, coefficients=0.0 * placement.coefficients)
@@ -238,19 +235,19 @@ def main() -> int:
             + "\n".join(rows) + "\n\nAgainst the truth fixed where the placement puts the "
             "template's fixed region:\n\n" + "\n".join(findings) + "\n")
     if "LPS" in out:  # the clamp's size, in predict-liver's default placement
-        placement, found = placed["LPS"]
+        placement, found, own = placed["LPS"]
         fx = sm.fixed_nodes
         tp = sm.template_points[fx]
         compact = tp - tp.mean(axis=0) + placement.points[fx].mean(axis=0)
         data = unseen_truth(scene_file, liver, placement, sm, a, "unseen_LPS_compact",
                             fixed=placement.to_liver(compact))
         truths = {"where the placement puts the template's fixed region":  # evaluated above
-                  ({n: out["LPS"][n]["own"] for n in DESIGNS}, placement.points[fx]),
+                  ({n: out["LPS"][n]["own"] for n in DESIGNS}, placement.points[fx], own),
                   "a patch of the template's size, centred there":
                   ({n: evaluate_unseen(p, data, BASE / "data", placement, found)
-                    for n, p in preds.items()}, compact)}
+                    for n, p in preds.items()}, compact, data)}
         crow = []
-        for label, (res, pts) in truths.items():
+        for label, (res, pts, _) in truths.items():
             first = res["paper_scene4"]
             crow.append(f"| {label} | {first['fixed_nodes']} | "
                         + " x ".join(f"{v:.0f}" for v in np.ptp(pts, axis=0)) + " | "
@@ -270,12 +267,9 @@ def main() -> int:
         pop = clamp_response(BASE / "data")
         b, r2 = power_law(pop[:, 1:], pop[:, 0])
         frow = []
-        for label, d in (("where the placement puts the template's fixed region",
-                          RESULTS / "unseen_LPS" / "data"),
-                         ("a patch of the template's size, centred there", data)):
+        for label, (res, _, d) in truths.items():
             u = clamp_response(d)[0]
             fit = float(np.exp(b[0] + b[1:] @ np.log(u[1:])))
-            res = out["clamp"][label]
             frow.append(f"| {label} | {u[1]:.0f} | {u[2]:.1f} | {u[3]:.0f} | {u[0]:.2f} | "
                         f"{fit:.2f} ({fit / u[0]:.2f}x) | " + " | ".join(
                             f"{res[n]['predicted_mean_mm'] / res[n]['truth_mean_mm']:.2f}x"
