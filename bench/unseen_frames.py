@@ -99,19 +99,12 @@ def file_region_picture(panels: list, file_truth: Path, png: Path) -> Path:
                          cols=2)
 
 
-def fixed_area(points: np.ndarray, triangles: np.ndarray, fixed: np.ndarray) -> float:
-    """Area (mm^2) of the surface triangles whose three corners are all ``fixed`` nodes."""
-    T = points[triangles[np.isin(triangles, fixed).all(axis=1)]]
-    return float(0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]),
-                                      axis=1).sum())
-
-
 def clamp_response(data: Path) -> np.ndarray:
     """(n_livers, 4) for each liver of a dataset, averaged over its simulations that
     converged: mean displacement (mm, over output nodes and load steps), area of the fixed
     surface (mm^2), distance of the load to the nearest fixed node (mm), volume (mL).
     """
-    from data_spec.geometry import read_geometry, signed_volumes
+    from data_spec.geometry import read_geometry, region_area, signed_volumes
     from data_spec.shards import geometry_path, list_shards, read_shard
 
     per: dict[str, list] = {}
@@ -128,7 +121,7 @@ def clamp_response(data: Path) -> np.ndarray:
         dist = np.sqrt(((g.points[s.load_nodes][:, None] - F) ** 2).sum(axis=-1)).min()
         per.setdefault(s.geometry_id, []).append(
             (np.linalg.norm(s.displacement, axis=-1).mean(),
-             fixed_area(g.points, g.surface_triangles, s.fixed_nodes), dist, vol))
+             region_area(g.points, g.surface_triangles, s.fixed_nodes), dist, vol))
     return np.array([np.mean(v, axis=0) for v in per.values()])
 
 

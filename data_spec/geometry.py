@@ -75,6 +75,15 @@ def signed_volumes(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
     return np.linalg.det(e) / 6.0
 
 
+def region_area(points: np.ndarray, triangles: np.ndarray, nodes: np.ndarray) -> float:
+    """Area (mm^2) of the surface ``triangles`` whose three corners are all in ``nodes`` (a
+    region's surface: its nodes' triangles, nothing of the triangles that only touch it).
+    """
+    T = points[triangles[np.isin(triangles, nodes).all(axis=1)]]
+    return float(0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]),
+                                      axis=1).sum())
+
+
 def geometry_problems(g: Geometry) -> list[str]:
     """Everything wrong with a geometry's arrays (empty list if it is usable): shapes, ids,
     finite points, unused nodes, and cells that are not positively oriented (a tangled or

@@ -17,12 +17,14 @@ from pathlib import Path
 
 import numpy as np
 
+from data_spec.geometry import region_area
 from liverreg.cpd import STAGED, dense_surface, farthest_points, project, register
 from liverreg.morph import SurfaceMorph
 from liverreg.rigid import RigidFit, orient
 
 FORMAT = 1
 INVERTED_FLOOR = 0.01  # fraction of inverted template tetrahedra never worth a warning
+AREA_MARGIN = 1.25  # a fixed region this many times beyond the population's range is warned
 DEFAULT_FRAME = "LPS"  # the frame of DICOM and ITK, hence of most segmented livers
 
 
@@ -108,6 +110,7 @@ class ShapeModel:
     loadable_nodes: np.ndarray = None  # template nodes the scene's loads act on (empty: any)
     population_inverted: np.ndarray = None  # (R,) template tetrahedra each liver inverted
     population_coefficients: np.ndarray = None  # (R, K) each liver's shape coefficients
+    population_fixed_area: np.ndarray = None  # (R,) mm^2, the fixed region on each liver
 
     def __post_init__(self):
         if self.loadable_nodes is None:
@@ -116,6 +119,8 @@ class ShapeModel:
             self.population_inverted = np.zeros(0, dtype=np.int64)
         if self.population_coefficients is None:  # a model exported before they were kept
             self.population_coefficients = np.zeros((0, self.components.shape[0]))
+        if self.population_fixed_area is None:
+            self.population_fixed_area = np.zeros(0)
         if self.schedule is None:
             self.schedule = np.asarray(STAGED, dtype=np.float64)
         self.schedule = np.asarray(self.schedule, dtype=np.float64).reshape(-1, 3)
@@ -166,6 +171,25 @@ class ShapeModel:
         return Placement(points=reg.points, coefficients=coeff, residual=reg.residual,
                          iterations=reg.iterations, offset=offset, inverted=reg.inverted,
                          rotation=rotation, frame=how)
+
+    def fixed_area(self, points) -> float:
+        """Area (mm^2) of the template's fixed region with the template's nodes at ``points``
+        ((n, 3): the template moved onto a liver, :attr:`Placement.points`).
+        """
+        return region_area(np.asarray(points, dtype=np.float64), self.surface_triangles,
+                           self.fixed_nodes)
+
+    def fixed_areas(self, surface_displacements) -> np.ndarray:
+        """(R,) the fixed region's area on each liver whose template-surface displacement
+        (3 s,) is a row of ``surface_displacements`` (the population's registration: mean +
+        every component's coefficient).
+        """
+        surf, P = self.surface_nodes, self.template_points.copy()
+        out = []
+        for d in np.atleast_2d(surface_displacements):
+            P[surf] = self.template_points[surf] + d.reshape(-1, 3)
+            out.append(self.fixed_area(P))
+        return np.asarray(out)
 
     def rigid_fit(self, points, triangles, frame: str = DEFAULT_FRAME) -> RigidFit:
         """The map of a liver surface into the population's frame (:func:`orient` of the
@@ -260,6 +284,18 @@ class ShapeModel:
                                for i in bad[:5])
             out.append(f"{bad.size} of {c.size} shape coefficients outside the population's "
                        f"range: {listed}{' ...' if bad.size > 5 else ''}")
+        # The fixed region is where the template's lands on the liver; a patch wider than any
+        # training liver's holds the liver stiffer than the network ever saw (and a narrower one
+        # softer): the prediction's size is then extrapolated, however good its shape.
+        A = self.population_fixed_area
+        if A.size:
+            a = self.fixed_area(placement.points)
+            if not A.min() / AREA_MARGIN <= a <= AREA_MARGIN * A.max():
+                out.append(f"the fixed region covers {a:.0f} mm^2 of this liver, "
+                           f"{self.fixed_area(self.template_points):.0f} mm^2 of the template "
+                           f"and {A.min():.0f} .. {A.max():.0f} mm^2 of the population's "
+                           "livers: the liver is held over a patch no training liver had, and "
+                           "the size of its predicted displacement is extrapolated")
         return out
 
     def save(self, path) -> None:

@@ -37,6 +37,7 @@ def population_shape_model(ds):
     with np.load(path, allow_pickle=False) as z:
         ids = [str(i) for i in z["geometry_ids"]]
         coeff, mean, comps = z["coefficients"][:, :k], z["mean"], z["components"][:k]
+        D = z["mean"] + z["coefficients"] @ z["components"]  # every component: exact
         residuals = z["registration_error"]
         inverted = z["inverted"] if "inverted" in z.files else None
     template = template_geometry(ds)
@@ -47,12 +48,14 @@ def population_shape_model(ds):
         fixed = template.regions[scene["fixed"]["name"]]
     loadable = eligible_load_nodes(scene["loads"], template.points, template.surface_nodes,
                                    fixed)
-    return ShapeModel(template_points=template.points, template_cells=template.cells,
-                      surface_triangles=template.surface_triangles, fixed_nodes=fixed,
-                      mean=mean, components=comps, coefficient_min=coeff.min(axis=0),
-                      coefficient_max=coeff.max(axis=0), residuals=residuals,
-                      loadable_nodes=loadable, population_inverted=inverted,
-                      population_coefficients=coeff)
+    sm = ShapeModel(template_points=template.points, template_cells=template.cells,
+                    surface_triangles=template.surface_triangles, fixed_nodes=fixed,
+                    mean=mean, components=comps, coefficient_min=coeff.min(axis=0),
+                    coefficient_max=coeff.max(axis=0), residuals=residuals,
+                    loadable_nodes=loadable, population_inverted=inverted,
+                    population_coefficients=coeff)
+    sm.population_fixed_area = sm.fixed_areas(D)
+    return sm
 
 
 def template_geometry(ds):

@@ -8,7 +8,7 @@ import pytest
 from data_spec.geometry import Geometry, box_mesh
 from liverreg.cpd import build_population, project
 from liverreg.morph import interpolation_matrix
-from liverreg.shape_model import ShapeModel, nearest_convex_combination
+from liverreg.shape_model import AREA_MARGIN, ShapeModel, nearest_convex_combination
 
 N_POINTS = 150
 SCHEDULE = ((2.0, 1.5, 1e-3), (0.6, 0.45, 1e-4))  # two stages: fast enough for a test
@@ -40,6 +40,7 @@ def population():
                     coefficient_min=coeff.min(0), coefficient_max=coeff.max(0),
                     residuals=pop.registration_error, n_points=N_POINTS, schedule=SCHEDULE,
                     population_inverted=pop.inverted, population_coefficients=coeff)
+    sm.population_fixed_area = sm.fixed_areas(pop.mean + pop.coefficients @ pop.components)
     return livers, pop, sm
 
 
@@ -88,8 +89,19 @@ def test_a_liver_outside_the_population_is_named_with_its_numbers(population):
     big = c + 1.8 * (g.points - c)  # 1.8x larger: the template fits it less well, in mm
     pl = sm.place(big, g.surface_triangles)
     assert pl.residual > 1.5 * pop.registration_error.max()
+    msgs = sm.warnings(pl)
     assert any(m.startswith("registration residual") and f"{pl.residual:.2f} mm" in m
-               for m in sm.warnings(pl))
+               for m in msgs)
+    # its fixed face (x = 0 of the box: 80 x 60 mm on the unwarped liver 0, the template) is
+    # 1.8^2 = 3.24 times liver 2's, beyond the population's largest, and is named with the
+    # numbers
+    A = sm.population_fixed_area
+    assert A[0] == pytest.approx(80 * 60, rel=1e-3)
+    a = sm.fixed_area(pl.points)
+    assert a == pytest.approx(1.8 ** 2 * A[2], rel=0.1)
+    assert a > AREA_MARGIN * A.max()
+    assert any(m.startswith(f"the fixed region covers {a:.0f} mm^2") and
+               f"{A.min():.0f} .. {A.max():.0f} mm^2" in m for m in msgs), msgs
     bent = warped(24, 0, 0)  # four times the population's largest bend
     # in the population's frame as declared (a box is nearly symmetric: a free rigid fit may
     # turn the bend into a tilt)
@@ -104,14 +116,17 @@ def test_save_and_load_give_the_same_model(population, tmp_path):
     for name in ("template_points", "template_cells", "mean", "components", "schedule",
                  "coefficient_min", "loadable_nodes", "population_coefficients"):
         np.testing.assert_array_equal(getattr(back, name), getattr(sm, name))
+    np.testing.assert_array_equal(back.population_fixed_area, sm.population_fixed_area)
     assert back.n_points == sm.n_points
     # a file written before the population's coefficients were kept still loads; the rules
     # that need them fall back to the ranges, and say so
     with np.load(tmp_path / "sm.npz") as z:
-        old = {k: z[k] for k in z.files if k != "population_coefficients"}
+        old = {k: z[k] for k in z.files
+               if k not in ("population_coefficients", "population_fixed_area")}
     np.savez(tmp_path / "old.npz", **old)
     older = ShapeModel.load(tmp_path / "old.npz")
     assert older.population_coefficients.shape == (0, sm.n_components)
+    assert older.population_fixed_area.size == 0  # and no fixed-region warning from it
     far = 3 * sm.coefficient_max
     told, rule = older.shape_told(far, "hull")
     assert rule == "range"
