@@ -10,9 +10,10 @@ table4's row and its node-wise network were measured. One seed per variant (an e
 members, from other initialisations and batch orders, averaged): differences of a few per cent
 are noise.
 
-    .venv-train/bin/python bench/basis_study.py [--scenes 2 3]   # after make table4
+    .venv-train/bin/python bench/basis_study.py [--scenes 2 3] [--only VARIANT ...]
 
-Resumable: a variant whose run holds metrics for the same config is not trained again.
+Run after make table4. Resumable: a variant whose run holds metrics for the same config is
+not trained again, and each scene's table lists every variant trained there.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ VARIANTS = {  # config overrides of ``basis``; the first is the shipped config
     "weight decay 1e-3": {"l2": 1e-3},
     "ensemble of 5": {"ensemble": 5},
     "input noise 0.1, ensemble of 5": {"input_noise": 0.1, "ensemble": 5},
+    "weight decay 1e-3, ensemble of 5": {"l2": 1e-3, "ensemble": 5},
     "hidden 512 x 2": {"hidden": [512, 512]},
     "32 modes": {"modes": 32},
 }
@@ -82,7 +84,8 @@ def section(k: int, names: list[str]) -> str:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenes", type=int, nargs="+", default=[2, 3], choices=[2, 3])
-    ap.add_argument("--only", nargs="+", choices=sorted(VARIANTS), default=list(VARIANTS))
+    ap.add_argument("--only", nargs="+", choices=sorted(VARIANTS), default=list(VARIANTS),
+                    help="the variants to train (those already trained are reported too)")
     ap.add_argument("--md", default=str(ROOT / "docs" / "basis_study.md"))
     a = ap.parse_args()
     names = ["shipped"] + [n for n in a.only if n != "shipped"]
@@ -91,12 +94,16 @@ def main() -> int:
         print(f"scenes {missing}: no dataset; run make table4 T4=\"--scenes "
               f"{' '.join(map(str, missing))}\" first", file=sys.stderr)
         return 2
-    body = "\n".join(section(k, names) for k in a.scenes)
+    # each scene's table: the variants asked for, and every other one already trained there
+    body = "\n".join(section(k, names + [n for n in VARIANTS if n not in names and
+                                          (run_dir(k, n) / "metrics.json").exists()])
+                     for k in a.scenes)
     text = (header("The reduced basis of scenes 2 and 3, one knob at a time").rstrip() + "\n\n"
             + " ".join(__doc__.split("\n\n")[1].split()) + "\n\n" + body + "\n"
             "MEE and skill over folds: the mean of the folds'. " + TIMING_NOTE
             + " (the model trained on every simulation); this shared host varies 10-30 % "
-            "between runs.\n")
+            "between runs. Training times are wall times of all folds, some measured while "
+            "other jobs ran: read them as rough multiples.\n")
     Path(a.md).write_text(text)
     print(f"report written to {a.md}")
     return 0
