@@ -74,7 +74,7 @@ def section(k: int, names: list[str]) -> str:
                         f"{s['metrics']['network']['mee']:.3f} mm" for s in side) + ".")
     n_sims = metrics[names[0]]["n_simulations"]
     untried = [n for n in VARIANTS if n not in names]
-    untried = f" Not trained on this scene: {', '.join(untried)}." if untried else ""
+    untried = f" Not trained on this scene: {'; '.join(untried)}." if untried else ""
     return (f"## Scene {k} (`{SCENES[k]}`, {n_sims} simulations, {BUDGET[k]['folds']} folds)\n\n"
             "| variant | config overrides of `basis` | MEE mm, folds "
             f"{reported + 1}-{BUDGET[k]['folds']} (choice) | skill | MEE mm, folds 1-{reported} "
