@@ -37,7 +37,7 @@ def population_shape_model(ds):
     with np.load(path, allow_pickle=False) as z:
         ids = [str(i) for i in z["geometry_ids"]]
         coeff, mean, comps = z["coefficients"][:, :k], z["mean"], z["components"][:k]
-        D = z["mean"] + z["coefficients"] @ z["components"]  # every component: exact
+        D = surface_displacements(z)
         residuals = z["registration_error"]
         inverted = z["inverted"] if "inverted" in z.files else None
     template = template_geometry(ds)
@@ -58,6 +58,13 @@ def population_shape_model(ds):
     return sm
 
 
+def surface_displacements(z) -> np.ndarray:
+    """(R, 3 s) each liver's template-surface displacement from an open population.npz: the
+    mean and every component (exact, not the model's truncation).
+    """
+    return z["mean"] + z["coefficients"] @ z["components"]
+
+
 def template_geometry(ds):
     """The template's own mesh: the population's liver 0 (:class:`data_spec.Geometry`)."""
     with np.load(population_file(ds), allow_pickle=False) as z:
@@ -73,7 +80,7 @@ def registered_templates(ds) -> dict[str, np.ndarray]:
     path = population_file(ds)
     with np.load(path, allow_pickle=False) as z:
         ids = [str(i) for i in z["geometry_ids"]]
-        D = z["mean"] + z["coefficients"] @ z["components"]  # every component: exact
+        D = surface_displacements(z)
     template = template_geometry(ds)
     surf = template.surface_nodes
     morph = SurfaceMorph(template.points, template.cells, surf)
