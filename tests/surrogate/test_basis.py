@@ -179,7 +179,7 @@ def test_an_ensemble_predicts_the_mean_of_its_members(ds, tmp_path):
 
     train = np.arange(ds.n_samples - 6)
     held = np.arange(ds.n_samples - 6, ds.n_samples)
-    cfg = get_config("basis", epochs=15, modes=12, hidden=[24])
+    cfg = get_config("basis", epochs=15, modes=12, hidden=[24], ensemble=1)
     single, _ = fit_design(ds, train, cfg, 0, "", lambda m: None)
     ens, hist = fit_design(ds, train, {**cfg, "ensemble": 3}, 0, "", lambda m: None)
     assert ens.members == 3 and sorted({h["member"] for h in hist}) == [0, 1, 2]

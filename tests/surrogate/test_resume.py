@@ -37,7 +37,7 @@ class KilledAfter(engine.Checkpoint):
 @pytest.mark.parametrize("design, overrides", [
     ("small", {"hidden": [16, 16], "epochs": 5, "early_stopping": 10, "batch_size": 256}),
     ("basis", {"hidden": [16], "modes": 8, "epochs": 6, "early_stopping": 10,
-               "batch_size": 16}),
+               "batch_size": 16, "ensemble": 1}),
 ])
 def test_killed_fit_resumes_and_ends_where_an_uninterrupted_fit_ends(synth_dir, tmp_path,
                                                                       design, overrides):
@@ -59,6 +59,39 @@ def test_killed_fit_resumes_and_ends_where_an_uninterrupted_fit_ends(synth_dir, 
     b = resumed[0] if design == "small" else resumed.params
     flat_a = np.concatenate([np.ravel(v) for v in _leaves(a)])
     flat_b = np.concatenate([np.ravel(v) for v in _leaves(b)])
+    np.testing.assert_allclose(flat_b, flat_a, rtol=1e-4, atol=1e-6 * np.abs(flat_a).max())
+
+
+def test_a_killed_ensemble_resumes_member_by_member(synth_dir, tmp_path, monkeypatch):
+    """The shipped basis is an ensemble: killed in its second member's third epoch, the
+    resumed fit takes the first member from its finished checkpoint, the second from its
+    epoch 2, trains the third, and ends with the parameters of an uninterrupted fit."""
+    ds = load_dataset(synth_dir, stream=False)
+    cfg = get_config("basis", hidden=[16], modes=8, epochs=4, early_stopping=10, batch_size=16,
+                     ensemble=3)
+    assert get_config("basis")["ensemble"] > 1  # what this test is for
+    train = np.arange(ds.n_samples - 9)
+    whole, _ = fit_design(ds, train, cfg, 3, "", lambda m: None)
+    save = engine.Checkpoint.save
+
+    def dying(self, tree, meta):
+        save(self, tree, meta)
+        if self.dir.name == "member1" and meta["epoch"] == 2:
+            raise Killed(meta["epoch"])
+
+    ck = engine.Checkpoint(tmp_path / "ck", "id")
+    monkeypatch.setattr(engine.Checkpoint, "save", dying)
+    with pytest.raises(Killed):
+        fit_design(ds, train, cfg, 3, "", lambda m: None, ck)
+    monkeypatch.setattr(engine.Checkpoint, "save", save)
+    said = []
+    resumed, _ = fit_design(ds, train, cfg, 3, "", said.append, ck)
+    resumes = [s for s in said if "resumed after" in s]
+    assert len(resumes) == 2, said
+    assert "member 1/3 resumed after epoch 4" in resumes[0], resumes
+    assert "member 2/3 resumed after epoch 2" in resumes[1], resumes
+    flat_a = np.concatenate([np.ravel(v) for v in _leaves(whole.params)])
+    flat_b = np.concatenate([np.ravel(v) for v in _leaves(resumed.params)])
     np.testing.assert_allclose(flat_b, flat_a, rtol=1e-4, atol=1e-6 * np.abs(flat_a).max())
 
 
