@@ -151,9 +151,10 @@ tradeoff-surrogate: setup
 	$(TPY) bench/tradeoff_surrogate.py --np $(NP)
 
 # Real-time designs side by side (long, resumable): scene 1 at the paper's size (400
-# simulations; generate skips what is done), each design trained on the same folds, latency at
-# ~15k nodes -> docs/realtime.md. RT_DATA=DIR uses another scene-1 dataset.
-RT_DATA ?= bench/results/realtime/data
+# simulations, make table4's scene-1 dataset; generate skips what is done), each design trained
+# on the same folds, latency at ~15k nodes -> docs/realtime.md. RT_DATA=DIR uses another
+# scene-1 dataset.
+RT_DATA ?= bench/results/table4/scene1_base/data
 bench-realtime: setup
 	$(MPIRUN) $(SPY) -m fem_sim generate data_spec/scenes/scene1_base.toml --out $(RT_DATA)
 	$(TPY) bench/bench_realtime.py --data $(RT_DATA)
