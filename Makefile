@@ -153,11 +153,13 @@ tradeoff-surrogate: setup
 # Real-time designs side by side (long, resumable): scene 1 at the paper's size (400
 # simulations, make table4's scene-1 dataset; generate skips what is done), each design trained
 # on the same folds, latency at ~15k nodes -> docs/realtime.md. RT_DATA=DIR uses another
-# scene-1 dataset.
+# scene-1 dataset; RT="--evaluate-folds 0" holds out every fold (the node-wise net then takes
+# about an hour on two cores, against about 30 min for the first 2 of 5).
 RT_DATA ?= bench/results/table4/scene1_base/data
+RT      ?= --evaluate-folds 2
 bench-realtime: setup
 	$(MPIRUN) $(SPY) -m fem_sim generate data_spec/scenes/scene1_base.toml --out $(RT_DATA)
-	$(TPY) bench/bench_realtime.py --data $(RT_DATA)
+	$(TPY) bench/bench_realtime.py --data $(RT_DATA) $(RT)
 
 # The paper's Table 4, scene by scene (long, resumable; about an hour per scene on 2 cores,
 # an hour and a half for scene 4):
