@@ -153,8 +153,8 @@ tradeoff-surrogate: setup
 # Real-time designs side by side (long, resumable): scene 1 at the paper's size (400
 # simulations, make table4's scene-1 dataset; generate skips what is done), each design trained
 # on the same folds, latency at ~15k nodes -> docs/realtime.md. RT_DATA=DIR uses another
-# scene-1 dataset; RT="--evaluate-folds 0" holds out every fold (the node-wise net then takes
-# about an hour on two cores, against about 30 min for the first 2 of 5).
+# scene-1 dataset; RT="--evaluate-folds 0" holds out every fold (about 45 min of training on
+# two cores, against about 25 min for the first 2 of 5).
 RT_DATA ?= bench/results/table4/scene1_base/data
 RT      ?= --evaluate-folds 2
 bench-realtime: setup

@@ -67,7 +67,7 @@ def main() -> int:
     ap.add_argument("--folds", type=int, default=5)
     ap.add_argument("--evaluate-folds", type=int, default=0,
                     help="hold out only the first n folds (0: every fold; the node-wise net "
-                         "takes about 10 min per fold on two cores)")
+                         "takes about 5 min per fold on two cores)")
     ap.add_argument("--calls", type=int, default=500)
     ap.add_argument("--nodes", type=int, default=15400)
     ap.add_argument("--out", default=str(ROOT / "docs" / "realtime.md"))
