@@ -55,11 +55,8 @@ def test_killed_fit_resumes_and_ends_where_an_uninterrupted_fit_ends(synth_dir, 
     assert [h["epoch"] for h in hist2] == [h["epoch"] for h in hist]
     np.testing.assert_allclose([h["val_loss"] for h in hist2], [h["val_loss"] for h in hist],
                                rtol=1e-4)
-    a = whole[0] if design == "small" else whole.params
-    b = resumed[0] if design == "small" else resumed.params
-    flat_a = np.concatenate([np.ravel(v) for v in _leaves(a)])
-    flat_b = np.concatenate([np.ravel(v) for v in _leaves(b)])
-    np.testing.assert_allclose(flat_b, flat_a, rtol=1e-4, atol=1e-6 * np.abs(flat_a).max())
+    _assert_same_params(resumed[0] if design == "small" else resumed.params,
+                        whole[0] if design == "small" else whole.params)
 
 
 def test_a_killed_ensemble_resumes_member_by_member(synth_dir, tmp_path, monkeypatch):
@@ -90,9 +87,7 @@ def test_a_killed_ensemble_resumes_member_by_member(synth_dir, tmp_path, monkeyp
     assert len(resumes) == 2, said
     assert "member 1/3 resumed after epoch 4" in resumes[0], resumes
     assert "member 2/3 resumed after epoch 2" in resumes[1], resumes
-    flat_a = np.concatenate([np.ravel(v) for v in _leaves(whole.params)])
-    flat_b = np.concatenate([np.ravel(v) for v in _leaves(resumed.params)])
-    np.testing.assert_allclose(flat_b, flat_a, rtol=1e-4, atol=1e-6 * np.abs(flat_a).max())
+    _assert_same_params(resumed.params, whole.params)
 
 
 class KilledBetween(engine.Checkpoint):
@@ -150,6 +145,14 @@ def _leaves(tree):
     import jax
 
     return [np.asarray(x) for x in jax.tree_util.tree_leaves(tree)]
+
+
+def _assert_same_params(got, expected):
+    """Two parameter trees equal to float32 training noise (a resumed fit against an
+    uninterrupted one)."""
+    flat_e = np.concatenate([np.ravel(v) for v in _leaves(expected)])
+    flat_g = np.concatenate([np.ravel(v) for v in _leaves(got)])
+    np.testing.assert_allclose(flat_g, flat_e, rtol=1e-4, atol=1e-6 * np.abs(flat_e).max())
 
 
 def test_checkpoint_of_another_configuration_is_not_used(synth_dir, tmp_path):
