@@ -4,9 +4,10 @@
     make bench-realtime            # generates scene 1 at the paper's size if missing, then this
     .venv-train/bin/python bench/bench_realtime.py --data DIR [--folds 5] [--calls 500]
 
-Resumable: each design is trained once into ``bench/results/realtime/runs/<design>`` (skipped
-when its metrics.json exists), with ``surrogate.train.train_and_evaluate``: the same folds and
-seed for every design, so the validation errors come from the same held-out simulations.
+Resumable: each design is trained into ``bench/results/realtime/runs/<design>`` by make
+table4's ``train`` (skipped when the run holds metrics of the same config and dataset size; a
+killed training resumes from its checkpoint): the same folds and seed for every design, so the
+validation errors come from the same held-out simulations.
 
 Latency: the trained network of each design, moved onto a liver-sized cloud of ~15k nodes
 (``--nodes``; the node-wise design evaluates its features there; the reduced basis gets
@@ -20,7 +21,6 @@ printed) is ``realtime: <design> <ms> ms median at <N> nodes, MEE <x> mm vs pape
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import sys
@@ -32,6 +32,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+import table4  # noqa: E402
 from latency import at_scale, latency  # noqa: E402
 from report import header, sections  # noqa: E402
 
@@ -44,26 +45,20 @@ PAPER = "paper scene-1 net (node-wise)"
 
 
 def train(data: Path, folds: int, evaluate: int) -> dict:
-    from surrogate.config import get_config
-    from surrogate.train import train_and_evaluate
-
+    """name -> (run, metrics) of every design, trained unless its run holds the same config
+    and dataset (make table4's ``train``)."""
     out = {}
     for name, (config, overrides) in DESIGNS.items():
         run = RESULTS / "runs" / config
-        metrics = run / "metrics.json"
-        if not metrics.exists():
-            print(f"training {name} ({folds} folds) into {run}", flush=True)
-            cfg = get_config(config, **{**overrides, "folds": folds, "evaluate_folds": evaluate})
-            train_and_evaluate(data, run, cfg)
-        out[name] = (run, json.loads(metrics.read_text()))
+        out[name] = (run, table4.train(data, run, config, {**overrides, "folds": folds,
+                                                            "evaluate_folds": evaluate}))
     return out
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     # make table4's scene-1 dataset (the same scene file)
-    ap.add_argument("--data", default=str(ROOT / "bench" / "results" / "table4" / "scene1_base"
-                                          / "data"))
+    ap.add_argument("--data", default=str(table4.scene_dir(1) / "data"))
     ap.add_argument("--folds", type=int, default=5)
     ap.add_argument("--evaluate-folds", type=int, default=0,
                     help="hold out only the first n folds (0: every fold; the node-wise net "
