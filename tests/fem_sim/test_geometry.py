@@ -1,5 +1,6 @@
 """Phantom and surface import: volumes, closedness, orientation, fixed region on the surface."""
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -7,11 +8,14 @@ import pytest
 
 from data_spec.geometry import geometry_problems
 from fem_sim.geometry.phantom import (
+    MIN_GROOVE_AREA,
     RIEDEL_PREVALENCE,
     anatomical_parameters,
+    groove_area,
     make_phantom,
     mesh_volume,
     phantom_parameters,
+    with_groove,
 )
 from fem_sim.geometry.source import GeometryError
 from fem_sim.geometry.surfaces import clean_surface, mesh_surface_file, read_vtk_polydata
@@ -75,6 +79,41 @@ def test_anatomical_phantom_is_one_closed_solid_of_its_drawn_volume(seed):
     assert g.regions["vena_cava"].size >= 5
     with pytest.raises(ValueError, match="variety: expected 'narrow' or 'anatomical'"):
         make_phantom(seed, 14.0, "wide")
+
+
+def fixed_area(g):
+    """Area of the surface triangles whose three nodes are in the fixed region."""
+    tri = g.surface_triangles[np.isin(g.surface_triangles, g.regions["vena_cava"]).all(axis=1)]
+    p = g.points
+    return 0.5 * np.linalg.norm(np.cross(p[tri[:, 1]] - p[tri[:, 0]],
+                                         p[tri[:, 2]] - p[tri[:, 0]]), axis=1).sum()
+
+
+def test_a_sliver_groove_gets_its_vena_cava_redrawn_and_a_deep_one_is_kept(monkeypatch):
+    # phantom 1100's drawn cava axis grazes the posterior surface: a groove of ~210 mm^2
+    # (4 fixed nodes at 16 mm, the liver hanging ~20x further than the median one)
+    drawn = anatomical_parameters(1100)
+    assert groove_area(drawn) < 0.5 * MIN_GROOVE_AREA
+    prm = with_groove(drawn, 1100)
+    assert groove_area(prm) >= MIN_GROOVE_AREA
+    cava = ("cava_x", "cava_y", "cava_radius")
+    assert all(getattr(prm, k) != getattr(drawn, k) for k in cava)
+    assert replace(prm, **{k: getattr(drawn, k) for k in cava}) == drawn  # the rest is kept
+    assert with_groove(drawn, 1100) == prm  # seeded
+    g = make_phantom(1100, 16.0, "anatomical")
+    assert f"cava_y': {prm.cava_y}" in g.description
+    # the meshed fixed region is the groove: its triangles cover the CAD faces' area, less
+    # the edge strip a 16 mm mesh leaves out
+    assert 0.8 * groove_area(prm) < fixed_area(g) <= 1.001 * groove_area(prm)
+    deep = anatomical_parameters(1017)
+    assert with_groove(deep, 1017) == deep
+    import fem_sim.geometry.phantom as ph
+
+    monkeypatch.setattr(ph, "MIN_GROOVE_AREA", 1e9)
+    monkeypatch.setattr(ph, "MAX_CAVA_DRAWS", 2)
+    with pytest.raises(GeometryError, match=r"phantom 1100: no vena-cava groove of "
+                                            r"1000000000 mm\^2 in 2 draws \(the last \d+ mm"):
+        ph.with_groove(drawn, 1100)
 
 
 def test_a_phantom_whose_surface_mesh_crosses_itself_is_meshed_with_the_next_algorithm(
