@@ -39,6 +39,12 @@ and its volume (:func:`clamp_response`, :func:`power_law`), then asked for the u
 liver under each clamp: whether those numbers explain how stiff the liver is, or its shape
 does beyond them.
 
+Where the template's fixed region lands on the phantoms: each training liver is clamped at
+its own groove, while a model placed on a new liver assumes the template's fixed region moved
+there by the registration. For every liver of the population, the registered region against
+the liver's own (:func:`fixed_region_landing`): how far their nodes lie from each other, and
+their areas; the unseen liver's registered region is then set beside the population's.
+
     .venv-train/bin/python bench/unseen_frames.py    # after make table4 T4="--scenes 4"
 
 Resumable: a truth whose simulations exist is not generated again.
@@ -123,6 +129,31 @@ def clamp_response(data: Path) -> np.ndarray:
             (np.linalg.norm(s.displacement, axis=-1).mean(),
              region_area(g.points, g.surface_triangles, s.fixed_nodes), dist, vol))
     return np.array([np.mean(v, axis=0) for v in per.values()])
+
+
+def fixed_region_landing(data: Path, sm, fixed_name: str) -> np.ndarray:
+    """(n_livers, 4) for each liver of the population in ``data``: the median distance (mm)
+    from the registered template's fixed nodes to the liver's own fixed nodes (region
+    ``fixed_name``), the same from its own to the registered ones, the registered region's
+    area and the liver's own region's area (mm^2).
+    """
+    from types import SimpleNamespace
+
+    from scipy.spatial import cKDTree
+
+    from data_spec.geometry import read_geometry, region_area
+    from data_spec.shards import geometry_path
+    from surrogate.population import registered_templates
+
+    fx = sm.fixed_nodes
+    rows = []
+    for gid, P in registered_templates(SimpleNamespace(directory=data)).items():
+        g = read_geometry(geometry_path(data, gid))
+        own = g.regions[fixed_name]
+        rows.append((np.median(cKDTree(g.points[own]).query(P[fx])[0]),
+                     np.median(cKDTree(P[fx]).query(g.points[own])[0]),
+                     sm.fixed_area(P), region_area(g.points, g.surface_triangles, own)))
+    return np.array(rows)
 
 
 def power_law(X: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
@@ -282,6 +313,27 @@ def main() -> int:
                  "displacement mm | the phantoms' fit mm | " + " | ".join(
                      design_label(n) for n in DESIGNS) + " |\n|---|---|---|---|---|---|---|---|\n"
                  + "\n".join(frow) + "\n")
+    from data_spec.scene import load_scene
+
+    land = fixed_region_landing(BASE / "data", sm, load_scene(scene_file)["fixed"]["name"])
+    out["fixed_region_landing"] = land.tolist()
+    (RESULTS / "unseen_frames.json").write_text(json.dumps(out, indent=1))
+    why = next(t for t in __doc__.split("\n\n") if t.startswith("Where the template's fixed"))
+    q = lambda v: " / ".join(f"{x:.1f}" for x in np.percentile(v, [50, 90, 100]))  # noqa: E731
+    rng = lambda v: " .. ".join(f"{x:.0f}" for x in np.percentile(v, [0, 100]))  # noqa: E731
+    text += ("\n" + why + f"\n\nOver the population's {len(land)} livers (median / p90 / "
+             "largest over the livers):\n\n"
+             "| | median / p90 / max |\n|---|---|\n"
+             f"| registered fixed nodes to the liver's own fixed nodes, median mm | "
+             f"{q(land[:, 0])} |\n"
+             f"| the liver's own fixed nodes to the registered ones, median mm | "
+             f"{q(land[:, 1])} |\n"
+             f"| registered region's area / the liver's own | {q(land[:, 2] / land[:, 3])} |\n"
+             f"\nFixed areas: the livers' own regions {rng(land[:, 3])} mm^2 (the phantoms' "
+             f"grooves), the registered template's {rng(land[:, 2])} mm^2, the template's own "
+             f"{sm.fixed_area(sm.template_points):.0f} mm^2" + "".join(
+                 f"; on the unseen liver placed with `--frame {f}` "
+                 f"{sm.fixed_area(placed[f][0].points):.0f} mm^2" for f in placed) + ".\n")
     phantoms = [geometry_path(BASE / "data", g) for g in sorted(
         np.load(BASE / "data" / "geometry" / "population.npz")["geometry_ids"].tolist())[:PHANTOMS]]
     prow = []
