@@ -330,10 +330,13 @@ def main() -> int:
              f"{q(land[:, 1])} |\n"
              f"| registered region's area / the liver's own | {q(land[:, 2] / land[:, 3])} |\n"
              f"\nFixed areas: the livers' own regions {rng(land[:, 3])} mm^2 (the phantoms' "
-             f"grooves), the registered template's {rng(land[:, 2])} mm^2, the template's own "
-             f"{sm.fixed_area(sm.template_points):.0f} mm^2" + "".join(
-                 f"; on the unseen liver placed with `--frame {f}` "
-                 f"{sm.fixed_area(placed[f][0].points):.0f} mm^2" for f in placed) + ".\n")
+             f"grooves, on their meshes), the template's region registered onto them "
+             f"{rng(land[:, 2])} mm^2 (on the registered template), the template's own "
+             f"{sm.fixed_area(sm.template_points):.0f} mm^2; the template's region registered "
+             "onto the unseen liver " + ", ".join(
+                 f"{sm.fixed_area(placed[f][0].points):.0f} mm^2 (`--frame {f}`)"
+                 for f in placed) + ". (The clamp table's areas are those of the fixed nodes "
+             "on the liver's own mesh, as the phantoms' own.)\n")
     phantoms = [geometry_path(BASE / "data", g) for g in sorted(
         np.load(BASE / "data" / "geometry" / "population.npz")["geometry_ids"].tolist())[:PHANTOMS]]
     prow = []
