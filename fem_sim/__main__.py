@@ -4,6 +4,7 @@ mpirun -n N python3 -m fem_sim generate SCENE.toml --out DIR [--ranks-per-sim R]
 [--only I..J] [--retry-failed]
 python3 -m fem_sim summary DIR
 python3 -m fem_sim population SCENE.toml --out DIR   (scene 4: CPD + PCA shape coefficients)
+python3 -m fem_sim phantom SEED --out FILE.h5 [--variety V] [--spread S] [--mesh-size H]
 """
 
 from __future__ import annotations
@@ -73,6 +74,16 @@ def main(argv: list[str] | None = None) -> int:
                         "fail (default 0.5; 1 for sweeps of extremes)")
     sub.add_parser("population", help="scene 4: CPD + PCA shape coefficients of a liver "
                    "population, with the IoU/Dice report (see population --help)")
+    ph = sub.add_parser("phantom", help="mesh one phantom liver into a data_spec geometry "
+                        "file (a liver to try predict-liver or a file scene on)")
+    ph.add_argument("seed", type=int)
+    ph.add_argument("--out", required=True, help="geometry file to write (.h5)")
+    ph.add_argument("--variety", choices=("anatomical", "narrow"), default="anatomical")
+    ph.add_argument("--spread", type=float, default=1.0, metavar="S",
+                    help="an anatomical phantom's shape ranges widened by S about their "
+                         "centres (default 1: the population's)")
+    ph.add_argument("--mesh-size", type=float, default=16.0, metavar="H",
+                    help="target edge length, mm (default 16, the shipped scenes')")
     s = sub.add_parser("summary", help="print counts and statistics of a dataset")
     s.add_argument("directory")
     s.add_argument("--png", help="picture of deformed livers (default DIR/summary.png)")
@@ -88,9 +99,33 @@ def main(argv: list[str] | None = None) -> int:
         return _collective(lambda: generate(
             args.scene, args.out, args.ranks_per_sim, args.only, args.retry_failed,
             progress=not args.no_progress, max_failure_rate=args.max_failure_rate))
+    if args.command == "phantom":
+        return _phantom(args, parser)
     from fem_sim.batch.summary import summary
 
     return summary(args.directory, png=args.png)
+
+
+def _phantom(args, parser) -> int:
+    from pathlib import Path
+
+    from data_spec.geometry import write_geometry
+    from fem_sim.geometry.errors import GeometryError
+    from fem_sim.geometry.phantom import make_phantom
+
+    out = Path(args.out)
+    if out.suffix not in (".h5", ".hdf5"):
+        parser.error(f"--out {out}: expected a .h5 data_spec geometry file")
+    try:
+        g = make_phantom(args.seed, args.mesh_size, args.variety, args.spread)
+    except (ValueError, GeometryError) as exc:
+        print(f"fem_sim phantom: {exc}", file=sys.stderr)
+        return 2
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_geometry(out, g)
+    print(f"{out}: {g.description.split(', parameters')[0]}; {g.n_nodes} nodes, "
+          f"{g.cells.shape[0]} tetrahedra")
+    return 0
 
 
 if __name__ == "__main__":

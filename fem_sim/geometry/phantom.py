@@ -89,10 +89,18 @@ def phantom_parameters(seed: int) -> PhantomParameters:
 RIEDEL_PREVALENCE = 0.15
 
 
-def anatomical_parameters(seed: int) -> PhantomParameters:
-    """Draw the shape of anatomical phantom ``seed`` (deterministic; ranges: module docstring)."""
+def anatomical_parameters(seed: int, spread: float = 1.0) -> PhantomParameters:
+    """Draw the shape of anatomical phantom ``seed`` (deterministic; ranges: module docstring).
+
+    ``spread``: every uniform range widened (> 1) or narrowed about its centre by this factor,
+    the volume's standard deviation and its clip too (the same random numbers drawn, so
+    ``spread = 1`` is the population itself): livers beyond the population, drawn as far
+    outside it as a real liver lies (bench/shape_rule_study.py).
+    """
+    if not (np.isfinite(spread) and spread > 0):
+        raise ValueError(f"spread: expected a number > 0, got {spread!r}")
     rng = np.random.default_rng([20251, seed])
-    u = lambda lo, hi: float(rng.uniform(lo, hi))  # noqa: E731
+    u = lambda lo, hi: float(rng.uniform(*_widened(lo, hi, spread)))  # noqa: E731
     ra = (u(65, 95), u(55, 95), u(45, 80))      # right lobe: half width, depth, below-equator
     la = (u(45, 100), u(35, 62), u(18, 36))     # left lobe: extent, depth, thickness
     cut = u(0.5, 0.85) * ra[2]
@@ -100,18 +108,29 @@ def anatomical_parameters(seed: int) -> PhantomParameters:
     if rng.uniform() < RIEDEL_PREVALENCE:
         riedel = (u(0.35, 0.65) * ra[0], u(-0.3, 0.1) * ra[1], -cut,
                   u(18, 30), u(15, 26), u(38, 60))
-    volume = 1e6 * float(np.clip(rng.normal(1.55, 0.38), 1.0, 2.5))
+    # litres: 1.55 +- 0.38, clipped to 1.0 .. 2.5 (1.55 - 0.55, 1.55 + 0.95)
+    sd, lo, hi = (0.38, 1.0, 2.5) if spread == 1.0 else \
+        (0.38 * spread, 1.55 - 0.55 * spread, 1.55 + 0.95 * spread)
+    volume = 1e6 * float(np.clip(rng.normal(1.55, sd), lo, hi))
     return PhantomParameters(
         right_axes=ra, left_axes=la,
         left_offset=(-(0.25 * ra[0] + 0.7 * la[0]), u(-14, 2), u(4, 24)),
-        cut_height=cut, cut_tilt=u(0.02, 0.35), **_draw_cava(rng, ra),
+        cut_height=cut, cut_tilt=u(0.02, 0.35), **_draw_cava(rng, ra, spread),
         dome_height=u(42, 88), bevel=(u(0.15, 0.65), u(0.1, 0.5) * ra[1]), riedel=riedel,
         volume=volume)
 
 
-def _draw_cava(rng, ra) -> dict:
+def _widened(lo: float, hi: float, spread: float) -> tuple[float, float]:
+    """The range lo .. hi widened about its centre by ``spread`` (itself at 1)."""
+    if spread == 1.0:
+        return lo, hi
+    mid, half = 0.5 * (lo + hi), 0.5 * spread * (hi - lo)
+    return mid - half, mid + half
+
+
+def _draw_cava(rng, ra, spread: float = 1.0) -> dict:
     """The vena cava of an anatomical phantom: axis (x, y) and radius, drawn from ``rng``."""
-    u = lambda lo, hi: float(rng.uniform(lo, hi))  # noqa: E731
+    u = lambda lo, hi: float(rng.uniform(*_widened(lo, hi, spread)))  # noqa: E731
     return dict(cava_x=u(-42, -10), cava_y=u(0.72, 0.9) * ra[1] + u(-6, 6),
                 cava_radius=u(9, 14))
 
@@ -124,10 +143,10 @@ MIN_GROOVE_AREA = 800.0  # mm^2
 MAX_CAVA_DRAWS = 20
 
 
-def with_groove(prm: PhantomParameters, seed: int) -> PhantomParameters:
+def with_groove(prm: PhantomParameters, seed: int, spread: float = 1.0) -> PhantomParameters:
     """``prm`` with its vena cava redrawn (seeded by ``seed`` and the attempt, the rest of the
-    shape kept) until its groove covers ``MIN_GROOVE_AREA``; ``prm`` itself when it does.
-    Needs gmsh.
+    shape kept; ``spread`` as :func:`anatomical_parameters`'s) until its groove covers
+    ``MIN_GROOVE_AREA``; ``prm`` itself when it does. Needs gmsh.
     """
     area, attempt = groove_area(prm), 0
     while area < MIN_GROOVE_AREA:
@@ -136,7 +155,7 @@ def with_groove(prm: PhantomParameters, seed: int) -> PhantomParameters:
             raise GeometryError(f"phantom {seed}: no vena-cava groove of {MIN_GROOVE_AREA:.0f} "
                                 f"mm^2 in {MAX_CAVA_DRAWS} draws (the last {area:.0f} mm^2)")
         prm = replace(prm, **_draw_cava(np.random.default_rng([20251, seed, attempt]),
-                                        prm.right_axes))
+                                        prm.right_axes, spread))
         area = groove_area(prm)
     if attempt:
         log.info("phantom %d: vena cava redrawn %d time(s), groove %.0f mm^2", seed, attempt,
@@ -144,14 +163,20 @@ def with_groove(prm: PhantomParameters, seed: int) -> PhantomParameters:
     return prm
 
 
-def make_phantom(seed: int = 0, mesh_size: float = 8.0, variety: str = "narrow") -> Geometry:
+def make_phantom(seed: int = 0, mesh_size: float = 8.0, variety: str = "narrow",
+                 spread: float = 1.0) -> Geometry:
     """Mesh phantom ``seed`` of the ``variety`` ("narrow" or "anatomical") with target edge
-    length ``mesh_size`` (mm). Needs gmsh.
+    length ``mesh_size`` (mm); ``spread``: an anatomical phantom's ranges widened
+    (:func:`anatomical_parameters`). Needs gmsh.
     """
     if variety not in ("narrow", "anatomical"):
         raise ValueError(f"variety: expected 'narrow' or 'anatomical', got {variety!r}")
+    if variety == "narrow" and spread != 1.0:
+        raise ValueError(f"spread: only anatomical phantoms are widened, got {spread!r} for a "
+                         "narrow one")
     prm = phantom_parameters(seed) if variety == "narrow" else \
-        with_groove(anatomical_parameters(seed), seed)
+        with_groove(anatomical_parameters(seed, spread), seed, spread)
+    widened = f", spread {spread:g}" if spread != 1.0 else ""
     lobes = (np.prod(prm.right_axes) + np.prod(prm.left_axes)) * 4.0 / 3.0 * np.pi
     if prm.volume is not None:
         lobes = prm.volume
@@ -164,8 +189,8 @@ def make_phantom(seed: int = 0, mesh_size: float = 8.0, variety: str = "narrow")
         except Exception as exc:  # gmsh raises a bare Exception with its last error
             failures.append(f"surface algorithm {algorithm}: {exc}")
     else:
-        raise GeometryError(f"phantom {seed} ({variety}), mesh size {mesh_size} mm: gmsh "
-                            "could not mesh it: " + "; ".join(failures))
+        raise GeometryError(f"phantom {seed} ({variety}{widened}), mesh size {mesh_size} "
+                            "mm: gmsh could not mesh it: " + "; ".join(failures))
     if failures:
         log.info("phantom %d (%s): meshed with surface algorithm %d after %s", seed, variety,
                  algorithm, "; ".join(failures))
@@ -176,8 +201,8 @@ def make_phantom(seed: int = 0, mesh_size: float = 8.0, variety: str = "narrow")
     cava = surf[axis_dist <= scale * prm.cava_radius + 0.05 * mesh_size]
     return Geometry(points=points, cells=cells, surface_triangles=tri,
                     regions={"vena_cava": cava},
-                    description=f"liver phantom seed {seed} ({variety}), mesh size "
-                                f"{mesh_size} mm, parameters {asdict(prm)}")
+                    description=f"liver phantom seed {seed} ({variety}{widened}), mesh "
+                                f"size {mesh_size} mm, parameters {asdict(prm)}")
 
 
 # Surface algorithms tried in turn: Frontal-Delaunay first (every phantom that meshes with it
