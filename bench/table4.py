@@ -233,26 +233,27 @@ def place_unseen(pred, liver: Path, frame: str):
 
 
 def unseen_truth(scene_file: Path, liver: Path, placement, sm, a, name: str,
-                 fixed=None) -> Path:
-    """The FE truth of the unseen liver (resumable): ``placement`` given, fixed where it puts
-    the template's fixed region (the boundary condition the model assumes); None: the file's
-    own default region (the most posterior surface in the population's axes). ``fixed``
-    (k, 3) mm in the liver's frame: fixed at these points instead.
+                 fixed=None, root: Path = RESULTS, sims: int = UNSEEN_SIMS) -> Path:
+    """The FE truth of the unseen liver, ``sims`` simulations under ``root / name``
+    (resumable): ``placement`` given, fixed where it puts the template's fixed region (the
+    boundary condition the model assumes); None: the file's own default region (the most
+    posterior surface in the population's axes). ``fixed`` (k, 3) mm in the liver's frame:
+    fixed at these points instead.
     """
     import shutil
 
-    d = RESULTS / name
+    d = root / name
     d.mkdir(parents=True, exist_ok=True)
     if fixed is None and placement is not None:
         fixed = placement.to_liver(placement.points[sm.fixed_nodes])
-    text = unseen_scene(scene_file, liver, UNSEEN_SIMS, fixed)
+    text = unseen_scene(scene_file, liver, sims, fixed)
     scene = d / "scene.toml"
     if not scene.exists() or scene.read_text() != text:
         if (d / "data").exists():  # another placement's truth: not this one's
             shutil.rmtree(d / "data")
         (d / "generation.json").unlink(missing_ok=True)
         scene.write_text(text)
-    generate(scene, d / "data", UNSEEN_SIMS, float("inf"), a)
+    generate(scene, d / "data", sims, float("inf"), a)
     return d / "data"
 
 
