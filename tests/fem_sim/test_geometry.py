@@ -68,6 +68,50 @@ def test_anatomical_draws_span_the_published_ranges():
     assert anatomical_parameters(7) != anatomical_parameters(8)
 
 
+def test_a_wider_spread_moves_every_draw_away_from_its_range_centre_by_that_factor():
+    """spread s draws the same random numbers on ranges s times as wide about their centres:
+    a parameter drawn at p from lo .. hi is drawn at c + s (p - c), c = (lo + hi) / 2. By hand
+    for the right lobe's half width (65 .. 95, c = 80): 74 at spread 1 is 68 at spread 2."""
+    for seed in range(1000, 1060):
+        one, two = anatomical_parameters(seed), anatomical_parameters(seed, 2.0)
+        assert anatomical_parameters(seed, 1.0) == one
+        assert (one.riedel is None) == (two.riedel is None)
+        for p1, p2, lo, hi in [(one.right_axes[0], two.right_axes[0], 65, 95),
+                               (one.right_axes[1], two.right_axes[1], 55, 95),
+                               (one.left_axes[0], two.left_axes[0], 45, 100),
+                               (one.dome_height, two.dome_height, 42, 88),
+                               (one.cut_tilt, two.cut_tilt, 0.02, 0.35),
+                               (one.cava_radius, two.cava_radius, 9, 14),
+                               (one.cava_x, two.cava_x, -42, -10)]:
+            c = 0.5 * (lo + hi)
+            assert p2 - c == pytest.approx(2.0 * (p1 - c), abs=1e-9)
+            assert lo - 0.5 * (hi - lo) <= p2 <= hi + 0.5 * (hi - lo)
+        v1, v2 = one.volume / 1e6, two.volume / 1e6  # 1.55 L, clipped at 1.0 .. 2.5 (s = 1)
+        if 1.0 < v1 < 2.5 and 0.45 < v2 < 3.45:
+            assert v2 - 1.55 == pytest.approx(2.0 * (v1 - 1.55), abs=1e-9)
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError, match="spread: expected a number > 0"):
+            anatomical_parameters(1000, bad)
+    with pytest.raises(ValueError, match="spread: only anatomical phantoms"):
+        make_phantom(0, 20.0, "narrow", spread=2.0)
+
+
+def test_fem_sim_phantom_writes_the_population_phantom_to_a_geometry_file(tmp_path, capsys):
+    from data_spec.geometry import read_geometry
+    from fem_sim.__main__ import main
+
+    out = tmp_path / "liver.h5"
+    assert main(["phantom", "1017", "--mesh-size", "20", "--out", str(out)]) == 0
+    g = read_geometry(out)
+    assert g.geometry_id == make_phantom(1017, 20.0, "anatomical").geometry_id
+    assert "liver phantom seed 1017 (anatomical), mesh size 20.0 mm" in capsys.readouterr().out
+    assert main(["phantom", "1017", "--spread", "-1", "--out", str(out)]) == 2
+    assert "spread: expected a number > 0" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["phantom", "1017", "--out", str(tmp_path / "liver.vtk")])
+    assert "expected a .h5 data_spec geometry file" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("seed", [1002, 1017])  # 1002 has a Riedel's lobe
 def test_anatomical_phantom_is_one_closed_solid_of_its_drawn_volume(seed):
     prm = anatomical_parameters(seed)
