@@ -27,8 +27,11 @@ both designs, with ``make table4``'s configs and budgets, trained again without 
 lie just outside the training livers' population, predicted told the training livers'
 population only; and table4's fold 1 (13 livers drawn at random, inside the population). Last,
 the models of ``make table4`` predict the unseen SOFA liver (``--frame LPS``, table4's FE truth)
-with each rule: reported, never used for the choice. One seed per design (the population basis:
-its shipped ensemble); MEE per liver over its simulations' nodes and load steps.
+with each rule: reported, never used for the choice. The wide phantoms are predicted by three
+models of each design (``--seeds``: ``make table4``'s and two more trained on the whole
+population with other training seeds; per liver the mean over them), the other splits by one
+(the population basis: its shipped ensemble); MEE per liver over its simulations' nodes and
+load steps.
 
     .venv-train/bin/python bench/shape_rule_study.py     # after make table4 T4="--scenes 4"
 
@@ -58,7 +61,7 @@ DESIGNS = {"population_basis": TABLE4 / "scene4_livers" / "run_population_basis"
 SPLITS = ("wide", "outlying", "fold1")
 CRITERION = "wide"  # the split whose lowest mean MEE chooses a design's rule
 EVERY = "hull, every liver"  # study only: the nearest mix for every liver, inside or not
-SPLIT_LABEL = {"wide": "13 phantoms drawn twice as wide (table4's models)",
+SPLIT_LABEL = {"wide": "13 phantoms drawn twice as wide (mean over the seeds)",
                "outlying": "the 13 livers farthest from the mean shape",
                "fold1": "table4's fold 1 (13 livers at random)"}
 # Livers beyond the population: phantoms drawn with every range of anatomical_parameters
@@ -244,18 +247,32 @@ def wide_livers(a) -> list[Path]:
     return out
 
 
-def wide_results(design: str, a) -> dict:
-    """Per liver beyond the population and rule: MEE of ``make table4``'s model of ``design``
-    against the liver's own FE simulations, the liver placed as predict-liver places it
-    (``--frame population``) and fixed where that placement puts the template's fixed region,
-    as the unseen liver is."""
+def seed_model(design: str, k: int) -> Path:
+    """``make table4``'s model of ``design`` (k = 0), or the same config trained on every
+    liver of the population with training seed k (kept under the wide split's directory)."""
+    if k == 0:
+        return DESIGNS[design] / "model"
+    from surrogate.data import load_dataset
+
+    cfg = json.loads((DESIGNS[design] / "config.json").read_text())
+    out = WIDE / f"{design}_seed{k}"
+    out.mkdir(parents=True, exist_ok=True)
+    ds = load_dataset(DATA, stream=cfg.get("stream", "auto"), spill_dir=out)
+    return trained(ds, {**cfg, "seed": cfg["seed"] + 100 * k}, [], out)
+
+
+def wide_results(design: str, a, k: int = 0) -> dict:
+    """Per liver beyond the population and rule: MEE of the model of ``design`` with training
+    seed ``k`` (:func:`seed_model`) against the liver's own FE simulations, the liver placed as
+    predict-liver places it (``--frame population``) and fixed where that placement puts the
+    template's fixed region, as the unseen liver is."""
     from table4 import SCENES, evaluate_unseen, place_unseen, unseen_truth
 
     from liverreg.shape_model import SHAPE_RULES
     from surrogate.export import load_predictor
 
-    model = DESIGNS[design] / "model"
-    cache = WIDE / f"results_{design}.json"
+    model = seed_model(design, k)
+    cache = WIDE / (f"results_{design}.json" if k == 0 else f"results_{design}_seed{k}.json")
     done = json.loads(cache.read_text()) if cache.exists() else {}
     stamp = (model / "params.npz").stat().st_mtime
     if done.get("model_mtime") != stamp:  # another model's results
@@ -286,7 +303,7 @@ def wide_results(design: str, a) -> dict:
         res["residual_mm"] = float(placement.residual)
         done["livers"][liver.stem] = res
         cache.write_text(json.dumps(done, indent=1))
-        print(f"[wide {design}] liver {n + 1}/{len(livers)} {liver.stem} (radius "
+        print(f"[wide {design} seed {k}] liver {n + 1}/{len(livers)} {liver.stem} (radius "
               f"{res['mahalanobis']:.2f}): "
               + ", ".join(f"{r} {res[r]:.3f}" for r in (*SHAPE_RULES, EVERY)), flush=True)
     return done
@@ -312,6 +329,9 @@ def main() -> int:
     ap.add_argument("--designs", nargs="+", choices=list(DESIGNS), default=list(DESIGNS))
     ap.add_argument("--splits", nargs="+", choices=SPLITS, default=list(SPLITS))
     ap.add_argument("--md", default=str(ROOT / "docs" / "shape_rule.md"))
+    ap.add_argument("--seeds", type=int, default=3, metavar="S",
+                    help="the wide split over S training seeds: make table4's model and S - 1 "
+                         "more trained on the whole population (default 3)")
     ap.add_argument("--np", type=int, default=2, help="MPI ranks for the FE simulations")
     ap.add_argument("--chunk", type=int, default=WIDE_SIMS, help="simulations per generate call")
     ap.add_argument("--solver-python", default=str(ROOT / ".venv-solver" / "bin" / "python"))
@@ -334,8 +354,14 @@ def main() -> int:
         engine_rule = ENGINE[json.loads((DESIGNS[design] / "config.json").read_text())[
             "design"]].shape_rule
         for split in a.splits:
-            lv = (wide_results(design, a) if split == "wide"
-                  else phantom_results(split, design))["livers"]
+            seeds = None
+            if split == "wide":  # per liver: the mean over the training seeds
+                seeds = [wide_results(design, a, k)["livers"] for k in range(a.seeds)]
+                lv = {g: {key: float(np.mean([s_[g][key] for s_ in seeds]))
+                          if key in SHAPE_RULES or key == EVERY else seeds[0][g][key]
+                          for key in seeds[0][g]} for g in seeds[0]}
+            else:
+                lv = phantom_results(split, design)["livers"]
             r = [x["mahalanobis"] for x in lv.values()]
             beyond = sum(x["mahalanobis"] > x["training_max_radius"] for x in lv.values())
             radii[split] = (f"| {SPLIT_LABEL[split]} | {np.median(r):.2f} | {beyond}"
@@ -344,11 +370,18 @@ def main() -> int:
                             f"{next(iter(lv.values()))['training_max_radius']:.2f} |")
             best = min(SHAPE_RULES, key=lambda k: summary(lv, k)[0])
             if split == CRITERION:
+                per_seed = ""
+                if seeds and len(seeds) > 1:
+                    per_seed = " Mean MEE per training seed: " + "; ".join(
+                        f"`{rule}` " + " / ".join(f"{summary(s_, rule)[0]:.3f}" for s_ in seeds)
+                        for rule in SHAPE_RULES) + "; the lowest in each seed: " + ", ".join(
+                        f"`{min(SHAPE_RULES, key=lambda r: summary(s_, r)[0])}`"
+                        for s_ in seeds) + "."
                 chosen.append(f"- {design_label(design)}: lowest mean MEE on the "
                               f"{SPLIT_LABEL[split].split(' (')[0]} `{best}`; the design's "
                               f"rule (`shape_rule` in "
                               f"surrogate/designs) `{engine_rule}`"
-                              + ("." if best == engine_rule else " (they differ)."))
+                              + ("." if best == engine_rule else " (they differ).") + per_seed)
             cells = []
             for rule in rules:
                 mean, med = summary(lv, rule)
