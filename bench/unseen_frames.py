@@ -45,7 +45,16 @@ there by the registration. For every liver of the population, the registered reg
 the liver's own (:func:`fixed_region_landing`): how far their nodes lie from each other, and
 their areas; the unseen liver's registered region is then set beside the population's.
 
-    .venv-train/bin/python bench/unseen_frames.py    # after make table4 T4="--scenes 4"
+What that costs, on livers with a groove of their own: the 13 phantoms drawn twice as wide of
+docs/shape_rule.md (bench/shape_rule_study.py), beyond the population as the unseen liver is,
+each with two FE truths on its own mesh: fixed where predict-liver's placement puts the
+template's fixed region (the study's truth, the boundary condition the model assumes) and fixed
+at the liver's own groove, as every training liver is (:func:`wide_clamp_cost`). The models
+are placed and told the shape as predict-liver does; if they are far nearer the second truth,
+they predict the clamp they were trained on, not the one they are placed with.
+
+    .venv-train/bin/python bench/unseen_frames.py    # after make table4 T4="--scenes 4" and
+                                                     # bench/shape_rule_study.py
 
 Resumable: a truth whose simulations exist is not generated again.
 """
@@ -154,6 +163,42 @@ def fixed_region_landing(data: Path, sm, fixed_name: str) -> np.ndarray:
                      np.median(cKDTree(P[fx]).query(g.points[own])[0]),
                      sm.fixed_area(P), region_area(g.points, g.surface_triangles, own)))
     return np.array(rows)
+
+
+def wide_clamp_cost(preds: dict, a, scene_file: Path) -> dict:
+    """Per wide phantom of bench/shape_rule_study.py (those whose truth it generated): its
+    Mahalanobis radius, each truth's fixed node count and mean displacement (mm), and per
+    design the MEE against each truth (mm); the own-groove truths are generated here
+    (resumable), the results kept in the study's directory."""
+    from shape_rule_study import WIDE, WIDE_SIMS, whitened_radius, wide_livers
+
+    cache = WIDE / "clamp_cost.json"
+    stamp = {n: (Path(DESIGNS[n]) / "params.npz").stat().st_mtime for n in preds}
+    done = json.loads(cache.read_text()) if cache.exists() else {}
+    if done.get("models") != stamp:
+        done = {"models": stamp, "livers": {}}
+    C = preds["population_basis"].shape_model.population_coefficients
+    for liver in wide_livers(a):
+        landing = WIDE / liver.stem / "data"
+        if liver.stem in done["livers"] or not (landing / "sims").is_dir():
+            continue
+        own = unseen_truth(scene_file, liver, None, None, a, liver.stem + "_own_groove",
+                           root=WIDE, sims=WIDE_SIMS)
+        row = {}
+        for name, pred in preds.items():
+            placement, found = place_unseen(pred, liver, "population")
+            row["radius"] = float(whitened_radius(placement.coefficients[None], C)[0])
+            for truth, data in (("landing", landing), ("own", own)):
+                r = evaluate_unseen(pred, data, BASE / "data", placement, found)
+                row[f"{name} {truth}"] = r["network"]["mee"]
+                row[f"{truth} fixed nodes"] = r["fixed_nodes"]
+                row[f"{truth} mean mm"] = r["truth_mean_mm"]
+                row[f"{truth} naive"] = r["naive"]["mee"]
+        done["livers"][liver.stem] = row
+        cache.write_text(json.dumps(done, indent=1))
+        print(f"[clamp] {liver.stem}: " + ", ".join(f"{k} {v:.3f}" for k, v in row.items()),
+              flush=True)
+    return done["livers"]
 
 
 def power_law(X: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
@@ -337,6 +382,25 @@ def main() -> int:
                  f"{sm.fixed_area(placed[f][0].points):.0f} mm^2 (`--frame {f}`)"
                  for f in placed) + ". (The clamp table's areas are those of the fixed nodes "
              "on the liver's own mesh, as the phantoms' own.)\n")
+    wide = wide_clamp_cost(preds, a, scene_file)
+    if wide:
+        out["wide_clamp_cost"] = wide
+        (RESULTS / "unseen_frames.json").write_text(json.dumps(out, indent=1))
+        why = next(t for t in __doc__.split("\n\n") if t.startswith("What that costs"))
+        cols = [("radius", "{:.1f}"), ("landing fixed nodes", "{:.0f}"),
+                ("own fixed nodes", "{:.0f}"), ("landing mean mm", "{:.2f}"),
+                ("own mean mm", "{:.2f}")] + [(f"{n} {t}", "{:.3f}") for n in DESIGNS
+                                             for t in ("landing", "own")]
+        wrow = [f"| `{k}` | " + " | ".join(f.format(r[c]) for c, f in cols) + " |"
+                for k, r in sorted(wide.items())]
+        wrow.append("| mean | " + " | ".join(
+            f.format(np.mean([r[c] for r in wide.values()])) for c, f in cols) + " |")
+        text += ("\n" + " ".join(why.split("\n")) + "\n\n| liver | radius | fixed nodes, "
+                 "template's region | fixed nodes, own groove | FE mean displacement mm, "
+                 "template's region | the same, own groove | " + " | ".join(
+                     f"{design_label(n)} MEE mm against the truth fixed at the {t}"
+                     for n in DESIGNS for t in ("template's region", "own groove"))
+                 + " |\n|---|" + "---|" * len(cols) + "\n" + "\n".join(wrow) + "\n")
     phantoms = [geometry_path(BASE / "data", g) for g in sorted(
         np.load(BASE / "data" / "geometry" / "population.npz")["geometry_ids"].tolist())[:PHANTOMS]]
     prow = []
