@@ -19,10 +19,11 @@ mapped (farthest-point samples both ways). The free fit (auto) is closest by con
 second table asks whether that distance could tell a file's frame, on livers of the population
 read in each frame.
 
-The networks are told the shape predict-liver tells them by default: the liver's own
-coefficients within the population's largest Mahalanobis radius, beyond it the design's rule
-(node-wise: scaled back onto that radius, ``radius``; population basis: the nearest mix of
-the population's livers, ``hull``; docs/shape_rule.md); the "shape told" column says which.
+The networks are told the shape predict-liver tells them by default, the design's rule
+(node-wise: each coefficient clipped to the population's range, ``range``; population basis:
+beyond the population's largest Mahalanobis radius, the nearest mix of the population's livers,
+``hull``; docs/shape_rule.md); a liver inside the population is told its own coefficients;
+the "shape told" column says which.
 The "mean shape" columns tell them the population's mean shape (coefficients zero) instead:
 how much of the error is the networks' answer to the shape they are told.
 

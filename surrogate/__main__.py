@@ -59,7 +59,7 @@ def main(argv=None) -> int:
                    "own (the liver's coefficients), range (clipped to the population's "
                    "ranges), radius (scaled back to the population's largest Mahalanobis "
                    "radius) or hull (the nearest mix of the population's livers); default: "
-                   "the design's (node-wise: radius, population basis: hull; "
+                   "the design's (node-wise: range, population basis: hull; "
                    "docs/shape_rule.md)")
     p.add_argument("--no-picture", action="store_true", help="no PNG (no OpenGL needed)")
     args = parser.parse_args(argv)

@@ -141,10 +141,11 @@ class NodeWise:
     """The design's entry in the registry (:data:`surrogate.designs.DESIGNS`)."""
 
     name = "nodewise"
-    # the shape it is told for a liver outside its population (ShapeModel.shape_told): it
-    # also sees the registered nodes, which a shape far from its coefficients contradicts
-    # (chosen on phantoms outside the training livers, docs/shape_rule.md)
-    shape_rule = "radius"
+    # the shape it is told for a liver outside its population (ShapeModel.shape_told): each
+    # coefficient clipped to the population's range; it also sees the registered nodes, which
+    # a shape far from its coefficients contradicts (chosen on phantoms drawn beyond the
+    # population, docs/shape_rule.md)
+    shape_rule = "range"
 
     def check(self, ds: Dataset) -> None:
         """Every dataset takes the node-wise design."""

@@ -49,21 +49,24 @@ def test_the_export_carries_the_population(run):
 
 
 def test_a_liver_beyond_the_population_is_told_a_shape_inside_it(run):
-    """A liver within the population's largest Mahalanobis radius is told its own shape; one
-    beyond it is told the design's rule's shape (node-wise: scaled back onto that radius) or
-    the rule asked for: the prediction is the predictor's on the registered template told that
-    shape, and says which."""
+    """A liver inside the population is told its own shape; one beyond it is told the design's
+    rule's shape (node-wise: each coefficient clipped to the population's range) or the rule
+    asked for (radius: scaled back onto the population's largest Mahalanobis radius): the
+    prediction is the predictor's on the registered template told that shape, and says
+    which."""
     import dataclasses
 
     from surrogate.predict_liver import place_liver, shape_rule
 
     pred = load_predictor(run / "model")
-    assert pred.design == "nodewise" and shape_rule(pred) == "radius"
+    assert pred.design == "nodewise" and shape_rule(pred) == "range"
     sm = pred.shape_model
     path, _ = _population_liver(3)
     points, tris = read_liver_surface(path)
-    inside, _ = place_liver(pred, points, tris, center=False)
+    placed, _ = place_liver(pred, points, tris, center=False)
     C = sm.population_coefficients
+    lo, hi = C.min(axis=0), C.max(axis=0)  # PCA coefficients: lo < 0 < hi
+    inside = dataclasses.replace(placed, coefficients=0.9 * np.clip(placed.coefficients, lo, hi))
     radius = [np.linalg.norm(c / C.std(axis=0)) for c in (inside.coefficients, *C)]
     beyond = 2.0 * max(radius[1:]) / radius[0]  # twice the population's largest radius
     far = dataclasses.replace(inside, coefficients=beyond * inside.coefficients)
@@ -71,17 +74,19 @@ def test_a_liver_beyond_the_population_is_told_a_shape_inside_it(run):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         got = [predict_liver(pred, points, tris, f, load_nodes=node, placement=pl, shape=rule)
-               for pl, rule in ((inside, None), (far, None), (far, "hull"))]
+               for pl, rule in ((inside, None), (far, None), (far, "radius"), (far, "hull"))]
     assert got[0].shape_rule == "own"
     np.testing.assert_array_equal(got[0].shape_told, inside.coefficients)
-    for out, rule in zip(got[1:], ("radius", "hull")):
+    for out, rule in zip(got[1:], ("range", "radius", "hull")):
         assert out.shape_rule == rule
         want, _ = sm.shape_told(far.coefficients, rule)
         np.testing.assert_allclose(out.shape_told, want)
         np.testing.assert_array_equal(out.coefficients, far.coefficients)
         direct = pred(f, node, geometry=(far.points, sm.fixed_nodes, want))
         np.testing.assert_allclose(out.displacement, direct, rtol=1e-5, atol=1e-6)
-    np.testing.assert_allclose(np.linalg.norm(got[1].shape_told / C.std(axis=0)),
+    assert np.all((got[1].shape_told >= lo) & (got[1].shape_told <= hi))
+    assert np.any(got[1].shape_told != far.coefficients)
+    np.testing.assert_allclose(np.linalg.norm(got[2].shape_told / C.std(axis=0)),
                                max(radius[1:]), rtol=1e-9)
 
 
@@ -103,7 +108,7 @@ def test_the_command_on_a_real_liver_writes_paraview_and_the_numbers(run, tmp_pa
     summary = json.loads((out / "prediction.json").read_text())
     assert summary["registration_residual_mm"] > 0 and len(summary["shape_coefficients"]) == 3
     assert 0 < summary["max_displacement_mm"] < 100
-    assert summary["shape_rule"] in ("own", "radius") and len(summary["shape_told"]) == 3
+    assert summary["shape_rule"] in ("own", "range") and len(summary["shape_told"]) == 3
     told_another = "the network is told a shape inside it" in capsys.readouterr().err
     assert told_another == (summary["shape_rule"] != "own")
     assert main(["predict-liver", str(run), str(SOFA), "--force", "120", "100", "190", "0",
