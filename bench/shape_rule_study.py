@@ -215,11 +215,12 @@ def wide_livers(a) -> list[Path]:
     environment: ``python -m fem_sim phantom``); the seeds gmsh cannot mesh are skipped and
     listed in failed.json with gmsh's reason."""
     import subprocess
-    import tomllib
 
     from table4 import SCENES
 
-    scene = tomllib.loads((ROOT / "data_spec" / "scenes" / SCENES[4]).read_text())
+    from data_spec.scene import load_scene
+
+    scene = load_scene(ROOT / "data_spec" / "scenes" / SCENES[4])
     d = WIDE / "livers"
     d.mkdir(parents=True, exist_ok=True)
     failed_path = d / "failed.json"
