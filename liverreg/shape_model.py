@@ -28,7 +28,7 @@ AREA_MARGIN = 1.25  # a fixed region this many times beyond the population's ran
 DEFAULT_FRAME = "LPS"  # the frame of DICOM and ITK, hence of most segmented livers
 
 
-SHAPE_RULES = ("own", "range", "radius", "hull")
+SHAPE_RULES = ("own", "range", "radius", "hull", "outside")
 
 
 def nearest_convex_combination(points: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -220,17 +220,20 @@ class ShapeModel:
         * ``radius``: beyond the population's largest Mahalanobis radius (coefficients over
           the population's standard deviations), scaled toward the mean shape onto it;
         * ``hull``: beyond that radius, the nearest convex combination of the population's
-          livers (nearest in the same whitened metric): a shape between livers it saw.
+          livers (nearest in the same whitened metric): a shape between livers it saw;
+        * ``outside``: the nearest convex combination for a liver beyond that radius *or* with
+          a coefficient beyond the population's range (:meth:`outside_range`, the warning's
+          margin): every liver the coefficient warnings name.
 
         The rule applied is ``own`` when the rule changed nothing. A model exported without
         its population's coefficients (older files) knows only the ranges: ``radius`` and
-        ``hull`` fall back to ``range``.
+        ``hull`` (and ``outside``) fall back to ``range``.
         """
         c = np.asarray(coefficients, dtype=np.float64)
         if rule not in SHAPE_RULES:
             raise ValueError(f"shape rule {rule!r}: expected one of {', '.join(SHAPE_RULES)}")
         C = self.population_coefficients
-        if rule in ("radius", "hull") and C.shape[0] < 2:
+        if rule in ("radius", "hull", "outside") and C.shape[0] < 2:
             rule = "range"
         if rule == "range":
             told = np.clip(c, self.coefficient_min, self.coefficient_max)
@@ -239,6 +242,9 @@ class ShapeModel:
             return c, rule
         std = self._spread()
         r, r_max = np.linalg.norm(c / std), np.linalg.norm(C / std, axis=1).max()
+        if rule == "outside":
+            beyond = r > r_max or self.outside_range(c).size > 0
+            return (self.nearest_mix(c), rule) if beyond else (c, "own")
         if r <= r_max:
             return c, "own"
         if rule == "radius":

@@ -58,7 +58,8 @@ def main(argv=None) -> int:
                    help="the shape the network is told for a liver outside the population: "
                    "own (the liver's coefficients), range (clipped to the population's "
                    "ranges), radius (scaled back to the population's largest Mahalanobis "
-                   "radius) or hull (the nearest mix of the population's livers); default: "
+                   "radius), hull (the nearest mix of the population's livers) or outside "
+                   "(that mix also for a liver with a coefficient beyond the ranges); default: "
                    "the design's (node-wise: range, population basis: hull; "
                    "docs/shape_rule.md)")
     p.add_argument("--no-picture", action="store_true", help="no PNG (no OpenGL needed)")

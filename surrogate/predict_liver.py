@@ -220,7 +220,8 @@ def predict_liver(predictor, points, triangles, forces, at=None, load_nodes=None
     ``at`` (n_loads, 3) mm, or at template node ids ``load_nodes``. Points, forces and the
     result are in the liver's frame (the file's). ``shape``: the shape the network is told for
     a liver outside the population (:meth:`liverreg.shape_model.ShapeModel.shape_told`:
-    ``own``, ``range``, ``radius`` or ``hull``; None: the design's, :func:`shape_rule`).
+    ``own``, ``range``, ``radius``, ``hull`` or ``outside``; None: the design's,
+    :func:`shape_rule`).
     """
     sm = predictor.shape_model
     if sm is None:

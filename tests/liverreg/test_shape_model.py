@@ -155,12 +155,13 @@ def test_the_shape_a_network_is_told(population):
     beyond the population is told one inside it: clipped to the ranges, scaled back to the
     population's largest Mahalanobis radius along the same direction, or the nearest convex
     combination of the population's livers (no farther than any of them, and inside the
-    largest radius)."""
+    largest radius). ``outside`` tells that mix also to a liver inside the radius with one
+    coefficient beyond the population's range, which ``hull`` leaves alone."""
     _, _, sm = population
     C = sm.population_coefficients
     std = C.std(axis=0)
     for c in [*C, 0.5 * (C[1] + C[3])]:
-        for rule in ("own", "range", "radius", "hull"):
+        for rule in ("own", "range", "radius", "hull", "outside"):
             told, used = sm.shape_told(c, rule)
             assert used == "own"
             np.testing.assert_array_equal(told, c)
@@ -181,6 +182,20 @@ def test_the_shape_a_network_is_told(population):
     assert np.linalg.norm(hull / std) <= r + 1e-9
     np.testing.assert_array_equal(sm.shape_told(far, "own")[0], far)
     assert sm.shape_told(far, "hull")[1] == "hull" and sm.shape_told(far, "range")[1] == "range"
+    np.testing.assert_allclose(sm.shape_told(far, "outside")[0], hull)
+    # inside the largest radius, one coefficient 10 % of its range beyond the population's
+    lo, hi = sm.coefficient_min, sm.coefficient_max
+    j = int(np.argmax((hi - lo) / std))  # the widest range in standard deviations
+    odd = C.mean(axis=0)
+    odd[j] = hi[j] + 0.1 * (hi[j] - lo[j])
+    assert np.linalg.norm(odd / std) < np.linalg.norm(C / std, axis=1).max()
+    assert sm.outside_range(odd).tolist() == [j]
+    np.testing.assert_array_equal(sm.shape_told(odd, "hull")[0], odd)
+    mix, used = sm.shape_told(odd, "outside")
+    assert used == "outside"
+    # a convex combination of the livers lies inside every range
+    assert np.all((mix >= lo - 1e-6 * (hi - lo)) & (mix <= hi + 1e-6 * (hi - lo)))
+    np.testing.assert_allclose(mix, sm.nearest_mix(odd))
     with pytest.raises(ValueError, match="shape rule 'nearest': expected one of own, range"):
         sm.shape_told(far, "nearest")
 
