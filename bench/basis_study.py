@@ -66,7 +66,7 @@ def section(k: int, names: list[str]) -> str:
     for n, m in metrics.items():
         choice, choice_skill = pooled(m, slice(reported, None))
         rep, rep_skill = pooled(m, slice(0, reported))
-        is_shipped = get_config("basis", **PLAIN, **VARIANTS[n]) == shipped
+        is_shipped = get_config("basis", **{**PLAIN, **VARIANTS[n]}) == shipped
         rows.append(f"| {n}{' (shipped)' if is_shipped else ''} | `{VARIANTS[n] or '-'}` | "
                     f"{choice:.3f} | {choice_skill:.3f} | "
                     f"{rep:.3f} | {rep_skill:.3f} | {m['training_seconds']:.0f} s | "
