@@ -611,7 +611,10 @@ def unseen_note(k: int, d: dict) -> str:
                 "radius": "its shape scaled back onto the population's largest Mahalanobis "
                           "radius (it lies beyond it)",
                 "hull": "the nearest mix of the population's livers (it lies beyond their "
-                        "largest Mahalanobis radius)"}.get(u["shape_rule"], u["shape_rule"])
+                        "largest Mahalanobis radius)",
+                "outside": "the nearest mix of the population's livers (it lies outside "
+                           "their largest Mahalanobis radius or their coefficients' range)",
+                }.get(u["shape_rule"], u["shape_rule"])
         out += (f"; the network told {told} (`--shape {u['shape_asked']}`, "
                 "docs/shape_rule.md)")
     if "best_scale" in u:

@@ -21,9 +21,9 @@ read in each frame.
 
 The networks are told the shape predict-liver tells them by default, the design's rule
 (node-wise: each coefficient clipped to the population's range, ``range``; population basis:
-beyond the population's largest Mahalanobis radius, the nearest mix of the population's livers,
-``hull``; docs/shape_rule.md); a liver inside the population is told its own coefficients;
-the "shape told" column says which.
+beyond the population's largest Mahalanobis radius or its coefficients' range, the nearest mix
+of the population's livers, ``outside``; docs/shape_rule.md); a liver inside the population
+is told its own coefficients; the "shape told" column says which.
 The "mean shape" columns tell them the population's mean shape (coefficients zero) instead:
 how much of the error is the networks' answer to the shape they are told.
 
@@ -173,8 +173,12 @@ def wide_clamp_cost(preds: dict, a, scene_file: Path) -> dict:
     (resumable), the results kept in the study's directory."""
     from shape_rule_study import WIDE, WIDE_SIMS, whitened_radius, wide_livers
 
+    from surrogate.predict_liver import shape_rule
+
     cache = WIDE / "clamp_cost.json"
-    stamp = {n: (Path(DESIGNS[n]) / "params.npz").stat().st_mtime for n in preds}
+    # the results hold for these models told the shape by these rules
+    stamp = {n: [(Path(DESIGNS[n]) / "params.npz").stat().st_mtime, shape_rule(pred)]
+             for n, pred in preds.items()}
     done = json.loads(cache.read_text()) if cache.exists() else {}
     if done.get("models") != stamp:
         done = {"models": stamp, "livers": {}}

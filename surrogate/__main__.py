@@ -60,7 +60,7 @@ def main(argv=None) -> int:
                    "ranges), radius (scaled back to the population's largest Mahalanobis "
                    "radius), hull (the nearest mix of the population's livers) or outside "
                    "(that mix also for a liver with a coefficient beyond the ranges); default: "
-                   "the design's (node-wise: range, population basis: hull; "
+                   "the design's (node-wise: range, population basis: outside; "
                    "docs/shape_rule.md)")
     p.add_argument("--no-picture", action="store_true", help="no PNG (no OpenGL needed)")
     args = parser.parse_args(argv)

@@ -102,8 +102,10 @@ class PopulationBasis(Basis):
     name = "population_basis"
     log_every = 10
     # the shape it is told for a liver outside its population (ShapeModel.shape_told): the
-    # shape coefficients are all it knows of the liver's shape (docs/shape_rule.md)
-    shape_rule = "hull"
+    # shape coefficients are all it knows of the liver's shape: the nearest mix of the
+    # population's livers for any liver outside it (chosen on phantoms drawn beyond the
+    # population, docs/shape_rule.md)
+    shape_rule = "outside"
 
     def maps(self, ds: Dataset) -> TemplateFields:
         """The dataset's TemplateFields, built once and kept with the dataset (so they live
