@@ -174,7 +174,7 @@ def phantom_results(split: str, design: str) -> dict:
     pred = load_predictor(trained(lambda: ds, cfg, held, out))
     train_C = C[[i for i, g in enumerate(ids) if g not in held]]
     sm = told_population(pred, train_C)
-    reg = registered_templates(ds)
+    reg = registered_templates(ds.directory)
     r_train = whitened_radius(train_C, train_C).max()
     for n, gid in enumerate(held):
         res = done["livers"].get(gid, {})

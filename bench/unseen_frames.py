@@ -147,8 +147,6 @@ def fixed_region_landing(data: Path, sm, fixed_name: str) -> np.ndarray:
     ``fixed_name``), the same from its own to the registered ones, the registered region's
     area and the liver's own region's area (mm^2).
     """
-    from types import SimpleNamespace
-
     from scipy.spatial import cKDTree
 
     from data_spec.geometry import read_geometry, region_area
@@ -157,7 +155,7 @@ def fixed_region_landing(data: Path, sm, fixed_name: str) -> np.ndarray:
 
     fx = sm.fixed_nodes
     rows = []
-    for gid, P in registered_templates(SimpleNamespace(directory=data)).items():
+    for gid, P in registered_templates(data).items():
         g = read_geometry(geometry_path(data, gid))
         own = g.regions[fixed_name]
         rows.append((np.median(cKDTree(g.points[own]).query(P[fx])[0]),

@@ -21,15 +21,16 @@ from liverreg.shape_model import ShapeModel
 log = logging.getLogger(__name__)
 
 
-def population_file(ds) -> Path:
-    return Path(ds.directory) / "geometry" / "population.npz"
+def population_file(directory) -> Path:
+    """The population's registration of the dataset in ``directory``."""
+    return Path(directory) / "geometry" / "population.npz"
 
 
 def population_shape_model(ds):
     """The dataset's population as a :class:`liverreg.shape_model.ShapeModel` (template = the
     population's liver 0), from DATA/geometry/population.npz; None when the dataset has none.
     """
-    path = population_file(ds)
+    path = population_file(ds.directory)
     if not path.exists():
         log.warning("%s: missing; the model cannot place a new liver", path)
         return None
@@ -40,7 +41,7 @@ def population_shape_model(ds):
         D = surface_displacements(z)
         residuals = z["registration_error"]
         inverted = z["inverted"] if "inverted" in z.files else None
-    template = template_geometry(ds)
+    template = template_geometry(ds.directory)
     scene = load_scene(Path(ds.directory) / "scene.toml")
     if ids[0] in ds.geo_ids:
         fixed = ds.fixed[ds.geo_ids.index(ids[0])]
@@ -65,23 +66,26 @@ def surface_displacements(z) -> np.ndarray:
     return z["mean"] + z["coefficients"] @ z["components"]
 
 
-def template_geometry(ds):
-    """The template's own mesh: the population's liver 0 (:class:`data_spec.Geometry`)."""
-    with np.load(population_file(ds), allow_pickle=False) as z:
-        first = str(z["geometry_ids"][0])
-    return read_geometry(geometry_path(ds.directory, first))
-
-
-def registered_templates(ds) -> dict[str, np.ndarray]:
-    """The template's nodes registered onto each liver of the population, by geometry id
-    ((n_template, 3) each: (its surface as the population's CPD put it, the interior by harmonic
-    extension, as :meth:`liverreg.shape_model.ShapeModel.place` does for a new liver)).
+def template_geometry(directory):
+    """The template's own mesh: the population's liver 0 (:class:`data_spec.Geometry`) of the
+    dataset in ``directory``.
     """
-    path = population_file(ds)
+    with np.load(population_file(directory), allow_pickle=False) as z:
+        first = str(z["geometry_ids"][0])
+    return read_geometry(geometry_path(directory, first))
+
+
+def registered_templates(directory) -> dict[str, np.ndarray]:
+    """The template's nodes registered onto each liver of the population of the dataset in
+    ``directory``, by geometry id ((n_template, 3) each: (its surface as the population's CPD
+    put it, the interior by harmonic extension, as
+    :meth:`liverreg.shape_model.ShapeModel.place` does for a new liver)).
+    """
+    path = population_file(directory)
     with np.load(path, allow_pickle=False) as z:
         ids = [str(i) for i in z["geometry_ids"]]
         D = surface_displacements(z)
-    template = template_geometry(ds)
+    template = template_geometry(directory)
     surf = template.surface_nodes
     morph = SurfaceMorph(template.points, template.cells, surf)
     S = template.points[surf]

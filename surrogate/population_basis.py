@@ -59,18 +59,19 @@ class TemplateFields:
         if not ds.spec.geometry_dim:
             raise BasisDesignError("design 'population_basis' needs a scene that varies the "
                                    "liver (a population); one liver takes design 'basis'")
-        if ds.directory is None or not population_file(ds).exists():
+        pop = population_file(ds.directory) if ds.directory is not None else None
+        if pop is None or not pop.exists():
             raise BasisDesignError(f"design 'population_basis' needs the population's "
-                                   f"registration ({population_file(ds)}); generate the "
-                                   "dataset with fem_sim, which writes it")
-        reg = registered_templates(ds)
+                                   f"registration ({pop or 'the dataset has no directory'}); "
+                                   "generate the dataset with fem_sim, which writes it")
+        reg = registered_templates(ds.directory)
         missing = [g for g in ds.geo_ids if g not in reg]
         if missing:
             raise BasisDesignError(f"livers {missing[:3]} are not in the population file "
-                                   f"{population_file(ds)}")
+                                   f"{pop}")
         # every sample's load context too: each liver's loads through its registered template
         # (one interpolation from it per liver, to its output nodes and its load points)
-        template = template_geometry(ds).points
+        template = template_geometry(ds.directory).points
         self.context = np.zeros(ds.load_points.shape[:2] + (CONTEXT,), dtype=np.float32)
         self.to_template, self.to_liver = [], []
         for g, gid in enumerate(ds.geo_ids):

@@ -295,6 +295,24 @@ def test_the_population_basis_predicts_a_new_liver_on_its_template(tmp_path, syn
         train_and_evaluate(synth_dir, tmp_path / "one", cfg, log_fn=lambda m: None)
 
 
+def test_the_population_basis_refuses_a_dataset_without_its_registration(tmp_path):
+    """The scene-4 dataset without DATA/geometry/population.npz: the design names the file it
+    needs before any training."""
+    from surrogate.population_basis import BasisDesignError
+
+    bare = tmp_path / "bare"
+    (bare / "geometry").mkdir(parents=True)
+    for p in Path(DATA).iterdir():
+        if p.name != "geometry":
+            (bare / p.name).symlink_to(p.resolve())
+    for p in (Path(DATA) / "geometry").iterdir():
+        if p.name != "population.npz":
+            (bare / "geometry" / p.name).symlink_to(p.resolve())
+    cfg = get_config("population_basis", folds=2, epochs=1, modes=4, hidden=[8], ensemble=1)
+    with pytest.raises(BasisDesignError, match=r"registration \(.*bare/geometry/population.npz\)"):
+        train_and_evaluate(bare, tmp_path / "run", cfg, log_fn=lambda m: None)
+
+
 def test_the_population_basis_exports_what_it_trained(tmp_path):
     """The exported predictor computes what training computes from the same inputs (the
     template's own mesh, loads at template nodes, whose place on the template is the node
