@@ -26,18 +26,17 @@ region where the placement puts it). The choice among ``own``, ``range``, ``radi
 ``hull`` is the lowest mean MEE over these livers (fixed before they were predicted).
 ``outside`` was proposed after they had been predicted, so it is judged on 13 fresh phantoms
 drawn the same way (seeds from 8000): it replaces that choice if its mean MEE there is lower
-(fixed before the fresh phantoms were drawn). Two splits of the population say what a rule
-costs nearer home: both designs, with ``make table4``'s configs and budgets, trained again
-without the 13 livers
-(1/8 of the population) farthest from the mean shape (largest Mahalanobis radius), which then
-lie just outside the training livers' population, predicted told the training livers'
+(fixed before the fresh phantoms were drawn). Two splits of the population say what a rule costs
+nearer home: both designs, with ``make table4``'s configs and budgets, trained again without the
+13 livers (1/8 of the population) farthest from the mean shape (largest Mahalanobis radius),
+which then lie just outside the training livers' population, predicted told the training livers'
 population only; and table4's fold 1 (13 livers drawn at random, inside the population). Last,
 the models of ``make table4`` predict the unseen SOFA liver (``--frame LPS``, table4's FE truth)
 with each rule: reported, never used for the choice. The wide phantoms are predicted by three
 models of each design (``--seeds``: ``make table4``'s and two more trained on the whole
 population with other training seeds; per liver the mean over them), the other splits by one
-(the population basis: its shipped ensemble); MEE per liver over its simulations' nodes and
-load steps.
+(the population basis: its shipped ensemble); MEE per liver over its simulations' nodes and load
+steps.
 
     .venv-train/bin/python bench/shape_rule_study.py     # after make table4 T4="--scenes 4"
 
@@ -73,6 +72,9 @@ FIRST_RULES = ("own", "range", "radius", "hull")
 # phantoms drawn the same way: it replaces a design's rule if its mean MEE is lower there.
 CONFIRM = "wide_fresh"
 EVERY = "hull, every liver"  # study only: the nearest mix for every liver, inside or not
+# the rules predicted; ``outside`` tells each liver what ``own`` or EVERY tells it, so its
+# result is read off theirs (:func:`outside_from`)
+PREDICTED = (*FIRST_RULES, EVERY)
 SPLIT_LABEL = {"wide": "13 phantoms drawn twice as wide (mean over the seeds)",
                "wide_fresh": "13 more, fresh seeds (mean over the seeds)",
                "outlying": "the 13 livers farthest from the mean shape",
@@ -184,9 +186,7 @@ def phantom_results(split: str, design: str) -> dict:
         c = C[ids.index(gid)]
         pl = Placement(points=reg[gid], coefficients=c, residual=0.0, iterations=[],
                        offset=np.zeros(3))
-        for rule in todo:
-            if rule == "outside":
-                continue
+        for rule in (r for r in todo if r in PREDICTED):
             told, asked = (pl, rule) if rule != EVERY else (every_liver(pl, sm), "own")
             res[rule] = evaluate_unseen(pred, DATA, DATA, told, [], asked, gid)["network"]["mee"]
         outside_from(res, sm, c)
@@ -222,9 +222,7 @@ def unseen_results(design: str, liver: Path) -> dict | None:
     placement, found = place_unseen(pred, liver, "LPS")
     out = {}
     sm = pred.shape_model
-    for rule in (*SHAPE_RULES, EVERY):
-        if rule == "outside":
-            continue
+    for rule in PREDICTED:
         told, asked = ((placement, rule) if rule != EVERY
                        else (every_liver(placement, sm), "own"))
         r = evaluate_unseen(pred, UNSEEN_DATA, DATA, told, found, asked)
@@ -238,6 +236,11 @@ def unseen_results(design: str, liver: Path) -> dict | None:
     return out
 
 
+def liver_dir(split: str) -> Path:
+    """Where the wide ``split``'s phantoms are kept (one geometry file each)."""
+    return RESULTS / split / "livers"
+
+
 def wide_livers(a, split: str = "wide") -> list[Path]:
     """The geometry files of the livers beyond the population of the wide ``split`` (meshed
     once, by the solver's environment: ``python -m fem_sim phantom``); the seeds gmsh cannot
@@ -249,7 +252,7 @@ def wide_livers(a, split: str = "wide") -> list[Path]:
     from data_spec.scene import load_scene
 
     scene = load_scene(ROOT / "data_spec" / "scenes" / SCENES[4])
-    d = RESULTS / split / "livers"
+    d = liver_dir(split)
     d.mkdir(parents=True, exist_ok=True)
     failed_path = d / "failed.json"
     failed = json.loads(failed_path.read_text()) if failed_path.exists() else {}
@@ -322,9 +325,7 @@ def wide_results(design: str, a, k: int = 0, split: str = "wide") -> dict:
         placement, found = place_unseen(pred, liver, "population")
         data = unseen_truth(scene_file, liver, placement, sm, a, liver.stem, root=root,
                             sims=WIDE_SIMS)
-        for rule in todo:
-            if rule == "outside":
-                continue
+        for rule in (r for r in todo if r in PREDICTED):
             told, asked = ((placement, rule) if rule != EVERY
                            else (every_liver(placement, sm), "own"))
             r = evaluate_unseen(pred, data, DATA, told, found, asked)

@@ -207,13 +207,13 @@ def wide_clamp_cost(preds: dict, a, scene_file: Path) -> dict:
 def wide_grooves(wide: dict, population_areas: np.ndarray, fixed_name: str) -> str:
     """Why the wide phantoms' own grooves hold fewer nodes: their areas (on their own meshes,
     as ``population_areas``, the population's own grooves) and how the node counts follow."""
-    from shape_rule_study import WIDE
+    from shape_rule_study import liver_dir
 
     from data_spec.geometry import read_geometry, region_area
 
     stems = sorted(wide)
     area = np.array([region_area(g.points, g.surface_triangles, g.regions[fixed_name])
-                     for g in (read_geometry(WIDE / "livers" / f"{s}.h5") for s in stems)])
+                     for g in (read_geometry(liver_dir("wide") / f"{s}.h5") for s in stems)])
     nodes = np.array([wide[s]["own fixed nodes"] for s in stems])
     return (f"\nThe wide phantoms' own grooves cover {np.median(area):.0f} mm^2 median "
             f"({area.min():.0f} .. {area.max():.0f}) on their meshes, the population's "
