@@ -44,3 +44,25 @@ def test_a_run_is_trained_again_when_the_dataset_grows_or_the_config_changes(tmp
     assert table4.train(data, run, "small", {"folds": 3})["calls"] == 3
     shards(7)
     assert table4.train(data, run, "small", {"folds": 3})["calls"] == 4
+
+
+def test_the_point_past_the_budget_starts_from_the_rows_dataset_without_touching_it(tmp_path):
+    data = tmp_path / "scene" / "data"
+    (data / "sims").mkdir(parents=True)
+    (data / "geometry").mkdir()
+    (data / "scene.toml").write_text("the scene")
+    (data / "geometry" / "g1.h5").write_text("liver 1")
+    for i in range(5):
+        (data / "sims" / f"sim_{i:06d}.h5").write_text(f"shard {i}")
+    more = table4.extended(data, 8)
+    assert more == tmp_path / "scene" / "beyond_8" / "data"
+    assert sorted(p.name for p in (more / "sims").iterdir()) == \
+        [f"sim_{i:06d}.h5" for i in range(5)]
+    assert (more / "sims" / "sim_000003.h5").read_text() == "shard 3"
+    assert (more / "geometry" / "g1.h5").read_text() == "liver 1"
+    assert (more / "scene.toml").read_text() == "the scene"
+    # what generate then writes there stays there; a second call links nothing twice
+    (more / "sims" / "sim_000005.h5").write_text("shard 5")
+    assert table4.extended(data, 8) == more
+    assert len(list((data / "sims").iterdir())) == 5
+    assert len(list((more / "sims").iterdir())) == 6
