@@ -239,17 +239,43 @@ def curve_fit(ns, skills, target):
     return float(np.exp(loga) * target**b), float(b)
 
 
+_PLACED: dict = {}  # (liver, its mtime, frame, the shape model's digest) -> placement, warnings
+
+
+def shape_model_digest(sm) -> str:
+    """A digest of what a placement depends on: the shape model's template, PCA, ranges and
+    registration settings (every design and seed trained on one dataset shares it)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for x in (sm.template_points, sm.template_cells, sm.surface_triangles, sm.fixed_nodes,
+              sm.mean, sm.components, sm.coefficient_min, sm.coefficient_max, sm.residuals,
+              sm.schedule, sm.population_coefficients, sm.population_inverted,
+              sm.population_fixed_area, np.asarray(sm.n_points)):
+        a = np.ascontiguousarray(x)
+        h.update(f"{a.dtype}{a.shape}".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
 def place_unseen(pred, liver: Path, frame: str):
     """(placement, warnings): predict-liver's placement of the liver file by the loaded
-    model ``pred`` (as a user gets it, ``frame`` as its --frame)."""
+    model ``pred`` (as a user gets it, ``frame`` as its --frame). Registered once per liver,
+    frame and shape model in a process: the designs and training seeds of one dataset share
+    their placements."""
     import warnings
 
     from surrogate.predict_liver import place_liver, read_liver_surface
 
-    points, tris = read_liver_surface(liver)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return place_liver(pred, points, tris, frame=frame)
+    liver = Path(liver).resolve()
+    key = (str(liver), liver.stat().st_mtime_ns, frame, shape_model_digest(pred.shape_model))
+    if key not in _PLACED:
+        points, tris = read_liver_surface(liver)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            _PLACED[key] = place_liver(pred, points, tris, frame=frame)
+    placement, found = _PLACED[key]
+    return placement, list(found)
 
 
 def unseen_truth(scene_file: Path, liver: Path, placement, sm, a, name: str,

@@ -66,3 +66,38 @@ def test_the_point_past_the_budget_starts_from_the_rows_dataset_without_touching
     assert table4.extended(data, 8) == more
     assert len(list((data / "sims").iterdir())) == 5
     assert len(list((more / "sims").iterdir())) == 6
+
+
+def test_a_liver_is_registered_once_per_shape_model(tmp_path, monkeypatch):
+    import types
+
+    import numpy as np
+
+    import surrogate.predict_liver as pl
+
+    calls = []
+    monkeypatch.setattr(pl, "read_liver_surface", lambda path: (np.zeros((3, 3)), np.zeros(
+        (1, 3), int)))
+    monkeypatch.setattr(pl, "place_liver", lambda pred, p, t, frame: (
+        calls.append(frame) or (f"placement {len(calls)}", [f"warning {len(calls)}"])))
+    liver = tmp_path / "liver.stl"
+    liver.write_text("a liver")
+
+    def model(lo):
+        arrays = {k: np.arange(4.0) for k in (
+            "template_points", "template_cells", "surface_triangles", "fixed_nodes", "mean",
+            "components", "residuals", "schedule", "population_coefficients",
+            "population_inverted", "population_fixed_area")}
+        sm = types.SimpleNamespace(**arrays, coefficient_min=np.array([lo]),
+                                   coefficient_max=np.array([1.0]), n_points=600)
+        return types.SimpleNamespace(shape_model=sm)
+
+    a, b = model(0.0), model(0.0)  # two designs of one dataset: the same shape model
+    first = table4.place_unseen(a, liver, "LPS")
+    assert table4.place_unseen(b, liver, "LPS") == first and len(calls) == 1
+    table4.place_unseen(a, liver, "RAS")  # another frame
+    table4.place_unseen(model(-1.0), liver, "LPS")  # other ranges: other warnings
+    assert calls == ["LPS", "RAS", "LPS"]
+    found = table4.place_unseen(a, liver, "LPS")[1]
+    found.append("the caller's own")  # a caller's list is its own
+    assert table4.place_unseen(a, liver, "LPS")[1] == ["warning 1"]
