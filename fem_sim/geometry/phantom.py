@@ -146,21 +146,36 @@ MAX_CAVA_DRAWS = 20
 def with_groove(prm: PhantomParameters, seed: int, spread: float = 1.0) -> PhantomParameters:
     """``prm`` with its vena cava redrawn (seeded by ``seed`` and the attempt, the rest of the
     shape kept; ``spread`` as :func:`anatomical_parameters`'s) until its groove covers
-    ``MIN_GROOVE_AREA``; ``prm`` itself when it does. Needs gmsh.
+    ``MIN_GROOVE_AREA``; ``prm`` itself when it does. Needs gmsh. :func:`make_phantom` draws
+    the same cava, measuring each groove in the model it then meshes.
     """
-    area, attempt = groove_area(prm), 0
+    attempt, area = 0, groove_area(prm)
     while area < MIN_GROOVE_AREA:
-        attempt += 1
-        if attempt > MAX_CAVA_DRAWS:
-            raise GeometryError(f"phantom {seed}: no vena-cava groove of {MIN_GROOVE_AREA:.0f} "
-                                f"mm^2 in {MAX_CAVA_DRAWS} draws (the last {area:.0f} mm^2)")
-        prm = replace(prm, **_draw_cava(np.random.default_rng([20251, seed, attempt]),
-                                        prm.right_axes, spread))
+        attempt, prm = _redrawn(prm, seed, attempt, area, spread)
         area = groove_area(prm)
+    _log_redrawn(seed, attempt, area)
+    return prm
+
+
+def _redrawn(prm: PhantomParameters, seed: int, attempt: int, area: float,
+             spread: float) -> tuple[int, PhantomParameters]:
+    """The next draw of a cava whose groove (``area`` mm^2) is too small: (attempt, prm)."""
+    attempt += 1
+    if attempt > MAX_CAVA_DRAWS:
+        raise GeometryError(f"phantom {seed}: no vena-cava groove of {MIN_GROOVE_AREA:.0f} "
+                            f"mm^2 in {MAX_CAVA_DRAWS} draws (the last {area:.0f} mm^2)")
+    return attempt, replace(prm, **_draw_cava(np.random.default_rng([20251, seed, attempt]),
+                                              prm.right_axes, spread))
+
+
+def _log_redrawn(seed: int, attempt: int, area: float) -> None:
     if attempt:
         log.info("phantom %d: vena cava redrawn %d time(s), groove %.0f mm^2", seed, attempt,
                  area)
-    return prm
+
+
+class _SmallGroove(Exception):
+    """The solid's groove is under MIN_GROOVE_AREA (its area, mm^2, in args[0])."""
 
 
 def make_phantom(seed: int = 0, mesh_size: float = 8.0, variety: str = "narrow",
@@ -174,23 +189,34 @@ def make_phantom(seed: int = 0, mesh_size: float = 8.0, variety: str = "narrow",
     if variety == "narrow" and spread != 1.0:
         raise ValueError(f"spread: only anatomical phantoms are widened, got {spread!r} for a "
                          "narrow one")
-    prm = phantom_parameters(seed) if variety == "narrow" else \
-        with_groove(anatomical_parameters(seed, spread), seed, spread)
+    anatomical = variety == "anatomical"
+    prm = anatomical_parameters(seed, spread) if anatomical else phantom_parameters(seed)
     widened = f", spread {spread:g}" if spread != 1.0 else ""
     lobes = (np.prod(prm.right_axes) + np.prod(prm.left_axes)) * 4.0 / 3.0 * np.pi
     if prm.volume is not None:
         lobes = prm.volume
     check_mesh_size(lobes, mesh_size, f"phantom {seed}")  # an upper bound of its volume
-    failures = []
-    for algorithm in SURFACE_ALGORITHMS:
+    # an anatomical phantom's groove is measured in the model that is then meshed (the solid
+    # built once): too small, its cava is redrawn as with_groove redraws it
+    failures, attempt, area = [], 0, None
+    algorithms = iter(SURFACE_ALGORITHMS)
+    algorithm = next(algorithms)
+    while True:
         try:
-            points, cells, scale = _mesh(prm, seed, mesh_size, algorithm)
+            points, cells, scale, area = _mesh(prm, seed, mesh_size, algorithm,
+                                               MIN_GROOVE_AREA if anatomical else None)
             break
+        except _SmallGroove as small:
+            attempt, prm = _redrawn(prm, seed, attempt, small.args[0], spread)
         except Exception as exc:  # gmsh raises a bare Exception with its last error
             failures.append(f"surface algorithm {algorithm}: {exc}")
-    else:
-        raise GeometryError(f"phantom {seed} ({variety}{widened}), mesh size {mesh_size} "
-                            "mm: gmsh could not mesh it: " + "; ".join(failures))
+            algorithm = next(algorithms, None)
+            if algorithm is None:
+                raise GeometryError(f"phantom {seed} ({variety}{widened}), mesh size "
+                                    f"{mesh_size} mm: gmsh could not mesh it: "
+                                    + "; ".join(failures)) from None
+    if anatomical:
+        _log_redrawn(seed, attempt, area)
     if failures:
         log.info("phantom %d (%s): meshed with surface algorithm %d after %s", seed, variety,
                  algorithm, "; ".join(failures))
@@ -212,9 +238,11 @@ def make_phantom(seed: int = 0, mesh_size: float = 8.0, variety: str = "narrow",
 SURFACE_ALGORITHMS = (6, 5, 1)
 
 
-def _mesh(prm, seed: int, mesh_size: float, algorithm: int):
+def _mesh(prm, seed: int, mesh_size: float, algorithm: int, min_groove: float | None = None):
     """Build phantom ``prm`` in a fresh gmsh model and mesh it with surface algorithm
-    ``algorithm``: (points, cells, the scale applied to reach its volume).
+    ``algorithm``: (points, cells, the scale applied to reach its volume, the groove's area in
+    mm^2). ``min_groove``: :class:`_SmallGroove` before any meshing when the groove is
+    smaller (None: not measured, area None).
     """
     import gmsh
 
@@ -223,7 +251,15 @@ def _mesh(prm, seed: int, mesh_size: float, algorithm: int):
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.option.setNumber("General.NumThreads", 1)  # reproducible meshes
         gmsh.model.add(f"phantom_{seed}")
-        body, scale = _build(prm)
+        body, scale = _solid(prm)
+        area = None
+        if min_groove is not None:
+            area = _groove(body) * scale ** 2
+            if area < min_groove:
+                raise _SmallGroove(area)
+        if scale != 1.0:
+            gmsh.model.occ.dilate(body, 0, 0, 0, scale, scale, scale)
+            gmsh.model.occ.synchronize()
         vols = gmsh.model.getEntities(3)
         if len(vols) != 1:
             raise RuntimeError(f"phantom {seed}: expected one volume, got {len(vols)}")
@@ -240,20 +276,7 @@ def _mesh(prm, seed: int, mesh_size: float, algorithm: int):
         gmsh.model.remove()
     finally:
         gmsh.finalize()
-    return points, cells, scale
-
-
-def _build(prm):
-    """Build phantom ``prm``'s solid in the current gmsh model (OpenCASCADE, synchronised),
-    scaled to its volume: (its volume entities, the scale applied).
-    """
-    import gmsh
-
-    body, scale = _solid(prm)
-    if scale != 1.0:
-        gmsh.model.occ.dilate(body, 0, 0, 0, scale, scale, scale)
-        gmsh.model.occ.synchronize()
-    return body, scale
+    return points, cells, scale, area
 
 
 def _solid(prm):
@@ -310,13 +333,22 @@ def groove_area(prm: PhantomParameters) -> float:
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.model.add("groove")
-        body, scale = _solid(prm)  # the scaling turns every face into a B-spline: area before
-        faces = gmsh.model.getBoundary(body, oriented=False)
-        area = sum(gmsh.model.occ.getMass(2, t) for _, t in faces
-                   if gmsh.model.getType(2, t) == "Cylinder")
+        body, scale = _solid(prm)
+        area = _groove(body)
     finally:
         gmsh.finalize()
     return area * scale ** 2
+
+
+def _groove(body) -> float:
+    """Area of the faces the cava's cylinder leaves on the solid ``body`` in the current gmsh
+    model, before its volume scaling (the scaling turns every face into a B-spline).
+    """
+    import gmsh
+
+    faces = gmsh.model.getBoundary(body, oriented=False)
+    return sum(gmsh.model.occ.getMass(2, t) for _, t in faces
+               if gmsh.model.getType(2, t) == "Cylinder")
 
 
 def _half_ellipsoids(occ, axes, dome: float) -> int:

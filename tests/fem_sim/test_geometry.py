@@ -151,6 +151,27 @@ def test_a_sliver_groove_gets_its_vena_cava_redrawn_and_a_deep_one_is_kept(monke
     with pytest.raises(GeometryError, match=r"phantom 1100: no vena-cava groove of "
                                             r"1000000000 mm\^2 in 2 draws \(the last \d+ mm"):
         ph.with_groove(drawn, 1100)
+    with pytest.raises(GeometryError, match=r"phantom 1100: no vena-cava groove of "
+                                            r"1000000000 mm\^2 in 2 draws"):
+        ph.make_phantom(1100, 16.0, "anatomical")  # the same limit where it meshes
+
+
+def test_an_anatomical_phantom_builds_its_solid_once_per_cava_drawn(monkeypatch):
+    # the groove is measured in the gmsh model that is then meshed: phantom 1017's first cava
+    # is kept (one solid), 1100's is redrawn (a solid per draw, the last one meshed)
+    import fem_sim.geometry.phantom as ph
+
+    final = with_groove(anatomical_parameters(1100), 1100)
+    built = []
+    solid = ph._solid
+    monkeypatch.setattr(ph, "_solid", lambda prm: built.append(prm) or solid(prm))
+    ph.make_phantom(1017, 16.0, "anatomical")
+    assert built == [anatomical_parameters(1017)]
+    built.clear()
+    g = ph.make_phantom(1100, 16.0, "anatomical")
+    assert len(built) >= 2 and built[0] == anatomical_parameters(1100) and built[-1] == final
+    assert len(set(built)) == len(built)  # each draw built once
+    assert f"cava_y': {final.cava_y}" in g.description
 
 
 def test_a_phantom_whose_surface_mesh_crosses_itself_is_meshed_with_the_next_algorithm(
