@@ -146,7 +146,7 @@ def subset(data: Path, n: int) -> Path:
 
 def extended(data: Path, n: int) -> Path:
     """A dataset directory of the scene's first ``n`` simulations that starts from ``data``'s
-    (its shards linked, its liver files and scene copy linked: nothing copied), for
+    (its shards and their XDMF files, its liver files and scene copy linked: nothing copied), for
     ``generate`` to go on past the budget without touching the row's dataset."""
     out = data.parent / f"beyond_{n}" / "data"
     (out / "sims").mkdir(parents=True, exist_ok=True)
@@ -156,9 +156,10 @@ def extended(data: Path, n: int) -> Path:
             os.link(p, out / "geometry" / p.name)  # generate reads them as its own
     if not (out / "scene.toml").exists():
         os.link(data / "scene.toml", out / "scene.toml")
-    for p in sorted((data / "sims").glob("sim_*.h5"))[:n]:
-        if not (out / "sims" / p.name).exists():
-            (out / "sims" / p.name).symlink_to(p.resolve())
+    for shard in sorted((data / "sims").glob("sim_*.h5"))[:n]:
+        for p in (data / "sims").glob(shard.stem + ".*"):  # the shard and its XDMF
+            if not (out / "sims" / p.name).exists():
+                (out / "sims" / p.name).symlink_to(p.resolve())
     return out
 
 

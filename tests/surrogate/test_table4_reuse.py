@@ -54,18 +54,20 @@ def test_the_point_past_the_budget_starts_from_the_rows_dataset_without_touching
     (data / "geometry" / "g1.h5").write_text("liver 1")
     for i in range(5):
         (data / "sims" / f"sim_{i:06d}.h5").write_text(f"shard {i}")
+        (data / "sims" / f"sim_{i:06d}.xdmf").write_text(f"shard {i}'s XDMF")
     more = table4.extended(data, 8)
     assert more == tmp_path / "scene" / "beyond_8" / "data"
+    # a shard without its XDMF is not done for generate: both are there
     assert sorted(p.name for p in (more / "sims").iterdir()) == \
-        [f"sim_{i:06d}.h5" for i in range(5)]
+        sorted(f"sim_{i:06d}.{e}" for i in range(5) for e in ("h5", "xdmf"))
     assert (more / "sims" / "sim_000003.h5").read_text() == "shard 3"
     assert (more / "geometry" / "g1.h5").read_text() == "liver 1"
     assert (more / "scene.toml").read_text() == "the scene"
     # what generate then writes there stays there; a second call links nothing twice
     (more / "sims" / "sim_000005.h5").write_text("shard 5")
     assert table4.extended(data, 8) == more
-    assert len(list((data / "sims").iterdir())) == 5
-    assert len(list((more / "sims").iterdir())) == 6
+    assert len(list((data / "sims").iterdir())) == 10
+    assert len(list((more / "sims").iterdir())) == 11
 
 
 def test_a_liver_is_registered_once_per_shape_model(tmp_path, monkeypatch):
