@@ -427,6 +427,8 @@ def run_scene(k: int, a, rows: dict | None = None) -> dict:
         res = train(data, run, other, keep)
         row = {"config": other, "variant": variant, "overrides": keep, "metrics": res,
                "run": str(run.relative_to(ROOT))}
+        if other == "population_basis":
+            row["floor"] = heldout_floor(data, run)
         if population and a.unseen:
             row["unseen"] = unseen(scene_file, where, run / "model", a)
         row["ms_own"], row["ms_big"], row["nodes"], row["ms_big_new_load"] = timed(
@@ -609,6 +611,37 @@ def evaluate_unseen(pred, data: Path, population_data: Path, placement,
                 axis=0).tolist()}
 
 
+def heldout_floor(data: Path, run: Path) -> dict:
+    """A population basis's floor on its evaluated held-out livers: the modes of each fold's
+    training fields (on the template, as the design computes them) fitted by least squares to
+    the held-out livers' fields, MEE in mm (``held_out``), beside the training fields' own
+    (``training``). What is left of the design's error is in the coefficients its network
+    gives. Kept in the run's directory for as many simulations as the dataset holds.
+    """
+    from surrogate.basis import compute_modes, projection_mee
+    from surrogate.data import kfold_groups, load_dataset
+    from surrogate.population_basis import TemplateFields
+
+    cache, shards = run / "table4_floor.json", shard_count(data)
+    if cache.exists():
+        saved = json.loads(cache.read_text())
+        if saved.get("shards") == shards:
+            return saved
+    cfg = json.loads((run / "config.json").read_text())
+    ds = load_dataset(data)
+    maps = TemplateFields(ds)
+    floors = []
+    for held in kfold_groups(ds, cfg["folds"], cfg["seed"])[:cfg.get("evaluate_folds") or None]:
+        U = maps.fields(ds, np.setdiff1d(np.arange(ds.n_samples), held))
+        modes = compute_modes(U, cfg["modes"], cfg["seed"])
+        floors.append((projection_mee(U, modes), projection_mee(maps.fields(ds, held), modes)))
+    out = {"shards": shards, "modes": cfg["modes"],
+           "training": float(np.mean([f[0] for f in floors])),
+           "held_out": float(np.mean([f[1] for f in floors]))}
+    cache.write_text(json.dumps(out))
+    return out
+
+
 def modes_floor(pred, placement, interp, shards: list) -> float:
     """MEE (mm) of the best a basis model's modes can do on a liver: each load step's FE field
     at the liver's nodes fitted by least squares with the modes carried there as a prediction
@@ -708,6 +741,18 @@ def unseen_note(k: int, d: dict) -> str:
                                if u["warnings"] else "No warning."))
 
 
+def floor_note(d: dict) -> str:
+    """The population basis's floor on the held-out livers (:func:`heldout_floor`)."""
+    f = d.get("floor")
+    if not f:
+        return ""
+    return (f" Its {f['modes']} modes (each fold's, from its training livers) fit the held-out "
+            f"livers' fields on the template to MEE {f['held_out']:.3f} mm (the training "
+            f"livers' to {f['training']:.3f}) against its {d['metrics']['network']['mee']:.3f} "
+            "mm: the rest of its error is in the coefficients its network gives a liver it "
+            "never saw.")
+
+
 def beyond_note(k: int, r: dict, b: dict) -> str:
     """What the point past the budget measured against what the row's learning curve said."""
     per = f" ({b['sims'] / POPULATION:.0f} per liver)" if k == 4 else ""
@@ -718,21 +763,31 @@ def beyond_note(k: int, r: dict, b: dict) -> str:
         m = d["metrics"]
         row = r if d is b else next((e for e in r.get("side_by_side", [])
                                      if e["config"] == d["config"]), None)
-        text = f"`{d['config']}` pooled skill {m['skill']:.3f}"
+        text = f"`{d['config']}` pooled skill {m['skill']:.3f}, MEE {m['network']['mee']:.3f} mm"
         if "skill_mean" in m.get("per_liver_mee", {}):
             pl = m["per_liver_mee"]
             text += f" ({pl['skill_mean']:.3f} / {pl['skill_median']:.3f} mean / median liver)"
         if row is not None:
-            text += f" against {row['metrics']['skill']:.3f} at the row's {r['sims']:,}"
+            text += (f" against {row['metrics']['skill']:.3f} and "
+                     f"{row['metrics']['network']['mee']:.3f} mm at the row's {r['sims']:,}")
+        if d.get("floor") and row is not None and row.get("floor"):
+            text += (f", its modes' floor on the held-out livers {d['floor']['held_out']:.3f} "
+                     f"mm against {row['floor']['held_out']:.3f}")
         if d.get("unseen") and row is not None and row.get("unseen"):
             text += (f", unseen liver MEE {d['unseen']['network']['mee']:.3f} mm against "
                      f"{row['unseen']['network']['mee']:.3f}")
         each.append(text)
+    p = PAPER[k]
+    at, slope = curve_fit([c["train_sims"] for c in r["curve"]] + [train_sims],
+                          [c["skill"] for c in r["curve"]] + [b["metrics"]["skill"]],
+                          p["sims"] * (PAPER_FOLDS - 1) / PAPER_FOLDS)
     return (f"- Scene {k} past the budget (`--beyond {k}={b['sims']}`): {b['sims']:,} "
             f"simulations{per}, the same designs and folds as the row (run: `{b['run']}`). "
             f"{'; '.join(each)}. The row's learning curve predicted a pooled skill of "
             f"{_f(b['curve_predicted'])} at its {train_sims:,.0f} training simulations per "
-            f"fold; measured {b['metrics']['skill']:.3f}.")
+            f"fold; measured {b['metrics']['skill']:.3f}. With this point the curve's slope is "
+            f"{_f(slope, '{:.2f}')} and it extrapolates to {_f(at)} at the paper's size (the "
+            f"paper: {p['skill']}).")
 
 
 def shortfall(k: int, r: dict) -> list[str]:
@@ -823,7 +878,8 @@ def write_report(rows: dict, a) -> None:
             if d is not r:
                 notes.append(f"- Scene {k}, {design_label(d['config'], d.get('variant'))} "
                              f"beside `{r['config']}`: the same "
-                             f"data and folds ({d['overrides']}). Run: `{d['run']}`.")
+                             f"data and folds ({d['overrides']}). Run: `{d['run']}`."
+                             + floor_note(d))
         if k == 1 and not r.get("side_by_side"):
             notes.append("- Scene 1's node-wise network beside the reduced basis, same scene "
                          "and folds: docs/realtime.md.")
