@@ -12,7 +12,8 @@ all the livers with half theirs train on the same number of simulations. One tra
 per cell (the config's ensemble of five averages its members): differences of a few per cent
 are noise.
 
-    .venv-train/bin/python bench/livers_or_loads.py    # after make table4 T4="--scenes 4 --beyond 4=1632"
+    # after make table4 T4="--scenes 4 --beyond 4=1632":
+    .venv-train/bin/python bench/livers_or_loads.py
 
 Resumable: each cell's result is kept under bench/results/livers_or_loads and not computed
 again.
@@ -106,7 +107,8 @@ def main() -> int:
     verdict = (
         f"On about as many training simulations ({cells[(many, lo)]['train_sims']:,} and "
         f"{cells[(few, hi)]['train_sims']:,}), {many} livers x {lo} give skill "
-        f"{s[(many, lo)]:.3f} and {few} livers x {hi} give {s[(few, hi)]:.3f}. Doubling the livers changes the skill by "
+        f"{s[(many, lo)]:.3f} and {few} livers x {hi} give {s[(few, hi)]:.3f}. Doubling the "
+        "livers changes the skill by "
         f"{100 * (s[(many, lo)] / s[(few, lo)] - 1):+.0f} % at {lo} simulations per liver and "
         f"{100 * (s[(many, hi)] / s[(few, hi)] - 1):+.0f} % at {hi}; doubling the simulations "
         f"per liver by {100 * (s[(few, hi)] / s[(few, lo)] - 1):+.0f} % with {few} livers and "
