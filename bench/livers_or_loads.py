@@ -3,8 +3,8 @@ docs/livers_or_loads.md.
 
 The population basis barely improves when each training liver gets twice the simulations
 (docs/table4.md, the point past the budget), while its modes fit the held-out livers' fields
-far better than it predicts them: what it lacks should be livers, not loads. This measures it
-on ``make table4 T4="--scenes 4 --beyond 4=1632"``'s dataset (16 simulations per liver): the
+far better than it predicts them: is its network short of livers, or of loads? This measures
+it on ``make table4 T4="--scenes 4 --beyond 4=1632"``'s dataset (16 simulations per liver): the
 design with table4's config trained on half or all of the training livers (44 or 89, the half
 drawn once, seeded) with the first 8 or all 16 simulations of each, and evaluated on the same
 held-out livers as table4's row (its fold 1). Half the livers with all their simulations and
