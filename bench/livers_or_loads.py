@@ -47,31 +47,27 @@ NOISES = (0.3, 0.1)  # input noise at 16 simulations per liver: table4's, and a 
 LIVER_SHARE = (0.5, 1.0)
 
 
-def cell(ds, cfg: dict, held: np.ndarray, livers: np.ndarray, per_liver: int) -> dict:
+def cell(ds, cfg: dict, held: np.ndarray, livers: np.ndarray, k: int) -> dict:
     """Pooled and per-liver skill on the held-out samples of the design trained on the
-    samples of ``livers`` from their first ``per_liver`` simulations."""
+    samples of ``livers`` from their first ``k`` simulations."""
     from surrogate.metrics import displacement_metrics
-    from surrogate.nodewise import example_index
-    from surrogate.train import fit_design, predict_design
+    from surrogate.train import fit_design, per_liver, predict_design, training_mean
 
     n_geo = len(ds.geo_ids)
     train = np.flatnonzero(np.isin(ds.sample_geo, livers)
-                           & (ds.sample_sim < per_liver * n_geo))
+                           & (ds.sample_sim < k * n_geo))
     t0 = time.perf_counter()
     model, _ = fit_design(ds, train, cfg, cfg["seed"] + 1, f"{len(livers)} livers x "
-                          f"{per_liver} ", print)
+                          f"{k} ", print)
     seconds = time.perf_counter() - t0
     pred, true, smp = predict_design(ds, model, cfg, held)
-    _, _, rows = example_index(ds, train)
-    naive = np.broadcast_to(ds.targets[rows].mean(axis=0), true.shape)
+    naive = np.broadcast_to(training_mean(ds, train), true.shape)
     m, mn = displacement_metrics(pred, true), displacement_metrics(naive, true)
-    geo = ds.sample_geo[smp]
-    ee, en = np.linalg.norm(pred - true, axis=1), np.linalg.norm(naive - true, axis=1)
-    skill = np.array([ee[geo == g].mean() / en[geo == g].mean() for g in np.unique(geo)])
-    return {"livers": int(len(livers)), "per_liver": per_liver,
+    pl = per_liver(pred, true, naive, ds.sample_geo[smp])
+    return {"livers": int(len(livers)), "per_liver": k,
             "train_sims": int(np.unique(ds.sample_sim[train]).size),
             "mee": m["mee"], "naive": mn["mee"], "skill": m["mee"] / mn["mee"],
-            "skill_mean": float(skill.mean()), "skill_median": float(np.median(skill)),
+            "skill_mean": pl["skill_mean"], "skill_median": pl["skill_median"],
             "seconds": seconds}
 
 

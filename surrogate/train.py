@@ -95,6 +95,27 @@ def predict_design(ds: Dataset, model, cfg: dict, samples: np.ndarray):
     return DESIGNS[cfg["design"]].predict_samples(ds, model, cfg, samples)
 
 
+def training_mean(ds: Dataset, samples: np.ndarray) -> np.ndarray:
+    """(3,) mm: the mean displacement over the examples of ``samples`` (the naive model
+    trained on them).
+    """
+    _, _, rows = example_index(ds, samples)
+    return ds.targets[rows].mean(axis=0)
+
+
+def per_liver(pred: np.ndarray, true: np.ndarray, naive: np.ndarray, geo: np.ndarray) -> dict:
+    """Each liver's MEE and skill (``geo``: the liver of each row), as the paper's scene-4 row
+    gives them: the median liver's MEE, skill as mean / median over the livers.
+    """
+    ee = np.linalg.norm(pred - true, axis=1)
+    ee_naive = np.linalg.norm(naive - true, axis=1)
+    per = np.array([ee[geo == g].mean() for g in np.unique(geo)])
+    skill = per / np.array([ee_naive[geo == g].mean() for g in np.unique(geo)])
+    return {"mean": float(np.mean(per)), "median": float(np.median(per)),
+            "values": per.tolist(), "skill_mean": float(np.mean(skill)),
+            "skill_median": float(np.median(skill))}
+
+
 def _save_fold(path: Path, pred, true, smp, naive, history) -> None:
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         np.savez(fh, pred=pred, true=true, smp=smp, naive=naive,
@@ -161,8 +182,7 @@ def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
                                      f"fold {k + 1}/{len(folds)} ", say,
                                      engine.Checkpoint(ckpt / f"fold{k}", identity))
             p, y, s = predict_design(ds, model, cfg, held)
-            _, _, tr_tgt = example_index(ds, train_samples)
-            mean_disp = ds.targets[tr_tgt].mean(axis=0)
+            mean_disp = training_mean(ds, train_samples)
             _save_fold(done, p, y, s, mean_disp, hist)
         # from the epochs' own records, so a resumed run reports the whole training
         examples += sum(h["examples_per_s"] * h["seconds"] for h in hist)
@@ -187,16 +207,7 @@ def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
               "training_seconds": train_time,
               "training_examples_per_s": examples / train_time if train_time else 0.0}
     if ds.spec.geometry_dim or len(ds.geo_ids) > 1:
-        geo = ds.sample_geo[smp]
-        ee = np.linalg.norm(pred - true, axis=1)
-        ee_naive = np.linalg.norm(nv - true, axis=1)
-        per = np.array([ee[geo == g].mean() for g in np.unique(geo)])
-        skill = per / np.array([ee_naive[geo == g].mean() for g in np.unique(geo)])
-        # the paper's scene-4 row: the median liver's MEE, skill as mean / median over livers
-        result["per_liver_mee"] = {"mean": float(np.mean(per)), "median": float(np.median(per)),
-                                   "values": per.tolist(),
-                                   "skill_mean": float(np.mean(skill)),
-                                   "skill_median": float(np.median(skill))}
+        result["per_liver_mee"] = per_liver(pred, true, nv, ds.sample_geo[smp])
     table = metrics_table({"network": m_nn, "naive (mean displacement)": m_naive})
     how = (f"{cfg['folds']}-fold cross-validation" if len(folds) == cfg["folds"] else
            f"the first {len(folds)} of {cfg['folds']} folds held out")
