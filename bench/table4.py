@@ -138,10 +138,17 @@ def subset(data: Path, n: int) -> Path:
     for name in ("scene.toml", "geometry"):
         if not (view / name).exists():
             (view / name).symlink_to((data / name).resolve())
-    for p in sorted((data / "sims").glob("sim_*.h5"))[:n]:
-        if not (view / "sims" / p.name).exists():
-            (view / "sims" / p.name).symlink_to(p.resolve())
+    link_shards(data, view, n)
     return view
+
+
+def link_shards(data: Path, view: Path, n: int) -> None:
+    """Symbolic links in ``view`` to the first n shards of ``data`` with their XDMF files (a
+    shard without its XDMF is not a valid one for ``generate``)."""
+    for shard in sorted((data / "sims").glob("sim_*.h5"))[:n]:
+        for p in (data / "sims").glob(shard.stem + ".*"):
+            if not (view / "sims" / p.name).exists():
+                (view / "sims" / p.name).symlink_to(p.resolve())
 
 
 def extended(data: Path, n: int) -> Path:
@@ -156,10 +163,7 @@ def extended(data: Path, n: int) -> Path:
             os.link(p, out / "geometry" / p.name)  # generate reads them as its own
     if not (out / "scene.toml").exists():
         os.link(data / "scene.toml", out / "scene.toml")
-    for shard in sorted((data / "sims").glob("sim_*.h5"))[:n]:
-        for p in (data / "sims").glob(shard.stem + ".*"):  # the shard and its XDMF
-            if not (out / "sims" / p.name).exists():
-                (out / "sims" / p.name).symlink_to(p.resolve())
+    link_shards(data, out, n)
     return out
 
 

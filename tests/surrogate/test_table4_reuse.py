@@ -68,6 +68,10 @@ def test_the_point_past_the_budget_starts_from_the_rows_dataset_without_touching
     assert table4.extended(data, 8) == more
     assert len(list((data / "sims").iterdir())) == 10
     assert len(list((more / "sims").iterdir())) == 11
+    # the learning curve's smaller views link the same way
+    view = table4.subset(data, 2)
+    assert sorted(p.name for p in (view / "sims").iterdir()) == \
+        sorted(f"sim_{i:06d}.{e}" for i in range(2) for e in ("h5", "xdmf"))
 
 
 def test_a_liver_is_registered_once_per_shape_model(tmp_path, monkeypatch):
