@@ -425,28 +425,26 @@ def main() -> int:
                               f"{SPLIT_LABEL[split].split(' (')[0]} among "
                               f"{', '.join(FIRST_RULES)}: `{first}`."
                               + per_seed(seeds, FIRST_RULES))
-            if split == CONFIRM:
-                decided = lv
-            if split == REPLICATE and first:
-                both = {**(decided or {}), **lv}
-                chosen.append(f"  On the {SPLIT_LABEL[split].split(' (')[0]}, `outside` "
-                              f"{summary(lv, 'outside')[0]:.3f} against `{first}` "
-                              f"{summary(lv, first)[0]:.3f}"
-                              + (f"; over both fresh sets ({len(both)} livers) "
-                                 f"{summary(both, 'outside')[0]:.3f} against "
-                                 f"{summary(both, first)[0]:.3f}, `outside` lower on "
-                                 f"{sum(x['outside'] < x[first] for x in both.values())}, "
-                                 f"higher on {sum(x['outside'] > x[first] for x in both.values())}"
-                                 if decided else "") + "."
-                              + per_seed(seeds, (first, "outside")))
-            if split == CONFIRM and first:
-                pick = "outside" if summary(lv, "outside")[0] < summary(lv, first)[0] else first
-                chosen.append(f"  On the {SPLIT_LABEL[split].split(' (')[0]}, `outside` "
-                              f"{summary(lv, 'outside')[0]:.3f} against `{first}` "
-                              f"{summary(lv, first)[0]:.3f}: `{pick}`; the design's rule "
-                              f"(`shape_rule` in surrogate/designs) `{engine_rule}`"
-                              + ("." if pick == engine_rule else " (they differ).")
-                              + per_seed(seeds, (first, "outside")))
+            if split in (CONFIRM, REPLICATE) and first:
+                text = (f"  On the {SPLIT_LABEL[split].split(' (')[0]}, `outside` "
+                        f"{summary(lv, 'outside')[0]:.3f} against `{first}` "
+                        f"{summary(lv, first)[0]:.3f}")
+                if split == CONFIRM:
+                    decided = lv
+                    pick = "outside" if summary(lv, "outside")[0] < summary(lv, first)[0] \
+                        else first
+                    text += (f": `{pick}`; the design's rule (`shape_rule` in surrogate/designs) "
+                             f"`{engine_rule}`"
+                             + ("." if pick == engine_rule else " (they differ)."))
+                else:
+                    both = {**(decided or {}), **lv}
+                    text += (f"; over both fresh sets ({len(both)} livers) "
+                             f"{summary(both, 'outside')[0]:.3f} against "
+                             f"{summary(both, first)[0]:.3f}, `outside` lower on "
+                             f"{sum(x['outside'] < x[first] for x in both.values())}, higher on "
+                             f"{sum(x['outside'] > x[first] for x in both.values())}"
+                             if decided else "") + "."
+                chosen.append(text + per_seed(seeds, (first, "outside")))
             cells = []
             for rule in rules:
                 mean, med = summary(lv, rule)
