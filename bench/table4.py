@@ -415,10 +415,16 @@ def run_scene(k: int, a, rows: dict | None = None) -> dict:
     out["metrics"] = curve_point(n, overrides["folds"], base / "run", True)
     out["run"] = str((base / "run").relative_to(ROOT))
     population = scene["geometry"]["source"] == "population"
-    if population and a.unseen:
-        out["unseen"] = unseen(scene_file, base, base / "run" / "model", a)
-    out["ms_own"], out["ms_big"], out["nodes"], out["ms_big_new_load"] = timed(
-        base / "run" / "model", a.calls)
+
+    def exported(d: dict, where: Path, model: Path) -> dict:
+        """``d`` with its exported model's unseen-liver row (a population scene) and
+        latency."""
+        if population and a.unseen:
+            d["unseen"] = unseen(scene_file, where, model, a)
+        d["ms_own"], d["ms_big"], d["nodes"], d["ms_big_new_load"] = timed(model, a.calls)
+        return d
+
+    exported(out, base, base / "run" / "model")
     out["calls"] = a.calls
     out["side_by_side"] = []
     save()
@@ -433,11 +439,7 @@ def run_scene(k: int, a, rows: dict | None = None) -> dict:
                "run": str(run.relative_to(ROOT))}
         if other == "population_basis":
             row["floor"] = heldout_floor(data, run)
-        if population and a.unseen:
-            row["unseen"] = unseen(scene_file, where, run / "model", a)
-        row["ms_own"], row["ms_big"], row["nodes"], row["ms_big_new_load"] = timed(
-            run / "model", a.calls)
-        return row
+        return exported(row, where, run / "model")
 
     for other, variant in SIDE_BY_SIDE[k]:  # other designs, same folds, all simulations
         out["side_by_side"].append(other_design(data, base, other, variant))
@@ -464,10 +466,7 @@ def run_scene(k: int, a, rows: dict | None = None) -> dict:
                                           [c["skill"] for c in out["curve"]],
                                           res["n_simulations"] * (overrides["folds"] - 1)
                                           / overrides["folds"])[0]}
-        if population and a.unseen:
-            b["unseen"] = unseen(scene_file, more.parent, more.parent / "run" / "model", a)
-        b["ms_own"], b["ms_big"], b["nodes"], b["ms_big_new_load"] = timed(
-            more.parent / "run" / "model", a.calls)
+        exported(b, more.parent, more.parent / "run" / "model")
         b["side_by_side"] = []
         out["beyond"].append(b)
         save()
