@@ -250,7 +250,13 @@ class BasisProblem(Problem):
                      "f": jnp.asarray(ds.forces / self.f_scale, dtype=jnp.float32),
                      "target": jnp.asarray(target)}
         self.net = network(tuple(cfg["hidden"]), self.modes.shape[0], L, self.shared, per)
-        self.input_noise = float(cfg["input_noise"])
+        # training noise per normalised feature: input_noise, and shape_noise on the shape
+        # coefficients (the last columns) when given
+        noise = np.full(X.shape[1], float(cfg["input_noise"]), dtype=np.float32)
+        shapes = self.n_extra - ds.spec.material_dim
+        if cfg.get("shape_noise") is not None and shapes:
+            noise[-shapes:] = float(cfg["shape_noise"])
+        self.noise = jnp.asarray(noise) if noise.any() else None
         self.tr, self.va = tr, va
         self.B = min(cfg["batch_size"], tr.size)
         self.steps_per_epoch = tr.size // self.B
@@ -271,8 +277,8 @@ class BasisProblem(Problem):
     def loss(self, params, data, idx, key, train):
         # coefficient loss x c_scale^2 = mean squared field error summed over dofs, mm^2
         x = data["x"][idx]
-        if train and self.input_noise > 0:  # on the normalised features, not the forces
-            x = x + self.input_noise * jax.random.normal(key, x.shape)
+        if train and self.noise is not None:  # on the normalised features, not the forces
+            x = x + self.noise * jax.random.normal(key, x.shape)
         pred = self.net.apply({"params": params}, x, data["f"][idx])
         return jnp.mean(jnp.sum((pred - data["target"][idx]) ** 2, axis=-1))
 

@@ -31,6 +31,8 @@ BASE = {
     "dropout": 0.0,            # node-wise only
     "l2": 0.0,                 # weight decay coefficient (added to the loss as l2 * |w|^2 / 2)
     "input_noise": 0.0,        # std of Gaussian noise on normalised inputs during training
+    "shape_noise": None,       # population_basis: its std on the shape coefficients instead
+                               # (None: input_noise), a liver perturbed within the population
     "batch_size": 2048,
     "learning_rate": 1e-3,
     "lr_rule": "plateau",      # "plateau": x0.1 after 2 epochs without val improvement;
@@ -95,6 +97,8 @@ CHECKS = {
     "dropout": (lambda v: is_num(v) and 0 <= v < 1, "a number in [0, 1)"),
     "l2": (lambda v: is_num(v) and v >= 0, "a finite number >= 0"),
     "input_noise": (lambda v: is_num(v) and v >= 0, "a finite number >= 0"),
+    "shape_noise": (lambda v: v is None or is_num(v) and v >= 0,
+                    "null or a finite number >= 0"),
     "load_context": (lambda v: isinstance(v, bool), "true or false"),
     "shared_loads": (lambda v: isinstance(v, bool), "true or false"),
     "ensemble": (lambda v: is_int(v) and v >= 1, "an integer >= 1"),
@@ -140,7 +144,8 @@ def get_config(name: str = "small", **overrides) -> dict:
                         f"got {cfg['ensemble']!r}: a node-wise ensemble's call costs its "
                         "number of networks over every node)")
     if not problems and cfg["design"] != "population_basis":
-        for key, default in (("shape_inputs", "all"), ("load_context", False)):
+        for key, default in (("shape_inputs", "all"), ("load_context", False),
+                             ("shape_noise", None)):
             if cfg[key] != default:
                 problems.append(f"{key}: only the population_basis design takes it (expected "
                                 f"{default!r} for {cfg['design']}, got {cfg[key]!r})")

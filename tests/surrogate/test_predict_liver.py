@@ -377,3 +377,46 @@ def test_the_manipulator_opens_on_a_placed_liver(run, tmp_path):
     assert (out / "manipulator.gif").stat().st_size > 0
     assert viewer([str(run), "--place", str(tmp_path / "none.stl"), "--offscreen", "--out",
                    str(out)]) == 2
+
+
+def test_shape_noise_perturbs_only_the_shape_coefficients():
+    """shape_noise sets the training noise of the shape coefficients (the features' last
+    columns) apart from input_noise, which keeps the loads'; without it every feature takes
+    input_noise. It perturbs training steps only, and only the population design takes it."""
+    import jax
+
+    from surrogate.data import load_dataset
+    from surrogate.designs import DESIGNS
+
+    ds = load_dataset(DATA)
+    design = DESIGNS["population_basis"]
+    rng = np.random.default_rng(0)
+    tr, va = np.arange(ds.n_samples - 6), np.arange(ds.n_samples - 6, ds.n_samples)
+
+    def problem(**over):
+        cfg = get_config("population_basis", modes=4, hidden=[8], shape_inputs=2, **over)
+        return design.problem(ds, tr, va, cfg, rng)
+
+    apart = problem(input_noise=0.0, shape_noise=0.7)
+    width = apart.data["x"].shape[1]
+    want = np.zeros(width, np.float32)
+    want[-2:] = 0.7  # the two shape coefficients it is told, after the loads and the material
+    np.testing.assert_array_equal(np.asarray(apart.noise), want)
+    both = problem(input_noise=0.2, shape_noise=0.7)
+    want[:-2] = 0.2
+    np.testing.assert_array_equal(np.asarray(both.noise), want)
+    np.testing.assert_array_equal(np.asarray(problem(input_noise=0.2).noise),
+                                  np.full(width, 0.2, np.float32))
+    assert problem(input_noise=0.0).noise is None
+    params = apart.init(jax.random.PRNGKey(0))
+    idx, key = apart.batch(tr[:8]), jax.random.PRNGKey(1)
+    clean = problem(input_noise=0.0)
+    assert float(apart.loss(params, apart.data, idx, key, False)) == pytest.approx(
+        float(clean.loss(params, clean.data, idx, key, True)), rel=1e-6)
+    assert float(apart.loss(params, apart.data, idx, key, True)) != pytest.approx(
+        float(clean.loss(params, clean.data, idx, key, True)), rel=1e-3)
+    for d in ("nodewise", "basis"):
+        with pytest.raises(ValueError, match="shape_noise: only the population_basis design"):
+            get_config("small", design=d, shape_noise=0.5)
+    with pytest.raises(ValueError, match="shape_noise: expected null or a finite number >= 0"):
+        get_config("population_basis", shape_noise=-1.0)
