@@ -106,8 +106,15 @@ def main() -> int:
 
     cfg = {**json.loads(CONFIG.read_text()), **KNOBS_AT_8}
     ds = load_dataset(DATA)
-    held = kfold_groups(ds, cfg["folds"], cfg["seed"])[0]  # table4's fold 1
-    training = np.setdiff1d(np.unique(ds.sample_geo), np.unique(ds.sample_geo[held]))
+    folds = kfold_groups(ds, cfg["folds"], cfg["seed"])
+    held = folds[0]  # table4's fold 1
+    choice = range(1, len(folds))  # folds 2-8: the sweep's choice
+
+    def outside(samples: np.ndarray) -> np.ndarray:
+        """The livers none of ``samples`` belongs to."""
+        return np.setdiff1d(np.unique(ds.sample_geo), np.unique(ds.sample_geo[samples]))
+
+    training = outside(held)
     half = np.sort(np.random.default_rng(0).permutation(training)[:training.size // 2])
     RESULTS.mkdir(parents=True, exist_ok=True)
     cells = {}
@@ -122,9 +129,6 @@ def main() -> int:
             c = cells[(livers.size, k)]
             print(f"{livers.size} livers x {k}: skill {c['skill']:.3f} (MEE {c['mee']:.3f} mm)",
                   flush=True)
-    folds = kfold_groups(ds, cfg["folds"], cfg["seed"])
-    choice = range(1, len(folds))  # folds 2-8; fold 1 is table4's held-out livers
-
     def per_fold(slug: str, k: int, seed: int = 0) -> list[dict]:
         """The variant trained on each fold's other livers, first ``k`` simulations each
         (``seed``: added to the config's training seed)."""
@@ -135,9 +139,8 @@ def main() -> int:
             if not path.exists():
                 print(f"{VARIANTS[slug][0]}, {k} per liver, seed +{seed}, fold "
                       f"{j + 1}/{len(folds)}", flush=True)
-                others = np.setdiff1d(np.unique(ds.sample_geo), np.unique(ds.sample_geo[fold]))
                 over = {**VARIANTS[slug][1], "seed": cfg["seed"] + seed}
-                path.write_text(json.dumps(cell(ds, {**cfg, **over}, fold, others, k),
+                path.write_text(json.dumps(cell(ds, {**cfg, **over}, fold, outside(fold), k),
                                            indent=1))
             out.append(json.loads(path.read_text()))
         return out
@@ -166,6 +169,7 @@ def main() -> int:
     small_rows = [f"| {VARIANTS[v][0]} | {mean(r, 'mee', choice):.3f} | "
                   f"{mean(r, 'skill', choice):.3f} | {r[0]['mee']:.3f} | {r[0]['skill']:.3f} |"
                   for v, r in small.items()]
+
     def change(a: list[dict], b: list[dict], idx) -> float:  # per cent, a's MEE against b's
         return 100 * (mean(a, "mee", idx) / mean(b, "mee", idx) - 1)
 
