@@ -109,8 +109,9 @@ def per_liver(pred: np.ndarray, true: np.ndarray, naive: np.ndarray, geo: np.nda
     """
     ee = np.linalg.norm(pred - true, axis=1)
     ee_naive = np.linalg.norm(naive - true, axis=1)
-    per = np.array([ee[geo == g].mean() for g in np.unique(geo)])
-    skill = per / np.array([ee_naive[geo == g].mean() for g in np.unique(geo)])
+    livers = np.unique(geo)
+    per = np.array([ee[geo == g].mean() for g in livers])
+    skill = per / np.array([ee_naive[geo == g].mean() for g in livers])
     return {"mean": float(np.mean(per)), "median": float(np.median(per)),
             "values": per.tolist(), "skill_mean": float(np.mean(skill)),
             "skill_median": float(np.median(skill))}
