@@ -17,6 +17,7 @@ from fem_sim.geometry.phantom import (
     phantom_parameters,
     with_groove,
 )
+from fem_sim.geometry.quality import mesh_problems
 from fem_sim.geometry.source import GeometryError
 from fem_sim.geometry.surfaces import clean_surface, mesh_surface_file, read_vtk_polydata
 
@@ -190,6 +191,26 @@ def test_a_phantom_whose_surface_mesh_crosses_itself_is_meshed_with_the_next_alg
     with pytest.raises(GeometryError, match=r"phantom 1084 \(anatomical\), mesh size 16.0 mm: "
                                             "gmsh could not mesh it: surface algorithm 6: PLC"):
         make_phantom(1084, 16.0, "anatomical")
+
+
+def test_a_phantom_meshed_with_a_flat_tetrahedron_is_meshed_with_the_next_algorithm(
+        monkeypatch, caplog):
+    # phantom 1150 at 16 mm (seed 150 of scene 4 with 204 livers): Frontal-Delaunay and
+    # Delaunay each leave one tetrahedron of mean-ratio quality ~1e-6, which the dataset's
+    # mesh check refuses (a singular stiffness matrix); MeshAdapt's mesh is usable
+    import fem_sim.geometry.phantom as ph
+
+    with caplog.at_level("INFO", logger="fem_sim.geometry.phantom"):
+        g = make_phantom(1150, 16.0, "anatomical")
+    assert ("meshed with surface algorithm 1 after surface algorithm 6: 1 of" in caplog.text
+            and "surface algorithm 5: 1 of" in caplog.text and "degenerate" in caplog.text)
+    assert mesh_problems(g.points, g.cells) == []
+    assert ph.degenerate(g.points, g.cells) == ""
+    monkeypatch.setattr(ph, "SURFACE_ALGORITHMS", (6, 5))
+    with pytest.raises(GeometryError, match=r"phantom 1150 \(anatomical\), mesh size 16.0 mm: "
+                                            "gmsh could not mesh it: surface algorithm 6: 1 of "
+                                            r"\d+ tetrahedra degenerate"):
+        make_phantom(1150, 16.0, "anatomical")
 
 
 @pytest.mark.skipif(not SOFA.exists(), reason="shared/data/livers/sofa_liver.vtk not present")
