@@ -809,6 +809,9 @@ def shortfall(k: int, r: dict) -> list[str]:
         pooled = float(p["skill"].split("/")[0])
         verdict = ("more simulations would close the gap" if at <= 1.1 * pooled else
                    "more simulations alone would not close the gap")
+        if k == 4:  # measured on 204 livers
+            verdict += (" (the population basis gains more from more livers than from more "
+                        "simulations per liver: docs/livers_or_loads.md)")
         out.append(f"- Scene {k} is short of the paper (skill {ours:.3f} against {paper:.3f}): "
                    f"it has {r['sims']:,} of the paper's {p['sims']:,} simulations{per}; its "
                    f"learning curve (pooled skill) extrapolates to {_f(at)} at the paper's "
