@@ -53,7 +53,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -161,7 +160,7 @@ def more_livers(ds, folds: list, cfg: dict, a) -> str:
     # beyond_1632's simulations with the 204 livers' geometry files (shape coefficients) and
     # registration: the shape description of the more-livers arms, on twice the loads
     view = MORE / "old16_pca204"
-    (view / "geometry").parent.mkdir(parents=True, exist_ok=True)
+    view.mkdir(parents=True, exist_ok=True)
     for name, src in (("scene.toml", DATA / "scene.toml"), ("sims", DATA / "sims"),
                       ("geometry", MORE / "data" / "geometry")):
         if not (view / name).exists():
@@ -201,7 +200,7 @@ def more_livers(ds, folds: list, cfg: dict, a) -> str:
             if not path.exists():
                 print(f"more livers: {slug}, fold {j + 1}/{len(folds)}", flush=True)
                 x, evaluate, livers = arms[slug]
-                k = MORE_PER_LIVER if x is more else 16
+                k = MORE_PER_LIVER if x is more else max(PER_LIVER)
                 path.write_text(json.dumps(cell(x, cfg, evaluate, livers, k), indent=1))
             out[slug].append(json.loads(path.read_text()))
     ref = out["old16"]
@@ -253,8 +252,6 @@ def main() -> int:
     ap.add_argument("--generate-only", action="store_true",
                     help="generate the dataset with more livers, then stop")
     a = ap.parse_args()
-    os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
-    os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
     if a.generate_only:
         more_livers_data(a)
         return 0

@@ -50,7 +50,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 from pathlib import Path
 
@@ -386,8 +385,6 @@ def main() -> int:
     ap.add_argument("--chunk", type=int, default=WIDE_SIMS, help="simulations per generate call")
     ap.add_argument("--solver-python", default=str(ROOT / ".venv-solver" / "bin" / "python"))
     a = ap.parse_args()
-    os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
-    os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
     missing = [str(p) for p in [DATA / "sims", *(DESIGNS[d] / "config.json"
                                                  for d in a.designs)] if not p.exists()]
     if missing:

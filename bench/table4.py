@@ -116,9 +116,11 @@ def generate(scene: Path, data: Path, n: int, budget_s: float, a) -> dict:
         print(f"[{scene.stem}] generating simulations {have}..{upto} of {n}", flush=True)
         t = time.perf_counter()
         # one BLAS thread per MPI rank (the ranks take the cores); the trainer's own BLAS and
-        # the latency timings keep the threads this process has (make table4: all cores)
+        # the latency timings keep the threads this process has (make table4: all cores).
+        # Open MPI refuses root unless told (the caller's environment may say otherwise)
         subprocess.run(cmd, check=True, cwd=ROOT,
-                       env={**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"})
+                       env={"OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
+                            **os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"})
         state["seconds"] += time.perf_counter() - t
         state_path.write_text(json.dumps(state))
         if shard_count(data) <= have:
@@ -1037,8 +1039,6 @@ def main() -> int:
     a.sims = {k: v for d in a.sims for k, v in d.items()}
     a.beyond = {k: [v["sims"] for d in a.beyond for kk, v in d.items() if kk == k]
                 for k in SCENES}
-    os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
-    os.environ.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
     rows = {}
     saved = Path(a.md).with_suffix(".json")
     saved = {int(k): v for k, v in json.loads(saved.read_text()).items()} \
