@@ -50,7 +50,7 @@ from fem_sim.geometry.meshing import (  # noqa: F401  (mesh_volume re-exported)
     gmsh_tetrahedra,
     mesh_volume,
 )
-from fem_sim.geometry.quality import MIN_QUALITY, mean_ratio
+from fem_sim.geometry.quality import flat_tetrahedra, mean_ratio
 
 log = logging.getLogger(__name__)
 
@@ -206,7 +206,7 @@ def make_phantom(seed: int = 0, mesh_size: float = 8.0, variety: str = "narrow",
         try:
             points, cells, scale, area = _mesh(prm, seed, mesh_size, algorithm,
                                                MIN_GROOVE_AREA if anatomical else None)
-            flat = degenerate(points, cells)
+            flat = flat_tetrahedra(mean_ratio(points, cells))  # quality.py would refuse it
             if not flat:
                 break
             raise RuntimeError(flat)
@@ -242,16 +242,6 @@ def make_phantom(seed: int = 0, mesh_size: float = 8.0, variety: str = "narrow",
 # with a flat tetrahedron (anatomical phantom 1150 at 16 mm, with the first two algorithms),
 # which the solver would refuse: the next algorithm is tried then too.
 SURFACE_ALGORITHMS = (6, 5, 1)
-
-
-def degenerate(points: np.ndarray, cells: np.ndarray) -> str:
-    """Why the tetrahedra ``cells`` cannot be solved on (quality.py's refusal: zero volume
-    or nearly flat), or '' when they can.
-    """
-    q = mean_ratio(points, cells)
-    bad = int(np.sum(q < MIN_QUALITY))
-    return (f"{bad} of {cells.shape[0]} tetrahedra degenerate (mean-ratio quality < "
-            f"{MIN_QUALITY:g}, min {q.min():.1e})") if bad else ""
 
 
 def _mesh(prm, seed: int, mesh_size: float, algorithm: int, min_groove: float | None = None):

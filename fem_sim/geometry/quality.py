@@ -39,6 +39,15 @@ def mean_ratio(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
     return 12.0 * (3.0 * vol) ** (2.0 / 3.0) / np.maximum(edges, 1e-300)
 
 
+def flat_tetrahedra(q: np.ndarray) -> str:
+    """How many of the tetrahedra of mean-ratio qualities ``q`` are too flat to solve on (zero
+    volume included), or '' when none is.
+    """
+    bad = int(np.sum(q < MIN_QUALITY))
+    return (f"{bad} of {q.size} tetrahedra are degenerate (mean-ratio quality < "
+            f"{MIN_QUALITY:g}, min {q.min():.1e})") if bad else ""
+
+
 def orient(points: np.ndarray, cells: np.ndarray, where: str) -> np.ndarray:
     """Cells reordered to positive volume (a copy); logs how many were negative."""
     neg = signed_volumes(points, cells) < 0
@@ -81,11 +90,9 @@ def mesh_problems(points: np.ndarray, cells: np.ndarray,
         p.append(f"{int(np.sum(vol <= 0))} of {cells.shape[0]} tetrahedra have zero or negative "
                  "volume")
     q = mean_ratio(points, cells)
-    flat = q < MIN_QUALITY
-    if flat.any():
-        p.append(f"{int(flat.sum())} tetrahedra are degenerate (mean-ratio quality < "
-                 f"{MIN_QUALITY:g}, min {q.min():.1e}): the stiffness matrix would be "
-                 "singular")
+    flat = flat_tetrahedra(q)
+    if flat:
+        p.append(f"{flat}: the stiffness matrix would be singular")
     elif (q < WARN_QUALITY).any():
         log.warning("%d of %d tetrahedra are slivers (mean-ratio quality < %g, min %.3g): "
                     "expect a poorly conditioned problem", int(np.sum(q < WARN_QUALITY)),

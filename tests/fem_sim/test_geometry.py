@@ -17,7 +17,7 @@ from fem_sim.geometry.phantom import (
     phantom_parameters,
     with_groove,
 )
-from fem_sim.geometry.quality import mesh_problems
+from fem_sim.geometry.quality import flat_tetrahedra, mean_ratio, mesh_problems
 from fem_sim.geometry.source import GeometryError
 from fem_sim.geometry.surfaces import clean_surface, mesh_surface_file, read_vtk_polydata
 
@@ -205,11 +205,11 @@ def test_a_phantom_meshed_with_a_flat_tetrahedron_is_meshed_with_the_next_algori
     assert ("meshed with surface algorithm 1 after surface algorithm 6: 1 of" in caplog.text
             and "surface algorithm 5: 1 of" in caplog.text and "degenerate" in caplog.text)
     assert mesh_problems(g.points, g.cells) == []
-    assert ph.degenerate(g.points, g.cells) == ""
+    assert flat_tetrahedra(mean_ratio(g.points, g.cells)) == ""
     monkeypatch.setattr(ph, "SURFACE_ALGORITHMS", (6, 5))
     with pytest.raises(GeometryError, match=r"phantom 1150 \(anatomical\), mesh size 16.0 mm: "
                                             "gmsh could not mesh it: surface algorithm 6: 1 of "
-                                            r"\d+ tetrahedra degenerate"):
+                                            r"\d+ tetrahedra are degenerate"):
         make_phantom(1150, 16.0, "anatomical")
 
 
