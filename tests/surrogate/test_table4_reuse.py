@@ -74,6 +74,40 @@ def test_the_point_past_the_budget_starts_from_the_rows_dataset_without_touching
         sorted(f"sim_{i:06d}.{e}" for i in range(2) for e in ("h5", "xdmf"))
 
 
+def test_a_point_past_the_budget_at_the_papers_size_is_reported_as_measured_not_extrapolated():
+    """Scene 2's row (600 simulations) is short of the paper's skill 0.085; a point past the
+    budget at the paper's 1,500 names the paper's size and its best design's measured skill
+    (the shortfall cites it); a point short of the paper's size keeps the curve's
+    extrapolation."""
+    def metrics(n, skill):
+        return {"n_simulations": n, "skill": skill, "network": {"mee": 10 * skill}}
+
+    def point(sims, skill, other):
+        return {"sims": sims, "overrides": {"folds": 5}, "run": "run", "config": "basis",
+                "curve_predicted": 0.05, "metrics": metrics(sims, skill),
+                "side_by_side": [{"config": "paper_scene2", "metrics": metrics(sims, other)}]}
+
+    row = {"sims": 600, "config": "basis", "metrics": metrics(600, 0.088),
+           "skill_at_paper_size": 0.045, "side_by_side": [],
+           "curve": [{"train_sims": 100, "skill": 0.23}, {"train_sims": 200, "skill": 0.14},
+                     {"train_sims": 480, "skill": 0.088}]}
+    full, part = point(1500, 0.061, 0.070), point(1000, 0.07, 0.09)
+    text = table4.beyond_note(2, row, full)
+    assert "This is the paper's size: the best design, `basis`, has skill 0.061 against " \
+           "the paper's 0.085" in text
+    assert "extrapolates" not in text
+    assert "extrapolates to" in table4.beyond_note(2, row, part)
+    # the side design wins: it is the one named
+    assert "`paper_scene2`, has skill 0.050" in table4.beyond_note(
+        2, row, point(1500, 0.061, 0.050))
+    assert "measured at the paper's" not in table4.shortfall(2, {**row, "beyond": [part]})[0]
+    assert "measured at the paper's 1,500 simulations (past the budget, below), `basis` has " \
+           "skill 0.061: more simulations close the gap" in \
+        table4.shortfall(2, {**row, "beyond": [part, full]})[0]
+    assert "has skill 0.090: more simulations alone do not close it" in \
+        table4.shortfall(2, {**row, "beyond": [point(1500, 0.09, 0.1)]})[0]
+
+
 def test_a_liver_is_registered_once_per_shape_model(tmp_path, monkeypatch):
     import types
 
