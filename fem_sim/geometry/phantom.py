@@ -206,19 +206,20 @@ def make_phantom(seed: int = 0, mesh_size: float = 8.0, variety: str = "narrow",
         try:
             points, cells, scale, area = _mesh(prm, seed, mesh_size, algorithm,
                                                MIN_GROOVE_AREA if anatomical else None)
-            flat = flat_tetrahedra(mean_ratio(points, cells))  # quality.py would refuse it
-            if not flat:
-                break
-            raise RuntimeError(flat)
+            problem = flat_tetrahedra(mean_ratio(points, cells))  # quality.py would refuse it
         except _SmallGroove as small:
             attempt, prm = _redrawn(prm, seed, attempt, small.args[0], spread)
+            continue
         except Exception as exc:  # gmsh raises a bare Exception with its last error
-            failures.append(f"surface algorithm {algorithm}: {exc}")
-            algorithm = next(algorithms, None)
-            if algorithm is None:
-                raise GeometryError(f"phantom {seed} ({variety}{widened}), mesh size "
-                                    f"{mesh_size} mm: gmsh could not mesh it: "
-                                    + "; ".join(failures)) from None
+            problem = str(exc) or type(exc).__name__  # never empty: not a mesh
+        if not problem:
+            break
+        failures.append(f"surface algorithm {algorithm}: {problem}")
+        algorithm = next(algorithms, None)
+        if algorithm is None:
+            raise GeometryError(f"phantom {seed} ({variety}{widened}), mesh size "
+                                f"{mesh_size} mm: gmsh could not mesh it: "
+                                + "; ".join(failures))
     if anatomical:
         _log_redrawn(seed, attempt, area)
     if failures:
