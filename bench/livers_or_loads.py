@@ -214,8 +214,12 @@ def more_livers(ds, folds: list, cfg: dict, a) -> str:
     def lower(s, t):  # folds where arm s's MEE is below arm t's
         return sum(r["mee"] < q["mee"] for r, q in zip(out[s], out[t]))
 
-    rows = [f"| {label} | {mean(out[s], 'livers'):.0f} | {out[s][0]['per_liver']} | "
-            f"{mean(out[s], 'train_sims'):,.0f} | {mean(out[s], 'mee'):.3f} | "
+    def span(runs, key):  # the folds hold 12 or 13 livers: what they train on, not a mean
+        lo, hi = min(r[key] for r in runs), max(r[key] for r in runs)
+        return f"{lo:,}" if lo == hi else f"{lo:,}-{hi:,}"
+
+    rows = [f"| {label} | {span(out[s], 'livers')} | {out[s][0]['per_liver']} | "
+            f"{span(out[s], 'train_sims')} | {mean(out[s], 'mee'):.3f} | "
             f"{mean(out[s], 'skill'):.3f} | {mean(out[s], 'skill_mean'):.3f} / "
             f"{mean(out[s], 'skill_median'):.3f} | "
             + ("" if s == "old16" else f"{lower(s, 'old16')} of {len(ref)}")
