@@ -39,7 +39,9 @@ any of them was trained: the comparison is the mean MEE over the 8 folds and the
 folds where it is lower; the more-livers dataset's shape coefficients come from its own PCA over
 204 livers. That makes the arms on 16 simulations per liver differ in two things, so one arm was
 added after these four were measured: the 16 per liver told the 204 livers' coefficients (their
-registration too), the same shape description as the arms with more livers.
+registration too), the same shape description as the arms with more livers. Those three arms
+on one shape description are then trained again from another training seed (chosen after the
+first seed's results: a check of them).
 
     # after make table4 T4="--scenes 4 --beyond 4=1632":
     .venv-train/bin/python bench/livers_or_loads.py
@@ -142,6 +144,9 @@ def cell(ds, cfg: dict, held: np.ndarray, livers: np.ndarray, k: int) -> dict:
 
 
 # the arms of the more-livers comparison, each evaluated on the same simulations: (slug, label)
+# the arms on one shape description (the 204 livers' PCA), trained again from training seed
+# +REPLICA: the deconfounded comparison's check
+REPLICATED = {"old8": "89 livers x 8", "old16_pca204": "89 x 16", "mixed8": "178 x 8"}
 ARMS = (("old8", "the fold's other livers of table4's 102, 8 simulations each"),
         ("old16", "the same livers, 16 simulations each (beyond_1632)"),
         ("old16_pca204", "the same, told the shape coefficients of the 204 livers' PCA"),
@@ -195,14 +200,16 @@ def more_livers(ds, folds: list, cfg: dict, a) -> str:
                 "mixed8": (more, theirs, np.concatenate([old[others], draw[:others.size]])),
                 "all8": (more, theirs, np.setdiff1d(np.arange(len(more.geo_ids)),
                                                      old[held]))}
-        for slug, _ in ARMS:
-            path = MORE / f"{slug}_fold{j + 1}.json"
+        for slug, seed in [(s, 0) for s, _ in ARMS] + [(s, REPLICA) for s in REPLICATED]:
+            tag = f"{slug}_seed{seed}" if seed else slug
+            path = MORE / f"{tag}_fold{j + 1}.json"
             if not path.exists():
-                print(f"more livers: {slug}, fold {j + 1}/{len(folds)}", flush=True)
+                print(f"more livers: {tag}, fold {j + 1}/{len(folds)}", flush=True)
                 x, evaluate, livers = arms[slug]
                 k = MORE_PER_LIVER if x is more else max(PER_LIVER)
-                path.write_text(json.dumps(cell(x, cfg, evaluate, livers, k), indent=1))
-            out[slug].append(json.loads(path.read_text()))
+                path.write_text(json.dumps(cell(x, {**cfg, "seed": cfg["seed"] + seed},
+                                                evaluate, livers, k), indent=1))
+            out.setdefault(tag, []).append(json.loads(path.read_text()))
     ref = out["old16"]
 
     def mean(runs, key):
@@ -244,7 +251,38 @@ def more_livers(ds, folds: list, cfg: dict, a) -> str:
         f"but the held-out ones: {change('all8', 'old16_pca204'):+.1f} %. The shape "
         "description alone: the same 16 simulations per liver told the 204 livers' "
         f"coefficients change by {change('old16_pca204', 'old16'):+.1f} % (lower on "
-        f"{lower('old16_pca204', 'old16')} of {len(ref)} folds).\n")
+        f"{lower('old16_pca204', 'old16')} of {len(ref)} folds).\n\n"
+        "Again from another training seed (the networks' initialisation, batch order and "
+        "early-stopping split; the same data and folds; chosen after the first seed's "
+        "results, so it checks them and does not add to them): the arms on one shape "
+        "description. " + again(out, REPLICA, len(ref)) + "\n")
+
+
+def again(out: dict, seed: int, n: int) -> str:
+    """The deconfounded comparison of the arms in REPLICATED from training seed +``seed``, and
+    the mean of both seeds."""
+    def mee(slug, s):
+        return float(np.mean([r["mee"] for r in out[f"{slug}_seed{s}" if s else slug]]))
+
+    def change(a, b, s):
+        return 100 * (mee(a, s) / mee(b, s) - 1)
+
+    def lower(a, b, s):
+        x, y = (out[f"{t}_seed{s}" if s else t] for t in (a, b))
+        return sum(r["mee"] < q["mee"] for r, q in zip(x, y))
+
+    def both(a, b):  # the two seeds' MEE averaged per arm
+        return 100 * ((mee(a, 0) + mee(a, seed)) / (mee(b, 0) + mee(b, seed)) - 1)
+
+    pairs = (("mixed8", "old8", "twice the livers"),
+             ("old16_pca204", "old8", "twice the simulations per liver"),
+             ("mixed8", "old16_pca204", "twice the livers against twice the simulations"))
+    return ("Mean MEE over the folds: "
+            + ", ".join(f"{label} {mee(s, seed):.3f} mm (the first seed: {mee(s, 0):.3f})"
+                        for s, label in REPLICATED.items()) + ". "
+            + "; ".join(f"{label}: {change(a, b, seed):+.1f} % (lower on {lower(a, b, seed)} "
+                        f"of {n} folds; both seeds averaged: {both(a, b):+.1f} %)"
+                        for a, b, label in pairs) + ".")
 
 
 def main() -> int:
