@@ -767,8 +767,10 @@ def beyond_note(k: int, r: dict, b: dict) -> str:
     for d in [b, *b["side_by_side"]]:
         m = d["metrics"]
         row = r if d is b else next((e for e in r.get("side_by_side", [])
-                                     if e["config"] == d["config"]), None)
-        text = f"`{d['config']}` pooled skill {m['skill']:.3f}, MEE {m['network']['mee']:.3f} mm"
+                                     if (e["config"], e.get("variant")) ==
+                                     (d["config"], d.get("variant"))), None)
+        text = (f"{design_label(d['config'], d.get('variant'))} pooled skill "
+                f"{m['skill']:.3f}, MEE {m['network']['mee']:.3f} mm")
         if "skill_mean" in m.get("per_liver_mee", {}):
             pl = m["per_liver_mee"]
             text += f" ({pl['skill_mean']:.3f} / {pl['skill_median']:.3f} mean / median liver)"
@@ -792,10 +794,15 @@ def beyond_note(k: int, r: dict, b: dict) -> str:
             f"{_f(b['curve_predicted'])} at its {train_sims:,.0f} training simulations per "
             f"fold; measured {b['metrics']['skill']:.3f}.")
     if at_paper_size(k, b):
-        best = min([b, *b["side_by_side"]], key=lambda d: d["metrics"]["skill"])
-        return (text + f" This is the paper's size: the best design, `{best['config']}`, has "
-                f"skill {best['metrics']['skill']:.3f} against the paper's {p['skill']} "
-                f"({PAPER_FOLDS} folds there, {b['overrides']['folds']} here: "
+        designs = [b, *b["side_by_side"]]
+        best = min(designs, key=lambda d: d["metrics"]["skill"])
+        theirs = [d for d in designs if d["config"].startswith("paper_") and d is not best]
+        return (text + " This is the paper's size: the best design, "
+                f"{design_label(best['config'], best.get('variant'))}, has skill "
+                f"{best['metrics']['skill']:.3f} against the paper's {p['skill']}"
+                + "".join(f"; the paper's network, {design_label(d['config'])}, "
+                          f"{d['metrics']['skill']:.3f}" for d in theirs)
+                + f" ({PAPER_FOLDS} folds there, {b['overrides']['folds']} here: "
                 f"{train_sims:,.0f} training simulations per fold against "
                 f"{p['sims'] * (PAPER_FOLDS - 1) // PAPER_FOLDS:,}).")
     return (text + f" With this point the curve's slope is {_f(slope, '{:.2f}')} and it "
@@ -828,7 +835,8 @@ def shortfall(k: int, r: dict) -> list[str]:
             best = min([full[0], *full[0]["side_by_side"]], key=lambda d: d["metrics"]["skill"])
             s = best["metrics"]["skill"]
             verdict = (f"measured at the paper's {full[0]['sims']:,} simulations (past the "
-                       f"budget, below), `{best['config']}` has skill {s:.3f}: "
+                       f"budget, below), {design_label(best['config'], best.get('variant'))} "
+                       f"has skill {s:.3f}: "
                        + ("more simulations close the gap" if s <= paper else
                           "more simulations alone do not close it"))
         if k == 4:  # measured on 204 livers

@@ -93,16 +93,17 @@ def test_a_point_past_the_budget_at_the_papers_size_is_reported_as_measured_not_
                      {"train_sims": 480, "skill": 0.088}]}
     full, part = point(1500, 0.061, 0.070), point(1000, 0.07, 0.09)
     text = table4.beyond_note(2, row, full)
-    assert "This is the paper's size: the best design, `basis`, has skill 0.061 against " \
-           "the paper's 0.085" in text
+    assert "This is the paper's size: the best design, reduced basis (`basis`), has skill " \
+           "0.061 against the paper's 0.085; the paper's network, node-wise (`paper_scene2`), " \
+           "0.070 (10 folds there, 5 here" in text
     assert "extrapolates" not in text
     assert "extrapolates to" in table4.beyond_note(2, row, part)
     # the side design wins: it is the one named
-    assert "`paper_scene2`, has skill 0.050" in table4.beyond_note(
-        2, row, point(1500, 0.061, 0.050))
+    assert "best design, node-wise (`paper_scene2`), has skill 0.050 against the paper's " \
+           "0.085 (10" in table4.beyond_note(2, row, point(1500, 0.061, 0.050))
     assert "measured at the paper's" not in table4.shortfall(2, {**row, "beyond": [part]})[0]
-    assert "measured at the paper's 1,500 simulations (past the budget, below), `basis` has " \
-           "skill 0.061: more simulations close the gap" in \
+    assert "measured at the paper's 1,500 simulations (past the budget, below), reduced " \
+           "basis (`basis`) has skill 0.061: more simulations close the gap" in \
         table4.shortfall(2, {**row, "beyond": [part, full]})[0]
     assert "has skill 0.090: more simulations alone do not close it" in \
         table4.shortfall(2, {**row, "beyond": [point(1500, 0.09, 0.1)]})[0]
