@@ -788,9 +788,10 @@ def beyond_note(k: int, r: dict, b: dict) -> str:
     at, slope = curve_fit([c["train_sims"] for c in r["curve"]] + [train_sims],
                           [c["skill"] for c in r["curve"]] + [b["metrics"]["skill"]],
                           p["sims"] * (PAPER_FOLDS - 1) / PAPER_FOLDS)
+    each = "; ".join(each)
     text = (f"- Scene {k} past the budget (`--beyond {k}={b['sims']}`): {b['sims']:,} "
             f"simulations{per}, the same designs and folds as the row (run: `{b['run']}`). "
-            f"{'; '.join(each)}. The row's learning curve predicted a pooled skill of "
+            f"{each[:1].upper()}{each[1:]}. The row's learning curve predicted a pooled skill of "
             f"{_f(b['curve_predicted'])} at its {train_sims:,.0f} training simulations per "
             f"fold; measured {b['metrics']['skill']:.3f}.")
     if at_paper_size(k, b):
