@@ -253,9 +253,9 @@ def more_livers(ds, folds: list, cfg: dict, a) -> str:
         f"coefficients change by {change('old16_pca204', 'old16'):+.1f} % (lower on "
         f"{lower('old16_pca204', 'old16')} of {len(ref)} folds).\n\n"
         "Again from another training seed (the networks' initialisation, batch order and "
-        "early-stopping split; the same data and folds; chosen after the first seed's "
-        "results, so it checks them and does not add to them): the arms on one shape "
-        "description. " + again(out, REPLICA, len(ref)) + "\n")
+        "early-stopping split; the same data and folds; run after the first seed's results, "
+        "as a check of them), the arms on one shape description. "
+        + again(out, REPLICA, len(ref)) + "\n")
 
 
 def again(out: dict, seed: int, n: int) -> str:
@@ -274,7 +274,7 @@ def again(out: dict, seed: int, n: int) -> str:
     def both(a, b):  # the two seeds' MEE averaged per arm
         return 100 * ((mee(a, 0) + mee(a, seed)) / (mee(b, 0) + mee(b, seed)) - 1)
 
-    pairs = (("mixed8", "old8", "twice the livers"),
+    pairs = (("mixed8", "old8", "Twice the livers"),
              ("old16_pca204", "old8", "twice the simulations per liver"),
              ("mixed8", "old16_pca204", "twice the livers against twice the simulations"))
     return ("Mean MEE over the folds: "
