@@ -795,14 +795,14 @@ def beyond_note(k: int, r: dict, b: dict) -> str:
             f"{_f(b['curve_predicted'])} at its {train_sims:,.0f} training simulations per "
             f"fold; measured {b['metrics']['skill']:.3f}.")
     if at_paper_size(k, b):
-        designs = [b, *b["side_by_side"]]
-        best = min(designs, key=lambda d: d["metrics"]["skill"])
-        theirs = [d for d in designs if d["config"].startswith("paper_") and d is not best]
+        best = best_design(b)
+        theirs = [d for d in [b, *b["side_by_side"]]
+                  if d["config"].startswith("paper_") and d is not best]
         return (text + " This is the paper's size: the best design, "
                 f"{design_label(best['config'], best.get('variant'))}, has skill "
-                f"{best['metrics']['skill']:.3f} against the paper's {p['skill']}"
+                f"{compared_skill(best['metrics']):.3f} against the paper's {p['skill']}"
                 + "".join(f"; the paper's network, {design_label(d['config'])}, "
-                          f"{d['metrics']['skill']:.3f}" for d in theirs)
+                          f"{compared_skill(d['metrics']):.3f}" for d in theirs)
                 + f" ({PAPER_FOLDS} folds there, {b['overrides']['folds']} here: "
                 f"{train_sims:,.0f} training simulations per fold against "
                 f"{p['sims'] * (PAPER_FOLDS - 1) // PAPER_FOLDS:,}).")
@@ -815,12 +815,23 @@ def at_paper_size(k: int, b: dict) -> bool:
     return b["sims"] >= PAPER[k]["sims"]
 
 
+def compared_skill(m: dict) -> float:
+    """The skill set beside the paper's: the median liver's where the metrics have one (scene
+    4), else the pooled skill."""
+    return m.get("per_liver_mee", {}).get("skill_median", m["skill"])
+
+
+def best_design(b: dict) -> dict:
+    """The design of a point past the budget (its own or one beside it) with the lowest skill."""
+    return min([b, *b["side_by_side"]], key=lambda d: compared_skill(d["metrics"]))
+
+
 def shortfall(k: int, r: dict) -> list[str]:
     """Why a row is short of the paper's skill and what would close the gap, from its numbers
     (nothing when it is not short)."""
     p, m = PAPER[k], r["metrics"]
     paper = float(p["skill"].split("/")[-1])  # scene 4: the median liver
-    ours = m.get("per_liver_mee", {}).get("skill_median", m["skill"])
+    ours = compared_skill(m)
     out = []
     if ours > paper:
         per = (f" ({r['sims'] / POPULATION:.0f} per liver against the paper's "
@@ -833,8 +844,8 @@ def shortfall(k: int, r: dict) -> list[str]:
                    "more simulations alone would not close the gap")
         full = [b for b in r.get("beyond", []) if at_paper_size(k, b)]
         if full:  # measured at the paper's size: the measurement, not the curve
-            best = min([full[0], *full[0]["side_by_side"]], key=lambda d: d["metrics"]["skill"])
-            s = best["metrics"]["skill"]
+            best = best_design(full[0])
+            s = compared_skill(best["metrics"])
             verdict = (f"measured at the paper's {full[0]['sims']:,} simulations (past the "
                        f"budget, below), {design_label(best['config'], best.get('variant'))} "
                        f"has skill {s:.3f}: "
