@@ -143,10 +143,10 @@ def cell(ds, cfg: dict, held: np.ndarray, livers: np.ndarray, k: int) -> dict:
             "seconds": seconds}
 
 
-# the arms of the more-livers comparison, each evaluated on the same simulations: (slug, label)
 # the arms on one shape description (the 204 livers' PCA), trained again from training seed
 # +REPLICA: the deconfounded comparison's check
 REPLICATED = {"old8": "89 livers x 8", "old16_pca204": "89 x 16", "mixed8": "178 x 8"}
+# the arms of the more-livers comparison, each evaluated on the same simulations: (slug, label)
 ARMS = (("old8", "the fold's other livers of table4's 102, 8 simulations each"),
         ("old16", "the same livers, 16 simulations each (beyond_1632)"),
         ("old16_pca204", "the same, told the shape coefficients of the 204 livers' PCA"),
@@ -201,15 +201,14 @@ def more_livers(ds, folds: list, cfg: dict, a) -> str:
                 "all8": (more, theirs, np.setdiff1d(np.arange(len(more.geo_ids)),
                                                      old[held]))}
         for slug, seed in [(s, 0) for s, _ in ARMS] + [(s, REPLICA) for s in REPLICATED]:
-            tag = f"{slug}_seed{seed}" if seed else slug
-            path = MORE / f"{tag}_fold{j + 1}.json"
+            path = MORE / f"{tag(slug, seed)}_fold{j + 1}.json"
             if not path.exists():
-                print(f"more livers: {tag}, fold {j + 1}/{len(folds)}", flush=True)
+                print(f"more livers: {tag(slug, seed)}, fold {j + 1}/{len(folds)}", flush=True)
                 x, evaluate, livers = arms[slug]
                 k = MORE_PER_LIVER if x is more else max(PER_LIVER)
                 path.write_text(json.dumps(cell(x, {**cfg, "seed": cfg["seed"] + seed},
                                                 evaluate, livers, k), indent=1))
-            out.setdefault(tag, []).append(json.loads(path.read_text()))
+            out.setdefault(tag(slug, seed), []).append(json.loads(path.read_text()))
     ref = out["old16"]
 
     def mean(runs, key):
@@ -220,6 +219,15 @@ def more_livers(ds, folds: list, cfg: dict, a) -> str:
 
     def lower(s, t):  # folds where arm s's MEE is below arm t's
         return sum(r["mee"] < q["mee"] for r, q in zip(out[s], out[t]))
+
+    def both(s, t):  # per cent, with each arm's MEE averaged over the two training seeds
+        return 100 * ((mean(out[s], "mee") + mean(out[tag(s, REPLICA)], "mee"))
+                      / (mean(out[t], "mee") + mean(out[tag(t, REPLICA)], "mee")) - 1)
+
+    # the comparisons on one shape description, from the second seed (and both averaged)
+    pairs = (("mixed8", "old8", "Twice the livers"),
+             ("old16_pca204", "old8", "twice the simulations per liver"),
+             ("mixed8", "old16_pca204", "twice the livers against twice the simulations"))
 
     def span(runs, key):  # the folds hold 12 or 13 livers: what they train on, not a mean
         lo, hi = min(r[key] for r in runs), max(r[key] for r in runs)
@@ -254,35 +262,17 @@ def more_livers(ds, folds: list, cfg: dict, a) -> str:
         f"{lower('old16_pca204', 'old16')} of {len(ref)} folds).\n\n"
         "Again from another training seed (the networks' initialisation, batch order and "
         "early-stopping split; the same data and folds; run after the first seed's results, "
-        "as a check of them), the arms on one shape description. "
-        + again(out, REPLICA, len(ref)) + "\n")
+        "as a check of them), the arms on one shape description. Mean MEE over the folds: "
+        + ", ".join(f"{label} {mean(out[tag(s, REPLICA)], 'mee'):.3f} mm (the first seed: "
+                    f"{mean(out[s], 'mee'):.3f})" for s, label in REPLICATED.items()) + ". "
+        + "; ".join(f"{label}: {change(tag(a, REPLICA), tag(b, REPLICA)):+.1f} % (lower on "
+                    f"{lower(tag(a, REPLICA), tag(b, REPLICA))} of {len(ref)} folds; both "
+                    f"seeds averaged: {both(a, b):+.1f} %)" for a, b, label in pairs) + ".\n")
 
 
-def again(out: dict, seed: int, n: int) -> str:
-    """The deconfounded comparison of the arms in REPLICATED from training seed +``seed``, and
-    the mean of both seeds."""
-    def mee(slug, s):
-        return float(np.mean([r["mee"] for r in out[f"{slug}_seed{s}" if s else slug]]))
-
-    def change(a, b, s):
-        return 100 * (mee(a, s) / mee(b, s) - 1)
-
-    def lower(a, b, s):
-        x, y = (out[f"{t}_seed{s}" if s else t] for t in (a, b))
-        return sum(r["mee"] < q["mee"] for r, q in zip(x, y))
-
-    def both(a, b):  # the two seeds' MEE averaged per arm
-        return 100 * ((mee(a, 0) + mee(a, seed)) / (mee(b, 0) + mee(b, seed)) - 1)
-
-    pairs = (("mixed8", "old8", "Twice the livers"),
-             ("old16_pca204", "old8", "twice the simulations per liver"),
-             ("mixed8", "old16_pca204", "twice the livers against twice the simulations"))
-    return ("Mean MEE over the folds: "
-            + ", ".join(f"{label} {mee(s, seed):.3f} mm (the first seed: {mee(s, 0):.3f})"
-                        for s, label in REPLICATED.items()) + ". "
-            + "; ".join(f"{label}: {change(a, b, seed):+.1f} % (lower on {lower(a, b, seed)} "
-                        f"of {n} folds; both seeds averaged: {both(a, b):+.1f} %)"
-                        for a, b, label in pairs) + ".")
+def tag(slug: str, seed: int) -> str:
+    """The name of an arm's results trained from training seed +``seed``."""
+    return f"{slug}_seed{seed}" if seed else slug
 
 
 def main() -> int:
