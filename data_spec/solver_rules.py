@@ -41,17 +41,17 @@ class Route:
 # First match wins: on one rank without a PETSc pc_type, "auto" takes the serial path.
 ROUTES = (
     Route("lagrange", (1, 2), None, "direct", ("auto",) + SERIAL_FACTORIZATIONS, True, False,
-          "serial", "one rank: MKL PARDISO's float32 Cholesky (pardiso; auto with MKL) or "
+          "serial", "MKL PARDISO's float32 Cholesky (pardiso; auto with MKL) or "
           "MUMPS' LDL^T through its C interface (single: float32, double: float64; auto "
           "without MKL)"),
     Route("lagrange", (1, 2), None, "direct", ("auto", "petsc"), False, True, "petsc",
           "PETSc's KSP with MUMPS' Cholesky (auto on several ranks, or a pc_type in "
           "petsc_options)"),
     Route("lagrange", (1, 2), None, "gamg", ("auto",), False, True, "gamg",
-          "CG + GAMG with the rigid-body near-nullspace, any ranks"),
+          "CG + GAMG with the rigid-body near-nullspace"),
     Route("anp", (1,), (1,), "direct", ("auto",) + SERIAL_FACTORIZATIONS, True, False,
           "serial", "averaged nodal pressure: P1, one quadrature point, the serial "
-          "factorisation on one rank"),
+          "factorisation"),
 )
 
 

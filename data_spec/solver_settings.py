@@ -60,11 +60,16 @@ class SolverSettings:
                               "an indefinite tangent still factorises, and a solve the "
                               "factors cannot give falls back to float64 with pivoting)")
     petsc_options: dict = _setting({}, "extra PETSc options for PETSc's solvers (factorization "
-                                   "petsc, gamg); a pc_type here selects PETSc's path; an "
-                                   "option PETSc never reads is reported", scene=True)
+                                   "petsc, gamg); a pc_type here selects PETSc's path; "
+                                   "ksp_max_it, ksp_rtol, ksp_atol win over the solver's own "
+                                   "limits; an option PETSc never reads is reported once",
+                                   scene=True)
     krylov_rtol: float = _setting(1e-10, "relative tolerance of each linear solve", lo=0.0,
                                   strict=True)
-    max_krylov: int = _setting(60, "Krylov iterations before a solve counts as failed", lo=1)
+    max_krylov: int = _setting(0, "Krylov iterations before a solve counts as failed (0: the "
+                               "path's own limit, 60 for the GMRES refinement of a "
+                               "factorisation and 1000 for CG + GAMG; a scene raises it with "
+                               "petsc_options ksp_max_it)", lo=0)
     predictor_order: int = _setting(3, "hermite: converged points used (1 = Euler); tangent: "
                                     "tangents used", lo=1)
     line_search: bool = _setting(True, "backtracking on the energy or |R| after each Newton "

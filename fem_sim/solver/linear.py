@@ -34,6 +34,12 @@ from fem_sim.solver.results import LinearCounts, StepFailure
 from fem_sim.solver.settings import SolverSettings
 
 log = logging.getLogger(__name__)
+# Krylov iterations per solve when settings.max_krylov is 0: GMRES refining a float32
+# factorisation converges in a few (60 means the factors are poor: fall back), CG + GAMG needs
+# hundreds at K/mu = 200 (about 120 per solve on tiny_scene1, 240 on scene 1's P2 mesh).
+REFINE_MAX_IT = 60
+GAMG_MAX_IT = 1000
+_warned_unused: set[tuple[str, ...]] = set()  # unused options warned about, once per process
 Factors = ldlt.SerialLDLT | pardiso.PardisoCholesky  # one interface: factor, solve, ...
 
 
@@ -177,7 +183,8 @@ class SerialLDLTSolver(LinearSolver):
                 why = str(exc)
                 continue
             self.counts.factorizations += 1
-            ok, its = self._refine(solver, J, rhs, du, rtol, self.settings.max_krylov)
+            ok, its = self._refine(solver, J, rhs, du, rtol,
+                                   self.settings.max_krylov or REFINE_MAX_IT)
             if ok:
                 return
             why = f"GMRES with the LDL^T factors did not reach {rtol:.1e} in {its} iterations"
@@ -197,7 +204,8 @@ class SerialLDLTSolver(LinearSolver):
         kept = self._recurring
         if kept is not None and np.array_equal(kept[1], values) \
                 and np.array_equal(kept[0], indices) \
-                and self._refine(kept[2], J, rhs, du, rtol, self.settings.max_krylov)[0]:
+                and self._refine(kept[2], J, rhs, du, rtol,
+                                 self.settings.max_krylov or REFINE_MAX_IT)[0]:
             self.counts.reused_factorizations += 1
             return
         self._recurring = None
@@ -261,6 +269,23 @@ class PetscSolver(LinearSolver):
         self._factorized = False
 
     @property
+    def max_it(self) -> int:
+        """Krylov iterations per solve from the settings (0: the path's own limit)."""
+        gamg = self.settings.linear_solver == "gamg"
+        return self.settings.max_krylov or (GAMG_MAX_IT if gamg else REFINE_MAX_IT)
+
+    def _set_tolerances(self, ksp, rtol: float) -> None:
+        """The Newton loop's ``rtol`` and the settings' limit, except where the user's
+        petsc_options set a KSP tolerance: that one stays as PETSc read it.
+        """
+        user = self.settings.petsc_options
+        read_rtol, read_atol, read_divtol, read_max_it = self._read_tolerances
+        ksp.setTolerances(rtol=read_rtol if "ksp_rtol" in user else rtol,
+                          atol=read_atol if "ksp_atol" in user else 0.0,
+                          divtol=read_divtol,
+                          max_it=read_max_it if "ksp_max_it" in user else self.max_it)
+
+    @property
     def has_factorization(self) -> bool:
         return self._factorized
 
@@ -280,8 +305,10 @@ class PetscSolver(LinearSolver):
                         "mg_levels_ksp_type": "chebyshev", "mg_levels_pc_type": "jacobi"}
         for k, v in {**defaults, **s.petsc_options}.items():
             opts[f"{self.prefix}{k}"] = v
+        # the settings' tolerances first, so that setFromOptions lets a user's ksp_* win
+        ksp.setTolerances(rtol=s.krylov_rtol, atol=0.0, max_it=self.max_it)
         ksp.setFromOptions()
-        ksp.setTolerances(rtol=s.krylov_rtol, atol=0.0, max_it=s.max_krylov)
+        self._read_tolerances = ksp.getTolerances()  # (rtol, atol, divtol, max_it) as read
         if ksp.getType() != "preonly":
             ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
             ksp.getPC().setReusePreconditioner(False)
@@ -294,7 +321,7 @@ class PetscSolver(LinearSolver):
         s = self.settings
         A = J.petsc()
         ksp = self._get_ksp(A)
-        ksp.setTolerances(rtol=rtol, atol=0.0, max_it=s.max_krylov)
+        self._set_tolerances(ksp, rtol)
         ksp.getPC().setReusePreconditioner(False)  # a new factorisation of this J
         ksp.setOperators(A, A)
         self.counts.factorizations += 1
@@ -317,7 +344,8 @@ class PetscSolver(LinearSolver):
         unused = [k for k in self.settings.petsc_options
                   if not _option_used(f"{self.prefix}{k}")]
         self.unused_options = unused
-        if unused and self.comm.rank == 0:
+        if unused and self.comm.rank == 0 and tuple(unused) not in _warned_unused:
+            _warned_unused.add(tuple(unused))  # once per process, not once per simulation
             log.warning("petsc_options %s: never read by PETSc (misspelt, or not an option "
                         "of the solver that runs); they have no effect",
                         ", ".join(repr(k) for k in unused))

@@ -625,3 +625,25 @@ def test_petsc_options_that_petsc_never_reads_are_reported(caplog):
             OgdenProblem(MPI.COMM_WORLD, g.points, g.cells,
                          settings={"petsc_options": {"ksp_type": "cg"}}, prefix="serial_")
         assert "have no effect" in caplog.text and "ksp_type" in caplog.text
+
+
+def test_a_users_krylov_options_win_over_the_settings():
+    """petsc_options ksp_max_it / ksp_rtol are the scene's way to set the Krylov limit: the
+    KSP runs with them, not with the settings' values that used to overwrite them."""
+    g = make_phantom(0, 20.0)
+    node = int(np.argmax(g.points[:, 0]))
+    opts = {"ksp_max_it": 777, "ksp_rtol": 1e-9}
+    prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells,
+                        settings={"linear_solver": "gamg", "petsc_options": opts},
+                        prefix="user_ksp_")
+    s = prob.solve(MAT, [Constraint(g.regions["vena_cava"])],
+                   [NodalLoad([node], [[0.0, 0.0, -0.1]])], [1.0])
+    assert s.status == "ok", s.failure_reason
+    rtol, _, _, max_it = prob.linear._ksp.getTolerances()
+    assert (max_it, rtol) == (777, 1e-9)
+    prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells,
+                        settings={"linear_solver": "gamg", "max_krylov": 321}, prefix="set_ksp_")
+    s = prob.solve(MAT, [Constraint(g.regions["vena_cava"])],
+                   [NodalLoad([node], [[0.0, 0.0, -0.1]])], [1.0])
+    assert s.status == "ok", s.failure_reason
+    assert prob.linear._ksp.getTolerances()[3] == 321
