@@ -116,7 +116,7 @@ test-extremes: setup-solver
 	bash scripts/run_pytest.sh $(SPY) tests/extremes -q $(TESTS)
 
 extremes-doc: setup-solver
-	$(SPY) scripts/extremes_doc.py docs/extremes.md
+	$(SPY) -m scripts.extremes_doc docs/extremes.md
 
 # A small real dataset (fem_sim) for the trainer's end-to-end test; regenerated only if missing.
 TEST_DATA := runs/test-data/ci_scene1

@@ -1,7 +1,7 @@
 """Hard cases beside the easy one: what a liver and a load that make Newton work cost.
 
-The easy case is ``bench_solver.py``'s (the real liver, 0.4 N along -z on the surface node
-farthest from the fixed region). The hard ones change one thing: the phantom liver, a
+The easy case: the real liver (``shared/data/livers/sofa_liver.vtk``), 0.4 N along -z on the
+surface node farthest from the fixed region. The hard ones change one thing: the phantom liver, a
 thin-lobe phantom (the seed with the thinnest left lobe among 0..99), 2x and 5x the force, the
 softest material of scene 3 (c1 = 2e-3 MPa, m1 = 6). Each row gives the Newton iterations per
 load step, factorisations, back-solves, chord steps, cut-backs, fallbacks (matrices the
@@ -27,16 +27,14 @@ import json
 import logging
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 from mpi4py import MPI
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import bench_solver as bs  # noqa: E402
-from report import ROOT, capture  # noqa: E402
+from fem_sim import Constraint, NodalLoad, OgdenMaterial, OgdenProblem
+from liverviz.report import ROOT, capture
 
-from fem_sim import Constraint, NodalLoad, OgdenMaterial, OgdenProblem  # noqa: E402
+SOFA = ROOT.parent / "shared" / "data" / "livers" / "sofa_liver.vtk"
 
 NOMINAL = np.array([0.0, 0.0, -0.4])  # N
 C1, M1 = 4.1e-3, 10.06
@@ -63,12 +61,13 @@ def liver(kind: str, h: float):
     """(geometry, fixed nodes, load node) of a liver: the load on the free surface node
     farthest from the fixed region."""
     if (kind, h) not in _MESHES:
-        if kind == "thin":
-            from fem_sim.geometry.phantom import make_phantom
+        from fem_sim.geometry.phantom import make_phantom
+        from fem_sim.geometry.surfaces import mesh_surface_file
 
-            g = make_phantom(thin_lobe_seed(), h)
+        if kind == "sofa":
+            g = mesh_surface_file(SOFA, h)
         else:
-            g, _ = bs.load_mesh(kind, h)
+            g = make_phantom(thin_lobe_seed() if kind == "thin" else 0, h)
         fixed = g.regions["vena_cava"]
         surf = np.setdiff1d(g.surface_nodes, fixed)
         d = np.linalg.norm(g.points[surf][:, None] - g.points[fixed][None], axis=2).min(axis=1)
@@ -121,17 +120,11 @@ def main() -> int:
         return _run(a, ap)
 
 
-def _run(a, ap) -> int:
+def _cases(a, names: list[str]) -> tuple[list, object]:
+    """Every case with the defaults (and the variant): (rows, the easy case's problem)."""
     variants = {"defaults": {}}
     if a.settings:
         variants["variant"] = json.loads(a.settings)
-    names = list(CASES)
-    if a.cases:
-        names = [names[int(i) - 1] for i in a.cases.split(",")]
-    print(f"mesh size {a.h} mm, P1, 10 load steps, rtol 1e-10; thin-lobe phantom = seed "
-          f"{thin_lobe_seed()}; {MPI.COMM_WORLD.size} rank(s); variant: {a.settings or '-'}")
-    if a.batch and "easy: real liver" not in names:
-        ap.error("--batch continues the easy case: include case 1")
     rows, easy_problem = [], None
     for name in names:
         per = {}
@@ -152,6 +145,10 @@ def _run(a, ap) -> int:
         for vname, r in per.items():
             print(f"  {name} [{vname}]: {r['status']}, {r['seconds']:.1f} s, its {r['its']}, "
                   f"{r['factorizations']} factorisations", flush=True)
+    return rows, easy_problem
+
+
+def _table(rows: list) -> None:
     easy = {v: r["factorizations"] for v, r in rows if r["case"] == "easy: real liver"}
     print("\n| case | solver | nodes | max abs u mm | Newton its per step | factorisations | "
           "x easy | back-solves | chord steps | cut-backs | fallbacks | s / sim | vs defaults |")
@@ -162,50 +159,79 @@ def _run(a, ap) -> int:
         print(f"| {r['case']} | {vname} | {r['nodes']} | {r['max_u']:.1f} | "
               f"{' '.join(map(str, r['its']))} | {r['factorizations']} | {ratio} | "
               f"{r['back_solves']} | {r['chord']} | {r['cutbacks']} | {r['fallbacks']} | "
-              f"{r['seconds']:.1f} | "
-              f"{diff} |")
+              f"{r['seconds']:.1f} | {diff} |")
+
+
+def _easy(rows: list) -> dict:
+    return next(r for v, r in rows if v == "defaults" and r["case"] == "easy: real liver")
+
+
+def _batch(a, rows: list, easy_problem) -> None:
+    """More simulations of the easy case on its problem, as a dataset runs them."""
+    first = _easy(rows)
+    later = [run_case("easy: real liver", a.h, {}, prob=easy_problem) for _ in range(a.batch)]
+    diff = max(max(np.linalg.norm(x - y) / np.linalg.norm(y)
+                   for x, y in zip(r["u"], first["u"])) for r in later)
+    each = ", ".join(f"{r['seconds']:.1f}" for r in later)
+    print(f"\neasy case, {a.batch} more simulations on the same problem (as in a "
+          f"dataset): {float(np.median([r['seconds'] for r in later])):.1f} s median "
+          f"({each}), factorisations "
+          f"{[r['factorizations'] for r in later]}, reused {[r['reused'] for r in later]}; "
+          f"largest relative difference to the first {diff:.1e}")
+
+
+def _elements(a) -> None:
+    """The locking-free element's price: P2 against P1 on the same mesh and against P1 on
+    the shipped scenes' 8 mm mesh. Accuracy of each: docs/tradeoff_fem.md."""
+    print("\n| liver | h mm | element | Newton its per step | factorisations | "
+          "x P1 same mesh | back-solves | s / sim | x P1 at 8 mm |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name in ("easy: real liver", "phantom"):
+        shipped = run_case(name, 8.0, {})
+        table = [(8.0, 1, shipped, shipped)]
+        for h in a.elements:
+            p1 = run_case(name, h, {})
+            table += [(h, 1, p1, p1), (h, 2, run_case(name, h, {}, degree=2), p1)]
+        for h, degree, r, p1 in table:
+            print(f"| {CASES[name][0]} | {h:g} | P{degree} | "
+                  f"{' '.join(map(str, r['its']))} | {r['factorizations']} | "
+                  f"{r['factorizations'] / p1['factorizations']:.2f} | "
+                  f"{r['back_solves']} | {r['seconds']:.1f} | "
+                  f"{r['seconds'] / shipped['seconds']:.2f} |", flush=True)
+
+
+def _textbook(a, rows: list) -> None:
+    """The textbook dolfinx solver (fem_sim.solver.textbook) on the easy case."""
+    from fem_sim.solver.textbook import textbook_simulation
+
+    g, fixed, node = liver("sofa", a.h)
+    mat = OgdenMaterial((C1,), (M1,), 100 * C1)
+    u_tb, its, secs, _ = textbook_simulation(g, fixed, node, NOMINAL, mat,
+                                             np.linspace(0.1, 1.0, 10))
+    ours = _easy(rows)
+    diff = max(np.linalg.norm(x - y) / np.linalg.norm(y) for x, y in zip(u_tb, ours["u"]))
+    print(f"\ntextbook dolfinx on the easy case: {secs:.1f} s, Newton its {its} "
+          f"({sum(its)} factorisations); fem_sim {ours['seconds']:.1f} s: "
+          f"{secs / ours['seconds']:.1f}x; the two answers differ by {diff:.1e} (largest "
+          "relative L2 difference over the load steps)")
+
+
+def _run(a, ap) -> int:
+    names = list(CASES)
+    if a.cases:
+        names = [names[int(i) - 1] for i in a.cases.split(",")]
+    print(f"mesh size {a.h} mm, P1, 10 load steps, rtol 1e-10; thin-lobe phantom = seed "
+          f"{thin_lobe_seed()}; {MPI.COMM_WORLD.size} rank(s); variant: {a.settings or '-'}")
+    if a.batch and "easy: real liver" not in names:
+        ap.error("--batch continues the easy case: include case 1")
+    rows, easy_problem = _cases(a, names)
+    _table(rows)
     if a.batch:
-        first = next(r for v, r in rows if v == "defaults" and r["case"] == "easy: real liver")
-        later = [run_case("easy: real liver", a.h, {}, prob=easy_problem)
-                 for _ in range(a.batch)]
-        diff = max(max(np.linalg.norm(x - y) / np.linalg.norm(y)
-                       for x, y in zip(r["u"], first["u"])) for r in later)
-        each = ", ".join(f"{r['seconds']:.1f}" for r in later)
-        print(f"\neasy case, {a.batch} more simulations on the same problem (as in a "
-              f"dataset): {float(np.median([r['seconds'] for r in later])):.1f} s median "
-              f"({each}), factorisations "
-              f"{[r['factorizations'] for r in later]}, reused {[r['reused'] for r in later]}; "
-              f"largest relative difference to the first {diff:.1e}")
+        _batch(a, rows, easy_problem)
     if a.elements:
-        # The locking-free element's price: P2 against P1 on the same mesh (the issue's bar:
-        # at most 2x P1's factorisations) and against P1 on the shipped scenes' 8 mm mesh (no
-        # more seconds). Accuracy of each: docs/tradeoff_fem.md.
-        print("\n| liver | h mm | element | Newton its per step | factorisations | "
-              "x P1 same mesh | back-solves | s / sim | x P1 at 8 mm |")
-        print("|---|---|---|---|---|---|---|---|---|")
-        for name in ("easy: real liver", "phantom"):
-            shipped = run_case(name, 8.0, {})
-            table = [(8.0, 1, shipped, shipped)]
-            for h in a.elements:
-                p1 = run_case(name, h, {})
-                table += [(h, 1, p1, p1), (h, 2, run_case(name, h, {}, degree=2), p1)]
-            for h, degree, r, p1 in table:
-                print(f"| {CASES[name][0]} | {h:g} | P{degree} | "
-                      f"{' '.join(map(str, r['its']))} | {r['factorizations']} | "
-                      f"{r['factorizations'] / p1['factorizations']:.2f} | "
-                      f"{r['back_solves']} | {r['seconds']:.1f} | "
-                      f"{r['seconds'] / shipped['seconds']:.2f} |", flush=True)
+        _elements(a)
     if a.textbook:
-        g, fixed, node = liver("sofa", a.h)
-        mat = OgdenMaterial((C1,), (M1,), 100 * C1)
-        u_tb, its, secs, _ = bs.textbook_simulation(g, fixed, node, NOMINAL, mat,
-                                                    np.linspace(0.1, 1.0, 10))
-        ours = next(r for v, r in rows if v == "defaults" and r["case"] == "easy: real liver")
-        diff = max(np.linalg.norm(x - y) / np.linalg.norm(y) for x, y in zip(u_tb, ours["u"]))
-        print(f"\ntextbook dolfinx on the easy case: {secs:.1f} s, Newton its {its} "
-              f"({sum(its)} factorisations); fem_sim {ours['seconds']:.1f} s: "
-              f"{secs / ours['seconds']:.1f}x; the two answers differ by {diff:.1e} (largest "
-              "relative L2 difference over the load steps)")
+        _textbook(a, rows)
     return 0
 
 

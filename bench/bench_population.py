@@ -23,8 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import ROOT, capture  # noqa: E402
+from liverviz.report import ROOT, capture
 
 SCENE = """schema_version = 1
 [scene]

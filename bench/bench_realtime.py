@@ -29,12 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-import table4  # noqa: E402
-from latency import at_scale, latency  # noqa: E402
-from report import header, sections  # noqa: E402
+from liverviz.report import ROOT, header, sections
+from surrogate.latency import at_scale, latency
+from surrogate.train import train_or_reuse
 
 RESULTS = ROOT / "bench" / "results" / "realtime"
 DESIGNS = {  # name -> (config, overrides)
@@ -50,7 +47,7 @@ def train(data: Path, folds: int, evaluate: int) -> dict:
     out = {}
     for name, (config, overrides) in DESIGNS.items():
         run = RESULTS / "runs" / config
-        out[name] = (run, table4.train(data, run, config, {**overrides, "folds": folds,
+        out[name] = (run, train_or_reuse(data, run, config, {**overrides, "folds": folds,
                                                             "evaluate_folds": evaluate}))
     return out
 
@@ -58,7 +55,8 @@ def train(data: Path, folds: int, evaluate: int) -> dict:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     # make table4's scene-1 dataset (the same scene file)
-    ap.add_argument("--data", default=str(table4.scene_dir(1) / "data"))
+    ap.add_argument("--data", default=str(ROOT / "bench" / "results" / "table4" / "scene1_base"
+                                          / "data"))
     ap.add_argument("--folds", type=int, default=5)
     ap.add_argument("--evaluate-folds", type=int, default=0,
                     help="hold out only the first n folds (0: every fold; the node-wise net "
@@ -69,7 +67,7 @@ def main() -> int:
     a = ap.parse_args()
     import jax
 
-    from surrogate.export import load_predictor
+    from surrogate.predictor import load_predictor
 
     trained = train(Path(a.data), a.folds, a.evaluate_folds)
     rows = []

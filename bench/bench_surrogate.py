@@ -10,7 +10,6 @@ network sizes. Weights are random: latency does not depend on their values.
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -20,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from liverviz.report import ROOT, capture
 from surrogate import load_predictor
 from surrogate.config import get_config
 from surrogate.engine import make_train_step, optimizer
@@ -28,9 +28,6 @@ from surrogate.features import FeatureSpec
 from surrogate.model import NodeMLP
 from surrogate.nodewise import nodewise_loss
 from surrogate.normalise import Normaliser
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import ROOT, capture  # noqa: E402
 
 NETS = {"small (128,128,128)": [128, 128, 128],
         "paper scene 1 (500,300,100,50)": [500, 300, 100, 50],

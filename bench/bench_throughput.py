@@ -17,12 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
+from liverviz.report import capture
+
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "data_spec" / "scenes" / "demo_scene1.toml"
 ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
        "OPENBLAS_NUM_THREADS": "1"}
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import capture  # noqa: E402
 
 
 def run(n: int, sims: int) -> float:

@@ -21,15 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from report import header  # noqa: E402
-
-from liverviz.pictures import pyvista  # noqa: E402
-from surrogate.export import load_predictor  # noqa: E402
-from surrogate.manipulator import Manipulator  # noqa: E402
-from surrogate.viewer import Scene, apply_frame, display_range, load_script, model_dir  # noqa: E402
+from liverviz.pictures import pyvista
+from liverviz.report import header
+from surrogate.manipulator import Manipulator
+from surrogate.predictor import load_predictor
+from surrogate.viewer import LiverScene, apply_frame, display_range, load_script, model_dir
 
 
 def measure(run: Path, nodes: str, frames: int, repeats: int, size) -> dict:
@@ -42,7 +38,7 @@ def measure(run: Path, nodes: str, frames: int, repeats: int, size) -> dict:
     inference, frame = [], []
     for _ in range(repeats):
         p = pv.Plotter(off_screen=True, window_size=size)
-        scene = Scene(p, m, clim)
+        scene = LiverScene(p, m, clim)
         apply_frame(m, script[0])
         scene.draw()
         p.screenshot(return_img=True)  # the first real render (buffers, shaders) not counted

@@ -19,9 +19,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import tradeoff_fem as tf  # noqa: E402
+import tradeoff_fem as tf  # a sibling driver: its liver, load and reference
 
 RESULTS = tf.ROOT / "bench" / "results" / "budget_fem"
 SCENE = tf.ROOT / "data_spec" / "scenes" / "scene1_base.toml"

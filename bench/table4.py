@@ -28,22 +28,21 @@ on this host.
 from __future__ import annotations
 
 import argparse
-import functools
 import json
-import os
 import re
-import subprocess
+import shutil
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "bench"))
-from latency import at_scale, latency, model_nodes  # noqa: E402
-from report import commit, header, put_section  # noqa: E402
+from data_spec.views import extension, first
+from fem_sim.batch.chunked import generate_chunks
+from liverviz.report import ROOT, commit, header, put_section
+from surrogate.evaluate import evaluate_liver, heldout_floor, place, truth_scene
+from surrogate.latency import timed, timed_placed
+from surrogate.train import train_or_reuse
 
 RESULTS = ROOT / "bench" / "results" / "table4"
 SCENES = {1: "scene1_base.toml", 2: "scene2_two_forces.toml", 3: "scene3_materials.toml",
@@ -98,102 +97,10 @@ def scene_dir(k: int) -> Path:
     return RESULTS / Path(SCENES[k]).stem
 
 
-def shard_count(data: Path) -> int:
-    return len(list((data / "sims").glob("sim_*.h5")))
-
-
 def generate(scene: Path, data: Path, n: int, budget_s: float, a) -> dict:
-    """Shards 0..n-1 of the scene in chunks of ``a.chunk``; stops early once ``budget_s`` of
-    generation wall time is spent. Wall seconds accumulate in data/../generation.json.
-    """
-    state_path = data.parent / "generation.json"
-    state = json.loads(state_path.read_text()) if state_path.exists() else {"seconds": 0.0}
-    have = shard_count(data)
-    while have < n and state["seconds"] < budget_s:
-        upto = min(n, have + a.chunk)
-        cmd = ["mpirun", "-n", str(a.np), a.solver_python, "-m", "fem_sim", "generate",
-               str(scene), "--out", str(data), "--only", f"0..{upto}"]
-        print(f"[{scene.stem}] generating simulations {have}..{upto} of {n}", flush=True)
-        t = time.perf_counter()
-        # one BLAS thread per MPI rank (the ranks take the cores); the trainer's own BLAS and
-        # the latency timings keep the threads this process has (make table4: all cores).
-        # Open MPI refuses root unless told (the caller's environment may say otherwise)
-        subprocess.run(cmd, check=True, cwd=ROOT,
-                       env={"OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
-                            **os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"})
-        state["seconds"] += time.perf_counter() - t
-        state_path.write_text(json.dumps(state))
-        if shard_count(data) <= have:
-            raise RuntimeError(f"{data}: generate made no new shard")
-        have = shard_count(data)
-    state["sims"] = have
-    state_path.write_text(json.dumps(state))
-    return state
-
-
-def subset(data: Path, n: int) -> Path:
-    """A dataset view of the first n simulations (symbolic links, nothing copied)."""
-    if n >= shard_count(data):
-        return data
-    view = data.parent / f"first_{n}"
-    (view / "sims").mkdir(parents=True, exist_ok=True)
-    for name in ("scene.toml", "geometry"):
-        if not (view / name).exists():
-            (view / name).symlink_to((data / name).resolve())
-    link_shards(data, view, n)
-    return view
-
-
-def link_shards(data: Path, view: Path, n: int) -> None:
-    """Symbolic links in ``view`` to the first n shards of ``data`` with their XDMF files (a
-    shard without its XDMF is not a valid one for ``generate``)."""
-    for shard in sorted((data / "sims").glob("sim_*.h5"))[:n]:
-        for p in (data / "sims").glob(shard.stem + ".*"):
-            if not (view / "sims" / p.name).exists():
-                (view / "sims" / p.name).symlink_to(p.resolve())
-
-
-def extended(data: Path, n: int) -> Path:
-    """A dataset directory of the scene's first ``n`` simulations that starts from ``data``'s
-    (its shards and their XDMF files, its liver files and scene copy linked: nothing copied), for
-    ``generate`` to go on past the budget without touching the row's dataset."""
-    out = data.parent / f"beyond_{n}" / "data"
-    (out / "sims").mkdir(parents=True, exist_ok=True)
-    (out / "geometry").mkdir(exist_ok=True)
-    for p in sorted((data / "geometry").iterdir()):
-        if not (out / "geometry" / p.name).exists():
-            os.link(p, out / "geometry" / p.name)  # generate reads them as its own
-    if not (out / "scene.toml").exists():
-        os.link(data / "scene.toml", out / "scene.toml")
-    link_shards(data, out, n)
-    return out
-
-
-def train(data: Path, run: Path, name: str, overrides: dict) -> dict:
-    from surrogate.config import BASE, get_config
-    from surrogate.train import train_and_evaluate
-
-    metrics, seen = run / "metrics.json", run / "table4_data.json"
-    cfg = get_config(name, **overrides)
-    shards = shard_count(data)
-    if metrics.exists():
-        done = json.loads((run / "config.json").read_text())
-        same = {**BASE, **done} == cfg
-        m = json.loads(metrics.read_text())
-        # keys added to the trainer since that run: the base default, the behaviour before
-        # the key existed (a named config that turns it on needs a new run); a run of fewer
-        # simulations than the dataset now holds (its generation went on) is trained again
-        trained_on = json.loads(seen.read_text())["shards"] if seen.exists() \
-            else m["n_simulations"]
-        if same and trained_on == shards:
-            return m
-        print(f"[{run}] trained on {trained_on} simulations with "
-              f"{'the same' if same else 'another'} config; the dataset "
-              f"holds {shards}: training again", flush=True)
-    print(f"[{run}] training config {name} {overrides}", flush=True)
-    train_and_evaluate(data, run, cfg)
-    seen.write_text(json.dumps({"shards": shards}))
-    return json.loads(metrics.read_text())
+    """Shards 0..n-1 of the scene in chunks (resumable; :mod:`fem_sim.batch.chunked`)."""
+    return generate_chunks(scene, data, n, ranks=a.np, solver_python=a.solver_python,
+                           chunk=a.chunk, budget_s=budget_s)
 
 
 def fe_error(degree: int, h: float) -> str:
@@ -219,25 +126,6 @@ def sim_seconds(data: Path) -> float:
     return float(np.nanmedian(t)) if t else float("nan")
 
 
-def timed(model_dir: Path, calls: int) -> tuple[float, float, int, float]:
-    """(median ms at the model's own nodes, median ms at ~15k nodes, own node count, median
-    ms at ~15k nodes with a new load node every call)."""
-    import warnings
-
-    from surrogate.export import load_predictor
-
-    pred = load_predictor(model_dir)
-    own = model_nodes(pred)[0].shape[0]
-    med_own, _ = latency(pred, None, calls)
-    with tempfile.TemporaryDirectory() as tmp:
-        big = load_predictor(at_scale(model_dir, LATENCY_NODES, Path(tmp) / "big"))
-        med_big, _ = latency(big, None, calls)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # the cloud's nodes were never loaded: timing only
-            med_new, _ = latency(big, None, calls, new_load_nodes=True)
-    return 1e3 * med_own, 1e3 * med_big, own, 1e3 * med_new
-
-
 def curve_fit(ns, skills, target):
     """Power law skill = a n^b through the points (log-log least squares) at n = target."""
     if len(ns) < 2:
@@ -246,60 +134,13 @@ def curve_fit(ns, skills, target):
     return float(np.exp(loga) * target**b), float(b)
 
 
-_PLACED: dict = {}  # (liver, its mtime, frame, the shape model's digest) -> placement, warnings
-
-
-def shape_model_digest(sm) -> str:
-    """A digest of what a placement depends on: the shape model's template, PCA, ranges and
-    registration settings (every design and seed trained on one dataset shares it)."""
-    import hashlib
-
-    h = hashlib.sha256()
-    for x in (sm.template_points, sm.template_cells, sm.surface_triangles, sm.fixed_nodes,
-              sm.mean, sm.components, sm.coefficient_min, sm.coefficient_max, sm.residuals,
-              sm.schedule, sm.population_coefficients, sm.population_inverted,
-              sm.population_fixed_area, np.asarray(sm.n_points)):
-        a = np.ascontiguousarray(x)
-        h.update(f"{a.dtype}{a.shape}".encode())
-        h.update(a.tobytes())
-    return h.hexdigest()
-
-
-def place_unseen(pred, liver: Path, frame: str):
-    """(placement, warnings): predict-liver's placement of the liver file by the loaded
-    model ``pred`` (as a user gets it, ``frame`` as its --frame). Registered once per liver,
-    frame and shape model in a process: the designs and training seeds of one dataset share
-    their placements."""
-    import warnings
-
-    from surrogate.predict_liver import place_liver, read_liver_surface
-
-    liver = Path(liver).resolve()
-    key = (str(liver), liver.stat().st_mtime_ns, frame, shape_model_digest(pred.shape_model))
-    if key not in _PLACED:
-        points, tris = read_liver_surface(liver)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            _PLACED[key] = place_liver(pred, points, tris, frame=frame)
-    placement, found = _PLACED[key]
-    return placement, list(found)
-
-
-def unseen_truth(scene_file: Path, liver: Path, placement, sm, a, name: str,
-                 fixed=None, root: Path = RESULTS, sims: int = UNSEEN_SIMS) -> Path:
-    """The FE truth of the unseen liver, ``sims`` simulations under ``root / name``
-    (resumable): ``placement`` given, fixed where it puts the template's fixed region (the
-    boundary condition the model assumes); None: the file's own default region (the most
-    posterior surface in the population's axes). ``fixed`` (k, 3) mm in the liver's frame:
-    fixed at these points instead.
-    """
-    import shutil
-
-    d = root / name
+def unseen_truth(scene_file: Path, liver: Path, pred, a, name: str,
+                 sims: int = UNSEEN_SIMS) -> Path:
+    """The FE truth of the unseen liver under ``RESULTS / name`` (resumable), fixed where the
+    model's placement puts the template's fixed region."""
+    d = RESULTS / name
     d.mkdir(parents=True, exist_ok=True)
-    if fixed is None and placement is not None:
-        fixed = placement.to_liver(placement.points[sm.fixed_nodes])
-    text = unseen_scene(scene_file, liver, sims, fixed)
+    text = truth_scene(pred, scene_file, liver, sims, a.unseen_frame)
     scene = d / "scene.toml"
     if not scene.exists() or scene.read_text() != text:
         if (d / "data").exists():  # another placement's truth: not this one's
@@ -318,46 +159,15 @@ def unseen(scene_file: Path, base: Path, model_dir: Path, a) -> dict | None:
     if not liver.exists():
         print(f"{liver}: missing; no unseen-liver row", flush=True)
         return None
-    from surrogate.export import load_predictor
+    from surrogate.predictor import load_predictor
 
     pred = load_predictor(model_dir)
-    placement, found = place_unseen(pred, liver, a.unseen_frame)
-    data = unseen_truth(scene_file, liver, placement, pred.shape_model, a,
-                        f"unseen_{a.unseen_frame}")
+    placement, found = place(pred, liver, a.unseen_frame)
+    data = unseen_truth(scene_file, liver, pred, a, f"unseen_{a.unseen_frame}")
     return {"liver": liver.name, "frame": a.unseen_frame, "placed_as": placement.frame,
-            **evaluate_unseen(pred, data, base / "data", placement, found),
+            **evaluate_liver(pred, data, placement, found, population_data=base / "data"),
             "ms_placed": timed_placed(pred, placement, LATENCY_NODES, a.calls),
             "placed_nodes": LATENCY_NODES}
-
-
-def timed_placed(pred, placement, n_nodes: int, calls: int) -> float:
-    """Median ms per call of :class:`surrogate.predict_liver.PlacedModel` on the placed liver
-    meshed at ``n_nodes`` nodes (points drawn inside the registered template's tetrahedra,
-    in the liver's frame: what a user's mesh of the liver gives): the model on the template,
-    one sparse interpolation to the nodes, the turn into the liver's frame; the same load
-    node every call, the force changing."""
-    import warnings
-
-    from surrogate.predict_liver import PlacedModel
-
-    sm = pred.shape_model
-    rng = np.random.default_rng(0)
-    cells = sm.template_cells[rng.integers(0, sm.template_cells.shape[0], n_nodes)]
-    w = rng.dirichlet(np.ones(4), n_nodes)
-    nodes = placement.to_liver(np.einsum("nk,nkd->nd", w, placement.points[cells]))
-    placed = PlacedModel(pred, nodes=nodes, placement=placement)
-    at = placed.load_nodes(placement.to_liver(
-        placement.points[sm.loadable_nodes[:pred.spec.n_loads]]))
-    f = np.tile([[0.0, 0.0, -0.4]], (pred.spec.n_loads, 1))
-    times = []
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        for i in range(calls + 5):
-            g = f * (1.0 - 1e-4 * (i % 100))
-            t = time.perf_counter()
-            placed(g, at)
-            times.append(time.perf_counter() - t)
-    return 1e3 * float(np.median(times[5:]))
 
 
 def budget(k: int, config: str, overrides: dict) -> dict:
@@ -365,303 +175,130 @@ def budget(k: int, config: str, overrides: dict) -> dict:
     budget for a node-wise config (a basis design takes neither its epochs nor node fraction).
     """
     from surrogate.config import get_config
+    from surrogate.designs import DESIGNS
 
-    if get_config(config)["design"] != "nodewise":
+    if not DESIGNS[get_config(config)["design"]].node_sampled:
         return {key: v for key, v in overrides.items() if key not in ("epochs", "node_fraction")}
     return {**overrides, **NODEWISE_BUDGET.get(k, {})}
 
 
-def run_scene(k: int, a, rows: dict | None = None) -> dict:
-    from data_spec import load_scene
+class SceneRow:
+    """One scene's row, built step by step (the row first: all simulations, the scene's folds,
+    the exported model; then the other designs on the same folds; then the learning curve's
+    smaller points; then the points past the budget), saved and reported after every step so
+    that a cut run leaves what it did."""
 
-    scene_file = ROOT / "data_spec" / "scenes" / SCENES[k]
-    scene = load_scene(scene_file)
-    plan = {**BUDGET[k], **a.sims.get(k, {})}
-    n = min(plan.pop("sims"), scene["scene"]["n_simulations"])
-    minutes = plan.pop("minutes")
-    minutes = minutes if a.budget_minutes is None else a.budget_minutes
-    base = scene_dir(k)
-    data = base / "data"
-    gen = generate(scene_file, data, n, 0.5 * minutes * 60, a)
-    n = gen["sims"]
-    name = scene["surrogate"]["config"]
-    overrides = budget(k, name, {"folds": scene["surrogate"]["folds"],
-                                 "node_fraction": scene["surrogate"]["node_fraction"], **plan})
-    out = {"scene": k, "file": scene_file.name, "config": name, "overrides": overrides,
-           "sims": n, "budget_minutes": minutes, "generation_seconds": gen["seconds"],
-           "sim_seconds": sim_seconds(data),
-           "fe_error": fe_error(scene["solver"]["degree"], scene["geometry"]["mesh_size"]),
-           "curve": [], "written": {"commit": commit(), "date": time.strftime(
-               "%Y-%m-%d %H:%M UTC", time.gmtime())}}
+    def __init__(self, k: int, a, rows: dict | None):
+        from data_spec import load_scene
 
-    def save():
+        self.k, self.a, self.rows = k, a, rows
+        self.scene_file = ROOT / "data_spec" / "scenes" / SCENES[k]
+        scene = load_scene(self.scene_file)
+        plan = {**BUDGET[k], **a.sims.get(k, {})}
+        n = min(plan.pop("sims"), scene["scene"]["n_simulations"])
+        minutes = plan.pop("minutes")
+        minutes = minutes if a.budget_minutes is None else a.budget_minutes
+        self.base = scene_dir(k)
+        self.data = self.base / "data"
+        gen = generate(self.scene_file, self.data, n, 0.5 * minutes * 60, a)
+        self.n, self.name = gen["sims"], scene["surrogate"]["config"]
+        self.overrides = budget(k, self.name, {
+            "folds": scene["surrogate"]["folds"],
+            "node_fraction": scene["surrogate"]["node_fraction"], **plan})
+        self.population = scene["geometry"]["source"] == "population"
+        self.out = {
+            "scene": k, "file": self.scene_file.name, "config": self.name,
+            "overrides": self.overrides, "sims": self.n, "budget_minutes": minutes,
+            "generation_seconds": gen["seconds"], "sim_seconds": sim_seconds(self.data),
+            "fe_error": fe_error(scene["solver"]["degree"], scene["geometry"]["mesh_size"]),
+            "curve": [], "written": {"commit": commit(), "date": time.strftime(
+                "%Y-%m-%d %H:%M UTC", time.gmtime())}}
+
+    def save(self) -> None:
+        out = self.out
         out["curve"].sort(key=lambda c: c["train_sims"])
         out["skill_at_paper_size"], out["curve_slope"] = curve_fit(
             [c["train_sims"] for c in out["curve"]], [c["skill"] for c in out["curve"]],
-            PAPER[k]["sims"] * (PAPER_FOLDS - 1) / PAPER_FOLDS)
-        (base / "row.json").write_text(json.dumps(out, indent=1))
-        if rows is not None:  # the report after every step: a cut run leaves what it did
-            rows[k] = out
-            write_report(rows, a)
+            PAPER[self.k]["sims"] * (PAPER_FOLDS - 1) / PAPER_FOLDS)
+        (self.base / "row.json").write_text(json.dumps(out, indent=1))
+        if self.rows is not None:
+            self.rows[self.k] = out
+            write_report(self.rows, self.a)
 
-    def curve_point(m: int, folds: int, run: Path, final: bool) -> dict:
-        res = train(subset(data, m), run, name, {**overrides, "folds": folds,
-                                                 "final_fit": final})
-        out["curve"].append({"sims": res["n_simulations"], "folds": folds,
-                             "train_sims": res["n_simulations"] * (folds - 1) / folds,
-                             "skill": res["skill"], "mee": res["network"]["mee"]})
+    def curve_point(self, m: int, folds: int, run: Path, final: bool) -> dict:
+        res = train_or_reuse(first(self.data, m), run, self.name,
+                             {**self.overrides, "folds": folds, "final_fit": final})
+        self.out["curve"].append({"sims": res["n_simulations"], "folds": folds,
+                                  "train_sims": res["n_simulations"] * (folds - 1) / folds,
+                                  "skill": res["skill"], "mee": res["network"]["mee"]})
         return res
 
-    # the row first (all simulations, the scene's folds, the exported model), then the
-    # other design, then the learning curve's smaller points
-    out["metrics"] = curve_point(n, overrides["folds"], base / "run", True)
-    out["run"] = str((base / "run").relative_to(ROOT))
-    population = scene["geometry"]["source"] == "population"
-
-    def exported(d: dict, where: Path, model: Path) -> dict:
+    def exported(self, d: dict, where: Path, model: Path) -> dict:
         """``d`` with its exported model's unseen-liver row (a population scene) and
         latency."""
-        if population and a.unseen:
-            d["unseen"] = unseen(scene_file, where, model, a)
-        d["ms_own"], d["ms_big"], d["nodes"], d["ms_big_new_load"] = timed(model, a.calls)
+        if self.population and self.a.unseen:
+            d["unseen"] = unseen(self.scene_file, where, model, self.a)
+        d.update(timed(model, self.a.calls, LATENCY_NODES))
         return d
 
-    exported(out, base, base / "run" / "model")
-    out["calls"] = a.calls
-    out["side_by_side"] = []
-    save()
+    def other_design(self, data: Path, where: Path, other: str, variant: dict) -> dict:
+        from surrogate.config import get_config
+        from surrogate.designs import DESIGNS
 
-    def other_design(data: Path, where: Path, other: str, variant: dict) -> dict:
         run = where / ("run_" + "_".join([other] + [f"{key}-{json.dumps(v)}"
                                                     for key, v in variant.items()]))
-        keep = budget(k, other, {**{key: overrides[key] for key in ("folds", "evaluate_folds")
-                                    if key in overrides}, **variant})
-        res = train(data, run, other, keep)
+        keep = budget(self.k, other, {**{key: self.overrides[key] for key in (
+            "folds", "evaluate_folds") if key in self.overrides}, **variant})
+        res = train_or_reuse(data, run, other, keep)
         row = {"config": other, "variant": variant, "overrides": keep, "metrics": res,
                "run": str(run.relative_to(ROOT))}
-        if other == "population_basis":
+        if DESIGNS[get_config(other)["design"]].on_template:
             row["floor"] = heldout_floor(data, run)
-        return exported(row, where, run / "model")
+        return self.exported(row, where, run / "model")
 
+    def beyond(self, m: int) -> None:
+        """The same designs and folds on ``m`` simulations, past the budget."""
+        more = extension(self.data, self.n, self.base / f"beyond_{m}" / "data")
+        g = generate(self.scene_file, more, m, float("inf"), self.a)
+        res = train_or_reuse(more, more.parent / "run", self.name,
+                             {**self.overrides, "final_fit": True})
+        folds = self.overrides["folds"]
+        b = {"sims": g["sims"], "generation_seconds": g["seconds"], "config": self.name,
+             "overrides": self.overrides, "metrics": res,
+             "run": str((more.parent / "run").relative_to(ROOT)),
+             "curve_predicted": curve_fit([c["train_sims"] for c in self.out["curve"]],
+                                          [c["skill"] for c in self.out["curve"]],
+                                          res["n_simulations"] * (folds - 1) / folds)[0]}
+        self.exported(b, more.parent, more.parent / "run" / "model")
+        b["side_by_side"] = []
+        self.out["beyond"].append(b)
+        self.save()
+        for other, variant in SIDE_BY_SIDE[self.k]:
+            b["side_by_side"].append(self.other_design(more, more.parent, other, variant))
+            self.save()
+
+
+def run_scene(k: int, a, rows: dict | None = None) -> dict:
+    r = SceneRow(k, a, rows)
+    out, base = r.out, r.base
+    out["metrics"] = r.curve_point(r.n, r.overrides["folds"], base / "run", True)
+    out["run"] = str((base / "run").relative_to(ROOT))
+    r.exported(out, base, base / "run" / "model")
+    out["calls"], out["side_by_side"], out["beyond"] = a.calls, [], []
+    r.save()
     for other, variant in SIDE_BY_SIDE[k]:  # other designs, same folds, all simulations
-        out["side_by_side"].append(other_design(data, base, other, variant))
-        save()
+        out["side_by_side"].append(r.other_design(r.data, base, other, variant))
+        r.save()
     for frac in CURVE[1:]:
-        m = max(CURVE_FOLDS, int(round(frac * n)))
-        curve_point(m, CURVE_FOLDS, base / f"run_first_{m}", False)
-        save()
-    # past the budget: the same designs and folds on more simulations (the curve's check)
-    out["beyond"] = []
+        m = max(CURVE_FOLDS, int(round(frac * r.n)))
+        r.curve_point(m, CURVE_FOLDS, base / f"run_first_{m}", False)
+        r.save()
     # asked for now, or measured before on this host (its directory there): kept in the row
     asked = set(a.beyond.get(k, ())) | {int(d.parent.name.split("_")[1]) for d in
                                         base.glob("beyond_*/generation.json")}
-    for m in sorted(asked):
-        if m <= n:
-            continue
-        more = extended(data, m)
-        g = generate(scene_file, more, m, float("inf"), a)
-        res = train(more, more.parent / "run", name, {**overrides, "final_fit": True})
-        b = {"sims": g["sims"], "generation_seconds": g["seconds"], "config": name,
-             "overrides": overrides, "metrics": res,
-             "run": str((more.parent / "run").relative_to(ROOT)),
-             "curve_predicted": curve_fit([c["train_sims"] for c in out["curve"]],
-                                          [c["skill"] for c in out["curve"]],
-                                          res["n_simulations"] * (overrides["folds"] - 1)
-                                          / overrides["folds"])[0]}
-        exported(b, more.parent, more.parent / "run" / "model")
-        b["side_by_side"] = []
-        out["beyond"].append(b)
-        save()
-        for other, variant in SIDE_BY_SIDE[k]:
-            b["side_by_side"].append(other_design(more, more.parent, other, variant))
-            save()
+    for m in sorted(x for x in asked if x > r.n):
+        r.beyond(m)
     return out
-
-
-def toml_text(d: dict) -> str:
-    """A scene dict (tables of scalars and lists) as TOML."""
-    def value(v):
-        if isinstance(v, bool):
-            return "true" if v else "false"
-        if isinstance(v, str):
-            return json.dumps(v)
-        if isinstance(v, (list, tuple)):
-            return "[" + ", ".join(value(x) for x in v) + "]"
-        return repr(v)
-
-    lines = [f"{k} = {value(v)}" for k, v in d.items() if not isinstance(v, dict)]
-    for k, v in d.items():
-        if isinstance(v, dict):
-            lines += ["", f"[{k}]"] + [f"{kk} = {value(vv)}" for kk, vv in v.items()
-                                        if not isinstance(vv, dict)]
-            for kk, vv in v.items():
-                if isinstance(vv, dict):
-                    lines += ["", f"[{k}.{kk}]"] + [f"{a} = {value(b)}" for a, b in vv.items()]
-    return "\n".join(lines) + "\n"
-
-
-def unseen_scene(scene_file: Path, liver: Path, n: int, fixed=None) -> str:
-    """The scene of the unseen-liver truth: the population scene's loads, material, steps and
-    solver on one liver file (its own mesh at the scene's mesh size). ``fixed`` (k, 3) mm: the
-    surface nodes within half an element of these points are fixed (the template's fixed
-    region where a placement puts it); None: the file's default region.
-    """
-    import tomllib
-
-    raw = tomllib.loads(scene_file.read_text())
-    raw["scene"] = {"name": "unseen_" + liver.stem, "n_simulations": n, "seed": 44,
-                    "description": f"{scene_file.name}'s settings on {liver.name}, a liver no "
-                                   "training run uses: the truth of the unseen-liver row."}
-    raw["geometry"] = {"source": "file", "path": str(liver.resolve()),
-                       "mesh_size": raw["geometry"]["mesh_size"]}
-    if fixed is not None:
-        raw["fixed"] = {"kind": "points", "radius": 0.5 * raw["geometry"]["mesh_size"],
-                        "points": [[round(float(v), 3) for v in p] for p in fixed]}
-    raw["surrogate"] = {"config": "small"}
-    return toml_text(raw)
-
-
-@functools.lru_cache(maxsize=4)
-def population_mean_displacement(population_data: Path) -> np.ndarray:
-    """(3,) mm: the mean displacement of a population's simulations (the naive model)."""
-    from data_spec import list_shards, read_shard
-
-    return np.mean([np.asarray(read_shard(p).displacement).reshape(-1, 3).mean(axis=0)
-                    for p in list_shards(population_data)], axis=0)
-
-
-@functools.cache
-def fixed_extents(data: Path) -> np.ndarray:
-    """(livers, 3) mm: the extent along x, y, z of each liver's fixed nodes in a dataset."""
-    from data_spec import read_geometry, read_shard
-    from data_spec.shards import geometry_path
-
-    out = []
-    for gid, paths in shards_by_liver(data).items():
-        points = read_geometry(geometry_path(data, gid)).points
-        out.append(np.ptp(points[read_shard(paths[0]).fixed_nodes], axis=0))
-    return np.array(out)
-
-
-@functools.cache
-def shards_by_liver(data: Path) -> dict[str, list[Path]]:
-    """The shard files of a dataset by liver (geometry id), read once per dataset."""
-    from data_spec import list_shards, read_shard
-
-    out: dict[str, list[Path]] = {}
-    for path in list_shards(data):
-        out.setdefault(read_shard(path).geometry_id, []).append(path)
-    return out
-
-
-def evaluate_unseen(pred, data: Path, population_data: Path, placement,
-                    found: list, shape: str | None = None, geometry_id: str | None = None) -> dict:
-    """The loaded population model ``pred`` on the FE simulations of a liver it never saw,
-    placed by
-    ``placement`` (predict-liver's), predicted at the liver's own mesh nodes (the registered
-    template's prediction interpolated) and told the shape ``shape`` gives
-    (:meth:`liverreg.shape_model.ShapeModel.shape_told`; None: the design's, as predict-liver),
-    against the FE solution. Naive model: the mean displacement of the population's
-    simulations (turned into the liver's frame).
-    ``geometry_id``: only that liver's simulations of ``data``.
-    """
-    import warnings
-
-    from data_spec import list_shards, read_geometry, read_shard
-    from data_spec.shards import geometry_path
-    from surrogate.metrics import displacement_metrics
-    from surrogate.predict_liver import PlacedModel, shape_rule, told_shape
-
-    sm = pred.shape_model
-    paths = list_shards(data) if geometry_id is None else shards_by_liver(data)[geometry_id]
-    shards = [sh for sh in map(read_shard, paths) if sh.n_done]
-    g = read_geometry(geometry_path(data, shards[0].geometry_id))
-    P, T = [], []
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        placed = PlacedModel(pred, nodes=g.points, placement=placement, shape=shape)  # once
-        for sh in shards:
-            fr = np.asarray(sh.load_fractions[:sh.n_done])
-            forces = fr[:, None, None] * np.asarray(sh.forces)[None]
-            at = np.broadcast_to(g.points[sh.load_nodes], forces.shape)
-            u = placed(forces, placed.load_nodes(at))
-            P.append(u[:, sh.output_nodes].reshape(-1, 3))
-            T.append(np.asarray(sh.displacement[:sh.n_done]).reshape(-1, 3))
-    pred_all, true_all = np.concatenate(P), np.concatenate(T)
-    floor = ({"modes_floor_mm": modes_floor(pred, placement, placed.interpolation, shards)}
-             if getattr(pred, "_modes_np", None) is not None else {})
-    # too large or too small as a whole: the one scale that fits the truth best
-    scale = float(np.sum(pred_all * true_all) / max(float(np.sum(pred_all ** 2)), 1e-30))
-    mean = population_mean_displacement(population_data)
-    m_nn = displacement_metrics(pred_all, true_all)
-    m_naive = displacement_metrics(np.broadcast_to(placement.vectors_to_liver(mean),
-                                                   true_all.shape), true_all)
-    return {"sims": len(shards), "nodes": g.n_nodes, "network": m_nn, "naive": m_naive,
-            "skill": m_nn["mee"] / m_naive["mee"], "residual_mm": placement.residual,
-            "inverted": placement.inverted, "template_cells": int(sm.template_cells.shape[0]),
-            "coefficients_out": int(sm.outside_range(placement.coefficients).size),
-            "coefficients": int(placement.coefficients.size),
-            "shape_asked": shape or shape_rule(pred),
-            "shape_rule": told_shape(pred, placement.coefficients, shape)[1],
-            "fixed_nodes": int(shards[0].fixed_nodes.size),
-            "warnings": found, **floor, "best_scale": scale,
-            "truth_mean_mm": float(np.linalg.norm(true_all, axis=1).mean()),
-            "predicted_mean_mm": float(np.linalg.norm(pred_all, axis=1).mean()),
-            "mee_best_scale": float(np.linalg.norm(scale * pred_all - true_all, axis=1).mean()),
-            # the fixed region the placement gives against the template's (population frame)
-            "fixed_extent_mm": np.ptp(placement.points[sm.fixed_nodes], axis=0).tolist(),
-            "template_fixed_extent_mm": np.ptp(sm.template_points[sm.fixed_nodes],
-                                               axis=0).tolist(),
-            "population_fixed_extent_max_mm": fixed_extents(population_data).max(
-                axis=0).tolist()}
-
-
-def heldout_floor(data: Path, run: Path) -> dict:
-    """A population basis's floor on its evaluated held-out livers: the modes of each fold's
-    training fields (on the template, as the design computes them) fitted by least squares to
-    the held-out livers' fields, MEE in mm (``held_out``), beside the training fields' own
-    (``training``). What is left of the design's error is in the coefficients its network
-    gives. Kept in the run's directory for as many simulations as the dataset holds.
-    """
-    from surrogate.basis import compute_modes, projection_mee
-    from surrogate.data import kfold_groups, load_dataset
-    from surrogate.population_basis import TemplateFields
-
-    cache, shards = run / "table4_floor.json", shard_count(data)
-    if cache.exists():
-        saved = json.loads(cache.read_text())
-        if saved.get("shards") == shards:
-            return saved
-    cfg = json.loads((run / "config.json").read_text())
-    ds = load_dataset(data)
-    maps = TemplateFields(ds)
-    floors = []
-    for held in kfold_groups(ds, cfg["folds"], cfg["seed"])[:cfg.get("evaluate_folds") or None]:
-        U = maps.fields(ds, np.setdiff1d(np.arange(ds.n_samples), held))
-        modes = compute_modes(U, cfg["modes"], cfg["seed"])
-        floors.append((projection_mee(U, modes), projection_mee(maps.fields(ds, held), modes)))
-    out = {"shards": shards, "modes": cfg["modes"],
-           "training": float(np.mean([f[0] for f in floors])),
-           "held_out": float(np.mean([f[1] for f in floors]))}
-    cache.write_text(json.dumps(out))
-    return out
-
-
-def modes_floor(pred, placement, interp, shards: list) -> float:
-    """MEE (mm) of the best a basis model's modes can do on a liver: each load step's FE field
-    at the liver's nodes fitted by least squares with the modes carried there as a prediction
-    is (``interp``: the sparse interpolation from the registered template to the liver's
-    nodes, :attr:`PlacedModel.interpolation`; then turned into the liver's frame). The rest of
-    the model's error is in the coefficients its network gives.
-    """
-    A = np.stack([placement.vectors_to_liver(interp @ m) for m in pred._modes_np], axis=-1)
-    errors = []
-    for sh in shards:
-        a = A[sh.output_nodes].reshape(-1, A.shape[-1])  # (3 n_out, modes)
-        t = np.asarray(sh.displacement[:sh.n_done], dtype=np.float64).reshape(sh.n_done, -1).T
-        c = np.linalg.lstsq(a, t, rcond=None)[0]
-        errors.append(np.linalg.norm((a @ c - t).T.reshape(sh.n_done, -1, 3), axis=-1).ravel())
-    return float(np.mean(np.concatenate(errors)))
 
 
 def _f(x, fmt="{:.3f}"):
@@ -670,8 +307,10 @@ def _f(x, fmt="{:.3f}"):
 
 def design_label(config: str, variant: dict | None = None) -> str:
     """The design's name, its config and the overrides that make it a variant of it."""
-    kind = {"basis": "reduced basis", "population_basis": "population basis"}.get(
-        config, "node-wise")
+    from surrogate.config import get_config
+    from surrogate.designs import DESIGNS
+
+    kind = DESIGNS[get_config(config)["design"]].label
     knobs = "".join(f", {key} = {json.dumps(v)}" for key, v in (variant or {}).items())
     return f"{kind} (`{config}`{knobs})"
 
@@ -980,7 +619,11 @@ def write_report(rows: dict, a) -> None:
 def realtime_section(r: dict) -> str | None:
     """Scene 4's verdict for docs/realtime.md: the population basis against the node-wise
     net on the same held-out livers (and on the unseen liver when it was evaluated)."""
-    pb = [d for d in r.get("side_by_side", []) if d["config"] == "population_basis"]
+    from surrogate.config import get_config
+    from surrogate.designs import DESIGNS
+
+    pb = [d for d in r.get("side_by_side", [])
+          if DESIGNS[get_config(d["config"])["design"]].on_template]
     if not pb:
         return None
     d = pb[0]

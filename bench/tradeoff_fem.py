@@ -38,9 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from report import header  # noqa: E402
+from liverviz.report import ROOT, header
 
 SOFA = ROOT.parent / "shared" / "data" / "livers" / "sofa_liver.vtk"
 RESULTS = ROOT / "bench" / "results" / "tradeoff_fem"

@@ -39,12 +39,10 @@ import sys
 import time
 from pathlib import Path
 
+import budget_fem as bf  # a sibling driver (no dolfinx at import): the budget's cases, meshes
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "bench"))
-import budget_fem as bf  # noqa: E402  (no dolfinx at import: the budget's cases and meshes)
-from report import header  # noqa: E402
+from liverviz.report import ROOT, header
 
 RESULTS = ROOT / "bench" / "results" / "tradeoff_surrogate"
 DOCS = ROOT / "docs"
@@ -231,11 +229,10 @@ def train_one(spec: dict) -> dict:
 
 def latency(model_dir: Path, nodes, dtype: str, calls: int) -> float:
     """Median seconds of one jitted call for one load case, after warm-up."""
-    from bench_surrogate import latency as median_latency
-
     from surrogate import load_predictor
+    from surrogate.latency import latency as timed_calls
 
-    return median_latency(load_predictor(model_dir, dtype=dtype), None, nodes, calls)
+    return timed_calls(load_predictor(model_dir, dtype=dtype), nodes, calls)[0]
 
 
 def study(part: int, parts: int) -> None:

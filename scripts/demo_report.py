@@ -11,12 +11,9 @@ import json
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "bench"))
-from report import capture  # noqa: E402
-
-from data_spec import list_shards, load_scene, read_shard  # noqa: E402
-from surrogate.metrics import metrics_table  # noqa: E402
+from data_spec import list_shards, load_scene, read_shard
+from liverviz.report import ROOT, capture
+from surrogate.metrics import metrics_table
 
 
 def main() -> int:

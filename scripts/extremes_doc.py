@@ -1,6 +1,6 @@
 """Write docs/extremes.md: the outcome of every extreme case (tests/extremes/cases.py).
 
-.venv-solver/bin/python scripts/extremes_doc.py [docs/extremes.md]     (make extremes-doc)
+.venv-solver/bin/python -m scripts.extremes_doc [docs/extremes.md]     (make extremes-doc)
 """
 
 from __future__ import annotations
@@ -13,12 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from report import header  # noqa: E402
+from liverviz.report import header
+from tests.extremes.cases import MESH_SIZE, extremes, liver, simulate
 
-from tests.extremes.cases import MESH_SIZE, extremes, liver, simulate  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def main(out: str = "docs/extremes.md") -> int:

@@ -7,10 +7,10 @@ u = predict(forces=[[0, 0, -0.4]], load_nodes=[123])     # (n_nodes, 3) mm
 
 
 def load_predictor(directory, dtype: str = "float32"):
-    """Load an exported model directory; returns a jitted :class:`surrogate.export.Predictor`
+    """Load an exported model directory; returns a jitted :class:`surrogate.predictor.Predictor`
     (``dtype`` "bfloat16" or "float16": the network in 16 bits).
     """
-    from surrogate.export import load_predictor as _load
+    from surrogate.predictor import load_predictor as _load
 
     return _load(directory, dtype)
 

@@ -1,7 +1,14 @@
-"""``python -m surrogate train --data DIR --run RUN [--config NAME] [--fresh] [key=value ...]``
-and ``python -m surrogate predict-liver RUN LIVER --force X Y Z FX FY FZ [--out DIR]``.
+"""The trainer's command line (``liverfem-surrogate``, or ``python -m surrogate``).
+
+    train --data DIR --run RUN [--config NAME] [--fresh] [key=value ...]
+    predict-liver RUN LIVER --force X Y Z FX FY FZ [--out DIR]
+    truth-scene RUN LIVER --scene SCENE [--sims N] --out FILE
+    evaluate RUN DATA [--liver LIVER] [--population DIR] [--out FILE]
 
 A killed training resumes when the same command is run again (``--fresh`` starts over).
+``truth-scene`` writes the scene of a liver's FE truth with the model's boundary condition
+(``fem_sim generate`` solves it in the solver environment); ``evaluate`` compares a model with
+any dataset: one of its own liver, or that truth of a liver it never saw.
 """
 
 from __future__ import annotations
@@ -9,6 +16,9 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
+
+FRAMES = ("LPS", "RAS", "population", "auto")
 
 
 def _value(text: str):
@@ -18,11 +28,7 @@ def _value(text: str):
         return text
 
 
-def main(argv=None) -> int:
-    from liverreg.shape_model import SHAPE_RULES
-
-    parser = argparse.ArgumentParser(prog="python -m surrogate")
-    sub = parser.add_subparsers(dest="command", required=True)
+def _add_train(sub) -> None:
     t = sub.add_parser("train", help="k-fold CV, metrics, plots and an exported model")
     t.add_argument("--data", required=True, help="dataset directory written by fem_sim")
     t.add_argument("--run", required=True, help="run directory to write")
@@ -31,6 +37,11 @@ def main(argv=None) -> int:
                    help="discard RUN/checkpoints instead of resuming from them")
     t.add_argument("overrides", nargs="*", metavar="key=value",
                    help="config overrides, e.g. epochs=20 hidden=[64,64]")
+
+
+def _add_predict_liver(sub) -> None:
+    from liverreg.shape_model import SHAPE_RULES
+
     p = sub.add_parser("predict-liver", help="place a liver never seen in the training "
                        "population and predict its displacement (models of scene 4)")
     p.add_argument("run", help="a run directory whose model was trained on a population")
@@ -48,7 +59,7 @@ def main(argv=None) -> int:
                    help="keep the liver where the file puts it (a liver already in the "
                    "population's frame and place); by default it is mapped onto the "
                    "population's mean liver (--frame)")
-    p.add_argument("--frame", choices=("LPS", "RAS", "population", "auto"), default="LPS",
+    p.add_argument("--frame", choices=FRAMES, default="LPS",
                    help="the liver file's frame: LPS (DICOM, ITK; the default), RAS (NIfTI, "
                    "Slicer), population (x toward the right lobe, y posterior, z up), or auto "
                    "(the best rigid fit onto the population's mean liver, mirror images "
@@ -56,72 +67,165 @@ def main(argv=None) -> int:
                    "anatomy)")
     p.add_argument("--shape", choices=SHAPE_RULES,
                    help="the shape the network is told for a liver outside the population: "
-                   "own (the liver's coefficients), range (clipped to the population's "
-                   "ranges), radius (scaled back to the population's largest Mahalanobis "
-                   "radius), hull (the nearest mix of the population's livers) or outside "
-                   "(that mix also for a liver with a coefficient beyond the ranges); default: "
-                   "the design's (node-wise: range, population basis: outside; "
-                   "docs/shape_rule.md)")
+                   "own, range, radius, hull or outside (docs/shape_rule.md); default: the "
+                   "design's")
     p.add_argument("--no-picture", action="store_true", help="no PNG (no OpenGL needed)")
-    args = parser.parse_args(argv)
-    if args.command == "predict-liver":
-        if not args.force:  # no force given: the manipulator opens on the placed liver
-            from surrogate.viewer import main as viewer
 
-            return viewer([str(args.run), "--place", str(args.liver), "--scale-to-mm",
-                           str(args.scale_to_mm), "--frame", args.frame,
-                           *(["--shape", args.shape] if args.shape else [])]
-                          + (["--no-center"] if args.no_center else []))
-        from surrogate.predict_liver import main as predict_liver
 
-        return predict_liver(args)
+def _add_evaluate(sub) -> None:
+    s = sub.add_parser("truth-scene", help="the scene of a liver's FE truth with a population "
+                       "model's boundary condition (solve it with fem_sim generate)")
+    s.add_argument("run", help="a run directory whose model was trained on a population")
+    s.add_argument("liver", help="the liver file (as predict-liver reads it)")
+    s.add_argument("--scene", required=True, help="the population scene whose loads, "
+                   "material, steps and solver the truth takes")
+    s.add_argument("--sims", type=int, default=60, help="simulations of the truth")
+    s.add_argument("--frame", choices=FRAMES, default="LPS", help="as predict-liver's")
+    s.add_argument("--out", required=True, help="the scene file to write")
+    e = sub.add_parser("evaluate", help="a trained model against a dataset it never trained "
+                       "on: of its own liver, or the FE truth of a liver it never saw")
+    e.add_argument("run", help="a run directory (or its model directory)")
+    e.add_argument("data", help="a dataset directory written by fem_sim generate")
+    e.add_argument("--liver", help="the liver file the dataset was solved on, for a "
+                   "population model (it is placed as predict-liver places it)")
+    e.add_argument("--frame", choices=FRAMES, default="LPS", help="as predict-liver's")
+    e.add_argument("--population", help="the population dataset whose mean displacement is "
+                   "the naive model (default: the evaluated dataset's own mean)")
+    e.add_argument("--out", help="write the metrics here as JSON")
 
-    from pathlib import Path
 
-    from data_spec import SceneError, load_scene
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="liverfem-surrogate")
+    sub = parser.add_subparsers(dest="command", required=True)
+    _add_train(sub)
+    _add_predict_liver(sub)
+    _add_evaluate(sub)
+    return parser
+
+
+def _fail(command: str, message: str) -> int:
+    print(f"liverfem-surrogate {command}: {message}", file=sys.stderr)
+    return 2
+
+
+def _predict_liver(args) -> int:
+    if not args.force:  # no force given: the manipulator opens on the placed liver
+        from surrogate.viewer import main as viewer
+
+        return viewer([str(args.run), "--place", str(args.liver), "--scale-to-mm",
+                       str(args.scale_to_mm), "--frame", args.frame,
+                       *(["--shape", args.shape] if args.shape else [])]
+                      + (["--no-center"] if args.no_center else []))
+    from surrogate.predict_liver import main as predict_liver
+
+    return predict_liver(args)
+
+
+def _train_config(args, scene):
+    """(config, None) for the train command, or (None, the reason it cannot run)."""
     from surrogate.config import get_config
-    from surrogate.data import DataError
-    from surrogate.train import train_and_evaluate
+    from surrogate.designs import DESIGNS
 
-    try:
-        scene = load_scene(Path(args.data) / "scene.toml")
-    except SceneError as exc:
-        print(f"surrogate train: {exc}", file=sys.stderr)
-        return 2
     bad = [kv for kv in args.overrides if "=" not in kv]
     if bad:
-        print(f"surrogate train: overrides are key=value, got {bad}", file=sys.stderr)
-        return 2
-    overrides = dict(kv.split("=", 1) for kv in args.overrides)
-    overrides = {k: _value(v) for k, v in overrides.items()}
+        return None, f"overrides are key=value, got {bad}"
+    overrides = {k: _value(v) for k, v in (kv.split("=", 1) for kv in args.overrides)}
     name = args.config or scene["surrogate"]["config"]
     overrides.setdefault("folds", scene["surrogate"]["folds"])
     overrides.setdefault("node_fraction", scene["surrogate"]["node_fraction"])
     try:
         cfg = get_config(name, **overrides)
     except ValueError as exc:
-        print(f"surrogate train: {exc}", file=sys.stderr)
-        return 2
-    if cfg["design"] == "basis" and scene.varies["geometry"]:
-        print(f"surrogate train: config {name!r} (design 'basis') needs a scene with one liver; "
-              f"{args.data}/scene.toml varies the geometry: use a node-wise config",
-              file=sys.stderr)
-        return 2
-    if cfg["design"] == "population_basis" and not scene.varies["geometry"]:
-        print(f"surrogate train: config {name!r} (design 'population_basis') needs a "
-              f"population of livers; {args.data}/scene.toml has one liver: use config "
-              "'basis'", file=sys.stderr)
-        return 2
+        return None, str(exc)
+    why = DESIGNS[cfg["design"]].scene_problem(scene.varies["geometry"])
+    if why:
+        return None, f"config {name!r}: {why} ({args.data}/scene.toml)"
+    return cfg, None
+
+
+def _train(args) -> int:
+    from data_spec import SceneError, load_scene
+    from surrogate.data import DataError
+    from surrogate.train import train_and_evaluate
+
+    try:
+        scene = load_scene(Path(args.data) / "scene.toml")
+    except SceneError as exc:
+        return _fail("train", str(exc))
+    cfg, why = _train_config(args, scene)
+    if why:
+        return _fail("train", why)
     if Path(args.run).exists() and not Path(args.run).is_dir():
-        print(f"surrogate train: --run {args.run} is a file, not a directory", file=sys.stderr)
-        return 2
+        return _fail("train", f"--run {args.run} is a file, not a directory")
     try:
         result = train_and_evaluate(args.data, args.run, cfg, fresh=args.fresh)
     except (DataError, OSError) as exc:  # OSError: a run directory that cannot be written
-        print(f"surrogate train: {exc}", file=sys.stderr)
-        return 2
+        return _fail("train", str(exc))
     print(json.dumps({k: result[k] for k in ("scene", "skill", "training_seconds")}))
     return 0
+
+
+def _model_dir(run: str) -> Path:
+    d = Path(run)
+    return d / "model" if (d / "model" / "model.json").exists() else d
+
+
+def _truth_scene(args) -> int:
+    from surrogate.evaluate import truth_scene
+    from surrogate.predictor import load_predictor
+
+    out = Path(args.out)
+    if out.is_dir():
+        return _fail("truth-scene", f"--out {out} is a directory; expected a .toml file")
+    try:
+        pred = load_predictor(_model_dir(args.run))
+        if pred.shape_model is None:
+            return _fail("truth-scene", f"{args.run}: its model was not trained on a "
+                         "population (no shape model): evaluate it on a dataset of its liver")
+        text = truth_scene(pred, args.scene, args.liver, args.sims, args.frame)
+    except (ValueError, OSError) as exc:
+        return _fail("truth-scene", str(exc))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text)
+    print(f"wrote {out}; solve it with: mpirun -n 2 .venv-solver/bin/python -m fem_sim "
+          f"generate {out} --out DIR", file=sys.stderr)
+    return 0
+
+
+def _evaluate(args) -> int:
+    from data_spec import validate_dataset
+    from surrogate.evaluate import evaluate_liver, evaluate_own, place
+    from surrogate.predictor import load_predictor
+
+    problems = validate_dataset(args.data)
+    if problems:
+        return _fail("evaluate", f"{args.data}: not a valid dataset: " + "; ".join(problems[:5]))
+    try:
+        pred = load_predictor(_model_dir(args.run))
+        if pred.static is None and not args.liver:
+            return _fail("evaluate", f"{args.run}: a model of a population: give --liver, the "
+                         "file the dataset was solved on (its truth: truth-scene)")
+        if args.liver:
+            placement, found = place(pred, args.liver, args.frame)
+            result = evaluate_liver(pred, Path(args.data), placement, found,
+                                    population_data=args.population)
+        else:
+            result = evaluate_own(pred, Path(args.data))
+    except (ValueError, OSError) as exc:
+        return _fail("evaluate", str(exc))
+    text = json.dumps(result, indent=1)
+    if args.out:
+        Path(args.out).write_text(text)
+    print(f"MEE {result['network']['mee']:.3f} mm, naive {result['naive']['mee']:.3f} mm, "
+          f"skill {result['skill']:.3f} on {result['sims']} simulations")
+    return 0
+
+
+def main(argv=None) -> int:
+    args = _parser().parse_args(argv)
+    command = {"train": _train, "predict-liver": _predict_liver, "truth-scene": _truth_scene,
+               "evaluate": _evaluate}[args.command]
+    return command(args)
 
 
 if __name__ == "__main__":

@@ -27,6 +27,7 @@ arrays; trained by the one loop of :mod:`surrogate.engine`.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import flax.linen as nn
@@ -326,8 +327,21 @@ class Basis:
     """The design's entry in the registry (:data:`surrogate.designs.DESIGNS`)."""
 
     name = "basis"
+    label = "reduced basis"
     log_every = 10
     shape_rule = "own"  # predicts on its own liver only
+    needs_liver = True  # its modes live on the liver it is exported with
+    on_template = False
+    node_sampled = False  # trains on whole fields
+    takes = frozenset({"modes", "ensemble", "shared_loads"})
+
+    def scene_problem(self, varies_geometry: bool) -> str | None:
+        """Why a scene cannot take the design (None when it can)."""
+        if varies_geometry:
+            return (f"design {self.name!r} needs a scene with one liver (its modes live on "
+                    "its nodes); the scene varies the geometry: use config "
+                    "'population_basis' or a node-wise config")
+        return None
 
     def check(self, ds: Dataset) -> None:
         check_dataset(ds)
@@ -352,3 +366,137 @@ class Basis:
 
     def export_parts(self, model: BasisModel) -> tuple[dict, dict, dict]:
         return model.params, model.stats(), {"basis.npz": {"modes": model.modes}}
+
+    def runtime(self, d, pred, hidden: tuple, dropout: float, dtype: str) -> BasisRuntime:
+        """The exported model in ``d`` at prediction time."""
+        return BasisRuntime(d, pred, hidden, dropout, dtype)
+
+
+def _read_modes(where, n_out: int) -> np.ndarray:
+    """(k, 3 n_out) float32 modes of an exported basis model, checked."""
+    try:
+        with np.load(where, allow_pickle=False) as z:
+            modes = np.asarray(z["modes"], dtype=np.float32)
+    except FileNotFoundError:
+        raise ValueError(f"{where}: missing (a reduced-basis model needs its modes)") from None
+    except (OSError, KeyError, ValueError) as exc:
+        raise ValueError(f"{where}: cannot be read ({exc})") from None
+    if modes.ndim != 2 or modes.shape[1] != 3 * n_out or not np.all(np.isfinite(modes)):
+        raise ValueError(f"{where}: modes must be a finite (k, {3 * n_out}) array for the "
+                         f"{n_out} output nodes, got shape {modes.shape}")
+    return modes
+
+
+def read_stats(where, stats, spec, contexts: tuple[int, ...]) -> BasisModel:
+    """The exported statistics (model.json's ``stats``) as a :class:`BasisModel` without its
+    parameters and modes; ``contexts``: the load-context widths the design reads.
+    """
+    L, e = spec.n_loads, spec.material_dim + spec.geometry_dim
+    try:
+        x_mean = np.asarray(stats["x_mean"], dtype=np.float32)
+        x_std = np.asarray(stats["x_std"], dtype=np.float32)
+        c_scale, f_scale = float(stats["c_scale"]), float(stats["f_scale"])
+        n_extra = stats.get("n_extra", e)  # models written before shape_inputs: all
+        context = stats.get("context", 0)  # and before load_context: none
+        members = stats.get("members", 1)  # and before ensembles: one network
+        shared = stats.get("shared_loads", False)  # and before shared loads: one per load
+    except (KeyError, TypeError, ValueError, AttributeError):
+        raise ValueError(f"{where}: stats: expected x_mean, x_std, c_scale, f_scale") from None
+    problems = []
+    if not (isinstance(members, int) and members >= 1):
+        problems.append(f"members: expected an integer >= 1, got {members!r}")
+    if not isinstance(shared, bool):
+        problems.append(f"shared_loads: expected true or false, got {shared!r}")
+    if not (isinstance(n_extra, int) and spec.material_dim <= n_extra <= e):
+        problems.append(f"n_extra: expected an integer from {spec.material_dim} to {e}, got "
+                        f"{n_extra!r}")
+    if context not in contexts:
+        problems.append(f"context: expected {' or '.join(map(str, contexts))}, got "
+                        f"{context!r}")
+    dim = (LOAD_FEATURES + (context if context in contexts else 0)) * L + \
+        (n_extra if isinstance(n_extra, int) else 0)
+    if not problems and (x_mean.shape != (dim,) or x_std.shape != (dim,) or not (
+            np.all(np.isfinite(x_mean)) and np.all(x_std > 0) and c_scale > 0
+            and f_scale > 0 and np.isfinite(c_scale) and np.isfinite(f_scale))):
+        problems.append(f"{dim} finite means, positive scales and positive finite c_scale, "
+                        "f_scale expected")
+    if problems:
+        raise ValueError(f"{where}: stats: " + "; ".join(problems))
+    return BasisModel(params=None, modes=None, x_mean=x_mean, x_std=x_std, c_scale=c_scale,
+                      f_scale=f_scale, hidden=(), n_loads=L, n_extra=n_extra, context=context,
+                      members=members, shared_loads=shared)
+
+
+class BasisRuntime:
+    """An exported reduced-basis model at prediction time: the network's coefficients times
+    the modes of the requested output nodes. It predicts on the liver it was trained on.
+    """
+
+    outputs_only = True   # its modes live on the scene's output nodes only
+    contexts = (0,)       # the load-context widths this design reads
+
+    def __init__(self, d, pred, hidden: tuple, dropout: float, dtype: str):
+        from surrogate.export import read_params
+
+        meta, spec = pred.meta, pred.spec
+        n_out = pred.output_nodes.size
+        modes = _read_modes(d / "basis.npz", n_out)
+        stats = read_stats(d / "model.json", meta.get("stats"), spec, self.contexts)
+        self.stats = dataclasses.replace(stats, hidden=hidden)  # without parameters, modes
+        k, s = modes.shape[0], self.stats
+        params = read_params(d / "params.npz",
+                             input_width(spec.n_loads, LOAD_FEATURES + s.context, s.n_extra,
+                                         s.shared_loads), hidden,
+                             out=3 * k * (1 if s.shared_loads else spec.n_loads),
+                             version=meta["version"], last="coefficients", members=s.members)
+        self._out_row = {int(n): i for i, n in enumerate(pred.output_nodes.tolist())}
+        self.modes = modes.reshape(k, n_out, 3)
+        self._modes = jnp.asarray(modes, dtype=dtype)
+        self.params = jax.tree_util.tree_map(lambda w: jnp.asarray(w, dtype=dtype), params)
+        self._batched = self._compile(k, dtype)
+
+    def _compile(self, k: int, dtype: str):
+        s, net = self.stats, model_network(self.stats, k)
+
+        def one_case(params, modes, forces, load_points, extra, ctx):
+            apply = member_mean(net, params, s.members, cast=lambda a: a.astype(dtype))
+            c = coefficients(s, forces, load_points, extra, xp=jnp, apply=apply,
+                             context=ctx if s.context else None)
+            return (c.astype(dtype) @ modes).astype(jnp.float32).reshape(-1, 3)
+
+        return jax.jit(jax.vmap(one_case, in_axes=(None, None, 0, 0, 0, 0)))
+
+    def check_geometry(self, pred, geometry) -> None:
+        if geometry is not None:
+            raise ValueError("geometry: a reduced-basis model predicts on the liver it was "
+                             "trained on only (its modes live on those nodes)")
+
+    def check_points(self, pred, n_nodes: int) -> None:
+        """Its own liver (check_geometry refuses another)."""
+
+    def all_rows(self, static):
+        return self._modes
+
+    def rows(self, pred, static, nodes):
+        rows = [self._out_row.get(int(n)) for n in nodes.tolist()]
+        if any(r is None for r in rows):
+            raise ValueError("nodes: a reduced-basis model predicts its scene's output nodes "
+                             f"only ({pred.output_nodes.size} of {pred.points.shape[0]})")
+        k = self.modes.shape[0]
+        return jnp.asarray(self.modes[:, rows].reshape(k, -1), dtype=self._modes.dtype)
+
+    def context(self, pred, load_nodes, liver):
+        """(n_cases, n_loads, 0): this design reads no load context."""
+        return np.zeros(load_nodes.shape + (0,), dtype=np.float32)
+
+    def apply(self, pred, rows, forces, load_points, extra, load_nodes, liver):
+        return self._batched(self.params, rows, forces, load_points, extra,
+                             self.context(pred, load_nodes, liver))
+
+    def on_nodes(self, params, n_nodes: int, rng) -> BasisModel:
+        """The trained model to export on another cloud of ``n_nodes`` nodes (timing):
+        the same network with orthonormal random modes of that size.
+        """
+        k = self.modes.shape[0]
+        modes = np.linalg.qr(rng.standard_normal((3 * n_nodes, k)))[0].T.astype(np.float32)
+        return dataclasses.replace(self.stats, params=params, modes=modes)

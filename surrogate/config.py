@@ -10,9 +10,6 @@ import copy
 
 from data_spec.checks import is_int, is_num
 
-# The designs a config may name (their classes: surrogate/designs.py, which a test keeps equal).
-DESIGN_NAMES = ("nodewise", "basis", "population_basis")
-
 BASE = {
     "design": "nodewise",      # "nodewise": the paper's MLP per node; "basis": a reduced basis
                                # (surrogate/basis.py), one liver only
@@ -92,7 +89,6 @@ CONFIGS = {
 
 # key -> (check, what is expected): every value is checked before training starts.
 CHECKS = {
-    "design": (lambda v: v in DESIGN_NAMES, " or ".join(map(repr, DESIGN_NAMES))),
     "modes": (lambda v: is_int(v) and v >= 1, "an integer >= 1"),
     "hidden": (lambda v: isinstance(v, list) and v and all(is_int(w) and w > 0 for w in v),
                "a non-empty list of layer widths > 0"),
@@ -122,6 +118,25 @@ CHECKS = {
 }
 
 
+def design_problems(cfg: dict) -> list[str]:
+    """The config's design is one of the registry's, and a design-specific key that its design
+    does not read (``takes``) keeps the base value.
+    """
+    from surrogate.designs import DESIGNS
+
+    design = DESIGNS.get(cfg["design"])
+    if design is None:
+        return [f"design: expected {' or '.join(map(repr, DESIGNS))}, got {cfg['design']!r}"]
+    specific = set().union(*(d.takes for d in DESIGNS.values()))
+    out = []
+    for key in sorted(specific - design.takes):
+        if cfg[key] != BASE[key]:
+            takers = " and ".join(n for n, d in DESIGNS.items() if key in d.takes)
+            out.append(f"{key}: the {design.name} design does not take it, only {takers} "
+                       f"(expected {BASE[key]!r}, got {cfg[key]!r})")
+    return out
+
+
 def get_config(name: str = "small", **overrides) -> dict:
     """A copy of config ``name`` with ``overrides`` applied. ValueError listing every problem:
     an unknown name or key, or a value out of its range.
@@ -135,22 +150,7 @@ def get_config(name: str = "small", **overrides) -> dict:
     cfg.update({k: v for k, v in overrides.items() if k in BASE})
     problems += [f"{k}: expected {what}, got {cfg[k]!r}" for k, (ok, what) in CHECKS.items()
                  if not ok(cfg[k])]
-    if not problems and cfg["design"] != "nodewise" and cfg["dropout"] > 0:
-        problems.append(f"dropout: the {cfg['design']} design has no dropout (expected 0, got "
-                        f"{cfg['dropout']!r}; input_noise and l2 regularise it)")
-    if not problems and cfg["design"] == "nodewise" and cfg["shared_loads"]:
-        problems.append("shared_loads: only the basis designs take it (expected false for "
-                        "nodewise, got True)")
-    if not problems and cfg["design"] == "nodewise" and cfg["ensemble"] != 1:
-        problems.append(f"ensemble: only the basis designs take it (expected 1 for nodewise, "
-                        f"got {cfg['ensemble']!r}: a node-wise ensemble's call costs its "
-                        "number of networks over every node)")
-    if not problems and cfg["design"] != "population_basis":
-        for key, default in (("shape_inputs", "all"), ("load_context", False),
-                             ("shape_noise", None)):
-            if cfg[key] != default:
-                problems.append(f"{key}: only the population_basis design takes it (expected "
-                                f"{default!r} for {cfg['design']}, got {cfg[key]!r})")
+    problems += design_problems(cfg)
     if problems:
         raise ValueError("trainer config: " + "; ".join(problems))
     cfg["name"] = name

@@ -18,7 +18,7 @@ import numpy as np
 
 from data_spec import list_shards, load_scene, read_geometry, read_shard
 from data_spec.atomic import atomic_path
-from data_spec.loads import eligible_load_nodes
+from data_spec.eligible_loads import eligible_load_nodes
 from data_spec.shards import geometry_path
 from surrogate.features import FeatureSpec, material_vector, static_node_features
 

@@ -57,7 +57,7 @@ def material_names(material_dim: int) -> list[str]:
 
 
 class Manipulator:
-    """State of the manipulator around a loaded :class:`surrogate.export.Predictor`.
+    """State of the manipulator around a loaded :class:`surrogate.predictor.Predictor`.
 
     ``nodes``: "surface" predicts the surface vertices only (what is drawn); "all" predicts
     every node of the liver (the whole field, as a simulator would use it) and draws the
@@ -215,7 +215,7 @@ class Manipulator:
         if nodes == "surface":
             return surf, np.arange(surf.size)
         n_all = self.points.shape[0]
-        if self.pred.design == "basis" and self.pred.output_nodes.size != n_all:
+        if self.pred.runtime.outputs_only and self.pred.output_nodes.size != n_all:
             raise ValueError(f"nodes='all': this reduced-basis model predicts its "
                              f"{self.pred.output_nodes.size} output nodes, not all {n_all}")
         return None, surf

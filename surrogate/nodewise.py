@@ -141,14 +141,23 @@ class NodeWise:
     """The design's entry in the registry (:data:`surrogate.designs.DESIGNS`)."""
 
     name = "nodewise"
+    label = "node-wise"
     # the shape it is told for a liver outside its population (ShapeModel.shape_told): each
     # coefficient clipped to the population's range; it also sees the registered nodes, which
     # a shape far from its coefficients contradicts (chosen on phantoms drawn beyond the
     # population, docs/shape_rule.md)
     shape_rule = "range"
+    needs_liver = False   # a model of a population has no liver of its own
+    on_template = False
+    node_sampled = True   # trains on a fraction of the nodes per epoch (node_fraction)
+    takes = frozenset({"dropout"})  # the design-specific config keys it reads
 
     def check(self, ds: Dataset) -> None:
         """Every dataset takes the node-wise design."""
+
+    def scene_problem(self, varies_geometry: bool) -> str | None:
+        """Every scene takes the node-wise design."""
+        return None
 
     def problem(self, ds, train, val, cfg, rng) -> NodeWiseProblem:
         return NodeWiseProblem(ds, train, val, cfg, rng)
@@ -178,3 +187,56 @@ class NodeWise:
         """(parameters, statistics for model.json, extra arrays files) of the export."""
         params, norm = model
         return params, norm.to_dict(), {}
+
+    def runtime(self, d, pred, hidden: tuple, dropout: float, dtype: str) -> NodeWiseRuntime:
+        """The exported model in ``d`` at prediction time."""
+        return NodeWiseRuntime(d, pred, hidden, dropout, dtype)
+
+
+class NodeWiseRuntime:
+    """An exported node-wise model at prediction time: its network over the selected nodes'
+    static features (:class:`surrogate.predictor.Predictor` checks the inputs).
+    """
+
+    modes = None
+    outputs_only = False  # predicts any node of the liver it is given
+
+    def __init__(self, d, pred, hidden: tuple, dropout: float, dtype: str):
+        from surrogate.export import read_params
+
+        meta = pred.meta
+        params = read_params(d / "params.npz", pred.spec.dim, hidden, version=meta["version"])
+        # Reduced precision: the weights and the network's activations are cast; features,
+        # normalisation and the returned millimetres stay float32.
+        self.params = jax.tree_util.tree_map(lambda w: jnp.asarray(w, dtype=dtype), params)
+        self.norm = Normaliser.from_dict(meta.get("stats"), pred.spec.dim,
+                                         where=f"{d / 'model.json'}: stats")
+        model = NodeMLP(hidden=hidden, dropout=dropout)
+
+        def one_case(params, norm, static, forces, load_points, extra):
+            x = norm.inputs(node_features(static, forces, load_points, extra, xp=jnp))
+            y = model.apply({"params": params}, x.astype(dtype), train=False)
+            return norm.outputs(y.astype(jnp.float32))
+
+        self._batched = jax.jit(jax.vmap(one_case, in_axes=(None, None, None, 0, 0, 0)))
+
+    def check_geometry(self, pred, geometry) -> None:
+        """Any liver: its static features are computed from the points given."""
+
+    def check_points(self, pred, n_nodes: int) -> None:
+        """Any number of nodes."""
+
+    def all_rows(self, static):
+        return static
+
+    def rows(self, pred, static, nodes):
+        return static[jnp.asarray(nodes)]
+
+    def apply(self, pred, rows, forces, load_points, extra, load_nodes, liver):
+        return self._batched(self.params, self.norm, rows, forces, load_points, extra)
+
+    def on_nodes(self, params, n_nodes: int, rng):
+        """The trained model to export on another cloud of ``n_nodes`` nodes (timing): the
+        same network and statistics (its features are computed at the nodes).
+        """
+        return params, self.norm

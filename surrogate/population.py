@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from data_spec import read_geometry
-from data_spec.loads import eligible_load_nodes
+from data_spec.eligible_loads import eligible_load_nodes
 from data_spec.scene import load_scene
 from data_spec.shards import geometry_path
 from liverreg.morph import SurfaceMorph

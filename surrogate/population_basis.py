@@ -29,6 +29,7 @@ from surrogate.basis import (
     BasisDesignError,
     BasisModel,
     BasisProblem,
+    BasisRuntime,
     predict_fields,
 )
 from surrogate.data import Dataset
@@ -95,18 +96,71 @@ class TemplateFields:
         return out
 
 
+class PopulationBasisRuntime(BasisRuntime):
+    """An exported population basis at prediction time: the reduced basis' call on the
+    registered template (a liver is placed on it by :mod:`surrogate.predict_liver`), with the
+    loads' context on the liver predicted on when the model reads one.
+    """
+
+    outputs_only = False  # the template's every node is an output node
+    contexts = (0, CONTEXT)
+
+    def check_geometry(self, pred, geometry) -> None:
+        """A registered template of any liver."""
+
+    def check_points(self, pred, n_nodes: int) -> None:
+        if n_nodes != pred.output_nodes.size:
+            raise ValueError(f"geometry: a population-basis model predicts on the registered "
+                             f"template ({pred.output_nodes.size} nodes; "
+                             "surrogate.predict_liver places a liver), got {n_nodes} points")
+
+    def context(self, pred, load_nodes, liver):
+        """(n_cases, n_loads, c) the loads' context on the liver predicted on (``liver``:
+        (key, points, fixed nodes), None for the template itself); a load node of the
+        registered template is the template's node of the same id. Kept once per (liver,
+        load nodes): a manipulator drags one node with changing forces.
+        """
+        import jax.numpy as jnp
+
+        if not self.stats.context:
+            return super().context(pred, load_nodes, liver)
+        key = (None if liver is None else liver[0], load_nodes.dtype.str, load_nodes.shape,
+               load_nodes.tobytes())
+        if getattr(self, "_ctx_key", None) != key:
+            points, fixed = (pred.points, pred.fixed) if liver is None else liver[1:]
+            self._ctx_key = key
+            self._ctx = jnp.asarray(load_context(points[load_nodes], pred.points[load_nodes],
+                                                 points[fixed]), dtype=jnp.float32)
+        return self._ctx
+
+
 class PopulationBasis(Basis):
     """The design's entry in the registry (:data:`surrogate.designs.DESIGNS`); the model and
     its export are the reduced basis' (modes on the template's nodes).
     """
 
     name = "population_basis"
+    label = "population basis"
     log_every = 10
     # the shape it is told for a liver outside its population (ShapeModel.shape_told): the
     # shape coefficients are all it knows of the liver's shape: the nearest mix of the
     # population's livers for any liver outside it (chosen on phantoms drawn beyond the
     # population, docs/shape_rule.md)
     shape_rule = "outside"
+    on_template = True  # its modes, and the liver it is exported with, are the template's
+    takes = Basis.takes | {"shape_inputs", "load_context", "shape_noise"}
+
+    def scene_problem(self, varies_geometry: bool) -> str | None:
+        """Why a scene cannot take the design (None when it can)."""
+        if not varies_geometry:
+            return (f"design {self.name!r} needs a population of livers; the scene has one "
+                    "liver: use config 'basis'")
+        return None
+
+    def runtime(self, d, pred, hidden: tuple, dropout: float,
+                dtype: str) -> PopulationBasisRuntime:
+        """The exported model in ``d`` at prediction time."""
+        return PopulationBasisRuntime(d, pred, hidden, dropout, dtype)
 
     def maps(self, ds: Dataset) -> TemplateFields:
         """The dataset's TemplateFields, built once and kept with the dataset (so they live

@@ -36,7 +36,7 @@ import numpy as np
 
 from liverreg.morph import interpolation_matrix
 from liverreg.shape_model import DEFAULT_FRAME
-from surrogate.export import check_load_nodes
+from surrogate.predictor import check_load_nodes
 
 SURFACE_SUFFIXES = (".vtk", ".vtp", ".vtu", ".stl", ".obj", ".ply", ".h5")
 
@@ -345,7 +345,7 @@ def main(args) -> int:
     """The ``predict-liver`` subcommand (arguments parsed by surrogate.__main__)."""
     import sys
 
-    from surrogate.export import load_predictor
+    from surrogate.predictor import load_predictor
 
     def fail(msg):
         print(f"surrogate predict-liver: {msg}", file=sys.stderr)

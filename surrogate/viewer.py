@@ -217,7 +217,7 @@ def status_text(m, inference_s: float, frame_s: float | None, spheres: bool = Fa
     return "\n".join(lines)
 
 
-class Scene:
+class LiverScene:
     """A plotter showing one manipulator: the liver, its arrows, its handles, the status."""
 
     def __init__(self, plotter, m, clim: float, spheres: bool = False):
@@ -259,7 +259,7 @@ def run_window(m, clim: float, screenshot: Path | None, window_size) -> int:
     """
     pv = pyvista()
     p = pv.Plotter(window_size=window_size, title="liverfem manipulator")
-    scene = Scene(p, m, clim, spheres=True)
+    scene = LiverScene(p, m, clim, spheres=True)
     r = 0.02 * m.surface.size
     widgets = []
 
@@ -384,7 +384,7 @@ def run_offscreen(m, clim: float, script: Path | None, out: Path, window_size) -
     frames, fps = load_script(script, m)
     out.mkdir(parents=True, exist_ok=True)
     p = pv.Plotter(off_screen=True, window_size=window_size)
-    scene = Scene(p, m, clim)
+    scene = LiverScene(p, m, clim)
     images, inference, frame_times = [], [], []
     for k, fr in enumerate(frames):
         apply_frame(m, fr)
@@ -474,8 +474,8 @@ def compare(m, pred, data: Path, sim: int | None, out: Path | None, window_size)
 
 def build(args):
     """(manipulator, predictor) from the command line's model and liver options."""
-    from surrogate.export import load_predictor
     from surrogate.manipulator import Manipulator
+    from surrogate.predictor import load_predictor
 
     mdir = model_dir(Path(args.run))
     pred = load_predictor(mdir)

@@ -77,7 +77,7 @@ def output_nodes(scene: Scene, g: Geometry) -> np.ndarray:
 
 
 def eligible_load_nodes(scene: Scene, g: Geometry, fixed: np.ndarray) -> np.ndarray:
-    """Nodes a random load may act on (the rule of :mod:`data_spec.loads`)."""
+    """Nodes a random load may act on (the rule of :mod:`data_spec.eligible_loads`)."""
     return loads.eligible_load_nodes(scene["loads"], g.points, g.surface_nodes, fixed)
 
 

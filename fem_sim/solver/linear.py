@@ -318,7 +318,6 @@ class PetscSolver(LinearSolver):
         return ksp
 
     def solve(self, J: Jacobian, rhs, du, rtol: float) -> None:
-        s = self.settings
         A = J.petsc()
         ksp = self._get_ksp(A)
         self._set_tolerances(ksp, rtol)

@@ -1,6 +1,6 @@
 """Load-step predictors: the starting guess of Newton at a new load fraction.
 
-One interface, :class:`Predictor`: ``start()`` at the beginning of a simulation,
+One interface, :class:`StepPredictor`: ``start()`` at the beginning of a simulation,
 ``converged(lam, newton_iterations)`` after every converged increment, ``predict(states, lam,
 extrapolate)`` to set u for the next one; ``order`` says how good the last guess was meant to
 be (0: the previous state; 1: linear), which the Newton loop uses to judge its first step.
@@ -36,7 +36,7 @@ log = logging.getLogger(__name__)
 States = list[tuple[float, np.ndarray]]  # (load fraction, u) of the last converged states
 
 
-class Predictor:
+class StepPredictor:
     """Interface (see the module docstring); subclasses override :meth:`_guess`."""
 
     def __init__(self, settings: SolverSettings, eqs: Equations, linear: LinearSolver):
@@ -65,11 +65,11 @@ class Predictor:
         return False
 
 
-class PreviousState(Predictor):
+class PreviousState(StepPredictor):
     """Newton starts from the last converged state."""
 
 
-class Extrapolation(Predictor):
+class Extrapolation(StepPredictor):
     """Lagrange extrapolation through the last converged states."""
 
     def _guess(self, states: States, lam: float) -> bool:
@@ -256,5 +256,5 @@ PREDICTORS = {"previous": PreviousState, "extrapolate": Extrapolation,
               "tangent": TangentIntegration, "hermite": Hermite}
 
 
-def make_predictor(settings: SolverSettings, eqs: Equations, linear: LinearSolver) -> Predictor:
+def make_predictor(settings: SolverSettings, eqs: Equations, linear: LinearSolver) -> StepPredictor:
     return PREDICTORS[settings.predictor](settings, eqs, linear)

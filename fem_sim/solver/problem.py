@@ -16,7 +16,7 @@ the others (FEBio's Newton solver and strategy objects, PETSc's SNES/KSP objects
 * :class:`~fem_sim.solver.assembly.Assembler`: material points, forces, Jacobian (dolfinx or C);
 * :class:`~fem_sim.solver.equations.Equations`: the state u and R(u; lam) of one simulation;
 * :class:`~fem_sim.solver.linear.LinearSolver`: serial LDL^T or PETSc's KSP, counting its work;
-* :class:`~fem_sim.solver.predictors.Predictor`: the start of each load step;
+* :class:`~fem_sim.solver.predictors.StepPredictor`: the start of each load step;
 * :class:`~fem_sim.solver.newton.NewtonSolver`: Newton with chord steps and line search;
 * :class:`~fem_sim.solver.stepping.LoadStepper`: load steps and cut-backs.
 

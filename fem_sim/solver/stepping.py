@@ -24,7 +24,7 @@ from fem_sim.solver import blas
 from fem_sim.solver.equations import Equations
 from fem_sim.solver.linear import LinearSolver
 from fem_sim.solver.newton import NewtonSolver
-from fem_sim.solver.predictors import Predictor
+from fem_sim.solver.predictors import StepPredictor
 from fem_sim.solver.results import Solution, StepFailure, WorkCounts
 from fem_sim.solver.settings import SolverSettings
 
@@ -67,7 +67,7 @@ class LoadStepper:
     """Runs one simulation through its load fractions with the pieces it is given."""
 
     def __init__(self, settings: SolverSettings, eqs: Equations, newton: NewtonSolver,
-                 predictor: Predictor, linear: LinearSolver):
+                 predictor: StepPredictor, linear: LinearSolver):
         self.settings, self.eqs, self.newton = settings, eqs, newton
         self.predictor, self.linear = predictor, linear
 

@@ -1,11 +1,7 @@
 """A report section that another benchmark owns survives the report's own rewrite, and is
 replaced, not repeated, when its owner writes it again (bench/report.py)."""
 
-import sys
-from pathlib import Path
-
-sys.path.insert(0, str(Path(__file__).parents[2] / "bench"))
-from report import put_section, sections  # noqa: E402
+from liverviz.report import put_section, sections
 
 
 def test_a_section_is_appended_then_replaced_and_kept(tmp_path):

@@ -296,12 +296,11 @@ def test_pardiso_keeps_its_threads_when_gmsh_starts(cholesky, tmp_path):
     from pathlib import Path
 
     script = tmp_path / "gmsh_then_pardiso.py"
-    script.write_text(f"""
+    script.write_text("""
 import sys
 import numpy as np
 from mpi4py import MPI  # noqa: F401
-sys.path.insert(0, {str(Path(__file__).parent)!r})
-from test_ldlt import laplacian_3d
+from tests.fem_sim.test_ldlt import laplacian_3d
 from fem_sim.solver import pardiso
 A = laplacian_3d(12)
 P = pardiso.PardisoCholesky()
@@ -314,7 +313,8 @@ P.factor(A.indptr, A.indices, A.data)
 x = P.solve(np.ones(A.shape[0]))
 print(before, pardiso.threads(), float(np.abs(A @ x - 1.0).max()))
 """)
-    env = {**os.environ, "OMP_NUM_THREADS": "2", "PETSC_OPTIONS": "-no_signal_handler"}
+    env = {**os.environ, "OMP_NUM_THREADS": "2", "PETSC_OPTIONS": "-no_signal_handler",
+           "PYTHONPATH": str(Path(__file__).parents[2])}  # the script imports tests.fem_sim
     out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
                          env=env, timeout=120)
     assert out.returncode == 0, out.stderr[-2000:]

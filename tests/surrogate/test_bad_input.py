@@ -81,5 +81,5 @@ def test_basis_design_on_a_many_liver_scene_is_refused_before_any_work(tmp_path,
     shutil.copy(scenes / "scene4_livers.toml", data / "scene.toml")
     assert main(["train", "--data", str(data), "--run", str(tmp_path / "r"),
                  "--config", "basis"]) == 2
-    assert "design 'basis') needs a scene with one liver" in capsys.readouterr().err
+    assert "design 'basis' needs a scene with one liver" in capsys.readouterr().err
     assert not (tmp_path / "r").exists()

@@ -154,11 +154,13 @@ def test_input_noise_regularises_the_basis_in_training_only_and_dropout_is_refus
     assert float(noisy.loss(params, noisy.data, idx, key, True)) != pytest.approx(clean,
                                                                                  rel=1e-3)
     for design in ("basis", "population_basis"):
-        with pytest.raises(ValueError, match=f"dropout: the {design} design has no dropout"):
+        with pytest.raises(ValueError,
+                           match=f"dropout: the {design} design does not take it, only nodewise"):
             get_config(design, dropout=0.1)
     for key, value in (("shape_inputs", 3), ("load_context", True)):
         for design in ("nodewise", "basis"):
-            with pytest.raises(ValueError, match=f"{key}: only the population_basis design"):
+            with pytest.raises(ValueError, match=f"{key}: the {design} design does not take it, "
+                               "only population_basis"):
                 get_config("small", design=design, **{key: value})
     with pytest.raises(ValueError, match="shape_inputs: expected 'all' or an integer >= 0"):
         get_config("population_basis", shape_inputs=-1)
@@ -202,7 +204,8 @@ def test_an_ensemble_predicts_the_mean_of_its_members(ds, tmp_path):
     (tmp_path / "e" / "model.json").write_text(json.dumps(meta))
     with pytest.raises(ValueError, match="params.npz: 'hidden_0/kernel' has shape"):
         load_predictor(tmp_path / "e")
-    with pytest.raises(ValueError, match="ensemble: only the basis designs"):
+    with pytest.raises(ValueError, match="ensemble: the nodewise design does not take it, "
+                       "only basis and population_basis"):
         get_config("small", ensemble=2)
 
 
@@ -271,5 +274,6 @@ def test_with_one_load_the_shared_network_is_the_network_per_load():
         "params"]) == shapes
     np.testing.assert_allclose(shared.apply({"params": params}, x, f),
                                joint.apply({"params": params}, x, f), rtol=1e-5, atol=1e-6)
-    with pytest.raises(ValueError, match="shared_loads: only the basis designs"):
+    with pytest.raises(ValueError, match="shared_loads: the nodewise design does not take "
+                       "it, only basis and population_basis"):
         get_config("small", shared_loads=True)

@@ -1,16 +1,12 @@
-"""The modes floor of the unseen-liver row (bench/table4.py: modes_floor): the least-squares
+"""The modes floor of a liver never seen (surrogate.evaluate.modes_floor): the least-squares
 best a basis model's modes can do at a liver's nodes, checked on fields built by hand."""
 
-import sys
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 
 from liverreg.morph import interpolation_matrix
-
-sys.path.insert(0, str(Path(__file__).parents[2] / "bench"))
-from table4 import modes_floor  # noqa: E402
+from surrogate.evaluate import modes_floor
 
 
 def test_the_floor_is_zero_in_the_span_of_the_modes_and_the_rest_outside_it():
@@ -24,7 +20,7 @@ def test_the_floor_is_zero_in_the_span_of_the_modes_and_the_rest_outside_it():
     modes, extra = q[:k], q[k].reshape(n, 3)
     place = SimpleNamespace(points=points, to_population=lambda x: x,
                             vectors_to_liver=lambda v: v)
-    pred = SimpleNamespace(_modes_np=modes.reshape(k, n, 3))
+    pred = SimpleNamespace(modes=modes.reshape(k, n, 3))
     interp = interpolation_matrix(points, points).tocsr()
     c = rng.normal(size=(steps, k)) * 10.0
     inside = (c @ modes).reshape(steps, n, 3)

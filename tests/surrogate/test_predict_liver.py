@@ -416,7 +416,8 @@ def test_shape_noise_perturbs_only_the_shape_coefficients():
     assert float(apart.loss(params, apart.data, idx, key, True)) != pytest.approx(
         float(clean.loss(params, clean.data, idx, key, True)), rel=1e-3)
     for d in ("nodewise", "basis"):
-        with pytest.raises(ValueError, match="shape_noise: only the population_basis design"):
+        with pytest.raises(ValueError, match=f"shape_noise: the {d} design does not take it, "
+                           "only population_basis"):
             get_config("small", design=d, shape_noise=0.5)
     with pytest.raises(ValueError, match="shape_noise: expected null or a finite number >= 0"):
         get_config("population_basis", shape_noise=-1.0)

@@ -2,11 +2,8 @@
 that differs from HEAD, not for the reports the run itself writes under docs/."""
 
 import subprocess
-import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).parents[2] / "bench"))
-import report  # noqa: E402
+from liverviz import report
 
 
 def test_only_changes_outside_docs_mark_the_commit(tmp_path, monkeypatch):

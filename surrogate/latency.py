@@ -1,16 +1,17 @@
-"""Latency of an exported model, shared by the reports that quote one (bench_realtime, table4).
+"""Latency of an exported model: what a call costs through the real ``load_predictor`` path.
 
-``at_scale`` re-exports a trained model's network onto a liver-sized cloud of nodes (the
-node-wise design evaluates its features there; the reduced basis gets orthonormal modes of
-that size, since its own modes live on the scene's mesh): the cost of one call depends on the
-design, the network and the node count, not on the values of the weights or the modes.
-``latency`` times calls through the real ``load_predictor`` path.
+``at_scale`` re-exports a trained model's network onto a liver-sized cloud of nodes (its
+design's runtime says how: ``on_nodes``), since the cost of one call depends on the design,
+the network and the node count, not on the values of the weights or the modes. ``latency``
+times calls; ``timed`` gives the figures a report quotes; ``timed_placed`` times a population
+model placed on a liver it never saw, at a user's mesh of it.
 """
 
 from __future__ import annotations
 
-import dataclasses
+import tempfile
 import time
+import warnings
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -38,7 +39,8 @@ def typical_inputs(pred) -> tuple[np.ndarray, np.ndarray]:
 
 def at_scale(model_dir: Path, n_nodes: int, directory: Path, seed: int = 0) -> Path:
     """A copy of the exported model in ``model_dir`` on a synthetic cloud of n_nodes."""
-    from surrogate.export import export_model, load_predictor
+    from surrogate.export import export_model
+    from surrogate.predictor import load_predictor
 
     pred = load_predictor(model_dir)
     meta = pred.meta
@@ -51,19 +53,15 @@ def at_scale(model_dir: Path, n_nodes: int, directory: Path, seed: int = 0) -> P
     ds = SimpleNamespace(forces=forces, extra=extra, scene_name=meta["scene"], spec=pred.spec,
                          points=[pts], fixed=[np.arange(100)], out_nodes=[np.arange(n_nodes)],
                          triangles=[np.zeros((0, 3), dtype=np.int64)])
-    if pred.design in ("basis", "population_basis"):
-        k = pred._modes_np.shape[0]
-        modes = np.linalg.qr(rng.standard_normal((3 * n_nodes, k)))[0].T.astype(np.float32)
-        model = dataclasses.replace(pred._basis_stats, params=_params(model_dir), modes=modes)
-    else:
-        model = (_params(model_dir), pred.norm)
+    model = pred.runtime.on_nodes(_params(model_dir), n_nodes, rng)
     export_model(directory, model, {**meta["config"], "design": pred.design}, ds)
     return directory
 
 
 def model_nodes(pred) -> tuple[np.ndarray, np.ndarray]:
     """(points, fixed node ids) a model is timed on: its own liver, or a population model's
-    template (it has no mesh of its own)."""
+    template (it has no mesh of its own).
+    """
     if pred.points is None and pred.shape_model is not None:
         return pred.shape_model.template_points, pred.shape_model.fixed_nodes
     return pred.points, pred.fixed
@@ -102,3 +100,52 @@ def latency(predict, nodes=None, calls: int = 200,
         predict(g, at, **kw)
         times.append(time.perf_counter() - t)
     return float(np.median(times)), float(np.percentile(times, 99))
+
+
+def timed(model_dir: Path, calls: int, n_nodes: int) -> dict:
+    """Median ms per call of the model in ``model_dir``: at its own nodes (``ms_own``, with
+    their count ``nodes``), at ``n_nodes`` nodes (``ms_big``), and there with a new load node
+    every call (``ms_big_new_load``).
+    """
+    from surrogate.predictor import load_predictor
+
+    pred = load_predictor(model_dir)
+    own = model_nodes(pred)[0].shape[0]
+    med_own, _ = latency(pred, None, calls)
+    with tempfile.TemporaryDirectory() as tmp:
+        big = load_predictor(at_scale(model_dir, n_nodes, Path(tmp) / "big"))
+        med_big, _ = latency(big, None, calls)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the cloud's nodes were never loaded: timing only
+            med_new, _ = latency(big, None, calls, new_load_nodes=True)
+    return {"ms_own": 1e3 * med_own, "ms_big": 1e3 * med_big, "nodes": own,
+            "ms_big_new_load": 1e3 * med_new}
+
+
+def timed_placed(pred, placement, n_nodes: int, calls: int) -> float:
+    """Median ms per call of :class:`surrogate.predict_liver.PlacedModel` on the placed liver
+    meshed at ``n_nodes`` nodes (points drawn inside the registered template's tetrahedra,
+    in the liver's frame: what a user's mesh of the liver gives): the model on the template,
+    one sparse interpolation to the nodes, the turn into the liver's frame; the same load
+    node every call, the force changing.
+    """
+    from surrogate.predict_liver import PlacedModel
+
+    sm = pred.shape_model
+    rng = np.random.default_rng(0)
+    cells = sm.template_cells[rng.integers(0, sm.template_cells.shape[0], n_nodes)]
+    w = rng.dirichlet(np.ones(4), n_nodes)
+    nodes = placement.to_liver(np.einsum("nk,nkd->nd", w, placement.points[cells]))
+    placed = PlacedModel(pred, nodes=nodes, placement=placement)
+    at = placed.load_nodes(placement.to_liver(
+        placement.points[sm.loadable_nodes[:pred.spec.n_loads]]))
+    f = np.tile([[0.0, 0.0, -0.4]], (pred.spec.n_loads, 1))
+    times = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for i in range(calls + 5):
+            g = f * (1.0 - 1e-4 * (i % 100))
+            t = time.perf_counter()
+            placed(g, at)
+            times.append(time.perf_counter() - t)
+    return 1e3 * float(np.median(times[5:]))

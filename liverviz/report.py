@@ -1,7 +1,7 @@
 """The header every generated report under docs/ carries, and a tee that turns what a
 benchmark prints into such a report.
 
-    from report import capture
+    from liverviz.report import capture
     with capture("docs/solver.md", "Solver speed: hard cases"):
         print("| case | ... |")      # printed as usual, and written to the report at the end
 
@@ -52,7 +52,8 @@ def _memory_gib() -> float:
 
 def commit() -> str:
     """HEAD's short hash, "+ local changes" when tracked files outside docs/ differ from it
-    (docs/ holds the reports and pictures the benchmarks write, a run's own output)."""
+    (docs/ holds the reports and pictures the benchmarks write, a run's own output).
+    """
     def git(*args):
         return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True,
                               timeout=30).stdout.strip()
@@ -94,7 +95,8 @@ def sections(path: str | Path) -> str:
 
 def put_section(path: str | Path, name: str, body: str) -> None:
     """Write ``body`` as section ``name`` of the report at ``path``: replaces the section when
-    it is there, appends it otherwise; the rest of the report is left as it is."""
+    it is there, appends it otherwise; the rest of the report is left as it is.
+    """
     path = Path(path)
     text = path.read_text() if path.exists() else ""
     block = f"<!-- begin {name} -->\n{body.rstrip()}\n<!-- end {name} -->\n"

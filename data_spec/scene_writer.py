@@ -1,0 +1,63 @@
+"""Scene files written from Python: a scene dict as TOML, and a scene's settings on one liver.
+
+``scene_toml(d)`` writes the tables of scalars and lists a scene has (:mod:`data_spec.scene`
+reads it back); ``liver_scene`` makes the scene of a liver's FE truth: a population scene's
+loads, material, steps and solver on one liver file, fixed where a model puts its fixed region.
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from pathlib import Path
+
+
+def _value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    return repr(v)
+
+
+def _table(name: str, d: dict) -> list[str]:
+    lines = ["", f"[{name}]"] + [f"{k} = {_value(v)}" for k, v in d.items()
+                                 if not isinstance(v, dict)]
+    for k, v in d.items():
+        if isinstance(v, dict):
+            lines += _table(f"{name}.{k}", v)
+    return lines
+
+
+def scene_toml(d: dict) -> str:
+    """A scene dict (tables of scalars, lists and nested tables) as TOML text."""
+    lines = [f"{k} = {_value(v)}" for k, v in d.items() if not isinstance(v, dict)]
+    for k, v in d.items():
+        if isinstance(v, dict):
+            lines += _table(k, v)
+    return "\n".join(lines) + "\n"
+
+
+def liver_scene(scene_file: str | Path, liver: str | Path, n: int, fixed=None,
+                seed: int = 44) -> str:
+    """The scene of a liver's FE truth: ``scene_file``'s loads, material, steps and solver on
+    the liver file ``liver`` (its own mesh at the scene's mesh size), ``n`` simulations.
+    ``fixed`` (k, 3) mm in the liver's frame: the surface nodes within half an element of
+    these points are fixed (where a model's placement puts its fixed region); None: the
+    file's default region.
+    """
+    scene_file, liver = Path(scene_file), Path(liver)
+    raw = tomllib.loads(scene_file.read_text())
+    raw["scene"] = {"name": "truth_" + liver.stem, "n_simulations": n, "seed": seed,
+                    "description": f"{scene_file.name}'s settings on {liver.name}: the FE "
+                                   "truth a model is evaluated against."}
+    raw["geometry"] = {"source": "file", "path": str(liver.resolve()),
+                       "mesh_size": raw["geometry"]["mesh_size"]}
+    if fixed is not None:
+        raw["fixed"] = {"kind": "points", "radius": 0.5 * raw["geometry"]["mesh_size"],
+                        "points": [[round(float(v), 3) for v in p] for p in fixed]}
+    raw.pop("cases", None)
+    raw["surrogate"] = {"config": "small"}
+    return scene_toml(raw)

@@ -1,0 +1,60 @@
+"""Dataset views: a dataset directory made of links to another's files, nothing copied.
+
+A view is a valid dataset for every reader (the trainer, the validator, ``fem_sim generate``):
+``first(data, n)`` holds the first ``n`` simulations of ``data``; ``extension(data, n, out)``
+starts a larger dataset of the same scene from ``data``'s shards, so that ``generate`` goes on
+past them without touching ``data``.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+
+def shard_count(data: str | Path) -> int:
+    """The number of shard files (``sims/sim_*.h5``) of a dataset directory."""
+    return len(list((Path(data) / "sims").glob("sim_*.h5")))
+
+
+def link_shards(data: Path, view: Path, n: int) -> None:
+    """Symbolic links in ``view/sims`` to the first ``n`` shards of ``data`` with their XDMF
+    files (a shard without its XDMF is not a valid one).
+    """
+    (view / "sims").mkdir(parents=True, exist_ok=True)
+    for shard in sorted((data / "sims").glob("sim_*.h5"))[:n]:
+        for p in (data / "sims").glob(shard.stem + ".*"):
+            if not (view / "sims" / p.name).exists():
+                (view / "sims" / p.name).symlink_to(p.resolve())
+
+
+def first(data: str | Path, n: int, view: str | Path | None = None) -> Path:
+    """A view of the first ``n`` simulations of ``data`` (``data`` itself when it holds no
+    more); by default ``data/../first_N``.
+    """
+    data = Path(data)
+    if n >= shard_count(data):
+        return data
+    view = Path(view) if view is not None else data.parent / f"first_{n}"
+    (view / "sims").mkdir(parents=True, exist_ok=True)
+    for name in ("scene.toml", "geometry"):
+        if not (view / name).exists():
+            (view / name).symlink_to((data / name).resolve())
+    link_shards(data, view, n)
+    return view
+
+
+def extension(data: str | Path, n: int, out: str | Path) -> Path:
+    """A dataset directory ``out`` that starts from ``data``'s first ``n`` shards (with their
+    XDMF files), its liver files and its scene copy, hard-linked or linked, for ``generate``
+    to go on from: the new shards land in ``out`` only.
+    """
+    data, out = Path(data), Path(out)
+    (out / "geometry").mkdir(parents=True, exist_ok=True)
+    for p in sorted((data / "geometry").iterdir()):
+        if not (out / "geometry" / p.name).exists():
+            os.link(p, out / "geometry" / p.name)  # generate reads them as its own
+    if not (out / "scene.toml").exists():
+        os.link(data / "scene.toml", out / "scene.toml")
+    link_shards(data, out, n)
+    return out

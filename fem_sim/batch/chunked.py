@@ -1,0 +1,59 @@
+"""A dataset generated in chunks under a wall-time budget, from any interpreter.
+
+``generate_chunks`` runs ``mpirun -n NP SOLVER_PYTHON -m fem_sim generate SCENE --only 0..k``
+for growing k until the dataset holds ``n`` simulations or the budget is spent; the wall seconds
+accumulate in ``DATA/../generation.json`` so that a study run again (or in another session)
+goes on where it stopped. Standard library only: the trainer's environment drives the solver's
+this way (``fem_sim generate`` itself skips the shards that exist).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _shards(data: Path) -> int:
+    return len(list((data / "sims").glob("sim_*.h5")))
+
+
+def generate_chunks(scene: str | Path, data: str | Path, n: int, *, ranks: int = 2,
+                    solver_python: str | Path | None = None, chunk: int = 100,
+                    budget_s: float = float("inf")) -> dict:
+    """Shards 0..n-1 of ``scene`` into ``data`` in chunks of ``chunk``; stops early once
+    ``budget_s`` of generation wall time is spent (over every call on this dataset).
+    Returns ``{"seconds": wall seconds so far, "sims": shards there}``.
+    """
+    scene, data = Path(scene), Path(data)
+    solver_python = solver_python or ROOT / ".venv-solver" / "bin" / "python"
+    state_path = data.parent / "generation.json"
+    state = json.loads(state_path.read_text()) if state_path.exists() else {"seconds": 0.0}
+    have = _shards(data) if data.exists() else 0
+    # one BLAS thread per MPI rank (the ranks take the cores); Open MPI refuses root unless
+    # told (the caller's environment may say otherwise)
+    env = {"OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
+           **os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    while have < n and state["seconds"] < budget_s:
+        upto = min(n, have + chunk)
+        cmd = ["mpirun", "-n", str(ranks), str(solver_python), "-m", "fem_sim", "generate",
+               str(scene), "--out", str(data), "--only", f"0..{upto}"]
+        print(f"[{scene.stem}] generating simulations {have}..{upto} of {n}", file=sys.stderr,
+              flush=True)
+        t = time.perf_counter()
+        subprocess.run(cmd, check=True, cwd=ROOT, env=env)
+        state["seconds"] += time.perf_counter() - t
+        data.parent.mkdir(parents=True, exist_ok=True)
+        state_path.write_text(json.dumps(state))
+        if _shards(data) <= have:
+            raise RuntimeError(f"{data}: generate made no new shard")
+        have = _shards(data)
+    state["sims"] = have
+    data.parent.mkdir(parents=True, exist_ok=True)
+    state_path.write_text(json.dumps(state))
+    return state

@@ -1,0 +1,262 @@
+"""A trained model against FE simulations it never trained on: any dataset of its own liver, or
+the FE truth of a liver it never saw (``python -m surrogate evaluate RUN DATA``).
+
+For a liver never seen, the truth must carry the model's boundary condition: ``truth_scene``
+writes the scene of that truth (a population scene's loads, material, steps and solver on the
+liver's own mesh, fixed where the model's placement puts the template's fixed region), which
+``fem_sim generate`` solves in the solver environment; ``evaluate_liver`` then compares the
+placed model with it, beside the naive model (the population's mean displacement) and, for a
+basis design, the floor of its modes (the best any coefficients could do on that liver).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from data_spec import list_shards, read_geometry, read_shard
+from data_spec.scene_writer import liver_scene
+from data_spec.shards import geometry_path
+from data_spec.views import shard_count
+
+_PLACED: dict = {}  # (liver, its mtime, frame, the shape model's digest) -> placement, warnings
+
+
+def shape_model_digest(sm) -> str:
+    """A digest of what a placement depends on: the shape model's template, PCA, ranges and
+    registration settings (every design and seed trained on one dataset shares it).
+    """
+    h = hashlib.sha256()
+    for x in (sm.template_points, sm.template_cells, sm.surface_triangles, sm.fixed_nodes,
+              sm.mean, sm.components, sm.coefficient_min, sm.coefficient_max, sm.residuals,
+              sm.schedule, sm.population_coefficients, sm.population_inverted,
+              sm.population_fixed_area, np.asarray(sm.n_points)):
+        a = np.ascontiguousarray(x)
+        h.update(f"{a.dtype}{a.shape}".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def place(pred, liver: str | Path, frame: str = "LPS"):
+    """(placement, warnings): predict-liver's placement of the liver file by the loaded
+    population model ``pred`` (``frame`` as its --frame). Registered once per liver, frame and
+    shape model in a process: the designs and training seeds of one dataset share it.
+    """
+    from surrogate.predict_liver import place_liver, read_liver_surface
+
+    liver = Path(liver).resolve()
+    key = (str(liver), liver.stat().st_mtime_ns, frame, shape_model_digest(pred.shape_model))
+    if key not in _PLACED:
+        points, tris = read_liver_surface(liver)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            _PLACED[key] = place_liver(pred, points, tris, frame=frame)
+    placement, found = _PLACED[key]
+    return placement, list(found)
+
+
+def truth_scene(pred, scene_file: str | Path, liver: str | Path, n: int,
+                frame: str = "LPS") -> str:
+    """The scene text of a liver's FE truth with the population model's boundary condition:
+    fixed where its placement puts the template's fixed region.
+    """
+    placement, _ = place(pred, liver, frame)
+    sm = pred.shape_model
+    return liver_scene(scene_file, liver, n, placement.to_liver(placement.points[sm.fixed_nodes]))
+
+
+@functools.lru_cache(maxsize=4)
+def mean_displacement(data: Path) -> np.ndarray:
+    """(3,) mm: the mean displacement of a dataset's simulations (the naive model)."""
+    return np.mean([np.asarray(read_shard(p).displacement).reshape(-1, 3).mean(axis=0)
+                    for p in list_shards(data)], axis=0)
+
+
+@functools.cache
+def shards_by_liver(data: Path) -> dict[str, list[Path]]:
+    """The shard files of a dataset by liver (geometry id), read once per dataset."""
+    out: dict[str, list[Path]] = {}
+    for path in list_shards(data):
+        out.setdefault(read_shard(path).geometry_id, []).append(path)
+    return out
+
+
+@functools.cache
+def fixed_extents(data: Path) -> np.ndarray:
+    """(livers, 3) mm: the extent along x, y, z of each liver's fixed nodes in a dataset."""
+    out = []
+    for gid, paths in shards_by_liver(data).items():
+        points = read_geometry(geometry_path(data, gid)).points
+        out.append(np.ptp(points[read_shard(paths[0]).fixed_nodes], axis=0))
+    return np.array(out)
+
+
+def _placed_fields(pred, placement, shape, points, shards):
+    """(predicted, true) (n, 3) mm of every done load step of ``shards`` at the liver's own
+    nodes ``points``, and the placed model.
+    """
+    from surrogate.predict_liver import PlacedModel
+
+    P, T = [], []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        placed = PlacedModel(pred, nodes=points, placement=placement, shape=shape)  # once
+        for sh in shards:
+            fr = np.asarray(sh.load_fractions[:sh.n_done])
+            forces = fr[:, None, None] * np.asarray(sh.forces)[None]
+            at = np.broadcast_to(points[sh.load_nodes], forces.shape)
+            u = placed(forces, placed.load_nodes(at))
+            P.append(u[:, sh.output_nodes].reshape(-1, 3))
+            T.append(np.asarray(sh.displacement[:sh.n_done]).reshape(-1, 3))
+    return np.concatenate(P), np.concatenate(T), placed
+
+
+def _scale_fit(pred_all, true_all) -> dict:
+    """Whether the prediction is too large or too small as a whole: the one scale that fits
+    the truth best, and the MEE at that scale.
+    """
+    scale = float(np.sum(pred_all * true_all) / max(float(np.sum(pred_all ** 2)), 1e-30))
+    return {"best_scale": scale,
+            "truth_mean_mm": float(np.linalg.norm(true_all, axis=1).mean()),
+            "predicted_mean_mm": float(np.linalg.norm(pred_all, axis=1).mean()),
+            "mee_best_scale": float(np.linalg.norm(scale * pred_all - true_all, axis=1).mean())}
+
+
+def _placement_facts(pred, placement, shape, population_data) -> dict:
+    """The registration's and the fixed region's numbers of a placement."""
+    from surrogate.predict_liver import shape_rule, told_shape
+
+    sm = pred.shape_model
+    out = {"residual_mm": placement.residual, "inverted": placement.inverted,
+           "template_cells": int(sm.template_cells.shape[0]),
+           "coefficients_out": int(sm.outside_range(placement.coefficients).size),
+           "coefficients": int(placement.coefficients.size),
+           "shape_asked": shape or shape_rule(pred),
+           "shape_rule": told_shape(pred, placement.coefficients, shape)[1],
+           # the fixed region the placement gives against the template's (population frame)
+           "fixed_extent_mm": np.ptp(placement.points[sm.fixed_nodes], axis=0).tolist(),
+           "template_fixed_extent_mm": np.ptp(sm.template_points[sm.fixed_nodes],
+                                              axis=0).tolist()}
+    if population_data is not None:
+        out["population_fixed_extent_max_mm"] = fixed_extents(population_data).max(
+            axis=0).tolist()
+    return out
+
+
+def evaluate_liver(pred, data: Path, placement, found: list = (), *, population_data=None,
+                   shape: str | None = None, geometry_id: str | None = None) -> dict:
+    """The loaded population model ``pred`` on the FE simulations ``data`` of a liver it never
+    saw, placed by ``placement`` (predict-liver's), predicted at the liver's own mesh nodes and
+    told the shape ``shape`` gives (:meth:`liverreg.shape_model.ShapeModel.shape_told`; None:
+    the design's, as predict-liver), against the FE solution. Naive model: the mean
+    displacement of ``population_data``'s simulations (None: of ``data``'s), turned into the
+    liver's frame. ``geometry_id``: only that liver's simulations of ``data``.
+    """
+    from surrogate.metrics import displacement_metrics
+
+    data = Path(data)
+    paths = list_shards(data) if geometry_id is None else shards_by_liver(data)[geometry_id]
+    shards = [sh for sh in map(read_shard, paths) if sh.n_done]
+    if not shards:
+        raise ValueError(f"{data}: no simulation with a converged load step")
+    g = read_geometry(geometry_path(data, shards[0].geometry_id))
+    pred_all, true_all, placed = _placed_fields(pred, placement, shape, g.points, shards)
+    mean = mean_displacement(Path(population_data) if population_data else data)
+    m_nn = displacement_metrics(pred_all, true_all)
+    m_naive = displacement_metrics(np.broadcast_to(placement.vectors_to_liver(mean),
+                                                   true_all.shape), true_all)
+    floor = ({"modes_floor_mm": modes_floor(pred, placement, placed.interpolation, shards)}
+             if pred.modes is not None else {})
+    return {"sims": len(shards), "nodes": g.n_nodes, "network": m_nn, "naive": m_naive,
+            "skill": m_nn["mee"] / m_naive["mee"],
+            "naive_from": str(population_data or data),
+            **_placement_facts(pred, placement, shape, population_data),
+            "fixed_nodes": int(shards[0].fixed_nodes.size), "warnings": list(found), **floor,
+            **_scale_fit(pred_all, true_all)}
+
+
+def evaluate_own(pred, data: Path) -> dict:
+    """A model of one liver on a dataset of that liver (its own mesh and output nodes): the
+    metrics of every done load step, beside the naive model (the dataset's mean
+    displacement).
+    """
+    from surrogate.features import material_vector
+    from surrogate.metrics import displacement_metrics
+
+    P, T = [], []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for sh in (s for s in map(read_shard, list_shards(data)) if s.n_done):
+            fr = np.asarray(sh.load_fractions[:sh.n_done])
+            forces = fr[:, None, None] * np.asarray(sh.forces)[None]
+            nodes = np.broadcast_to(sh.load_nodes, forces.shape[:2])
+            mat = sh.material
+            material = (material_vector(mat.c, mat.m, mat.K) if pred.spec.material_dim
+                        else None)
+            u = pred(forces, nodes, nodes=np.asarray(sh.output_nodes), material=material)
+            P.append(u.reshape(-1, 3))
+            T.append(np.asarray(sh.displacement[:sh.n_done]).reshape(-1, 3))
+    if not P:
+        raise ValueError(f"{data}: no simulation with a converged load step")
+    pred_all, true_all = np.concatenate(P), np.concatenate(T)
+    m_nn = displacement_metrics(pred_all, true_all)
+    m_naive = displacement_metrics(np.broadcast_to(true_all.mean(axis=0), true_all.shape),
+                                   true_all)
+    return {"sims": len(P), "network": m_nn, "naive": m_naive,
+            "skill": m_nn["mee"] / m_naive["mee"], "naive_from": str(data),
+            **_scale_fit(pred_all, true_all)}
+
+
+def modes_floor(pred, placement, interp, shards: list) -> float:
+    """MEE (mm) of the best a basis model's modes can do on a liver: each load step's FE field
+    at the liver's nodes fitted by least squares with the modes carried there as a prediction
+    is (``interp``: the sparse interpolation from the registered template to the liver's
+    nodes, :attr:`PlacedModel.interpolation`; then turned into the liver's frame). The rest of
+    the model's error is in the coefficients its network gives.
+    """
+    A = np.stack([placement.vectors_to_liver(interp @ m) for m in pred.modes], axis=-1)
+    errors = []
+    for sh in shards:
+        a = A[sh.output_nodes].reshape(-1, A.shape[-1])  # (3 n_out, modes)
+        t = np.asarray(sh.displacement[:sh.n_done], dtype=np.float64).reshape(sh.n_done, -1).T
+        c = np.linalg.lstsq(a, t, rcond=None)[0]
+        errors.append(np.linalg.norm((a @ c - t).T.reshape(sh.n_done, -1, 3), axis=-1).ravel())
+    return float(np.mean(np.concatenate(errors)))
+
+
+def heldout_floor(data: Path, run: Path) -> dict:
+    """A population basis's floor on its evaluated held-out livers: the modes of each fold's
+    training fields (on the template, as the design computes them) fitted by least squares to
+    the held-out livers' fields, MEE in mm (``held_out``), beside the training fields' own
+    (``training``). What is left of the design's error is in the coefficients its network
+    gives. Kept in the run's directory (floor.json) for as many simulations as the dataset
+    holds.
+    """
+    import json
+
+    from surrogate.basis import compute_modes, projection_mee
+    from surrogate.data import kfold_groups, load_dataset
+    from surrogate.population_basis import TemplateFields
+
+    cache, shards = Path(run) / "floor.json", shard_count(data)
+    if cache.exists():
+        saved = json.loads(cache.read_text())
+        if saved.get("shards") == shards:
+            return saved
+    cfg = json.loads((Path(run) / "config.json").read_text())
+    ds = load_dataset(data)
+    maps = TemplateFields(ds)
+    floors = []
+    for held in kfold_groups(ds, cfg["folds"], cfg["seed"])[:cfg.get("evaluate_folds") or None]:
+        U = maps.fields(ds, np.setdiff1d(np.arange(ds.n_samples), held))
+        modes = compute_modes(U, cfg["modes"], cfg["seed"])
+        floors.append((projection_mee(U, modes), projection_mee(maps.fields(ds, held), modes)))
+    out = {"shards": shards, "modes": cfg["modes"],
+           "training": float(np.mean([f[0] for f in floors])),
+           "held_out": float(np.mean([f[1] for f in floors]))}
+    cache.write_text(json.dumps(out))
+    return out
