@@ -34,7 +34,8 @@ MPIRUN := mpirun -n $(NP)
 
 .PHONY: help setup setup-system setup-solver setup-trainer demo test test-solver test-trainer \
         test-extremes extremes-doc \
-        dataset train population table4 bench tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
+        dataset train population table4 bench bench-solver bench-throughput bench-inference \
+        bench-population truth evaluate tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
         bench-viewer docs-manipulator viewer \
         clean lock-trainer
 
@@ -46,7 +47,9 @@ help:
 	@echo "make dataset  SCENE=... NP=... R=... OUT=...   generate a dataset with mpirun"
 	@echo "make train    SCENE=... DATA=... RUN=...       train the surrogate on a dataset"
 	@echo "make population SCENE=... OUT=...  CPD + PCA shape coefficients (scene 4)"
-	@echo "make bench    run the benchmarks in bench/ (long)"
+	@echo "make bench    solver, throughput and inference benchmarks -> docs/ (about half an hour)"
+	@echo "make truth RUN=... LIVER=... SCENE=... OUT=...   FE truth of a liver a model never saw"
+	@echo "make evaluate RUN=... DATA=... [LIVER=...]   a model against a dataset it never saw"
 	@echo "make tradeoff-fem   FEM speed/accuracy price list -> docs/tradeoff_fem.md (long, resumable)"
 	@echo "make tradeoff-surrogate   surrogate price list + error budget -> docs/ (long, resumable)"
 	@echo "make table4   the paper's Table 4, scenes 1-4 -> docs/table4.md (long, resumable)"
@@ -136,8 +139,36 @@ test-trainer: setup-trainer $(TEST_DATA)/.done $(TEST_DATA4)/.done
 	    bash scripts/run_pytest.sh $(TPY) tests/data_spec tests/liverviz tests/liverreg \
 	    tests/surrogate tests/reliability -q $(TESTS)
 
-bench: setup
-	@bash scripts/bench.sh "$(SPY)" "$(TPY)"
+# The benchmarks that fit two cores in about half an hour, each writing its report under docs/;
+# the long studies (table4, tradeoff-*, bench-realtime, bench-viewer) are targets of their own.
+bench: bench-solver bench-throughput bench-inference
+
+bench-solver: setup-solver  # needs ../shared/data/livers/sofa_liver.vtk
+	OMP_NUM_THREADS=2 OPENBLAS_NUM_THREADS=2 $(SPY) bench/bench_hard.py --h 5 --batch 3 --textbook
+
+bench-throughput: setup-solver
+	$(SPY) bench/bench_throughput.py
+
+bench-inference: setup-trainer
+	$(TPY) bench/bench_surrogate.py
+
+bench-# A liver a model never saw: the scene of its FE truth with the model's boundary condition
+# (trainer environment), solved under mpirun (solver environment), then the model against it.
+LIVER ?=
+TRUTH_SIMS ?= 60
+truth: setup
+	@test -n "$(LIVER)" || { echo "make truth: LIVER=file RUN=run SCENE=population scene OUT=dir"; exit 2; }
+	$(TPY) -m surrogate truth-scene $(RUN) $(LIVER) --scene $(SCENE) --sims $(TRUTH_SIMS) \
+	    --out $(OUT)/scene.toml
+	$(MPIRUN) $(SPY) -m fem_sim generate $(OUT)/scene.toml --out $(OUT)/data
+	$(TPY) -m surrogate evaluate $(RUN) $(OUT)/data --liver $(LIVER) --out $(OUT)/evaluation.json
+
+evaluate: setup-trainer
+	$(TPY) -m surrogate evaluate $(RUN) $(DATA) $(if $(LIVER),--liver $(LIVER)) \
+	    --out $(RUN)/evaluation.json
+
+population: setup-solver
+	$(SPY) bench/bench_population.py
 
 # FEM price list (resumable: re-run to continue): docs/tradeoff_fem.{md,png}; one run at a
 # time on FEM_THREADS threads (the machine's two cores by default)

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from data_spec import Geometry, OgdenMaterial, Scene, loads
+from data_spec import Geometry, OgdenMaterial, Scene, eligible_loads
 
 _MATERIAL_TABLE_STREAM = 2**31 - 1  # rng stream of the scene-wide material table
 
@@ -78,7 +78,7 @@ def output_nodes(scene: Scene, g: Geometry) -> np.ndarray:
 
 def eligible_load_nodes(scene: Scene, g: Geometry, fixed: np.ndarray) -> np.ndarray:
     """Nodes a random load may act on (the rule of :mod:`data_spec.eligible_loads`)."""
-    return loads.eligible_load_nodes(scene["loads"], g.points, g.surface_nodes, fixed)
+    return eligible_loads.eligible_load_nodes(scene["loads"], g.points, g.surface_nodes, fixed)
 
 
 def _draw(rng: np.random.Generator, spec) -> float:

@@ -96,7 +96,7 @@ def anatomical_parameters(seed: int, spread: float = 1.0) -> PhantomParameters:
     ``spread``: every uniform range widened (> 1) or narrowed about its centre by this factor,
     the volume's standard deviation and its clip too (the same random numbers drawn, so
     ``spread = 1`` is the population itself): livers beyond the population, drawn as far
-    outside it as a real liver lies (bench/shape_rule_study.py).
+    outside it as a real liver lies (docs/shape_rule.md).
     """
     if not (np.isfinite(spread) and spread > 0):
         raise ValueError(f"spread: expected a number > 0, got {spread!r}")

@@ -24,11 +24,9 @@ int ogden_points(int n, const double *F_all, int nterms, const double *ck, const
                  double *A_all, double *J_all);
 int ogden_threads(int n);
 """
-# No -ffast-math: the kernel relies on NaN and isfinite. OpenMP over the points. -O3 rather
-# than -O2: the same bits (ISO C: no FMA contraction, no reassociation), and the pass with
-# tangents 59-62 -> 41-46 ms at 75k points on one thread (bench/bench_kernel.py, alternated
-# with an -O2 build; the stress-only pass about unchanged). -march=native was tried too: the
-# same bits, the stiffness pass 12 % faster but the point passes 10 % slower; not kept.
+# No -ffast-math: the kernel relies on NaN and isfinite. OpenMP over the points. -O3 gives the
+# same bits as -O2 (ISO C: no FMA contraction, no reassociation) and a faster pass with
+# tangents (bench/bench_kernel.py); no -march=native, so the built module runs on any x86-64.
 COMPILE_ARGS = ["-O3", "-std=c99", "-fopenmp"]
 
 

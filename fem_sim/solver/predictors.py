@@ -154,11 +154,8 @@ class Hermite(TangentIntegration):
         when that leaves a smaller residual than zero: the solve then only corrects it, to the
         same tolerance relative to |f_ext|.
 
-        Measured on the real liver with P2 at 10 mm (71k unknowns): GMRES iterations per
-        simulation 105 -> 80, the same Newton iterations (``bench/bench_price_row.py``). In a
-        development probe the guess was within 1e-6-1e-4 of the tangent after the first steps
-        but left a relative residual of 2e-3-0.2 (its error sits in the stiff modes under the
-        load), so GMRES still runs: 1-3 iterations instead of 4-5.
+        The guess is close to the tangent after the first steps but its error sits in the
+        stiff modes under the load, so GMRES still runs, for fewer iterations.
         """
         eqs = self.eqs
         n = eqs.n_owned_dofs

@@ -31,21 +31,15 @@ from fem_sim.solver.settings import SolverSettings
 log = logging.getLogger(__name__)
 
 # An increment that would leave less than this fraction of itself before the output fraction
-# goes to the output fraction instead. Measured at 0.5 and rejected (the first step's
-# sub-increments 0.25, 0.5, 0.25 of it become 0.25, 0.75): one factorisation fewer on the real
-# liver's easy case, the phantoms, 2x force, P2 at 10-16 mm under a patch load (110 of the price
-# list's 151 runs better, 12 worse), but under a nodal load on fine P2 meshes the Hermite
-# polynomial through the unevenly spaced states (0, 0.025, 0.1) sent the second step astray:
-# real liver P2 8 mm 14 -> 21-35 factorisations (25 -> 49-76 s), the 6 mm references 14 -> 20
-# and 26. A cost that depends on luck is worse than one factorisation: back to a round-off
-# guard.
+# goes to the output fraction instead: a round-off guard only. A larger value merges the
+# stiffening start's sub-increments into unevenly spaced states, through which the Hermite
+# polynomial extrapolates badly (docs/solver.md).
 STRETCH = 1e-3
 
-# Increment control from the Hermite predictor's own error (at full order). Measured on the real
-# liver, P2 10 mm, patch load (development probe; the resulting costs: bench/bench_price_row.py
-# --steps): guesses off by <= 1.3e-3 of the increment converged with one factorisation,
-# 4e-3-2e-2 needed three (and 5-6 Newton iterations); the error grew 11-25x when the increment
-# doubled mid-load (as h^3.5-h^4.6; the theory's h^5 holds only asymptotically).
+# Increment control from the Hermite predictor's own error (at full order): a guess off by
+# about 1e-3 of the increment converges with one factorisation, one off by 1e-2 needs about
+# three, and the error grows faster than the increment (as h^3.5-h^4.6), so the increment is
+# sized to keep it near ERROR_TARGET.
 ERROR_TARGET = 1e-3
 ERROR_SHRINK = 3e-3
 # An increment is shrunk for ERROR_SHRINK only if it needed at least this many factorisations

@@ -1,5 +1,5 @@
 """A report section that another benchmark owns survives the report's own rewrite, and is
-replaced, not repeated, when its owner writes it again (bench/report.py)."""
+replaced, not repeated, when its owner writes it again (liverviz/report.py)."""
 
 from liverviz.report import put_section, sections
 

@@ -1,3 +1,4 @@
+import os
 from pathlib import Path
 
 import pytest
@@ -5,6 +6,20 @@ import pytest
 from tests.fixtures import synthetic_dataset
 
 ROOT = Path(__file__).parents[2]
+
+
+def generated_dataset(variable: str) -> Path:
+    """The fem_sim dataset named by the environment ``variable`` (make test generates it in
+    the solver environment and sets the variable). Missing, the test fails: a run outside
+    make test deselects these tests with -m 'not dataset' rather than passing without them.
+    """
+    d = os.environ.get(variable)
+    if not d:
+        pytest.fail(f"{variable} not set: make test generates the fem_sim dataset this test "
+                    "needs; deselect the dataset tests with -m 'not dataset'")
+    if not (Path(d) / "scene.toml").exists():
+        pytest.fail(f"{variable}={d}: not a dataset (no scene.toml)")
+    return Path(d)
 
 
 @pytest.fixture(scope="session")

@@ -16,11 +16,16 @@ from surrogate.__main__ import main
 from surrogate.config import get_config
 from surrogate.predict_liver import LiverFileError, predict_liver, read_liver_surface
 from surrogate.train import train_and_evaluate
+from tests.surrogate.conftest import generated_dataset
 
 DATA = os.environ.get("LIVERFEM_TEST_DATASET4")
 SOFA = Path(__file__).parents[3] / "shared" / "data" / "livers" / "sofa_liver.vtk"
-pytestmark = pytest.mark.skipif(not DATA, reason="LIVERFEM_TEST_DATASET4 not set (make test "
-                                                 "sets it)")
+pytestmark = pytest.mark.dataset
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _population_dataset():
+    generated_dataset("LIVERFEM_TEST_DATASET4")
 
 
 @pytest.fixture(scope="module")
@@ -421,3 +426,31 @@ def test_shape_noise_perturbs_only_the_shape_coefficients():
             get_config("small", design=d, shape_noise=0.5)
     with pytest.raises(ValueError, match="shape_noise: expected null or a finite number >= 0"):
         get_config("population_basis", shape_noise=-1.0)
+
+
+def test_the_truth_of_a_liver_carries_the_models_fixed_region_and_is_evaluated(run, tmp_path,
+                                                                                capsys):
+    """truth-scene: the population scene's settings on one liver file, fixed at the points
+    where the model's placement puts the template's fixed region; evaluate_liver on that
+    liver's own simulations of the population (as if they were its truth) reports the model
+    and the naive model on them."""
+    from data_spec import load_scene
+    from data_spec.geometry import read_geometry
+    from surrogate.evaluate import evaluate_liver, place
+
+    liver, _ = _population_liver(1)
+    out = tmp_path / "truth.toml"
+    assert main(["truth-scene", str(run), str(liver), "--scene", str(Path(DATA) / "scene.toml"),
+                 "--sims", "3", "--frame", "population", "--out", str(out)]) == 0
+    scene = load_scene(out)
+    assert scene["geometry"]["source"] == "file" and scene["scene"]["n_simulations"] == 3
+    assert scene["fixed"]["kind"] == "points"
+    pred = load_predictor(run / "model")
+    placement, found = place(pred, liver, "population")
+    fixed_points = np.asarray(scene["fixed"]["points"])
+    want = placement.to_liver(placement.points[pred.shape_model.fixed_nodes])
+    np.testing.assert_allclose(fixed_points, want, atol=1e-3)
+    gid = read_geometry(liver).geometry_id
+    m = evaluate_liver(pred, Path(DATA), placement, found, geometry_id=gid)
+    assert m["sims"] == 6 and np.isfinite(m["skill"]) and m["inverted"] == placement.inverted
+    assert "modes_floor_mm" not in m  # a node-wise model has no modes

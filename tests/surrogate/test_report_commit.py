@@ -1,4 +1,4 @@
-"""The commit a benchmark report names (bench/report.py: commit): "+ local changes" for code
+"""The commit a benchmark report names (liverviz.report.commit): "+ local changes" for code
 that differs from HEAD, not for the reports the run itself writes under docs/."""
 
 import subprocess
