@@ -83,6 +83,86 @@ class DataError(ValueError):
     """A dataset that cannot be trained on; the message names the directory or shard."""
 
 
+class _Reader:
+    """The arrays of a dataset, filled shard by shard: per liver (geometry) and per sample
+    (a converged load step); targets in memory or written to ``spill``.
+    """
+
+    def __init__(self, directory: Path, scene, spill):
+        self.directory, self.scene, self.spill = directory, scene, spill
+        self.geo_index: dict[str, int] = {}
+        self.geo = {k: [] for k in ("points", "fixed", "out_nodes", "triangles", "shapes",
+                                    "statics", "loadable")}
+        self.smp = {k: [] for k in ("geo", "sim", "fr", "f", "lp", "ln", "extra", "targets")}
+        self.failed = 0
+
+    def liver(self, sh) -> int:
+        """The index of the shard's liver, read the first time one of its shards comes."""
+        if sh.geometry_id not in self.geo_index:
+            g = read_geometry(geometry_path(self.directory, sh.geometry_id))
+            self.geo_index[sh.geometry_id] = len(self.geo["points"])
+            for key, value in (
+                    ("points", g.points), ("fixed", sh.fixed_nodes),
+                    ("out_nodes", sh.output_nodes), ("triangles", g.surface_triangles),
+                    ("loadable", eligible_load_nodes(self.scene["loads"], g.points,
+                                                     g.surface_nodes, sh.fixed_nodes)),
+                    ("shapes", g.shape_coefficients if g.shape_coefficients is not None
+                     else np.zeros(0)),
+                    ("statics", static_node_features(g.points,
+                                                     sh.fixed_nodes)[sh.output_nodes])):
+                self.geo[key].append(value)
+        return self.geo_index[sh.geometry_id]
+
+    def add(self, sh) -> None:
+        """The shard's converged load steps as samples."""
+        if sh.status != "ok":
+            self.failed += 1
+        if sh.n_done == 0:
+            return
+        gi = self.liver(sh)
+        lp = self.geo["points"][gi][sh.load_nodes]  # load nodes, or patch centres
+        mat = material_vector(sh.material.c, sh.material.m, sh.material.K)
+        s = self.smp
+        for k in range(sh.n_done):
+            for key, value in (("geo", gi), ("sim", sh.sim_index), ("fr", sh.load_fractions[k]),
+                               ("f", sh.forces * sh.load_fractions[k]), ("lp", lp),
+                               ("ln", sh.load_nodes), ("extra", mat)):
+                s[key].append(value)
+            t = sh.displacement[k].astype(np.float32)
+            if self.spill is not None:
+                self.spill.write(np.ascontiguousarray(t).tobytes())
+                t = np.empty((t.shape[0], 0), np.float32)  # its size only
+            s["targets"].append(t)
+
+    def dataset(self, final: Path | None) -> Dataset:
+        geo, s = self.geo, self.smp
+        n_shape = geo["shapes"][0].size if geo["shapes"] else 0
+        spec = FeatureSpec.from_scene(self.scene, n_shape)
+        extra = np.asarray(s["extra"])[:, : spec.material_dim] if spec.material_dim else \
+            np.zeros((len(s["geo"]), 0))
+        if spec.geometry_dim:
+            extra = np.concatenate([extra, np.asarray([geo["shapes"][g] for g in s["geo"]])],
+                                   axis=1)
+        sizes = np.array([t.shape[0] for t in s["targets"]])
+        targets = (np.memmap(final, dtype=np.float32, mode="r", shape=(int(sizes.sum()), 3))
+                   if final is not None else np.concatenate(s["targets"]))
+        sample_geo, load_nodes = np.asarray(s["geo"]), np.asarray(s["ln"])
+        return Dataset(
+            spec=spec, scene_name=self.scene.name,
+            static=np.concatenate(geo["statics"]).astype(np.float32),
+            geo_offset=np.concatenate([[0], np.cumsum([a.shape[0] for a in geo["statics"]])]),
+            geo_ids=list(self.geo_index), points=geo["points"], fixed=geo["fixed"],
+            out_nodes=geo["out_nodes"], triangles=geo["triangles"], shape_coeffs=geo["shapes"],
+            sample_geo=sample_geo, sample_sim=np.asarray(s["sim"]),
+            sample_fraction=np.asarray(s["fr"]), forces=np.asarray(s["f"], dtype=np.float32),
+            load_points=np.asarray(s["lp"], dtype=np.float32), load_nodes=load_nodes,
+            extra=np.asarray(extra, dtype=np.float32), targets=targets,
+            sample_offset=np.concatenate([[0], np.cumsum(sizes)]), failed_sims=self.failed,
+            loadable=None if self.scene.cases else [
+                np.union1d(rule, load_nodes[sample_geo == g].ravel())
+                for g, rule in enumerate(geo["loadable"])], directory=self.directory)
+
+
 def load_dataset(directory: str | Path, stream: bool | str = "auto",
                  spill_dir: str | Path | None = None) -> Dataset:
     """Read every shard of ``directory`` (ok shards and the converged steps of failed ones).
@@ -111,11 +191,7 @@ def load_dataset(directory: str | Path, stream: bool | str = "auto",
         final = Path(spill_dir or directory) / "targets.f32"
         spill = stack.enter_context(open(stack.enter_context(atomic_path(final)), "wb"))
         log.info("streaming targets to %s", final)
-    geo_index: dict[str, int] = {}
-    points, fixed, out_nodes, triangles, shapes, statics = [], [], [], [], [], []
-    loadable = []
-    s_geo, s_sim, s_fr, s_f, s_lp, s_ln, s_extra, targets = [], [], [], [], [], [], [], []
-    failed = 0
+    reader = _Reader(directory, scene, spill)
     with stack:  # on leaving: the spill file is closed, then renamed (last in, first out)
         for p in paths:
             try:
@@ -123,67 +199,11 @@ def load_dataset(directory: str | Path, stream: bool | str = "auto",
             except (OSError, ValueError, KeyError) as exc:
                 raise DataError(f"{p}: cannot be read ({exc}); run `python -m data_spec "
                                 f"validate {directory}` and regenerate it") from None
-            if sh.status != "ok":
-                failed += 1
-            if sh.n_done == 0:
-                continue
-            if sh.geometry_id not in geo_index:
-                g = read_geometry(geometry_path(directory, sh.geometry_id))
-                geo_index[sh.geometry_id] = len(points)
-                points.append(g.points)
-                fixed.append(sh.fixed_nodes)
-                out_nodes.append(sh.output_nodes)
-                triangles.append(g.surface_triangles)
-                loadable.append(eligible_load_nodes(scene["loads"], g.points, g.surface_nodes,
-                                                    sh.fixed_nodes))
-                shapes.append(g.shape_coefficients if g.shape_coefficients is not None
-                              else np.zeros(0))
-                statics.append(static_node_features(g.points, sh.fixed_nodes)[sh.output_nodes])
-            gi = geo_index[sh.geometry_id]
-            lp = points[gi][sh.load_nodes]  # load nodes, or patch centres
-            mat = material_vector(sh.material.c, sh.material.m, sh.material.K)
-            for k in range(sh.n_done):
-                s_geo.append(gi)
-                s_sim.append(sh.sim_index)
-                s_fr.append(sh.load_fractions[k])
-                s_f.append(sh.forces * sh.load_fractions[k])
-                s_lp.append(lp)
-                s_ln.append(sh.load_nodes)
-                s_extra.append(mat)
-                t = sh.displacement[k].astype(np.float32)
-                if spill is not None:
-                    spill.write(np.ascontiguousarray(t).tobytes())
-                    targets.append(np.empty((t.shape[0], 0), np.float32))  # size only
-                else:
-                    targets.append(t)
-    if not s_geo:
+            reader.add(sh)
+    if not reader.smp["geo"]:
         raise DataError(f"{directory}: none of the {len(paths)} shards has a converged load "
-                        f"step ({failed} failed): nothing to train on")
-    n_shape = shapes[0].size if shapes else 0
-    spec = FeatureSpec.from_scene(scene, n_shape)
-    extra = np.asarray(s_extra)[:, : spec.material_dim] if spec.material_dim else np.zeros(
-        (len(s_geo), 0))
-    if spec.geometry_dim:
-        extra = np.concatenate([extra, np.asarray([shapes[g] for g in s_geo])], axis=1)
-    sizes = np.array([t.shape[0] for t in targets])
-    if final is not None:
-        all_targets = np.memmap(final, dtype=np.float32, mode="r", shape=(int(sizes.sum()), 3))
-    else:
-        all_targets = np.concatenate(targets)
-    return Dataset(
-        spec=spec, scene_name=scene.name,
-        static=np.concatenate(statics).astype(np.float32),
-        geo_offset=np.concatenate([[0], np.cumsum([s.shape[0] for s in statics])]),
-        geo_ids=list(geo_index), points=points, fixed=fixed, out_nodes=out_nodes,
-        triangles=triangles,
-        shape_coeffs=shapes, sample_geo=np.asarray(s_geo), sample_sim=np.asarray(s_sim),
-        sample_fraction=np.asarray(s_fr), forces=np.asarray(s_f, dtype=np.float32),
-        load_points=np.asarray(s_lp, dtype=np.float32), load_nodes=np.asarray(s_ln),
-        extra=np.asarray(extra, dtype=np.float32), targets=all_targets,
-        sample_offset=np.concatenate([[0], np.cumsum(sizes)]), failed_sims=failed,
-        loadable=None if scene.cases else [
-            np.union1d(rule, np.asarray(s_ln)[np.asarray(s_geo) == g].ravel())
-            for g, rule in enumerate(loadable)], directory=directory)
+                        f"step ({reader.failed} failed): nothing to train on")
+    return reader.dataset(final)
 
 
 def restrict_nodes(ds: Dataset, keep: list[np.ndarray]) -> Dataset:

@@ -189,88 +189,88 @@ class Checkpoint:
         return serialization.from_bytes(template, blob), meta
 
 
+def _start(problem: Problem, cfg: dict, seed: int, rng, checkpoint, log_fn, label, eval_loss,
+           validate):
+    """(training state, history, first epoch, last validation loss): fresh from ``seed``, or
+    resumed from the checkpoint's last epoch (``rng`` restored with it).
+    """
+    key = jax.random.PRNGKey(seed)
+    key, k_init = jax.random.split(key)
+    params = problem.init(k_init)
+    tx = optimizer(cfg, problem.steps_per_epoch)
+    state = {"params": params, "opt_state": tx.init(params), "best": params, "key": key,
+             "stop": EarlyStopping(min_delta=0.0, patience=cfg["early_stopping"] - 1)}
+    loaded = checkpoint.load(state) if checkpoint is not None else None
+    if loaded is not None:
+        state, meta = loaded
+        rng.bit_generator.state = meta["rng"]
+        log_fn(f"{label}resumed after epoch {meta['epoch']} from {checkpoint.dir}")
+        return state, meta["history"], meta["epoch"], meta["last_val"]
+    if problem.validation() is not None:
+        return state, [], 0, validate(params)  # the plateau rule's first value
+    # nothing held out: the first training batch's loss
+    first = problem.batch(problem.epoch(np.random.default_rng(0))[0])
+    return state, [], 0, float(eval_loss(params, problem.data, first))
+
+
+def _epoch(problem: Problem, state: dict, train_step, rng, last_val) -> tuple[float, int]:
+    """One epoch of steps on ``state`` (updated in place): (mean training loss, examples)."""
+    order = problem.epoch(rng)
+    if len(order) != problem.steps_per_epoch:
+        raise RuntimeError(f"{type(problem).__name__}: {len(order)} batches in an epoch, "
+                           f"declared {problem.steps_per_epoch}")
+    losses, n = [], 0
+    value = jnp.asarray(last_val, jnp.float32)
+    params, opt_state, key = state["params"], state["opt_state"], state["key"]
+    for indices in order:
+        key, k = jax.random.split(key)
+        params, opt_state, mse = train_step(params, opt_state, problem.data,
+                                            problem.batch(indices), k, value)
+        losses.append(mse)
+        n += problem.examples(indices)
+    state.update(params=params, opt_state=opt_state, key=key)
+    return float(np.mean(jax.device_get(losses))), n
+
+
 def fit(problem: Problem, cfg: dict, seed: int, rng: np.random.Generator, *,
         label: str = "", log_fn=print, log_every: int = 1,
         checkpoint: Checkpoint | None = None) -> tuple[Any, list[dict]]:
     """Train ``problem``; returns (best parameters by validation loss, per-epoch history).
 
     ``rng`` draws the batches (its state is checkpointed with the rest); ``checkpoint``: save
-    after every epoch and resume from the last one saved.
+    after every epoch and resume from the last one saved. Without validation examples the
+    plateau rule and early stopping watch the training loss.
     """
-    key = jax.random.PRNGKey(seed)
-    key, k_init = jax.random.split(key)
-    params = problem.init(k_init)
     steps = problem.steps_per_epoch
-    tx = optimizer(cfg, steps)
-    opt_state = tx.init(params)
-    stop = EarlyStopping(min_delta=0.0, patience=cfg["early_stopping"] - 1)
-    data, val = problem.data, problem.validation()
-
-    train_step = make_train_step(problem.loss, tx)
+    train_step = make_train_step(problem.loss, optimizer(cfg, steps))
     eval_loss = jax.jit(lambda p, d, b: problem.loss(p, d, b, jax.random.PRNGKey(0), False))
+    val = problem.validation()
 
     def validate(p):
-        return float(eval_loss(p, data, val)) if val is not None else None
+        return float(eval_loss(p, problem.data, val))
 
-    state = {"params": params, "opt_state": opt_state, "best": params, "key": key,
-             "stop": stop}
-    history: list[dict] = []
-    start, last_val = 0, None
-    loaded = checkpoint.load(state) if checkpoint is not None else None
-    if loaded is not None:
-        state, meta = loaded
-        history, start = meta["history"], meta["epoch"]
-        rng.bit_generator.state = meta["rng"]
-        last_val = meta["last_val"]
-        log_fn(f"{label}resumed after epoch {start} from {checkpoint.dir}")
-    elif val is not None:
-        last_val = validate(params)  # the plateau rule's first value: the loss before any step
-    else:  # nothing held out: the first training batch's
-        last_val = float(eval_loss(params, data,
-                                   problem.batch(problem.epoch(np.random.default_rng(0))[0])))
-    params, opt_state, best = state["params"], state["opt_state"], state["best"]
-    key, stop = state["key"], state["stop"]
-    if stop.should_stop:
-        return jax.device_get(best), history
+    state, history, start, last_val = _start(problem, cfg, seed, rng, checkpoint, log_fn,
+                                             label, eval_loss, validate)
     for epoch in range(start, cfg["epochs"]):
+        if state["stop"].should_stop:
+            break
         t0 = time.perf_counter()
-        lr = learning_rate_now(cfg, opt_state, epoch * steps, steps)  # this epoch's
-        order = problem.epoch(rng)
-        if len(order) != steps:
-            raise RuntimeError(f"{type(problem).__name__}: {len(order)} batches in an epoch, "
-                               f"declared {steps}")
-        losses, n = [], 0
-        value = jnp.asarray(last_val, jnp.float32)
-        for indices in order:
-            batch = problem.batch(indices)
-            key, k = jax.random.split(key)
-            params, opt_state, mse = train_step(params, opt_state, data, batch, k, value)
-            losses.append(mse)
-            n += problem.examples(indices)
-        train_loss = float(np.mean(jax.device_get(losses)))
-        if val is None:
-            # Nothing held out: the plateau rule and early stopping watch the training loss.
-            val_loss = train_loss
-            last_val = train_loss
-        else:
-            val_loss = last_val = validate(params)
+        lr = learning_rate_now(cfg, state["opt_state"], epoch * steps, steps)  # this epoch's
+        train_loss, n = _epoch(problem, state, train_step, rng, last_val)
+        val_loss = last_val = train_loss if val is None else validate(state["params"])
         dt = time.perf_counter() - t0
         history.append({"epoch": epoch + 1, "train_loss": train_loss, "val_loss": val_loss,
                         "lr": lr, "seconds": dt, "examples_per_s": n / dt})
         if epoch % log_every == 0:
             log_fn(f"{label}epoch {epoch + 1:3d}  train {train_loss:.4e}  val {val_loss:.4e}  "
                    f"lr {lr:.1e}  {n / dt:,.0f} examples/s")
-        stop = stop.update(val_loss)
-        if stop.has_improved:
-            best = params
+        state["stop"] = state["stop"].update(val_loss)
+        if state["stop"].has_improved:
+            state["best"] = state["params"]
         if checkpoint is not None:
-            checkpoint.save({"params": params, "opt_state": opt_state, "best": best,
-                             "key": key, "stop": stop},
-                            {"epoch": epoch + 1, "history": history,
-                             "rng": rng.bit_generator.state, "last_val": last_val})
-        if stop.should_stop:
-            break
-    return jax.device_get(best), history
+            checkpoint.save(dict(state), {"epoch": epoch + 1, "history": history,
+                                          "rng": rng.bit_generator.state, "last_val": last_val})
+    return jax.device_get(state["best"]), history
 
 
 def learning_rate_now(cfg: dict, opt_state, steps_done: int, steps_per_epoch: int) -> float:

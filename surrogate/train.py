@@ -132,27 +132,16 @@ def _load_fold(path: Path):
         return None
 
 
-def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
-                       log_fn=None, fresh: bool = False) -> dict:
-    """k-fold CV + metrics + plots + (optionally) a final model exported to RUN/model.
-
-    Resumes from RUN/checkpoints when they belong to the same configuration and dataset
-    (``fresh=True`` discards them); they are removed once the run is complete.
+def _load(data_dir, run: Path, cfg: dict, say) -> Dataset:
+    """The dataset, checked for the config's design; no empty run directory is left behind a
+    dataset that cannot be read.
     """
-    run = Path(run_dir)
     created = not run.exists()
     check_writable(run)  # a read-only run directory fails now, not after the training
-    lines = []
-
-    def say(msg):
-        lines.append(msg)
-        (log_fn or (lambda m: print(m, file=sys.stderr, flush=True)))(msg)
-
-    t0 = time.perf_counter()
     try:
         ds = load_dataset(data_dir, stream=cfg.get("stream", "auto"), spill_dir=run)
     except Exception:
-        if created:  # leave no empty run directory behind a dataset that cannot be read
+        if created:
             shutil.rmtree(run, ignore_errors=True)
         raise
     say(f"dataset {data_dir}: {ds.n_samples} samples ({np.unique(ds.sample_sim).size} "
@@ -160,17 +149,17 @@ def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
         f"{ds.spec.dim} features: {', '.join(ds.spec.names())}"
         + ("; targets streamed from disk" if isinstance(ds.targets, np.memmap) else ""))
     DESIGNS[cfg["design"]].check(ds)
-    (run / "config.json").write_text(json.dumps(cfg, indent=1))
-    ckpt = run / "checkpoints"
-    if fresh:
-        shutil.rmtree(ckpt, ignore_errors=True)
-    identity = engine.config_hash(cfg, {"data": str(Path(data_dir).resolve()),
-                                        "samples": int(ds.n_samples),
-                                        "examples": int(ds.targets.shape[0])})
-    folds = kfold_groups(ds, cfg["folds"], cfg["seed"])
-    folds = folds[:cfg.get("evaluate_folds") or None]
-    preds, trues, smps, naive, history = [], [], [], [], {}
-    train_time, examples = 0.0, 0
+    return ds
+
+
+def _cross_validate(ds: Dataset, cfg: dict, ckpt: Path, identity: str, say) -> dict:
+    """Every evaluated fold trained (or read back from its checkpoint) and predicted: the
+    held-out predictions, truths, samples and naive fields per fold, the history, the
+    training seconds and examples.
+    """
+    folds = kfold_groups(ds, cfg["folds"], cfg["seed"])[:cfg.get("evaluate_folds") or None]
+    cv = {"pred": [], "true": [], "smp": [], "naive": [], "history": {}, "seconds": 0.0,
+          "examples": 0.0, "n_folds": len(folds)}
     for k, held in enumerate(folds):
         done = ckpt / f"fold{k}" / f"result-{identity}.npz"
         saved = _load_fold(done)
@@ -186,48 +175,87 @@ def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
             mean_disp = training_mean(ds, train_samples)
             _save_fold(done, p, y, s, mean_disp, hist)
         # from the epochs' own records, so a resumed run reports the whole training
-        examples += sum(h["examples_per_s"] * h["seconds"] for h in hist)
-        train_time += sum(h["seconds"] for h in hist)
-        history[f"fold{k}"] = hist
-        preds.append(p)
-        trues.append(y)
-        smps.append(s)
-        naive.append(np.broadcast_to(mean_disp, y.shape))
-    pred, true, smp, nv = (np.concatenate(a) for a in (preds, trues, smps, naive))
+        cv["examples"] += sum(h["examples_per_s"] * h["seconds"] for h in hist)
+        cv["seconds"] += sum(h["seconds"] for h in hist)
+        cv["history"][f"fold{k}"] = hist
+        for key, value in (("pred", p), ("true", y), ("smp", s),
+                           ("naive", np.broadcast_to(mean_disp, y.shape))):
+            cv[key].append(value)
+    return cv
+
+
+def _result(ds: Dataset, cfg: dict, cv: dict) -> dict:
+    """metrics.json's content: the pooled metrics of the held-out folds beside the naive
+    model's, each fold's own, and the training's cost.
+    """
+    pred, true, smp, nv = (np.concatenate(cv[k]) for k in ("pred", "true", "smp", "naive"))
     m_nn, m_naive = displacement_metrics(pred, true), displacement_metrics(nv, true)
-    result = {"scene": ds.scene_name, "folds": cfg["folds"], "evaluated_folds": len(folds),
-              "network": m_nn,
-              "naive": m_naive, "skill": m_nn["mee"] / m_naive["mee"],
+    seconds = cv["seconds"]
+    result = {"scene": ds.scene_name, "folds": cfg["folds"], "evaluated_folds": cv["n_folds"],
+              "network": m_nn, "naive": m_naive, "skill": m_nn["mee"] / m_naive["mee"],
               "n_simulations": int(np.unique(ds.sample_sim).size),
               "n_samples": int(ds.n_samples), "n_examples": int(ds.targets.shape[0]),
               # each evaluated fold's own MEE and skill (the spread of the held-out sets)
               "per_fold": [{"mee": float(np.linalg.norm(p - y, axis=1).mean()),
                             "skill": float(np.linalg.norm(p - y, axis=1).mean()
                                            / np.linalg.norm(n - y, axis=1).mean())}
-                           for p, y, n in zip(preds, trues, naive)],
-              "training_seconds": train_time,
-              "training_examples_per_s": examples / train_time if train_time else 0.0}
+                           for p, y, n in zip(cv["pred"], cv["true"], cv["naive"])],
+              "training_seconds": seconds,
+              "training_examples_per_s": cv["examples"] / seconds if seconds else 0.0}
     if ds.spec.geometry_dim or len(ds.geo_ids) > 1:
         result["per_liver_mee"] = per_liver(pred, true, nv, ds.sample_geo[smp])
-    table = metrics_table({"network": m_nn, "naive (mean displacement)": m_naive})
-    how = (f"{cfg['folds']}-fold cross-validation" if len(folds) == cfg["folds"] else
-           f"the first {len(folds)} of {cfg['folds']} folds held out")
+    return result
+
+
+def _final_fit(ds: Dataset, cfg: dict, run: Path, ckpt: Path, identity: str, say) -> list:
+    """The exported model, trained on every simulation; its history."""
+    model, hist = fit_design(ds, np.arange(ds.n_samples), cfg, cfg["seed"], "final ", say,
+                             engine.Checkpoint(ckpt / "final", identity))
+    _, held, _ = early_stopping_split(ds, np.arange(ds.n_samples), cfg, cfg["seed"])
+    export_model(run / "model", model, cfg, ds, np.unique(ds.sample_sim[held]))
+    say(f"model exported to {run / 'model'}")
+    return hist
+
+
+def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
+                       log_fn=None, fresh: bool = False) -> dict:
+    """k-fold CV + metrics + plots + (optionally) a final model exported to RUN/model.
+
+    Resumes from RUN/checkpoints when they belong to the same configuration and dataset
+    (``fresh=True`` discards them); they are removed once the run is complete.
+    """
+    run = Path(run_dir)
+    lines = []
+
+    def say(msg):
+        lines.append(msg)
+        (log_fn or (lambda m: print(m, file=sys.stderr, flush=True)))(msg)
+
+    t0 = time.perf_counter()
+    ds = _load(data_dir, run, cfg, say)
+    (run / "config.json").write_text(json.dumps(cfg, indent=1))
+    ckpt = run / "checkpoints"
+    if fresh:
+        shutil.rmtree(ckpt, ignore_errors=True)
+    identity = engine.config_hash(cfg, {"data": str(Path(data_dir).resolve()),
+                                        "samples": int(ds.n_samples),
+                                        "examples": int(ds.targets.shape[0])})
+    cv = _cross_validate(ds, cfg, ckpt, identity, say)
+    result = _result(ds, cfg, cv)
+    table = metrics_table({"network": result["network"],
+                           "naive (mean displacement)": result["naive"]})
+    how = (f"{cfg['folds']}-fold cross-validation" if cv["n_folds"] == cfg["folds"] else
+           f"the first {cv['n_folds']} of {cfg['folds']} folds held out")
     md = (f"# {ds.scene_name}: {how}\n\n{table}\n\n"
           f"skill = MEE_NN / MEE_naive = {result['skill']:.4f} (paper, scene 1: 0.078)\n")
     say("\n" + table + f"\nskill = MEE_NN / MEE_naive = {result['skill']:.4f}")
-    error_plots(run, pred, true, result)
+    error_plots(run, np.concatenate(cv["pred"]), np.concatenate(cv["true"]), result)
     if cfg["final_fit"]:
-        model, hist = fit_design(ds, np.arange(ds.n_samples), cfg, cfg["seed"], "final ", say,
-                                 engine.Checkpoint(ckpt / "final", identity))
-        history["final"] = hist
-        _, held, _ = early_stopping_split(ds, np.arange(ds.n_samples), cfg, cfg["seed"])
-        unseen = np.unique(ds.sample_sim[held])
-        export_model(run / "model", model, cfg, ds, unseen)
-        say(f"model exported to {run / 'model'}")
+        cv["history"]["final"] = _final_fit(ds, cfg, run, ckpt, identity, say)
     result["total_seconds"] = time.perf_counter() - t0
     (run / "metrics.json").write_text(json.dumps(result, indent=1))
     (run / "metrics.md").write_text(md)
-    (run / "history.json").write_text(json.dumps(history, indent=1))
+    (run / "history.json").write_text(json.dumps(cv["history"], indent=1))
     (run / "log.txt").write_text("\n".join(lines) + "\n")
     if isinstance(ds.targets, np.memmap):
         Path(ds.targets.filename).unlink(missing_ok=True)  # a cache, not a result

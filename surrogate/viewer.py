@@ -77,29 +77,29 @@ def dataset_liver(data: Path, liver: str | None):
     raise ViewerError(f"{data}: no simulation on liver {liver!r}")
 
 
-def load_script(path: Path | None, m) -> tuple[list[dict], float]:
-    """(frames, fps) of a force script: each frame gives nodes, forces (n_loads, 3) and inputs,
-    checked against the model; errors name the file and the key.
-    """
+def _default_script(m) -> list[dict]:
+    """At the far node: push in, sweep sideways, pull out, let go."""
     L = len(m.handles)
-    if path is None:  # the default at the far node: push in, sweep sideways, pull out, let go
-        node = m.handles[0].node
-        i = m.surface.local([node])[0]
-        n = m.surface.normals()[i]
-        side = np.cross(n, [0.0, 0.0, 1.0])
-        side = side / max(np.linalg.norm(side), 1e-12)
-        f = m.f_max
-        keys = [(np.zeros(3), 1), (-f * n, 12), (f * side, 12), (f * n * 0.6, 12),
-                (-f * side, 12), (np.zeros(3), 10)]
-        frames, prev = [], np.zeros((L, 3))
-        for target, steps in keys:
-            tgt = np.zeros((L, 3))
-            tgt[0] = target
-            if L > 1:
-                tgt[1] = -target[[1, 2, 0]] * 0.5
-            frames += _ramp(prev, tgt, steps, [h.node for h in m.handles], None)
-            prev = tgt
-        return frames, 12.0
+    node = m.handles[0].node
+    n = m.surface.normals()[m.surface.local([node])[0]]
+    side = np.cross(n, [0.0, 0.0, 1.0])
+    side = side / max(np.linalg.norm(side), 1e-12)
+    f = m.f_max
+    keys = [(np.zeros(3), 1), (-f * n, 12), (f * side, 12), (f * n * 0.6, 12),
+            (-f * side, 12), (np.zeros(3), 10)]
+    frames, prev = [], np.zeros((L, 3))
+    for target, steps in keys:
+        tgt = np.zeros((L, 3))
+        tgt[0] = target
+        if L > 1:
+            tgt[1] = -target[[1, 2, 0]] * 0.5
+        frames += _ramp(prev, tgt, steps, [h.node for h in m.handles], None)
+        prev = tgt
+    return frames
+
+
+def _read_script(path: Path) -> tuple[list, float]:
+    """(the script's frame entries, fps), the file's shape checked."""
     try:
         spec = json.loads(Path(path).read_text())
     except FileNotFoundError:
@@ -115,10 +115,65 @@ def load_script(path: Path | None, m) -> tuple[list[dict], float]:
     fps = spec.get("fps", 10)
     if not isinstance(fps, (int, float)) or not 0 < fps <= 60:
         raise ViewerError(f"{path}: fps: expected a number in (0, 60], got {fps!r}")
+    return spec["frames"], float(fps)
+
+
+def _array(value, shape) -> np.ndarray | None:
+    """``value`` as a finite float array of ``shape``, else None."""
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    return a if a.shape == shape and np.all(np.isfinite(a)) else None
+
+
+def _frame_nodes(where: str, entry: dict, m, L: int) -> list | None:
+    """The nodes a script entry moves the forces to (None: where they were)."""
+    if "nodes" in entry and "points" in entry:
+        raise ViewerError(f"{where}: give nodes or points, not both")
+    if "nodes" in entry:
+        ids = entry["nodes"]
+        if not (isinstance(ids, list) and len(ids) == L and all(
+                isinstance(i, int) and 0 <= i < m.points.shape[0] for i in ids)):
+            raise ViewerError(f"{where}: nodes: expected {L} node id(s) in "
+                              f"[0, {m.points.shape[0]}), got {ids!r}")
+        fixed = sorted(set(ids) & set(m.fixed.tolist()))
+        if fixed:
+            raise ViewerError(f"{where}: nodes: {fixed} are in the fixed region (zero "
+                              "displacement): a force there moves nothing")
+        return list(ids)
+    if "points" in entry:
+        pts = _array(entry["points"], (L, 3))
+        if pts is None:
+            raise ViewerError(f"{where}: points: expected {L} finite [x, y, z] in mm")
+        return [m.nearest_surface_node(p) for p in pts]
+    return None
+
+
+def _frame_inputs(where: str, entry: dict, m) -> list | None:
+    """The material/shape inputs a script entry sets (None: as they were)."""
+    if "inputs" not in entry:
+        return None
+    vals = entry["inputs"]
+    if not (isinstance(vals, list) and len(vals) == len(m.inputs) and all(
+            isinstance(v, (int, float)) and np.isfinite(v) for v in vals)):
+        names = [i.name for i in m.inputs]
+        raise ViewerError(f"{where}: inputs: expected {len(names)} numbers "
+                          f"({', '.join(names) or 'this model takes none'})")
+    return list(vals)
+
+
+def load_script(path: Path | None, m) -> tuple[list[dict], float]:
+    """(frames, fps) of a force script: each frame gives nodes, forces (n_loads, 3) and inputs,
+    checked against the model; errors name the file and the key. None: the default script.
+    """
+    if path is None:
+        return _default_script(m), 12.0
+    entries, fps = _read_script(path)
+    L = len(m.handles)
     frames, prev = [], np.zeros((L, 3))
-    nodes = [h.node for h in m.handles]
-    inputs = None
-    for k, entry in enumerate(spec["frames"]):
+    nodes, inputs = [h.node for h in m.handles], None
+    for k, entry in enumerate(entries):
         where = f"{path}: frames[{k}]"
         if not isinstance(entry, dict):
             raise ViewerError(f"{where}: expected an object")
@@ -126,48 +181,19 @@ def load_script(path: Path | None, m) -> tuple[list[dict], float]:
         if bad:
             raise ViewerError(f"{where}: unknown key(s) {sorted(bad)} (expected nodes or "
                               "points, forces, steps, inputs)")
-        try:
-            forces = np.asarray(entry.get("forces"), dtype=float)
-        except (TypeError, ValueError):
-            forces = np.zeros(0)
-        if forces.shape != (L, 3) or not np.all(np.isfinite(forces)):
+        forces = _array(entry.get("forces"), (L, 3))
+        if forces is None:
             raise ViewerError(f"{where}: forces: expected {L} finite [fx, fy, fz] in N, got "
                               f"{entry.get('forces')!r}")
-        if "nodes" in entry and "points" in entry:
-            raise ViewerError(f"{where}: give nodes or points, not both")
-        if "nodes" in entry:
-            ids = entry["nodes"]
-            if not (isinstance(ids, list) and len(ids) == L and all(
-                    isinstance(i, int) and 0 <= i < m.points.shape[0] for i in ids)):
-                raise ViewerError(f"{where}: nodes: expected {L} node id(s) in "
-                                  f"[0, {m.points.shape[0]}), got {ids!r}")
-            fixed = sorted(set(ids) & set(m.fixed.tolist()))
-            if fixed:
-                raise ViewerError(f"{where}: nodes: {fixed} are in the fixed region (zero "
-                                  "displacement): a force there moves nothing")
-            nodes = list(ids)
-        elif "points" in entry:
-            try:
-                pts = np.asarray(entry["points"], dtype=float)
-            except (TypeError, ValueError):
-                pts = np.zeros(0)
-            if pts.shape != (L, 3) or not np.all(np.isfinite(pts)):
-                raise ViewerError(f"{where}: points: expected {L} finite [x, y, z] in mm")
-            nodes = [m.nearest_surface_node(p) for p in pts]
-        if "inputs" in entry:
-            vals = entry["inputs"]
-            if not (isinstance(vals, list) and len(vals) == len(m.inputs) and all(
-                    isinstance(v, (int, float)) and np.isfinite(v) for v in vals)):
-                names = [i.name for i in m.inputs]
-                raise ViewerError(f"{where}: inputs: expected {len(names)} numbers "
-                                  f"({', '.join(names) or 'this model takes none'})")
-            inputs = list(vals)
+        nodes = _frame_nodes(where, entry, m, L) or nodes
+        given = _frame_inputs(where, entry, m)
+        inputs = inputs if given is None else given
         steps = entry.get("steps", 1)
         if not isinstance(steps, int) or steps < 1:
             raise ViewerError(f"{where}: steps: expected an integer >= 1, got {steps!r}")
         frames += _ramp(prev, forces, steps, nodes, inputs)
         prev = forces
-    return frames, float(fps)
+    return frames, fps
 
 
 def _ramp(start, end, steps: int, nodes, inputs) -> list[dict]:
@@ -253,128 +279,148 @@ class LiverScene:
         return self.m.surface.points + (self.last.surface_u if self.last is not None else 0.0)
 
 
+class Window:
+    """The interactive manipulator's window: the liver, a sphere per force, the sliders and
+    the keys, each wired to the manipulator ``m``.
+    """
+
+    def __init__(self, m, clim: float, window_size):
+        pv = pyvista()
+        self.m, self.window_size = m, window_size
+        self.p = pv.Plotter(window_size=window_size, title="liverfem manipulator")
+        self.scene = LiverScene(self.p, m, clim, spheres=True)
+        self.widgets = []
+        self.slider = self.p.add_slider_widget(
+            self.on_magnitude, (0.0, m.f_max), value=0.0,
+            title="force of the active handle (N)", pointa=(0.64, 0.9), pointb=(0.96, 0.9),
+            interaction_event="always", color="black", title_height=0.02, slider_width=0.02,
+            tube_width=0.006, fmt="%.2f")
+        self._add_handles()
+        self.p.enable_surface_point_picking(callback=self.on_pick, show_message=False,
+                                            show_point=False, left_clicking=False)
+        self._add_inputs()
+        self._add_keys()
+
+    def _add_handles(self) -> None:
+        r = 0.02 * self.m.surface.size
+        for j in range(len(self.m.handles)):
+            self.widgets.append(self.p.add_sphere_widget(
+                lambda c, w, j=j: self.on_drag(c, w, j), center=self.m.handle_position(j),
+                radius=r, color=FORCE if j == 0 else "darkorange", pass_widget=True,
+                test_callback=False, interaction_event="always"))
+
+    def _add_inputs(self) -> None:
+        for i, inp in enumerate(self.m.inputs[:4]):  # the leading inputs: more would not fit
+            def on_input(value, i=i):
+                self.m.set_input(i, value)
+                self.scene.draw()
+
+            y = 0.76 - 0.13 * i  # under the force slider, right of the status lines
+            self.p.add_slider_widget(on_input, (inp.lo, inp.hi), value=inp.value,
+                                     title=inp.name, pointa=(0.64, y), pointb=(0.96, y),
+                                     interaction_event="end", color="black",
+                                     title_height=0.02, slider_width=0.02, tube_width=0.006,
+                                     fmt="%.3g")
+
+    def _add_keys(self) -> None:
+        p = self.p
+        p.add_key_event("1", lambda: self.choose(0))
+        p.add_key_event("2", lambda: self.choose(1))
+        p.add_key_event("z", self.reset)
+        p.add_key_event("g", self.toggle_ghost)
+        p.add_key_event("m", self.toggle_mode)
+        p.add_text("right-click: move the force; drag the sphere: set it; 1, 2: which force; "
+                   "z: zero; m: pull/push; g: outline", position=(10, self.window_size[1] - 24),
+                   font_size=9, color="black")
+
+    def move_widgets(self) -> None:
+        for j, w in enumerate(self.widgets):
+            w.SetCenter(*self.m.handle_position(j))
+
+    def show_magnitude(self) -> None:  # the slider follows the active force, however set
+        force = self.m.handles[self.m.active].force
+        self.slider.GetRepresentation().SetValue(float(np.linalg.norm(force)))
+
+    def on_magnitude(self, value) -> None:
+        self.m.set_magnitude(value)
+        self.move_widgets()
+        self.scene.draw()
+
+    def on_drag(self, center, widget, j) -> None:
+        self.m.active = j
+        self.m.drag(center, j)
+        widget.SetCenter(*self.m.handle_position(j))  # a clamped force pulls the sphere back
+        self.show_magnitude()
+        self.scene.draw()
+
+    def on_pick(self, point) -> None:
+        if point is None:
+            return
+        self.m.pick(np.asarray(point), deformed=self.scene.deformed())
+        self.move_widgets()
+        self.scene.draw()
+
+    def choose(self, j) -> None:
+        if j < len(self.m.handles):
+            self.m.active = j
+            self.show_magnitude()
+            self.scene.draw()
+
+    def reset(self) -> None:
+        for j in range(len(self.m.handles)):
+            self.m.set_force(np.zeros(3), j)
+        self.move_widgets()
+        self.show_magnitude()
+        self.scene.draw()
+
+    def toggle_ghost(self) -> None:
+        ghost = self.scene.view.ghost_actor
+        ghost.SetVisibility(not ghost.GetVisibility())
+        self.scene.draw()
+
+    def toggle_mode(self) -> None:
+        self.m.toggle_mode()
+        self.move_widgets()
+        self.scene.draw()
+
+    def first_use(self, screenshot: Path) -> None:
+        """What a user does first, through the window's own callbacks: a right-click on the
+        default node of the drawn liver, then a drag of its sphere 1.5 drag lengths along
+        the default script's strongest pull (clamped to the training maximum); saved.
+        """
+        m, scene = self.m, self.scene
+        self.p.show(interactive=False, auto_close=False)
+        scene.draw()
+        node = m.handles[0].node
+        self.on_pick(scene.deformed()[m.surface.local([node])[0]])
+        frames, _ = load_script(None, m)
+        pull = max((f["forces"][0] for f in frames), key=np.linalg.norm)
+        tip = m.points[node] + 1.5 * m.drag_length * pull / np.linalg.norm(pull)
+        self.widgets[0].SetCenter(*tip)
+        self.on_drag(tip, self.widgets[0], 0)
+        scene.draw()  # a second frame: its status line reports the first frame's time
+        screenshot.parent.mkdir(parents=True, exist_ok=True)
+        self.p.screenshot(str(screenshot))
+        f = m.handles[0].force
+        away = np.linalg.norm(np.asarray(self.widgets[0].GetCenter()) - m.points[node])
+        print(f"{log_prefix}: window opened; picked node {m.handles[0].node}, dragged: force "
+              f"{np.linalg.norm(f):.4f} N (training max {m.f_max:.4f} N), slider "
+              f"{self.slider.GetRepresentation().GetValue():.4f} N, sphere at {away:.2f} mm "
+              f"(drag length {m.drag_length:.2f} mm); screenshot {screenshot}")
+        self.p.close()
+
+
 def run_window(m, clim: float, screenshot: Path | None, window_size) -> int:
     """The interactive manipulator. With ``screenshot`` it draws the first frame (the default
     script's strongest pull), saves it and closes: the check that a window opens.
     """
-    pv = pyvista()
-    p = pv.Plotter(window_size=window_size, title="liverfem manipulator")
-    scene = LiverScene(p, m, clim, spheres=True)
-    r = 0.02 * m.surface.size
-    widgets = []
-
-    def move_widgets():
-        for j, w in enumerate(widgets):
-            w.SetCenter(*m.handle_position(j))
-
-    def on_magnitude(value):
-        m.set_magnitude(value)
-        move_widgets()
-        scene.draw()
-
-    slider = p.add_slider_widget(on_magnitude, (0.0, m.f_max), value=0.0,
-                                 title="force of the active handle (N)", pointa=(0.64, 0.9),
-                                 pointb=(0.96, 0.9), interaction_event="always",
-                                 color="black", title_height=0.02, slider_width=0.02,
-                                 tube_width=0.006, fmt="%.2f")
-
-    def show_magnitude():  # the slider follows the active force, however it was set
-        slider.GetRepresentation().SetValue(float(np.linalg.norm(m.handles[m.active].force)))
-
-    def on_drag(center, widget, j):
-        m.active = j
-        m.drag(center, j)
-        widget.SetCenter(*m.handle_position(j))  # a clamped force pulls the sphere back
-        show_magnitude()
-        scene.draw()
-
-    for j in range(len(m.handles)):
-        widgets.append(p.add_sphere_widget(
-            lambda c, w, j=j: on_drag(c, w, j), center=m.handle_position(j), radius=r,
-            color=FORCE if j == 0 else "darkorange", pass_widget=True, test_callback=False,
-            interaction_event="always"))
-
-    def on_pick(point):
-        if point is None:
-            return
-        m.pick(np.asarray(point), deformed=scene.deformed())
-        move_widgets()
-        scene.draw()
-
-    p.enable_surface_point_picking(callback=on_pick, show_message=False, show_point=False,
-                                   left_clicking=False)
-
-    for i, inp in enumerate(m.inputs[:4]):  # the leading inputs: more would not fit
-        def on_input(value, i=i):
-            m.set_input(i, value)
-            scene.draw()
-
-        y = 0.76 - 0.13 * i  # under the force slider, right of the status lines
-        p.add_slider_widget(on_input, (inp.lo, inp.hi), value=inp.value, title=inp.name,
-                            pointa=(0.64, y), pointb=(0.96, y), interaction_event="end",
-                            color="black", title_height=0.02, slider_width=0.02,
-                            tube_width=0.006, fmt="%.3g")
-
-    def choose(j):
-        if j < len(m.handles):
-            m.active = j
-            show_magnitude()
-            scene.draw()
-
-    def reset():
-        for j in range(len(m.handles)):
-            m.set_force(np.zeros(3), j)
-        move_widgets()
-        show_magnitude()
-        scene.draw()
-
-    p.add_key_event("1", lambda: choose(0))
-    p.add_key_event("2", lambda: choose(1))
-    p.add_key_event("z", reset)
-
-    def toggle_ghost():
-        ghost = scene.view.ghost_actor
-        ghost.SetVisibility(not ghost.GetVisibility())
-        scene.draw()
-
-    p.add_key_event("g", toggle_ghost)
-
-    def toggle_mode():
-        m.toggle_mode()
-        move_widgets()
-        scene.draw()
-
-    p.add_key_event("m", toggle_mode)
-    p.add_text("right-click: move the force; drag the sphere: set it; 1, 2: which force; "
-               "z: zero; m: pull/push; g: outline", position=(10, window_size[1] - 24),
-               font_size=9, color="black")
+    w = Window(m, clim, window_size)
     if screenshot is not None:
-        # What a user does first, through the window's own callbacks: a right-click on the
-        # default node of the drawn liver, then a drag of its sphere 1.5 drag lengths along
-        # the default script's strongest pull (clamped to the training maximum).
-        p.show(interactive=False, auto_close=False)
-        scene.draw()
-        node = m.handles[0].node
-        on_pick(scene.deformed()[m.surface.local([node])[0]])
-        frames, _ = load_script(None, m)
-        pull = max((f["forces"][0] for f in frames), key=np.linalg.norm)
-        tip = m.points[node] + 1.5 * m.drag_length * pull / np.linalg.norm(pull)
-        widgets[0].SetCenter(*tip)
-        on_drag(tip, widgets[0], 0)
-        scene.draw()  # a second frame: its status line reports the first frame's time
-        screenshot.parent.mkdir(parents=True, exist_ok=True)
-        p.screenshot(str(screenshot))
-        f = m.handles[0].force
-        print(f"{log_prefix}: window opened; picked node {m.handles[0].node}, dragged: force "
-              f"{np.linalg.norm(f):.4f} N (training max {m.f_max:.4f} N), slider "
-              f"{slider.GetRepresentation().GetValue():.4f} N, sphere at "
-              f"{np.linalg.norm(np.asarray(widgets[0].GetCenter()) - m.points[node]):.2f} mm "
-              f"(drag length {m.drag_length:.2f} mm); screenshot {screenshot}")
-        p.close()
+        w.first_use(screenshot)
         return 0
-    scene.draw()
-    scene.last_frame_s = None  # nothing was on screen yet: not a frame time
-    p.show()
+    w.scene.draw()
+    w.scene.last_frame_s = None  # nothing was on screen yet: not a frame time
+    w.p.show()
     return 0
 
 
@@ -404,10 +450,11 @@ def run_offscreen(m, clim: float, script: Path | None, out: Path, window_size) -
     return timing
 
 
-def compare(m, pred, data: Path, sim: int | None, out: Path | None, window_size) -> Path | None:
-    """The FE solution of a simulation beside the surrogate's, and the error between them."""
+def _simulation(pred, data: Path, sim: int | None):
+    """The shard of simulation ``sim`` (None: the first the model never trained on), said
+    when the model saw it in training.
+    """
     from data_spec import list_shards, read_shard, shard_path
-    from surrogate.features import material_vector
 
     unseen = pred.meta.get("unseen_simulations")
     if not list_shards(data):
@@ -428,13 +475,21 @@ def compare(m, pred, data: Path, sim: int | None, out: Path | None, window_size)
     if s.status != "ok" or s.n_done == 0:
         raise ViewerError(f"{path}: simulation {sim} did not converge "
                           f"({s.failure_reason}): nothing to compare with")
+    return s, sim, bool(unseen and sim in unseen)
+
+
+def _set_case(m, pred, data: Path, s):
+    """The manipulator on the simulation's liver with its loads and material at full load."""
+    from surrogate.features import material_vector
+
     same = s.fixed_nodes.size == m.fixed.size and np.array_equal(s.fixed_nodes, m.fixed)
     if not same and pred.points is None:  # a model of many livers: show this simulation's
         from surrogate.manipulator import Manipulator
 
         m = Manipulator(pred, nodes=m.nodes_mode, geometry=dataset_liver(data, s.geometry_id))
     elif not same:
-        raise ViewerError(f"{path}: another liver than the model's")
+        raise ViewerError(f"{data}: simulation {s.sim_index} is on another liver than the "
+                          "model's")
     for j in range(len(m.handles)):
         m.handles[j].node = int(s.load_nodes[j])
         m.handles[j].force = np.asarray(s.forces[j], float) * float(s.load_fractions[-1])
@@ -442,6 +497,13 @@ def compare(m, pred, data: Path, sim: int | None, out: Path | None, window_size)
         vec = material_vector(s.material.c, s.material.m, s.material.K)
         for i in range(pred.spec.material_dim):
             m.inputs[i].value = float(vec[i])
+    return m
+
+
+def compare(m, pred, data: Path, sim: int | None, out: Path | None, window_size) -> Path | None:
+    """The FE solution of a simulation beside the surrogate's, and the error between them."""
+    s, sim, unseen = _simulation(pred, data, sim)
+    m = _set_case(m, pred, data, s)
     u_fe = np.zeros((m.points.shape[0], 3))
     u_fe[s.output_nodes] = s.displacement[-1]
     fe = u_fe[m.surface.nodes]
@@ -451,7 +513,7 @@ def compare(m, pred, data: Path, sim: int | None, out: Path | None, window_size)
     f_ref = float(np.linalg.norm(s.forces, axis=1).max())
     common = {"surface": m.surface, "forces": s.forces * s.load_fractions[-1],
               "load_nodes": s.load_nodes, "f_ref": f_ref, "clim": (0.0, top)}
-    what = "unseen by the model" if unseen and sim in unseen else "seen in training"
+    what = "unseen by the model" if unseen else "seen in training"
     panels = [Panel(u=fe, label=f"FE (fem_sim), sim {sim}\nmax displacement "
                     f"{np.linalg.norm(fe, axis=1).max():.1f} mm", **common),
               Panel(u=nn, label=f"surrogate ({what})\nmax displacement "
@@ -464,8 +526,7 @@ def compare(m, pred, data: Path, sim: int | None, out: Path | None, window_size)
     if out is not None:
         return render_panels(panels, out / f"compare_sim{sim}.png",
                              title=f"{pred.meta.get('scene', '')}: FE against surrogate")
-    pv = pyvista()
-    p = pv.Plotter(shape=(1, 3), window_size=window_size, title="FE against surrogate")
+    p = pyvista().Plotter(shape=(1, 3), window_size=window_size, title="FE against surrogate")
     draw_panels(p, panels, cols=3)
     p.link_views()
     p.show()
