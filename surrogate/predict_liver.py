@@ -341,20 +341,78 @@ def predict_at_points(predictor, placement, points, forces, at,
     return placed(forces, placed.load_nodes(np.broadcast_to(at, forces.shape)))
 
 
-def main(args) -> int:
-    """The ``predict-liver`` subcommand (arguments parsed by surrogate.__main__)."""
+# A force's point farther than this from the liver's surface is said (the force acts at the
+# nearest surface node); farther than REFUSE_MM it is refused: not a point on this liver.
+WARN_MM = 5.0
+REFUSE_MM = 30.0
+
+
+def surface_distances(points, triangles, at) -> np.ndarray:
+    """(k,) mm from each point of ``at`` to the nearest vertex of the surface."""
+    from scipy.spatial import cKDTree
+
+    surf = np.unique(triangles)
+    return cKDTree(points[surf]).query(np.asarray(at, dtype=np.float64))[0]
+
+
+def _force_points(spec: np.ndarray, points, triangles, file) -> tuple[list[str], str | None]:
+    """(warnings, the reason to refuse or None) for the --force points against the liver's
+    own surface, before any registration.
+    """
+    d = surface_distances(points, triangles, spec[:, :3])
+
+    def said(i: int) -> str:
+        return (f"--force {i + 1}: the point {spec[i, :3].tolist()} is {d[i]:.1f} mm from the "
+                f"surface of {file}")
+
+    if np.any(d > REFUSE_MM):
+        i = int(np.argmax(d))
+        return [], (f"{said(i)}: more than {REFUSE_MM:g} mm, not a point of this liver (give a "
+                    "point on its surface, in mm in the file's frame)")
+    return [f"{said(i)} (more than {WARN_MM:g} mm): the force acts at the nearest surface "
+            "node" for i in np.flatnonzero(d > WARN_MM)], None
+
+
+def _summary(args, predictor, pred, asked) -> dict:
+    """prediction.json's content."""
+    sm = predictor.shape_model
+    used = pred.points[pred.load_nodes]
+    return {"liver": str(args.liver), "model": str(args.run),
+            "registration_residual_mm": pred.residual,
+            "inverted_template_tetrahedra": pred.inverted,
+            "into_population_frame": {"rotation": pred.rotation.tolist(),
+                                      "offset_mm": pred.offset.tolist(),
+                                      "mirrored": bool(np.linalg.det(pred.rotation) < 0),
+                                      "how": pred.frame},
+            "population_residual_mm": {"median": float(np.median(sm.residuals)),
+                                       "max": float(sm.residuals.max())},
+            "shape_coefficients": pred.coefficients.tolist(),
+            "shape_rule": pred.shape_rule, "shape_told": pred.shape_told.tolist(),
+            "load_nodes": pred.load_nodes.tolist(), "forces_N": pred.forces.tolist(),
+            # where each force was asked for and where it acts (liver frame, mm)
+            "force_points_asked_mm": asked.tolist(), "force_points_used_mm": used.tolist(),
+            "force_point_moved_mm": np.linalg.norm(used - asked, axis=1).tolist(),
+            "max_displacement_mm": float(np.linalg.norm(pred.displacement, axis=1).max()),
+            "warnings": pred.warnings}
+
+
+def _checked_request(args, fail):
+    """(predictor, forces spec (L, 6), surface points, triangles, warnings) or an exit code:
+    every argument checked before the registration runs.
+    """
     import sys
 
+    from data_spec.atomic import check_writable
     from surrogate.predictor import load_predictor
 
-    def fail(msg):
-        print(f"surrogate predict-liver: {msg}", file=sys.stderr)
-        return 2
-
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        return fail(f"--out {out} is a file; expected a directory (it is created if missing)")
     try:
+        check_writable(out)
         predictor = load_predictor(Path(args.run) / "model")
-    except ValueError as exc:
-        return fail(exc)
+    except (OSError, ValueError) as exc:
+        return fail(f"--out: {exc}" if isinstance(exc, OSError) else exc)
     if predictor.shape_model is None:
         return fail(f"{args.run}: {_no_population(predictor)}")
     L = predictor.spec.n_loads
@@ -369,32 +427,39 @@ def main(args) -> int:
         points, triangles = read_liver_surface(args.liver, args.scale_to_mm)
     except LiverFileError as exc:
         return fail(exc)
+    said, refused = _force_points(spec, points, triangles, args.liver)
+    if refused:
+        return fail(refused)
+    for msg in said:
+        print(f"warning: {msg}", file=sys.stderr)
+    return predictor, spec, points, triangles, said
+
+
+def main(args) -> int:
+    """The ``predict-liver`` subcommand (arguments parsed by surrogate.__main__)."""
+    import sys
+
+    def fail(msg):
+        print(f"liverfem-surrogate predict-liver: {msg}", file=sys.stderr)
+        return 2
+
+    checked = _checked_request(args, fail)
+    if isinstance(checked, int):
+        return checked
+    predictor, spec, points, triangles, said = checked
+    asked = spec[:, :3]
     print(f"registering the template onto {args.liver} ({points.shape[0]:,} surface points)",
           file=sys.stderr, flush=True)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # reported below, once
-        pred = predict_liver(predictor, points, triangles, spec[:, 3:], at=spec[:, :3],
+        pred = predict_liver(predictor, points, triangles, spec[:, 3:], at=asked,
                              center=not args.no_center, frame=args.frame, shape=args.shape)
+    pred.warnings = said + pred.warnings
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     vtu = pred.write_vtu(out / "liver_deformed.vtu")
-    summary = {"liver": str(args.liver), "model": str(args.run),
-               "registration_residual_mm": pred.residual,
-               "inverted_template_tetrahedra": pred.inverted,
-               "into_population_frame": {"rotation": pred.rotation.tolist(),
-                                         "offset_mm": pred.offset.tolist(),
-                                         "mirrored": bool(np.linalg.det(pred.rotation) < 0),
-                                         "how": pred.frame},
-               "population_residual_mm": {"median": float(np.median(
-                   predictor.shape_model.residuals)), "max": float(
-                   predictor.shape_model.residuals.max())},
-               "shape_coefficients": pred.coefficients.tolist(),
-               "shape_rule": pred.shape_rule, "shape_told": pred.shape_told.tolist(),
-               "load_nodes": pred.load_nodes.tolist(), "forces_N": pred.forces.tolist(),
-               "max_displacement_mm": float(np.linalg.norm(pred.displacement, axis=1).max()),
-               "warnings": pred.warnings}
+    summary = _summary(args, predictor, pred, asked)
     (out / "prediction.json").write_text(json.dumps(summary, indent=1))
-    for msg in pred.warnings:
+    for msg in pred.warnings[len(said):]:
         print(f"warning: {msg}", file=sys.stderr)
     if pred.shape_rule != "own":
         print(told_note(pred.shape_rule), file=sys.stderr)
@@ -402,8 +467,7 @@ def main(args) -> int:
         png = pred.draw(out / "liver_deformed.png", title=Path(args.liver).name)
         print(f"picture: {png}", file=sys.stderr)
     print(f"placed as {pred.frame}; registration residual {pred.residual:.2f} mm, "
-          f"{pred.inverted} of "
-          f"{pred.cells.shape[0]} template tetrahedra inverted; max displacement "
-          f"{summary['max_displacement_mm']:.2f} mm; written {vtu} and "
+          f"{pred.inverted} of {pred.cells.shape[0]} template tetrahedra inverted; max "
+          f"displacement {summary['max_displacement_mm']:.2f} mm; written {vtu} and "
           f"{out / 'prediction.json'}")
     return 0

@@ -454,3 +454,37 @@ def test_the_truth_of_a_liver_carries_the_models_fixed_region_and_is_evaluated(r
     m = evaluate_liver(pred, Path(DATA), placement, found, geometry_id=gid)
     assert m["sims"] == 6 and np.isfinite(m["skill"]) and m["inverted"] == placement.inverted
     assert "modes_floor_mm" not in m  # a node-wise model has no modes
+
+
+def test_a_force_off_the_liver_is_said_or_refused_before_the_registration(run, tmp_path,
+                                                                          capsys):
+    """A force point 12 mm outside the liver is moved to the nearest surface node with a
+    warning, and prediction.json records the point asked for, the point used and the move; a
+    point 1.6 m away, and an --out that is a file, are refused with exit 2 before any
+    registration (nothing written)."""
+    from surrogate.predict_liver import REFUSE_MM, WARN_MM
+
+    liver = read_liver_surface(SOFA)[0]
+    tip = liver[np.argmax(liver[:, 0])] + [12.0, 0.0, 0.0]  # beyond the largest x
+    out = tmp_path / "pl"
+    assert main(["predict-liver", str(run), str(SOFA), "--force", *map(str, tip), "0", "0",
+                 "-0.4", "--out", str(out), "--no-picture"]) == 0
+    err = capsys.readouterr().err
+    assert f"is 12.0 mm from the surface of {SOFA} (more than {WARN_MM:g} mm)" in err
+    s = json.loads((out / "prediction.json").read_text())
+    np.testing.assert_allclose(s["force_points_asked_mm"], [tip])
+    moved = np.linalg.norm(np.subtract(s["force_points_used_mm"], [tip]), axis=1)
+    np.testing.assert_allclose(s["force_point_moved_mm"], moved)
+    assert 10.0 < moved[0] < 30.0 and any("12.0 mm from the surface" in w for w in s["warnings"])
+    far = liver.max(axis=0) + 1600.0
+    assert main(["predict-liver", str(run), str(SOFA), "--force", *map(str, far), "0", "0",
+                 "-0.4", "--out", str(tmp_path / "far"), "--no-picture"]) == 2
+    err = capsys.readouterr().err
+    assert f"more than {REFUSE_MM:g} mm, not a point of this liver" in err
+    assert "registering" not in err and not (tmp_path / "far" / "prediction.json").exists()
+    (tmp_path / "a_file").write_text("")
+    assert main(["predict-liver", str(run), str(SOFA), "--force", *map(str, tip), "0", "0",
+                 "-0.4", "--out", str(tmp_path / "a_file"), "--no-picture"]) == 2
+    err = capsys.readouterr().err
+    assert "--out" in err and "is a file; expected a directory" in err
+    assert "registering" not in err
