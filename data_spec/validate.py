@@ -56,39 +56,38 @@ def _geometry_facts(path: Path, cache: dict) -> tuple[int, str] | str:
     return cache[path]
 
 
-def shard_problems(path: str | Path, geometry_cache: dict | None = None) -> list[str]:
-    """Everything wrong with one shard file."""
-    path = Path(path)
-    geometry_cache = {} if geometry_cache is None else geometry_cache
+def _read(path: Path) -> tuple[list[str], dict | None, dict]:
+    """(problems so far, the shard's arrays (None when it cannot be read on), its attributes)."""
     try:
         f = h5py.File(path, "r")
     except OSError as exc:
-        return [f"{path}: cannot open as HDF5 (truncated or corrupt?): {exc}"]
+        return [f"{path}: cannot open as HDF5 (truncated or corrupt?): {exc}"], None, {}
     p: list[str] = []
     with f:
         if f.attrs.get("format") != SHARD_FORMAT:
             return [f"{path}: attribute 'format' is {f.attrs.get('format')!r}, expected "
-                    f"{SHARD_FORMAT!r}"]
+                    f"{SHARD_FORMAT!r}"], None, {}
         p += [f"{path}: missing {what}" for what in missing(f)]
         if p:
-            return p
+            return p, None, {}
         if f.attrs["schema_version"] != SHARD_SCHEMA_VERSION:
             p.append(f"{path}: schema_version {f.attrs['schema_version']}, expected "
                      f"{SHARD_SCHEMA_VERSION}")
         try:
             values = read_values(f)
         except OSError as exc:
-            return p + [f"{path}: data cannot be read (truncated or corrupt?): {exc}"]
+            return p + [f"{path}: data cannot be read (truncated or corrupt?): {exc}"], None, {}
         if not checksum_ok(f, values):
             p.append(f"{path}: {CHECKSUM_MISMATCH}")
-        arr = {e.path: values[e.path] for e in DATASETS}
-        status = str(f.attrs["status"])
-        reason = str(f.attrs["failure_reason"])
-        geo_rel = str(f.attrs["geometry_file"])
-        geo_id = str(f.attrs["geometry_id"])
+        attrs = {k: str(f.attrs[k]) for k in ("status", "failure_reason", "geometry_file",
+                                              "geometry_id")}
+        return p, {e.path: values[e.path] for e in DATASETS}, attrs
 
+
+def _content_problems(path: Path, arr: dict, status: str, reason: str) -> list[str]:
+    """Shapes, step counts, finiteness, status and the fixed region of a shard's arrays."""
     shapes, dims = shape_problems(arr)
-    p += [f"{path}: {msg}" for msg in shapes]
+    p = [f"{path}: {msg}" for msg in shapes]
     if not shapes:
         n_done, n_steps = dims["n_done"], dims["n_steps"]
         if n_done > n_steps:
@@ -111,18 +110,35 @@ def shard_problems(path: str | Path, geometry_cache: dict | None = None) -> list
         p.append(f"{path}: status 'failed' without a failure_reason")
     if np.size(arr["/fixed_nodes"]) == 0:
         p.append(f"{path}: 'fixed_nodes' is empty (the problem has rigid-body modes)")
+    return p
 
-    facts = _geometry_facts((path.parent / geo_rel).resolve(), geometry_cache)
+
+def _liver_problems(path: Path, arr: dict, geo_rel: str, geo_id: str, cache: dict) -> list:
+    """The shard's geometry file: readable, the liver it names, node ids within it."""
+    facts = _geometry_facts((path.parent / geo_rel).resolve(), cache)
     if isinstance(facts, str):
-        p.append(f"{path}: {facts}")
-    else:
-        n_nodes, real_id = facts
-        if real_id != geo_id:
-            p.append(f"{path}: geometry_id {geo_id!r} but {geo_rel} holds {real_id!r}")
-        for name in ("/load/nodes", "/fixed_nodes", "/output_nodes"):
-            ids = np.asarray(arr[name])
-            if ids.size and (ids.min() < 0 or ids.max() >= n_nodes):
-                p.append(f"{path}: '{name}' has node ids outside [0, {n_nodes})")
+        return [f"{path}: {facts}"]
+    p = []
+    n_nodes, real_id = facts
+    if real_id != geo_id:
+        p.append(f"{path}: geometry_id {geo_id!r} but {geo_rel} holds {real_id!r}")
+    for name in ("/load/nodes", "/fixed_nodes", "/output_nodes"):
+        ids = np.asarray(arr[name])
+        if ids.size and (ids.min() < 0 or ids.max() >= n_nodes):
+            p.append(f"{path}: '{name}' has node ids outside [0, {n_nodes})")
+    return p
+
+
+def shard_problems(path: str | Path, geometry_cache: dict | None = None) -> list[str]:
+    """Everything wrong with one shard file."""
+    path = Path(path)
+    geometry_cache = {} if geometry_cache is None else geometry_cache
+    p, arr, attrs = _read(path)
+    if arr is None:
+        return p
+    p += _content_problems(path, arr, attrs["status"], attrs["failure_reason"])
+    p += _liver_problems(path, arr, attrs["geometry_file"], attrs["geometry_id"],
+                         geometry_cache)
     if not path.with_suffix(".xdmf").exists():
         p.append(f"{path}: its XDMF file {path.with_suffix('.xdmf').name} is missing")
     return p

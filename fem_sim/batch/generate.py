@@ -102,82 +102,102 @@ def _shard_is_done(path: Path, scene_hash: str, retry_failed: bool) -> bool:
 _LOCK: DirectoryLock | None = None  # held by world rank 0 for the whole run
 
 
+def _check_directory(scene: Scene, out: Path) -> None:
+    """Lock ``out`` for this run, clear what an interrupted writer left, refuse a directory
+    of another scene's dataset and prove it writable (rank 0).
+    """
+    global _LOCK
+    _LOCK = DirectoryLock(out).acquire()
+    for tmp in leftover_temporaries(out):  # we hold the lock: no writer is running
+        log.info("removing %s, left by an interrupted writer", tmp)
+        tmp.unlink()
+    copy = out / "scene.toml"
+    if copy.exists() and any((out / "sims").glob("sim_*.h5")):
+        try:
+            old = load_scene(copy)
+        except SceneError:
+            old = None
+        if old is None or old.hash != scene.hash:
+            raise SceneError(str(out), [f"{out} holds a dataset of another scene "
+                                        f"({copy}); use a new --out directory"])
+    for d in (out, out / "sims", out / "geometry"):  # fail now, not at the first write
+        check_writable(d)
+
+
+def _scene_livers(scene: Scene, out: Path, progress: bool) -> list[Geometry]:
+    """The scene's livers, meshed, read or registered, with a progress bar per stage of a
+    population (meshing, registration), opened at its first liver.
+    """
+    bars = {}
+    population = progress and scene["geometry"]["source"] == "population"
+
+    def tick(desc):
+        def update(_):
+            from tqdm import tqdm
+
+            for other in [d for d in bars if d != desc]:
+                bars.pop(other).close()
+            if desc not in bars:
+                bars[desc] = tqdm(total=scene["geometry"]["population_size"], unit="liver",
+                                  desc=desc, file=sys.stderr)
+            bars[desc].update()
+        return update if population else None
+
+    try:
+        return scene_geometries(scene, cache=out / "geometry" / "population.npz", dataset=out,
+                                meshed=tick("livers (meshed or read)"),
+                                progress=tick("shape coefficients (CPD)"))
+    finally:
+        for bar in bars.values():
+            bar.close()
+
+
+def _write_livers(scene: Scene, scene_file: str, livers: list[Geometry], out: Path) -> list:
+    """Every liver checked against the scene (mesh, fixed region, eligible load nodes) and
+    written once; their geometry ids.
+    """
+    ids = []
+    for gi, g in enumerate(livers):
+        scene.check_mesh(g.n_nodes)
+        fixed = cs.fixed_nodes(scene, g, scene_file)
+        bad = mesh_problems(g.points, g.cells, fixed)
+        if bad:
+            raise GeometryError(f"{scene_file}: geometry {gi} ({g.description}): "
+                                + "; ".join(bad))
+        if not scene.cases:
+            eligible = cs.eligible_load_nodes(scene, g, fixed)
+            if eligible.size < scene["loads"]["count"]:
+                raise cs.CaseError(f"{scene_file}: geometry {gi} has {eligible.size} "
+                                   "eligible load nodes (loads.eligible, "
+                                   "min_distance_to_fixed)")
+        path = geometry_path(out, g.geometry_id)
+        if not _geometry_file_ok(path, g):  # missing, truncated or another mesh: rewrite
+            write_geometry(path, g)
+        ids.append(g.geometry_id)
+    return ids
+
+
 def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool,
               progress: bool = False, ranks_per_sim: int = 1) -> tuple[Plan, Scene | None]:
     """Rank 0 only: validate everything, lock the directory and decide the work. Any error
     goes into Plan.error (so it is broadcast, and no rank waits for a plan that never comes).
     """
-    global _LOCK
     try:
         scene = load_scene(scene_file)
         todo = parse_range(only, scene.n_simulations)  # a bad --only writes nothing
         found = solver_rules.scene_problems(scene["solver"], ranks=ranks_per_sim)
         if found:  # the scene allows it on some rank count, not on this one
             raise SceneError(scene_file, found)
-        _LOCK = DirectoryLock(out).acquire()
-        for tmp in leftover_temporaries(out):  # we hold the lock: no writer is running
-            log.info("removing %s, left by an interrupted writer", tmp)
-            tmp.unlink()
-        copy = out / "scene.toml"
-        if copy.exists() and any((out / "sims").glob("sim_*.h5")):
-            try:
-                old = load_scene(copy)
-            except SceneError:
-                old = None
-            if old is None or old.hash != scene.hash:
-                raise SceneError(str(out), [f"{out} holds a dataset of another scene "
-                                            f"({copy}); use a new --out directory"])
-        for d in (out, out / "sims", out / "geometry"):  # fail now, not at the first write
-            check_writable(d)
-        ids = []
-        bars = {}  # one progress bar per stage (meshing, registration), opened at its first liver
-        population = progress and scene["geometry"]["source"] == "population"
-
-        def tick(desc):
-            def update(_):
-                from tqdm import tqdm
-
-                for other in [d for d in bars if d != desc]:
-                    bars.pop(other).close()
-                if desc not in bars:
-                    bars[desc] = tqdm(total=scene["geometry"]["population_size"], unit="liver",
-                                      desc=desc, file=sys.stderr)
-                bars[desc].update()
-            return update if population else None
-
-        try:
-            livers = scene_geometries(scene, cache=out / "geometry" / "population.npz",
-                                      dataset=out,
-                                      meshed=tick("livers (meshed or read)"),
-                                      progress=tick("shape coefficients (CPD)"))
-        finally:
-            for bar in bars.values():
-                bar.close()
-        for gi, g in enumerate(livers):
-            scene.check_mesh(g.n_nodes)
-            fixed = cs.fixed_nodes(scene, g, scene_file)
-            bad = mesh_problems(g.points, g.cells, fixed)
-            if bad:
-                raise GeometryError(f"{scene_file}: geometry {gi} ({g.description}): "
-                                    + "; ".join(bad))
-            if not scene.cases:
-                eligible = cs.eligible_load_nodes(scene, g, fixed)
-                if eligible.size < scene["loads"]["count"]:
-                    raise cs.CaseError(f"{scene_file}: geometry {gi} has {eligible.size} "
-                                       "eligible load nodes (loads.eligible, "
-                                       "min_distance_to_fixed)")
-            path = geometry_path(out, g.geometry_id)
-            if not _geometry_file_ok(path, g):  # missing, truncated or another mesh: rewrite
-                write_geometry(path, g)
-            ids.append(g.geometry_id)
+        _check_directory(scene, out)
+        ids = _write_livers(scene, scene_file, _scene_livers(scene, out, progress), out)
         # Everything checked: record the scene (a directory without shards takes a new one).
+        copy = out / "scene.toml"
         if not (copy.exists() and load_scene(copy).hash == scene.hash):
             with atomic_path(copy) as tmp:
                 tmp.write_text(dataset_copy_text(scene_file), encoding="utf-8")
         tasks = [i for i in todo if not _shard_is_done(shard_path(out, i), scene.hash,
                                                        retry_failed)]
-        n_geo = len(ids)
-        tasks.sort(key=lambda i: (i % n_geo, i))  # cases of one liver together: fewer rebuilds
+        tasks.sort(key=lambda i: (i % len(ids), i))  # cases of one liver together
         return Plan(tasks=tasks, skipped=len(todo) - len(tasks), geometry_ids=ids), scene
     except (SceneError, GeometryError, cs.CaseError, LockedError, ValueError, OSError) as exc:
         return Plan(error=str(exc)), None
@@ -280,27 +300,61 @@ def run_case(problem, scene: Scene, case: cs.Case, g: Geometry, fixed: np.ndarra
                  patch_radius=case.patch_radius)
 
 
-def generate(scene_file: str, out: str | Path, ranks_per_sim: int = 1, only: str | None = None,
-             retry_failed: bool = False, progress: bool = True,
-             max_failure_rate: float = 0.5) -> int:
-    """Run (or resume) a batch; returns the process exit code (0; 2 bad input, nothing done;
-    3 more than ``max_failure_rate`` of the simulations failed). Collective on COMM_WORLD.
+class _Liver:
+    """A group's current liver and the problem on it, rebuilt when a task is on another."""
+
+    def __init__(self, scene: Scene, plan: Plan, out: Path, group, prefix: str):
+        self.scene, self.plan, self.out, self.group, self.prefix = scene, plan, out, group, prefix
+        self.current = None
+
+    def of(self, index: int) -> int:
+        scene = self.scene
+        return index % len(self.plan.geometry_ids) if not scene.cases else (
+            scene.cases[index].get("geometry_index", 0))
+
+    def load(self, gi: int) -> None:
+        """Collective on the group when the liver changes."""
+        from fem_sim.solver.problem import OgdenProblem
+
+        if gi == self.current:
+            return
+        scene, solver = self.scene, self.scene["solver"]
+        self.geo = read_geometry(geometry_path(self.out, self.plan.geometry_ids[gi]))
+        self.fixed = cs.fixed_nodes(scene, self.geo)
+        self.out_nodes = cs.output_nodes(scene, self.geo)
+        self.eligible = None if scene.cases else cs.eligible_load_nodes(scene, self.geo,
+                                                                         self.fixed)
+        self.table = cs.material_table(scene)
+        root = self.group.rank == 0
+        self.problem = OgdenProblem(self.group, self.geo.points if root else None,
+                                    self.geo.cells if root else None, degree=solver["degree"],
+                                    quadrature_degree=solver["quadrature_degree"],
+                                    element=solver.get("element", "lagrange"),
+                                    settings=solver_settings(scene), prefix=self.prefix)
+        self.current = gi
+
+    def run(self, index: int) -> Shard | None:
+        gi = self.of(index)
+        self.load(gi)
+        case = cs.make_case(self.scene, index, self.geo, self.fixed, self.table, self.eligible)
+        return run_case(self.problem, self.scene, case, self.geo, self.fixed, self.out_nodes,
+                        self.plan.geometry_ids[gi])
+
+
+def _one_thread_per_rank(world) -> None:
+    """The ranks share the cores: one point-kernel and one PARDISO thread each (a lone rank
+    keeps OpenMP's default, the cores it may run on).
     """
-    from mpi4py import MPI
-
-    from fem_sim.solver.problem import OgdenProblem
-
-    world = MPI.COMM_WORLD
-    out = Path(out)
-    t_start = time.perf_counter()
     if world.size > 1 and not os.environ.get("OMP_NUM_THREADS"):
-        # The ranks share the cores: one point-kernel and one PARDISO thread each (a lone rank
-        # keeps OpenMP's default, the cores it may run on).
         from fem_sim.material import ogden_c
         from fem_sim.solver import pardiso
 
         ogden_c.threads(1)
         pardiso.threads(1)
+
+
+def _plan(world, scene_file, out, only, retry_failed, progress, ranks_per_sim):
+    """(plan, scene) on every rank; rank 0 decides (collective)."""
     plan, scene = Plan(), None
     if world.rank == 0:
         if world.size % ranks_per_sim:  # checked before anything is written
@@ -311,52 +365,22 @@ def generate(scene_file: str, out: str | Path, ranks_per_sim: int = 1, only: str
                                     ranks_per_sim)
     plan = world.bcast(plan, root=0)  # collective
     if plan.error:
-        if world.rank == 0:
-            print(f"fem_sim generate: error: {plan.error}", file=sys.stderr, flush=True)
-        return 2
-    scene = world.bcast(scene, root=0)
-    if world.rank == 0:
-        _warm_jit_cache(scene["solver"]["degree"], scene["solver"]["quadrature_degree"])
-    world.Barrier()
-    group = world.Split(world.rank // ranks_per_sim, world.rank)  # collective
-    counter = _Counter(world)
-    tasks = plan.tasks
-    bar = None
-    if progress and world.rank == 0 and tasks:
-        from tqdm import tqdm
+        return plan, None
+    return plan, world.bcast(scene, root=0)
 
-        bar = tqdm(total=len(tasks), desc=scene.name, unit="sim", file=sys.stderr,
-                   dynamic_ncols=True)
-    problem, current = None, None
-    geo = fixed = out_nodes = eligible = table = None
-    n_groups = world.size // ranks_per_sim
+
+def _work(world, group, counter, plan: Plan, liver: _Liver, bar) -> None:
+    """Take tasks until none is left; each group's rank 0 writes its shards."""
+    n_groups = world.size // group.size
     while True:
         pos = counter.add(0) if group.rank == 0 else None
         pos = group.bcast(pos, root=0)
-        if pos >= len(tasks):
+        if pos >= len(plan.tasks):
             break
-        index = tasks[pos]
-        gi = index % len(plan.geometry_ids) if not scene.cases else (
-            scene.cases[index].get("geometry_index", 0))
-        if gi != current:
-            gid = plan.geometry_ids[gi]
-            geo = read_geometry(geometry_path(out, gid))
-            fixed = cs.fixed_nodes(scene, geo)
-            out_nodes = cs.output_nodes(scene, geo)
-            eligible = None if scene.cases else cs.eligible_load_nodes(scene, geo, fixed)
-            table = cs.material_table(scene)
-            problem = OgdenProblem(group, geo.points if group.rank == 0 else None,
-                                   geo.cells if group.rank == 0 else None,
-                                   degree=scene["solver"]["degree"],
-                                   quadrature_degree=scene["solver"]["quadrature_degree"],
-                                   element=scene["solver"].get("element", "lagrange"),
-                                   settings=solver_settings(scene),
-                                   prefix=f"g{world.rank // ranks_per_sim}_")
-            current = gi
-        case = cs.make_case(scene, index, geo, fixed, table, eligible)
-        shard = run_case(problem, scene, case, geo, fixed, out_nodes, plan.geometry_ids[gi])
+        index = plan.tasks[pos]
+        shard = liver.run(index)
         if group.rank == 0:
-            write_shard(out, shard)
+            write_shard(liver.out, shard)
             counter.add(1)
             if shard.status != "ok":
                 counter.add(2)
@@ -366,27 +390,67 @@ def generate(scene_file: str, out: str | Path, ranks_per_sim: int = 1, only: str
             bar.n = int(done)
             bar.set_postfix(failed=int(failed), groups=n_groups, refresh=False)
             bar.refresh()
+
+
+def _report(world, scene, plan, out, totals, elapsed, ranks_per_sim, max_failure_rate) -> int:
+    """Rank 0: the batch's line, and exit code 3 when too many simulations failed."""
+    done, failed = int(totals[1]), int(totals[2])
+    rate = done / elapsed * 3600 if elapsed > 0 else 0.0
+    print(f"fem_sim generate {scene.name}: {done} simulated ({failed} failed), "
+          f"{plan.skipped} skipped (already valid), {elapsed:.1f} s, "
+          f"{rate:.0f} simulations/hour on {world.size} rank(s), "
+          f"{world.size // ranks_per_sim} group(s) of {ranks_per_sim}", flush=True)
+    if done and failed / done > max_failure_rate:
+        print(f"fem_sim generate: error: {failed} of {done} simulations failed, more than "
+              f"--max-failure-rate {max_failure_rate:g}: a broken set-up rather than hard "
+              f"cases. Most common reasons:\n{_failure_summary(out, plan.tasks)}",
+              file=sys.stderr, flush=True)
+        return 3
+    return 0
+
+
+def generate(scene_file: str, out: str | Path, ranks_per_sim: int = 1, only: str | None = None,
+             retry_failed: bool = False, progress: bool = True,
+             max_failure_rate: float = 0.5) -> int:
+    """Run (or resume) a batch; returns the process exit code (0; 2 bad input, nothing done;
+    3 more than ``max_failure_rate`` of the simulations failed). Collective on COMM_WORLD.
+    """
+    from mpi4py import MPI
+
+    import fem_sim.solver.problem  # noqa: F401  (collective: PETSc initialises on every rank)
+
+    world = MPI.COMM_WORLD
+    out = Path(out)
+    t_start = time.perf_counter()
+    _one_thread_per_rank(world)
+    plan, scene = _plan(world, scene_file, out, only, retry_failed, progress, ranks_per_sim)
+    if plan.error:
+        if world.rank == 0:
+            print(f"fem_sim generate: error: {plan.error}", file=sys.stderr, flush=True)
+        return 2
+    if world.rank == 0:
+        _warm_jit_cache(scene["solver"]["degree"], scene["solver"]["quadrature_degree"])
+    world.Barrier()
+    group = world.Split(world.rank // ranks_per_sim, world.rank)  # collective
+    counter = _Counter(world)
+    bar = None
+    if progress and world.rank == 0 and plan.tasks:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(plan.tasks), desc=scene.name, unit="sim", file=sys.stderr,
+                   dynamic_ncols=True)
+    liver = _Liver(scene, plan, out, group, prefix=f"g{world.rank // ranks_per_sim}_")
+    _work(world, group, counter, plan, liver, bar)
     world.Barrier()  # collective: every shard is written
     totals = counter.read() if world.rank == 0 else None
     counter.free()
-    if world.rank == 0:
-        if bar is not None:
-            bar.n = int(totals[1])
-            bar.close()
-        elapsed = time.perf_counter() - t_start
-        done, failed = int(totals[1]), int(totals[2])
-        rate = done / elapsed * 3600 if elapsed > 0 else 0.0
-        print(f"fem_sim generate {scene.name}: {done} simulated ({failed} failed), "
-              f"{plan.skipped} skipped (already valid), {elapsed:.1f} s, "
-              f"{rate:.0f} simulations/hour on {world.size} rank(s), "
-              f"{n_groups} group(s) of {ranks_per_sim}", flush=True)
-        if done and failed / done > max_failure_rate:
-            print(f"fem_sim generate: error: {failed} of {done} simulations failed, more than "
-                  f"--max-failure-rate {max_failure_rate:g}: a broken set-up rather than hard "
-                  f"cases. Most common reasons:\n{_failure_summary(out, plan.tasks)}",
-                  file=sys.stderr, flush=True)
-            return 3
-    return 0
+    if world.rank != 0:
+        return 0
+    if bar is not None:
+        bar.n = int(totals[1])
+        bar.close()
+    return _report(world, scene, plan, out, totals, time.perf_counter() - t_start,
+                   ranks_per_sim, max_failure_rate)
 
 
 def _failure_summary(out: Path, tasks: list[int], top: int = 3) -> str:

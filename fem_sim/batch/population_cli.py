@@ -14,25 +14,11 @@ from pathlib import Path
 import numpy as np
 
 
-def run(scene_file, out, n_max: int = 40, overlap_livers: int | None = None,
-        compare_plain: int = 0, progress: bool = True) -> int:
-    from data_spec import SceneError, geometry_path, load_scene, write_geometry
-    from fem_sim.geometry.population import (
-        PLAIN,
-        STAGED,
-        build_population,
-        chamfer,
-        cpd_nonrigid,
-        report,
-        save_population,
-        set_coefficients,
-        surface_points,
-        surface_samples,
-        write_report,
-    )
+def _livers(scene_file):
+    """(scene, its livers, seconds) or the exit code 2 with the reason printed."""
+    from data_spec import SceneError, load_scene
     from fem_sim.geometry.source import GeometryError, n_geometries, scene_geometry
 
-    out = Path(out)
     try:
         scene = load_scene(scene_file)
         if scene["geometry"]["source"] != "population":
@@ -44,7 +30,13 @@ def run(scene_file, out, n_max: int = 40, overlap_livers: int | None = None,
     except (SceneError, GeometryError, ValueError) as exc:
         print(f"fem_sim population: {exc}", file=sys.stderr)
         return 2
-    t_mesh = time.perf_counter() - t0
+    return scene, livers, time.perf_counter() - t0
+
+
+def _register(livers, progress: bool):
+    """(population, seconds): the template registered onto every liver by staged CPD."""
+    from fem_sim.geometry.population import build_population
+
     bar = None
     if progress:
         from tqdm import tqdm
@@ -52,9 +44,54 @@ def run(scene_file, out, n_max: int = 40, overlap_livers: int | None = None,
         bar = tqdm(total=len(livers), desc="CPD", unit="liver")
     t0 = time.perf_counter()
     pop = build_population(livers, progress=(lambda r: bar.update()) if bar else None)
-    t_cpd = time.perf_counter() - t0
     if bar:
         bar.close()
+    return pop, time.perf_counter() - t0
+
+
+def _staged_against_plain(livers, n: int) -> str:
+    """The staged schedule against one plain CPD stage on livers 1..n: mean surface
+    distances.
+    """
+    from fem_sim.geometry.population import (
+        PLAIN,
+        STAGED,
+        chamfer,
+        cpd_nonrigid,
+        surface_points,
+        surface_samples,
+    )
+
+    M = livers[0]
+    Y = surface_samples(M, 600)
+    dense = surface_points(M)
+    st, pl = [], []
+    for r in range(1, min(n, len(livers) - 1) + 1):
+        X = surface_samples(livers[r], 600)
+        target = surface_points(livers[r])
+        for sched, acc in ((STAGED, st), (PLAIN, pl)):
+            acc.append(chamfer(cpd_nonrigid(X, Y, sched).transform(dense), target))
+    return (f"Staged vs plain CPD (beta = 2, lambda = 3, one stage) on livers 1-{len(st)}: mean "
+            f"surface distance {np.mean(st):.2f} mm vs {np.mean(pl):.2f} mm (median "
+            f"{np.median(st):.2f} vs {np.median(pl):.2f}).")
+
+
+def run(scene_file, out, n_max: int = 40, overlap_livers: int | None = None,
+        compare_plain: int = 0, progress: bool = True) -> int:
+    from data_spec import geometry_path, write_geometry
+    from fem_sim.geometry.population import (
+        report,
+        save_population,
+        set_coefficients,
+        write_report,
+    )
+
+    out = Path(out)
+    read = _livers(scene_file)
+    if isinstance(read, int):
+        return read
+    scene, livers, t_mesh = read
+    pop, t_cpd = _register(livers, progress)
     set_coefficients(livers, pop, scene["geometry"]["pca_components"])
     save_population(out / "geometry" / "population.npz", livers, pop)
     for g in livers:
@@ -77,19 +114,7 @@ def run(scene_file, out, n_max: int = 40, overlap_livers: int | None = None,
              f"by harmonic extension; of {livers[0].cells.shape[0]}): median "
              f"{np.median(pop.inverted):.0f}, max {pop.inverted.max()}."]
     if compare_plain:
-        M = livers[0]
-        Y = surface_samples(M, 600)
-        dense = surface_points(M)
-        st, pl = [], []
-        for r in range(1, min(compare_plain, len(livers) - 1) + 1):
-            X = surface_samples(livers[r], 600)
-            target = surface_points(livers[r])
-            for sched, acc in ((STAGED, st), (PLAIN, pl)):
-                acc.append(chamfer(cpd_nonrigid(X, Y, sched).transform(dense), target))
-        lines.append(f"Staged vs plain CPD (beta = 2, lambda = 3, one stage) on livers 1-"
-                     f"{len(st)}: mean surface distance {np.mean(st):.2f} mm vs "
-                     f"{np.mean(pl):.2f} mm (median {np.median(st):.2f} vs "
-                     f"{np.median(pl):.2f}).")
+        lines.append(_staged_against_plain(livers, compare_plain))
     write_report(rows, pop, out, f"Shape parametrisation of {scene.name}", lines)
     print("\n".join(lines))
     print((out / "population.md").read_text())

@@ -64,6 +64,41 @@ def _divided_power(x: np.ndarray, y: np.ndarray, p: float) -> np.ndarray:
     return y ** (p - 1.0) * ratio
 
 
+def _tangent(F, Q, c, S, B, UppJ, terms) -> np.ndarray:
+    """(n, 9, 9) dP/dF from the principal stretches' energy derivatives (see
+    :func:`ogden_point_kernel`): the material part in the eigenbasis of C and the geometric
+    part, one batched product.
+    """
+    n = F.shape[0]
+    inv = 1.0 / c
+    Phi2 = -B[:, None, None] * np.eye(3)[None] * inv[:, :, None] ** 2
+    Phi2 += (0.25 * UppJ)[:, None, None] * inv[:, :, None] * inv[:, None, :]
+    gam = -B[:, None, None] * inv[:, :, None] * inv[:, None, :]
+    for p, q, a, T, g in terms:
+        dg = p * (p - 1.0) * c ** (p - 2.0)
+        Phi2 += a[:, None, None] * (
+            np.eye(3)[None] * dg[:, :, None]
+            + q * (g[:, :, None] * inv[:, None, :] + inv[:, :, None] * g[:, None, :])
+            + (q**2 * T)[:, None, None] * inv[:, :, None] * inv[:, None, :])
+        gam += a[:, None, None] * p * _divided_power(c[:, :, None], c[:, None, :], p - 1.0)
+    # M[a, b] = (F n_a) (x) n_b, flattened to 9 components (i, J). With gamma symmetric,
+    # sum_(a != b) g_ab (M_ab M_ab^T + M_ab M_ba^T) = sum_(a < b) g_ab s_ab s_ab^T with
+    # s_ab = M_ab + M_ba, so the geometric part is one batched (9x6)(6x6)(6x9) product.
+    Fn = np.matmul(F, Q).transpose(0, 2, 1)  # (n, a, i)
+    Qt = Q.transpose(0, 2, 1)  # (n, b, J)
+    M = (Fn[:, :, None, :, None] * Qt[:, None, :, None, :]).reshape(n, 3, 3, 9)
+    ia, ib = np.array([0, 0, 1]), np.array([1, 2, 2])
+    G = np.concatenate([M[:, [0, 1, 2], [0, 1, 2]], M[:, ia, ib] + M[:, ib, ia]], axis=1)
+    Wm = np.zeros((n, 6, 6))
+    Wm[:, :3, :3] = 4.0 * Phi2
+    Wm[:, [3, 4, 5], [3, 4, 5]] = 2.0 * gam[:, ia, ib]
+    A = np.matmul(G.transpose(0, 2, 1), np.matmul(Wm, G))
+    A5 = A.reshape(n, 3, 3, 3, 3)
+    for i in range(3):
+        A5[:, i, :, i, :] += S
+    return A
+
+
 def ogden_point_kernel(F: np.ndarray, mat: OgdenMaterial, tangent: bool = True):
     """Energy, first Piola stress and tangent at points.
 
@@ -112,34 +147,7 @@ def ogden_point_kernel(F: np.ndarray, mat: OgdenMaterial, tangent: bool = True):
     S = np.matmul(Q * S_eig[:, None, :], Q.transpose(0, 2, 1))
     P = np.matmul(F, S)
 
-    A = None
-    if tangent:
-        inv = 1.0 / c
-        Phi2 = -B[:, None, None] * np.eye(3)[None] * inv[:, :, None] ** 2
-        Phi2 += (0.25 * UppJ)[:, None, None] * inv[:, :, None] * inv[:, None, :]
-        gam = -B[:, None, None] * inv[:, :, None] * inv[:, None, :]
-        for p, q, a, T, g in terms:
-            dg = p * (p - 1.0) * c ** (p - 2.0)
-            Phi2 += a[:, None, None] * (
-                np.eye(3)[None] * dg[:, :, None]
-                + q * (g[:, :, None] * inv[:, None, :] + inv[:, :, None] * g[:, None, :])
-                + (q**2 * T)[:, None, None] * inv[:, :, None] * inv[:, None, :])
-            gam += a[:, None, None] * p * _divided_power(c[:, :, None], c[:, None, :], p - 1.0)
-        # M[a, b] = (F n_a) (x) n_b, flattened to 9 components (i, J). With gamma symmetric,
-        # sum_(a != b) g_ab (M_ab M_ab^T + M_ab M_ba^T) = sum_(a < b) g_ab s_ab s_ab^T with
-        # s_ab = M_ab + M_ba, so the geometric part is one batched (9x6)(6x6)(6x9) product.
-        Fn = np.matmul(F, Q).transpose(0, 2, 1)  # (n, a, i)
-        Qt = Q.transpose(0, 2, 1)  # (n, b, J)
-        M = (Fn[:, :, None, :, None] * Qt[:, None, :, None, :]).reshape(n, 3, 3, 9)
-        ia, ib = np.array([0, 0, 1]), np.array([1, 2, 2])
-        G = np.concatenate([M[:, [0, 1, 2], [0, 1, 2]], M[:, ia, ib] + M[:, ib, ia]], axis=1)
-        Wm = np.zeros((n, 6, 6))
-        Wm[:, :3, :3] = 4.0 * Phi2
-        Wm[:, [3, 4, 5], [3, 4, 5]] = 2.0 * gam[:, ia, ib]
-        A = np.matmul(G.transpose(0, 2, 1), np.matmul(Wm, G))
-        A5 = A.reshape(n, 3, 3, 3, 3)
-        for i in range(3):
-            A5[:, i, :, i, :] += S
+    A = _tangent(F, Q, c, S, B, UppJ, terms) if tangent else None
     if not ok.all():
         bad = ~ok
         W[bad] = np.nan

@@ -96,8 +96,15 @@ class ANPAssembler(CAssembler):
         self.w_ae = w_ae = np.ascontiguousarray((V0[:, None] / 4.0) / self.V0_node[cells])
         self.Mw = sp.csr_matrix((w_ae.ravel(), (cells.ravel(), np.repeat(np.arange(nc), 4))),
                                 shape=(nb, nc))
-        # g_a = sum_(e at a) w_ae dJ_e/du: entries (a, dof of (e, b, k)) for a, b in e. Their
-        # sum per (a, dof) has a fixed structure: `g_index` maps each term to its entry.
+        self._index_nonlocal(cells, nb)
+        self._nonlocal = None
+
+    def _index_nonlocal(self, cells: np.ndarray, nb: int) -> None:
+        """Where the averaged pressure's coupling lands: ``g_index`` maps each term of
+        g_a = sum_(e at a) w_ae dJ_e/du (entries (a, dof of (e, b, k)) for a, b in e) to its
+        entry, and ``pair_pos`` each pair of entries of a row of g (K_nl = sum_a d_a g_a g_a^T)
+        to its position in the two-ring pattern's value array.
+        """
         a_loc, b_loc, k = np.meshgrid(np.arange(4), np.arange(4), np.arange(3), indexing="ij")
         a_loc, b_loc, k = a_loc.ravel(), b_loc.ravel(), k.ravel()      # 48 terms per cell
         rows = cells[:, a_loc]                                         # (nc, 48)
@@ -107,8 +114,6 @@ class ANPAssembler(CAssembler):
         self.g_index = np.ascontiguousarray(g_index, dtype=np.int64)
         g_row, g_col = ukeys // (3 * nb), ukeys % (3 * nb)
         ptr = np.searchsorted(g_row, np.arange(nb + 1))
-        # K_nl = sum_a d_a g_a g_a^T: every pair of entries of a row of g lands at a fixed
-        # position of the pattern's value array.
         lengths = np.diff(ptr)
         p_list, q_list = [], []
         for L in np.unique(lengths):
@@ -128,7 +133,6 @@ class ANPAssembler(CAssembler):
             raise ValueError("ANPAssembler: the two-ring pattern misses coupled entries")
         self.pair_pos = pos.astype(np.int32)
         self.n_g = ukeys.size
-        self._nonlocal = None
 
     # ------------------------------------------------------------------------------------------
     def update_points(self, tangent: bool) -> bool:

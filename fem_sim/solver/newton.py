@@ -18,6 +18,7 @@ too many iterations; the load stepper then retries or cuts back.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -26,6 +27,22 @@ from fem_sim.solver.equations import Equations
 from fem_sim.solver.linear import LinearSolver
 from fem_sim.solver.results import NewtonCounts, StepFailure
 from fem_sim.solver.settings import SolverSettings
+
+
+@dataclass
+class _Attempt:
+    """One attempt at a load: |R|, the constraint gap, the tolerances, the steps so far."""
+
+    lam: float
+    r: float
+    gap: float
+    tol: float
+    scale: float
+    gap_tol: float
+    history: list
+    it: int = 0
+    n_chord: int = 0
+    chord: bool = False
 
 
 class NewtonSolver:
@@ -66,8 +83,28 @@ class NewtonSolver:
         ``history`` receives |R| after every step. ``first_order_start``: u comes from a
         linear (or no) prediction.
         """
-        s, eqs = self.settings, self.eqs
+        s = self.settings
         self.attempt_iterations = 0
+        a = self._start(lam, history)
+        while True:
+            self.attempt_iterations = a.it
+            if a.r <= a.tol and a.gap <= a.gap_tol:
+                return a.it
+            if a.chord and a.gap <= a.gap_tol and a.n_chord < s.max_chord_steps:
+                if self._chord(a):
+                    continue
+            if a.it == s.max_iterations:
+                break
+            if self._newton_step(a, first_order_start):
+                return a.it
+        raise StepFailure(f"Newton did not converge in {s.max_iterations} iterations at load "
+                          f"{lam:.4g} (|R| = {a.r:.3e}, tolerance {a.tol:.1e})")
+
+    def _start(self, lam: float, history: list[float]) -> _Attempt:
+        """The attempt's start: |R| at the predictor (after the local relaxation of its hot
+        spot, when that helps) and the tolerances.
+        """
+        s, eqs = self.settings, self.eqs
         if not eqs.update_points(tangent=False):
             raise StepFailure(f"det F <= 0 at the predictor (min det F = {eqs.min_J:.3g})")
         r = eqs.residual(lam)
@@ -88,66 +125,70 @@ class NewtonSolver:
                                   f"{eqs.min_J:.3g})")
             r = eqs.residual(lam)
             history.append(r)
-        # A chord step pays off only in Newton's fast phase: it contracts |R| about as much as
-        # the last Newton step did, so it is tried after a Newton step that cut |R| by
-        # ``chord_trigger`` or more, and kept up while each step contracts by
-        # ``chord_contraction``. Measured on the real liver (15k nodes): chord steps straight
-        # after the predictor or in Newton's slow phase derail the next Newton step.
-        chord = False
-        it = n_chord = 0
-        while True:
-            self.attempt_iterations = it
-            if r <= tol and gap <= gap_tol:
-                return it
-            if chord and gap <= gap_tol and n_chord < s.max_chord_steps:
-                r_new = self._chord_step(lam, r)
-                if r_new is not None:
-                    n_chord += 1
-                    self.chord_steps += 1
-                    history.append(r_new)
-                    chord = r_new <= s.chord_contraction * r
-                    r = r_new
-                    continue
-                self.chord_rejected += 1
-                chord = False
-            if it == s.max_iterations:
-                break
-            J = eqs.jacobian(lift=gap > 0)
-            # Accurate linear solves keep Newton quadratic; measured: loose (Eisenstat-Walker)
-            # tolerances cost more Newton iterations (assembly + kernels) than they save.
-            eta = s.krylov_rtol if gap > 0 else min(
-                1e-2, max(s.krylov_rtol, 0.1 * tol / max(r, 1e-300)))
-            if not self._solve_near(it, gap, J, eta):
-                self.linear.solve(J, eqs.rhs, eqs.du, eta)
-            # Round-off floor: |R| cannot decrease below ~eps * |F_int|, and that floor does not
-            # shrink with a small increment (the stresses of a nearly undeformed state carry
-            # an absolute round-off of ~eps * mu). A state this close to the full load's scale
-            # is converged far beyond any tolerance that matters: it is kept if no step helps,
-            # and a step that no longer halves |R| there ends the iteration.
-            floor = r <= 1e-10 * max(scale, eqs.f_norm) and gap <= gap_tol
-            alpha, r_new, accepted = self._line_search(lam, r, tol, gap > gap_tol,
-                                                       it == 0 and first_order_start, floor)
-            if not accepted and floor:
-                return it + 1
-            if not accepted:
-                why = ("det F <= 0" if eqs.min_J <= 0 else
-                       "NaN/inf in the residual" if not np.isfinite(r_new) else
-                       "no residual decrease")
-                raise StepFailure(f"line search failed at load {lam:.4g}: {why} "
-                                  f"(|R| = {r:.3e})")
-            it += 1
-            stalled = floor and r_new > 0.5 * r
-            chord = self.chord_allowed and alpha == 1.0 and r_new <= s.chord_trigger * r
-            r = r_new
-            gap = eqs.constraint_gap(lam)
-            history.append(r)
-            if stalled and gap <= gap_tol:
-                return it
-            if it >= 7 and r > history[0]:
-                raise StepFailure(f"Newton is not converging at load {lam:.4g} (|R| = {r:.3e} "
-                                  f"after {it} iterations, {history[0]:.3e} at the start)")
-        raise StepFailure(f"Newton did not converge in {s.max_iterations} iterations at load "
-                          f"{lam:.4g} (|R| = {r:.3e}, tolerance {tol:.1e})")
+        return _Attempt(lam=lam, r=r, gap=gap, tol=tol, scale=scale, gap_tol=gap_tol,
+                        history=history)
+
+    def _chord(self, a: _Attempt) -> bool:
+        """A chord step (the last factorisation, no new one); False when it did not help.
+
+        A chord step pays off only in Newton's fast phase: it contracts |R| about as much as
+        the last Newton step did, so it is tried after a Newton step that cut |R| by
+        ``chord_trigger`` or more, and kept up while each step contracts by
+        ``chord_contraction`` (straight after the predictor or in Newton's slow phase it
+        derails the next Newton step).
+        """
+        r_new = self._chord_step(a.lam, a.r)
+        if r_new is None:
+            self.chord_rejected += 1
+            a.chord = False
+            return False
+        a.n_chord += 1
+        self.chord_steps += 1
+        a.history.append(r_new)
+        a.chord = r_new <= self.settings.chord_contraction * a.r
+        a.r = r_new
+        return True
+
+    def _newton_step(self, a: _Attempt, first_order_start: bool) -> bool:
+        """One Newton step with line search; True when the attempt ends converged."""
+        s, eqs = self.settings, self.eqs
+        J = eqs.jacobian(lift=a.gap > 0)
+        # Accurate linear solves keep Newton quadratic: loose (Eisenstat-Walker) tolerances
+        # cost more Newton iterations (assembly + kernels) than they save.
+        eta = s.krylov_rtol if a.gap > 0 else min(
+            1e-2, max(s.krylov_rtol, 0.1 * a.tol / max(a.r, 1e-300)))
+        if not self._solve_near(a.it, a.gap, J, eta):
+            self.linear.solve(J, eqs.rhs, eqs.du, eta)
+        # Round-off floor: |R| cannot decrease below ~eps * |F_int|, and that floor does not
+        # shrink with a small increment (the stresses of a nearly undeformed state carry an
+        # absolute round-off of ~eps * mu). A state this close to the full load's scale is
+        # converged far beyond any tolerance that matters: it is kept if no step helps, and a
+        # step that no longer halves |R| there ends the iteration.
+        floor = a.r <= 1e-10 * max(a.scale, eqs.f_norm) and a.gap <= a.gap_tol
+        alpha, r_new, accepted = self._line_search(a.lam, a.r, a.tol, a.gap > a.gap_tol,
+                                                   a.it == 0 and first_order_start, floor)
+        if not accepted and floor:
+            a.it += 1
+            return True
+        if not accepted:
+            why = ("det F <= 0" if eqs.min_J <= 0 else
+                   "NaN/inf in the residual" if not np.isfinite(r_new) else
+                   "no residual decrease")
+            raise StepFailure(f"line search failed at load {a.lam:.4g}: {why} "
+                              f"(|R| = {a.r:.3e})")
+        a.it += 1
+        stalled = floor and r_new > 0.5 * a.r
+        a.chord = self.chord_allowed and alpha == 1.0 and r_new <= s.chord_trigger * a.r
+        a.r = r_new
+        a.gap = eqs.constraint_gap(a.lam)
+        a.history.append(a.r)
+        if stalled and a.gap <= a.gap_tol:
+            return True
+        if a.it >= 7 and a.r > a.history[0]:
+            raise StepFailure(f"Newton is not converging at load {a.lam:.4g} (|R| = "
+                              f"{a.r:.3e} after {a.it} iterations, {a.history[0]:.3e} at the "
+                              "start)")
+        return False
 
     def _solve_near(self, it: int, gap: float, J, eta: float) -> bool:
         """A later Newton step of this attempt solved by GMRES preconditioned with the

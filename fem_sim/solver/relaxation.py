@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 import warnings
+from types import SimpleNamespace
 
 import numpy as np
 import scipy.sparse as sp
@@ -61,21 +62,16 @@ class LocalRelaxation:
             return None
         return np.flatnonzero(mask)
 
-    def relax(self, lam: float, tol: float, max_iterations: int = 8) -> int:
-        """Local Newton on the hot spot at load ``lam`` until its residual is below ``tol`` or
-        a tenth of the residual outside it; returns the local iterations (0: nothing done).
-        The caller re-evaluates the global state afterwards.
+    def _subproblem(self, region: np.ndarray) -> SimpleNamespace | None:
+        """The hot spot's own problem: its cells' assembler on the global block graph
+        restricted to its nodes, its dofs, and which of them are free (None: none is).
         """
         eqs, c = self.eqs, self.c
-        region = self.region()
-        if region is None:
-            return 0
         in_region = np.zeros(self.graph.shape[0], dtype=bool)
         in_region[region] = True
         cells = np.flatnonzero(in_region[c.cells].any(axis=1))
         sub_blocks, local = np.unique(c.cells[cells], return_inverse=True)
         local = local.reshape(cells.size, -1)
-        nd = 3 * sub_blocks.size
         # The hot spot's pattern: the global block graph restricted to its nodes, in 3 x 3
         # blocks (it holds every pair of nodes that share a cell).
         pattern = sp.kron(self.graph[sub_blocks][:, sub_blocks], np.ones((3, 3)), format="csr")
@@ -87,57 +83,73 @@ class LocalRelaxation:
         fixed[eqs.cons.owned] = True
         free = np.flatnonzero(in_region[sub_blocks].repeat(3) & ~fixed[dofs])
         if free.size == 0:
+            return None
+        return SimpleNamespace(sub=sub, dofs=dofs, free=free, fint=np.empty(dofs.size))
+
+    def _evaluate(self, p: SimpleNamespace, u: np.ndarray, f_ext: np.ndarray):
+        """(R on the free dofs, energy, tangents) of the hot spot at ``u``; None where
+        det F <= 0 or the stress is not finite.
+        """
+        W, P, A, J = point_kernel(p.sub.deformation(u.reshape(-1, 3)),
+                                  self.eqs.assembler.material, True)
+        if not (np.all(J > 0) and np.all(np.isfinite(P))):
+            return None
+        p.sub.forces(P.reshape(-1, 9), p.fint)
+        return p.fint[p.free] - f_ext[p.free], p.sub.integrate(W) - f_ext @ u, A
+
+    def _step(self, p: SimpleNamespace, u, state, f_ext):
+        """One local Newton step with backtracking: (u, state) accepted, or None."""
+        R, energy, A = state
+        r = float(np.linalg.norm(R))
+        p.sub.assemble(A.reshape(-1, 81))
+        K = p.sub.matrix()[p.free][:, p.free].tocsc()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", spla.MatrixRankWarning)
+            du = spla.spsolve(K, -R)
+        if not np.all(np.isfinite(du)):
+            return None
+        slope = float(R @ du)
+        alpha = 1.0
+        for _ in range(8):
+            trial = u.copy()
+            trial[p.free] += alpha * du
+            s = self._evaluate(p, trial, f_ext)
+            if s is not None and (np.linalg.norm(s[0]) < (1 - 1e-4 * alpha) * r
+                                  or (slope < 0 and s[1] <= energy + 1e-4 * alpha * slope)):
+                return trial, s
+            alpha *= 0.5
+        return None
+
+    def relax(self, lam: float, tol: float, max_iterations: int = 8) -> int:
+        """Local Newton on the hot spot at load ``lam`` until its residual is below ``tol`` or
+        a tenth of the residual outside it; returns the local iterations (0: nothing done).
+        The caller re-evaluates the global state afterwards.
+        """
+        eqs = self.eqs
+        region = self.region()
+        p = self._subproblem(region) if region is not None else None
+        if p is None:
             return 0
-        mat = eqs.assembler.material
         u_all = eqs.u.x.array
-        f_ext = lam * eqs.f_ext.array_r[dofs]
+        f_ext = lam * eqs.f_ext.array_r[p.dofs]
         outside = np.ones(eqs.n_owned_dofs, dtype=bool)
-        outside[dofs[free]] = False
+        outside[p.dofs[p.free]] = False
         target = max(tol, 0.1 * float(np.linalg.norm(eqs.b.array_r[outside])))
-        u = u_all[dofs].copy()
-        fint = np.empty(nd)
-
-        def evaluate(u, tangent):
-            W, P, A, J = point_kernel(sub.deformation(u.reshape(-1, 3)), mat, tangent)
-            if not (np.all(J > 0) and np.all(np.isfinite(P))):
-                return None
-            sub.forces(P.reshape(-1, 9), fint)
-            R = fint[free] - f_ext[free]
-            energy = sub.integrate(W) - f_ext @ u
-            return R, energy, A
-
-        state = evaluate(u, True)
+        u = u_all[p.dofs].copy()
+        state = self._evaluate(p, u, f_ext)
         its = 0
         while state is not None and its < max_iterations:
-            R, energy, A = state
-            r = float(np.linalg.norm(R))
+            r = float(np.linalg.norm(state[0]))
             log.debug("local |R| %.3e (target %.1e)", r, target)
             if r <= target:
                 break
-            sub.assemble(A.reshape(-1, 81))
-            K = sub.matrix()[free][:, free].tocsc()
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", spla.MatrixRankWarning)
-                du = spla.spsolve(K, -R)
-            if not np.all(np.isfinite(du)):
-                break
-            slope = float(R @ du)
-            alpha, accepted = 1.0, None
-            for _ in range(8):
-                trial = u.copy()
-                trial[free] += alpha * du
-                s = evaluate(trial, True)
-                if s is not None and (np.linalg.norm(s[0]) < (1 - 1e-4 * alpha) * r
-                                      or (slope < 0 and s[1] <= energy + 1e-4 * alpha * slope)):
-                    accepted = (trial, s)
-                    break
-                alpha *= 0.5
+            accepted = self._step(p, u, state, f_ext)
             if accepted is None:
                 break
             u, state = accepted
             its += 1
         if its:
-            u_all[dofs[free]] = u[free]
+            u_all[p.dofs[p.free]] = u[p.free]
             eqs.assembler.tangent_fresh = False
             self.iterations += its
             log.debug("local relaxation at %.4g: %d nodes, %d iterations", lam,

@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -57,6 +58,40 @@ MIN_INCREMENT = 1e-6  # a floor for the controller (cut-backs have their own lim
 NOISE = 1e3
 
 
+@dataclass
+class _Walk:
+    """The load path so far: the last fraction reached, the next increment, the increment the
+    predictor's measured error allows (once known), the last converged states.
+    """
+
+    lam: float
+    dlam: float
+    states: list
+    last: float
+    h_ok: float | None = None
+
+
+@dataclass
+class _Step:
+    """The work toward one output fraction."""
+
+    target: float
+    t0: float
+    iters: int = 0
+    cutbacks: int = 0
+    increments: int = 0
+    retry_plain: bool = False
+    history: list = field(default_factory=list)
+
+    def record(self, sol: Solution) -> None:
+        sol.newton_iterations.append(self.iters)
+        sol.residual_norms.append(self.history[-1])
+        sol.residual_history.append(self.history)
+        sol.cutbacks.append(self.cutbacks)
+        sol.increments.append(self.increments)
+        sol.wall_time.append(time.perf_counter() - self.t0)
+
+
 class LoadStepper:
     """Runs one simulation through its load fractions with the pieces it is given."""
 
@@ -74,104 +109,110 @@ class LoadStepper:
             return self._run(fractions, gather)
 
     def _run(self, fractions: np.ndarray, gather) -> Solution:
-        s, eqs = self.settings, self.eqs
+        eqs = self.eqs
         eqs.set_state(np.zeros_like(eqs.u.x.array))
         self.linear.reset()
         self.newton.reset()
         self.predictor.start()
         sol = Solution(fractions=fractions, displacement=None)
         stored = []
-        states: list[tuple[float, np.ndarray]] = [(0.0, eqs.state())]
-        lam, dlam = 0.0, self.first_increment(float(fractions[0]))
-        h_ok = None  # the increment the predictor's measured error allows (once it is known)
-        last = float(fractions[-1])
+        w = _Walk(lam=0.0, dlam=self.first_increment(float(fractions[0])),
+                  states=[(0.0, eqs.state())], last=float(fractions[-1]))
         for target in fractions:
-            t0 = time.perf_counter()
-            iters, cutbacks, history, retry_plain = 0, 0, [], False
-            increments = 0
-            dlam = min(dlam, target - lam) if dlam > 0 else target - lam
+            st = _Step(target=float(target), t0=time.perf_counter())
+            w.dlam = min(w.dlam, target - w.lam) if w.dlam > 0 else target - w.lam
             try:
-                while lam < target - 1e-14:
-                    if h_ok is not None:  # equal increments to the target, none above h_ok
-                        rest = target - lam
-                        trial = lam + rest / max(1, math.ceil(rest / h_ok - 1e-6))
-                    else:
-                        trial = min(lam + dlam, target)
-                        if target - trial < STRETCH * dlam:
-                            trial = target
-                    self.predictor.predict(states, trial, extrapolate=not retry_plain)
-                    q = self.predictor.error_exponent
-                    guess = eqs.state() if q else None
-                    factorizations = self.linear.counts.factorizations
-                    try:
-                        its = self.newton.solve(trial, history, self.predictor.order <= 1)
-                    except StepFailure as exc:
-                        iters += self.newton.attempt_iterations  # failed attempts cost too
-                        if not retry_plain and len(states) > 1 and s.predictor != "previous":
-                            # An extrapolated start can lie outside Newton's basin: retry the
-                            # same increment from the last converged state before cutting back.
-                            retry_plain = True
-                            eqs.set_state(states[-1][1])
-                            continue
-                        retry_plain = False
-                        cutbacks += 1
-                        log.debug("step to %.4g failed (%s); cut back", trial, exc)
-                        if cutbacks > s.max_cutbacks:
-                            raise StepFailure(f"{exc}; gave up after {s.max_cutbacks} "
-                                              "cut-backs") from None
-                        eqs.set_state(states[-1][1])
-                        dlam = 0.5 * (trial - lam)
-                        if h_ok is not None:
-                            h_ok = dlam
-                        self.linear.invalidate()
-                        continue
-                    iters += its
-                    increments += 1
-                    retry_plain = False
-                    h, lam = trial - lam, trial
-                    states = (states + [(lam, eqs.state())])[-3:]
-                    if guess is not None:
-                        # A guess Newton did not need to correct (no Newton step, or |R| within
-                        # NOISE of the tolerance) was good enough: its "error" is then the
-                        # noise of the converged states (they are exact only to the
-                        # tolerance), never a reason to shrink.
-                        newton = self.newton
-                        exact = its == 0 or newton.start_residual <= NOISE * newton.tolerance
-                        err = (0.0 if exact else
-                               self.relative_error(guess, states[-2][1], states[-1][1]))
-                        costly = (self.linear.counts.factorizations - factorizations
-                                  >= COSTLY_FACTORIZATIONS)
-                        h_ok = max(next_increment(h, err, q, h_ok if h_ok is not None
-                                                  else dlam, costly), MIN_INCREMENT)
-                    if lam < last:
-                        # Nothing is predicted after the last fraction: the Hermite predictor's
-                        # tangent there (an assembly and a GMRES solve) would be thrown away.
-                        self.predictor.converged(lam, its)
-                    if its <= 3:
-                        # An easy increment: let a cut-back or a small first increment grow
-                        # (capped by the distance to the next output fraction).
-                        dlam *= 2.0
+                while w.lam < target - 1e-14:
+                    self._increment(w, st)
             except StepFailure as exc:
                 sol.status, sol.failure_reason = "failed", str(exc)
-                eqs.set_state(states[-1][1])
+                eqs.set_state(w.states[-1][1])
                 break
-            sol.newton_iterations.append(iters)
-            sol.residual_norms.append(history[-1])
-            sol.residual_history.append(history)
-            sol.cutbacks.append(cutbacks)
-            sol.increments.append(increments)
-            sol.wall_time.append(time.perf_counter() - t0)
+            st.record(sol)
             stored.append(gather())
-            dlam = max(dlam, 0.0)
+            w.dlam = max(w.dlam, 0.0)
             nxt = np.searchsorted(fractions, target, side="right")
-            if nxt < fractions.size and not cutbacks:
-                dlam = fractions[nxt] - target
+            if nxt < fractions.size and not st.cutbacks:
+                w.dlam = fractions[nxt] - target
         for name, value in WorkCounts.of(self.linear.counts, self.newton.counts()).counts().items():
             setattr(sol, name, value)
         if eqs.disc.comm.rank == 0:
             sol.displacement = (np.stack(stored) if stored
                                 else np.zeros((0, eqs.disc.n_nodes, 3)))
         return sol
+
+    @staticmethod
+    def _trial(w: _Walk, target: float) -> float:
+        """The load fraction the next increment tries."""
+        if w.h_ok is not None:  # equal increments to the target, none above h_ok
+            rest = target - w.lam
+            return w.lam + rest / max(1, math.ceil(rest / w.h_ok - 1e-6))
+        trial = min(w.lam + w.dlam, target)
+        return target if target - trial < STRETCH * w.dlam else trial
+
+    def _increment(self, w: _Walk, st: _Step) -> None:
+        """One increment attempt toward ``st.target`` (collective): converged, retried from
+        the last state, or cut back; StepFailure once the cut-backs are spent.
+        """
+        trial = self._trial(w, st.target)
+        self.predictor.predict(w.states, trial, extrapolate=not st.retry_plain)
+        q = self.predictor.error_exponent
+        guess = self.eqs.state() if q else None
+        factorizations = self.linear.counts.factorizations
+        try:
+            its = self.newton.solve(trial, st.history, self.predictor.order <= 1)
+        except StepFailure as exc:
+            self._failed(w, st, trial, exc)
+            return
+        self._converged(w, st, trial, its, guess, q, factorizations)
+
+    def _failed(self, w: _Walk, st: _Step, trial: float, exc: StepFailure) -> None:
+        s = self.settings
+        st.iters += self.newton.attempt_iterations  # failed attempts cost too
+        if not st.retry_plain and len(w.states) > 1 and s.predictor != "previous":
+            # An extrapolated start can lie outside Newton's basin: retry the same increment
+            # from the last converged state before cutting back.
+            st.retry_plain = True
+            self.eqs.set_state(w.states[-1][1])
+            return
+        st.retry_plain = False
+        st.cutbacks += 1
+        log.debug("step to %.4g failed (%s); cut back", trial, exc)
+        if st.cutbacks > s.max_cutbacks:
+            raise StepFailure(f"{exc}; gave up after {s.max_cutbacks} cut-backs") from None
+        self.eqs.set_state(w.states[-1][1])
+        w.dlam = 0.5 * (trial - w.lam)
+        if w.h_ok is not None:
+            w.h_ok = w.dlam
+        self.linear.invalidate()
+
+    def _converged(self, w: _Walk, st: _Step, trial: float, its: int, guess, q,
+                   factorizations: int) -> None:
+        st.iters += its
+        st.increments += 1
+        st.retry_plain = False
+        h, w.lam = trial - w.lam, trial
+        w.states = (w.states + [(w.lam, self.eqs.state())])[-3:]
+        if guess is not None:
+            # A guess Newton did not need to correct (no Newton step, or |R| within NOISE of
+            # the tolerance) was good enough: its "error" is then the noise of the converged
+            # states (they are exact only to the tolerance), never a reason to shrink.
+            newton = self.newton
+            exact = its == 0 or newton.start_residual <= NOISE * newton.tolerance
+            err = 0.0 if exact else self.relative_error(guess, w.states[-2][1],
+                                                         w.states[-1][1])
+            costly = (self.linear.counts.factorizations - factorizations
+                      >= COSTLY_FACTORIZATIONS)
+            w.h_ok = max(next_increment(h, err, q, w.h_ok if w.h_ok is not None else w.dlam,
+                                        costly), MIN_INCREMENT)
+        if w.lam < w.last:
+            # Nothing is predicted after the last fraction: the Hermite predictor's tangent
+            # there (an assembly and a GMRES solve) would be thrown away.
+            self.predictor.converged(w.lam, its)
+        if its <= 3:
+            # An easy increment: let a cut-back or a small first increment grow (capped by
+            # the distance to the next output fraction).
+            w.dlam *= 2.0
 
     def relative_error(self, guess: np.ndarray, before: np.ndarray, after: np.ndarray) -> float:
         """|after - guess| / |after - before| over the owned dofs (collective): the predictor's

@@ -121,11 +121,23 @@ class TetAssembler:
         self.indptr = np.asarray(indptr, dtype=np.int32)
         self.indices = np.asarray(indices, dtype=np.int32)
         n = self.indptr.size - 1
-        # Position of every element entry in the CSR value array. The pattern is made of full
-        # 3 x 3 blocks (rows 3A..3A+2 share their columns): entry (3A+i, 3B+k) sits at
-        # indptr[3A+i] + (offset of column 3B in row 3A) + k. Columns are sorted, so the
-        # block offsets come from one search over (block row, block column) keys.
         self._check_blocked(n)
+        self.pos = self._positions(cb, n)
+        self.values = np.zeros(self.indices.size)
+        rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(self.indptr))
+        self.diag = np.flatnonzero(rows == self.indices)
+        if self.diag.size != n:
+            raise ValueError("TetAssembler: the CSR pattern misses diagonal entries")
+        self._bc_key = None
+        self._colour(n)
+
+    def _positions(self, cb: np.ndarray, n: int) -> np.ndarray:
+        """(ncells, (3 nn)^2) the position of every element entry in the CSR value array.
+
+        The pattern is made of full 3 x 3 blocks (rows 3A..3A+2 share their columns): entry
+        (3A+i, 3B+k) sits at indptr[3A+i] + (offset of column 3B in row 3A) + k. Columns are
+        sorted, so the block offsets come from one search over (block row, block column) keys.
+        """
         nb, nn = n // 3, self.nn
         first = self.indptr[0:n:3]                     # start of each block row's first row
         bcols = self.indices // 3
@@ -143,14 +155,12 @@ class TetAssembler:
         # pos[c, a, i, b, k] = indptr[3 cb[c, a] + i] + boff[c, a, b] + k
         pos = (self.indptr[3 * cb[:, :, None] + i][:, :, :, None, None]
                + boff[:, :, None, :, None] + i[None, None, None, None, :])
-        self.pos = np.ascontiguousarray(pos.reshape(-1, (3 * nn) ** 2), dtype=np.int32)
-        self.values = np.zeros(self.indices.size)
-        self.diag = np.flatnonzero(rows == self.indices)
-        if self.diag.size != n:
-            raise ValueError("TetAssembler: the CSR pattern misses diagonal entries")
-        self._bc_key = None
-        # Cells by colour (no two cells of a colour share a node): the threads split each
-        # colour, and every sum runs in the same order whatever their number.
+        return np.ascontiguousarray(pos.reshape(-1, (3 * nn) ** 2), dtype=np.int32)
+
+    def _colour(self, n: int) -> None:
+        """Cells by colour (no two cells of a colour share a node): the threads split each
+        colour, and every sum runs in the same order whatever their number.
+        """
         colour = np.empty(self.ncells, dtype=np.int32)
         ncol = self.lib.tet_colour(self.ncells, self.nn, n // 3,
                                    self.ffi.cast("int32_t *", self.cells.ctypes.data),
