@@ -137,7 +137,7 @@ test-trainer: setup-trainer $(TEST_DATA)/.done $(TEST_DATA4)/.done
 	$(TRAIN_VENV)/bin/ruff check .
 	LIVERFEM_TEST_DATASET=$(TEST_DATA) LIVERFEM_TEST_DATASET4=$(TEST_DATA4) \
 	    bash scripts/run_pytest.sh $(TPY) tests/data_spec tests/liverviz tests/liverreg \
-	    tests/surrogate tests/reliability -q $(TESTS)
+	    tests/surrogate tests/reliability tests/common/test_environments.py -q $(TESTS)
 
 # The benchmarks that fit two cores in about half an hour, each writing its report under docs/;
 # the long studies (table4, tradeoff-*, bench-realtime, bench-viewer) are targets of their own.
@@ -152,7 +152,10 @@ bench-throughput: setup-solver
 bench-inference: setup-trainer
 	$(TPY) bench/bench_surrogate.py
 
-bench-# A liver a model never saw: the scene of its FE truth with the model's boundary condition
+bench-population: setup-solver
+	$(SPY) bench/bench_population.py
+
+# A liver a model never saw: the scene of its FE truth with the model's boundary condition
 # (trainer environment), solved under mpirun (solver environment), then the model against it.
 LIVER ?=
 TRUTH_SIMS ?= 60
@@ -166,9 +169,6 @@ truth: setup
 evaluate: setup-trainer
 	$(TPY) -m surrogate evaluate $(RUN) $(DATA) $(if $(LIVER),--liver $(LIVER)) \
 	    --out $(RUN)/evaluation.json
-
-population: setup-solver
-	$(SPY) bench/bench_population.py
 
 # FEM price list (resumable: re-run to continue): docs/tradeoff_fem.{md,png}; one run at a
 # time on FEM_THREADS threads (the machine's two cores by default)

@@ -91,6 +91,55 @@ def key_of(spec: dict) -> str:
     return json.dumps(spec, sort_keys=True)
 
 
+def _plan_meshes(add, liver: str, s: dict) -> None:
+    """The references (one per K/mu) and the mesh-size and element rows."""
+    for kmu in (10.0, 100.0, 200.0, 1000.0):  # references (patch load), one per K/mu
+        if kmu == 200.0 or s["kmu"]:
+            add(liver=liver, load="patch", h=s["ref"], degree=2, K_over_mu=kmu,
+                rtol=REF_RTOL, role="reference")
+    add(liver=liver, load="nodal", h=s["ref"], degree=2, rtol=REF_RTOL, role="reference")
+    for load in ("patch", "nodal"):
+        for h in s["p1"]:
+            add(liver=liver, load=load, h=h, degree=1, role="mesh")
+        for h in s["p2"]:
+            add(liver=liver, load=load, h=h, degree=2, role="mesh")
+        for h in s["anp"]:
+            add(liver=liver, load=load, h=h, element="anp", role="mesh")
+
+
+def _plan_steps_and_tolerances(add, liver: str, s: dict) -> None:
+    d = s["default"]
+    for n in (1, 2, 5, 20):
+        add(liver=liver, load="patch", h=d, steps=n, role="steps")
+    # The locking-free elements with fewer load steps: one answer sooner (a dataset wants
+    # every load fraction as a sample; a single answer does not)
+    for n in (1, 2, 5):
+        for h in s["p2"]:
+            add(liver=liver, load="patch", h=h, degree=2, steps=n, role="steps")
+        for h in s["anp"]:
+            add(liver=liver, load="patch", h=h, element="anp", steps=n, role="steps")
+    for rtol in (1e-4, 1e-5, 1e-8, 1e-10):
+        add(liver=liver, load="patch", h=d, rtol=rtol, role="tolerance")
+    # The locking-free element at rtol 1e-9 (the references' tolerance): what the default
+    # tolerance saves in seconds and costs in accuracy where P2 reaches 2 %
+    for h in s["p2"]:
+        add(liver=liver, load="patch", h=h, degree=2, rtol=1e-9, role="tolerance")
+        add(liver=liver, load="patch", h=h, degree=2, rtol=1e-9, steps=1, role="tolerance")
+
+
+def _plan_solvers_and_kmu(add, liver: str, s: dict) -> None:
+    d = s["default"]
+    for fac in ("double", "petsc"):
+        add(liver=liver, load="patch", h=d, factorization=fac, role="linear solver")
+    add(liver=liver, load="patch", h=d, linear_solver="gamg", role="linear solver")
+    for pred in ("tangent", "extrapolate", "previous"):
+        add(liver=liver, load="patch", h=d, predictor=pred, role="predictor")
+    for kmu in (10.0, 100.0, 1000.0):
+        for h in s["kmu"]:
+            for degree in (1, 2):
+                add(liver=liver, load="patch", h=h, degree=degree, K_over_mu=kmu, role="K/mu")
+
+
 def plan(livers: list[str]) -> list[dict]:
     """Every run of the study, references first."""
     runs = []
@@ -101,46 +150,8 @@ def plan(livers: list[str]) -> list[dict]:
             runs.append(spec)
 
     for liver in livers:
-        s = SIZES[liver]
-        for kmu in (10.0, 100.0, 200.0, 1000.0):  # references (patch load), one per K/mu
-            if kmu == 200.0 or s["kmu"]:
-                add(liver=liver, load="patch", h=s["ref"], degree=2, K_over_mu=kmu,
-                    rtol=REF_RTOL, role="reference")
-        add(liver=liver, load="nodal", h=s["ref"], degree=2, rtol=REF_RTOL, role="reference")
-        for load in ("patch", "nodal"):
-            for h in s["p1"]:
-                add(liver=liver, load=load, h=h, degree=1, role="mesh")
-            for h in s["p2"]:
-                add(liver=liver, load=load, h=h, degree=2, role="mesh")
-            for h in s["anp"]:
-                add(liver=liver, load=load, h=h, element="anp", role="mesh")
-        d = s["default"]
-        for n in (1, 2, 5, 20):
-            add(liver=liver, load="patch", h=d, steps=n, role="steps")
-        # The locking-free elements with fewer load steps: one answer sooner (a dataset wants
-        # every load fraction as a sample; a single answer does not)
-        for n in (1, 2, 5):
-            for h in s["p2"]:
-                add(liver=liver, load="patch", h=h, degree=2, steps=n, role="steps")
-            for h in s["anp"]:
-                add(liver=liver, load="patch", h=h, element="anp", steps=n, role="steps")
-        for rtol in (1e-4, 1e-5, 1e-8, 1e-10):
-            add(liver=liver, load="patch", h=d, rtol=rtol, role="tolerance")
-        # The locking-free element at rtol 1e-9 (the references' tolerance): what the
-        # default tolerance saves in seconds and costs in accuracy where P2 reaches 2 %
-        for h in s["p2"]:
-            add(liver=liver, load="patch", h=h, degree=2, rtol=1e-9, role="tolerance")
-            add(liver=liver, load="patch", h=h, degree=2, rtol=1e-9, steps=1, role="tolerance")
-        for fac in ("double", "petsc"):
-            add(liver=liver, load="patch", h=d, factorization=fac, role="linear solver")
-        add(liver=liver, load="patch", h=d, linear_solver="gamg", role="linear solver")
-        for pred in ("tangent", "extrapolate", "previous"):
-            add(liver=liver, load="patch", h=d, predictor=pred, role="predictor")
-        for kmu in (10.0, 100.0, 1000.0):
-            for h in s["kmu"]:
-                for degree in (1, 2):
-                    add(liver=liver, load="patch", h=h, degree=degree, K_over_mu=kmu,
-                        role="K/mu")
+        for rows in (_plan_meshes, _plan_steps_and_tolerances, _plan_solvers_and_kmu):
+            rows(add, liver, SIZES[liver])
     return runs
 
 
@@ -432,13 +443,8 @@ def summary(rows: list) -> list[str]:
     return out + [""]
 
 
-def report() -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    res = results()
+def _rows(res: dict) -> list:
+    """(spec, record, errors) of every run of the current plan, in the report's order."""
     planned = {key_of(s) for s in plan(list(SIZES))}  # records of an earlier plan: not shown
     rows = []
     for rec in res.values():
@@ -451,101 +457,118 @@ def report() -> None:
     rows.sort(key=lambda r: (r[0]["liver"], order.index(r[0]["role"]), r[0]["load"],
                              r[0]["K_over_mu"], element_of(r[0]), -r[0]["h"],
                              r[0]["steps"]))
-    lines = [*header("FEM price list: speed against accuracy").rstrip().split("\n"), "",
-             f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-             f"one MPI rank, {threads_note(rows)} per run (OMP_NUM_THREADS = "
-             "OPENBLAS_NUM_THREADS). Seconds are single runs (expect 10-30 % noise between "
-             "runs on this shared machine); counts and errors are exact.", "",
-             "Setting: 0.4 N along -z at the surface point farthest from the fixed region, "
-             f"as a patch load (bump traction, radius {PATCH_RADIUS:g} mm) or a nodal load; "
-             f"Ogden c1 = {C1 * 1e3:g}e-3 MPa, m1 = {M1}; defaults: "
-             + ", ".join(f"{k} = {v}" for k, v in DEFAULTS.items()) + ".",
-             "Errors are against the reference of the same liver, load and K/mu (P2 on the "
-             f"finest mesh, Newton tolerance rtol = {REF_RTOL:g}), at the reference mesh's "
-             "vertices, relative to the reference's "
-             "max |u|. Nodal load: error outside a ball of radius 2h around the load point; "
-             "inside it in the last column.", "",
-             "Signed: the component of u - u_ref along u_ref over |u_ref|^2 (negative: too "
-             "stiff; -0.5 = half the displacement).",
-             "Fixed region: the phantom's vena cava; on the real liver the surface triangles "
-             "whose centroid is within 25 mm of its most posterior point (all their vertices "
-             "fixed: about the same area on every mesh).", "",
-             *summary(rows),
-             "## Every run", "",
-             "Knob rows (steps, tolerance, linear solver, predictor) also give, in the last "
-             "column, the largest difference from the default run on the same mesh: what that "
-             "knob alone costs. Element: P1 / P2 Lagrange, ANP = P1 with averaged nodal "
-             "pressure (`solver.element = \"anp\"`).", "",
-             "| liver | load | knob | element | h mm | vertices | K/mu | steps | rtol | solver | "
-             "predictor | s/sim | later s/sim | Newton its | fact. | RSS MB | mean err mm | "
-             "max err mm | mean rel | max rel | signed | inside 2h (mean/max mm) | "
-             "knob alone (max rel) |",
-             "|" + "---|" * 23]
+    return rows
+
+
+def _intro(rows: list) -> list[str]:
+    return [*header("FEM price list: speed against accuracy").rstrip().split("\n"), "",
+            f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+            f"one MPI rank, {threads_note(rows)} per run (OMP_NUM_THREADS = "
+            "OPENBLAS_NUM_THREADS). Seconds are single runs (expect 10-30 % noise between "
+            "runs on this shared machine); counts and errors are exact.", "",
+            "Setting: 0.4 N along -z at the surface point farthest from the fixed region, "
+            f"as a patch load (bump traction, radius {PATCH_RADIUS:g} mm) or a nodal load; "
+            f"Ogden c1 = {C1 * 1e3:g}e-3 MPa, m1 = {M1}; defaults: "
+            + ", ".join(f"{k} = {v}" for k, v in DEFAULTS.items()) + ".",
+            "Errors are against the reference of the same liver, load and K/mu (P2 on the "
+            f"finest mesh, Newton tolerance rtol = {REF_RTOL:g}), at the reference mesh's "
+            "vertices, relative to the reference's "
+            "max |u|. Nodal load: error outside a ball of radius 2h around the load point; "
+            "inside it in the last column.", "",
+            "Signed: the component of u - u_ref along u_ref over |u_ref|^2 (negative: too "
+            "stiff; -0.5 = half the displacement).",
+            "Fixed region: the phantom's vena cava; on the real liver the surface triangles "
+            "whose centroid is within 25 mm of its most posterior point (all their vertices "
+            "fixed: about the same area on every mesh).", "",
+            *summary(rows),
+            "## Every run", "",
+            "Knob rows (steps, tolerance, linear solver, predictor) also give, in the last "
+            "column, the largest difference from the default run on the same mesh: what that "
+            "knob alone costs. Element: P1 / P2 Lagrange, ANP = P1 with averaged nodal "
+            "pressure (`solver.element = \"anp\"`).", "",
+            "| liver | load | knob | element | h mm | vertices | K/mu | steps | rtol | solver | "
+            "predictor | s/sim | later s/sim | Newton its | fact. | RSS MB | mean err mm | "
+            "max err mm | mean rel | max rel | signed | inside 2h (mean/max mm) | "
+            "knob alone (max rel) |",
+            "|" + "---|" * 23]
+
+
+def _line(spec: dict, rec: dict, err, res: dict) -> str:
+    solver = (spec["linear_solver"] if spec["linear_solver"] != "direct"
+              else spec["factorization"])
+    base = (f"| {spec['liver']} | {spec['load']} | {spec['role']} | {element_of(spec)} | "
+            f"{spec['h']:g} | {rec.get('n_vertices', '-')} | {spec['K_over_mu']:g} | "
+            f"{spec['steps']} | {spec['rtol']:.0e} | {solver} | {spec['predictor']} | ")
+    if rec.get("status") != "ok":
+        return base + f"{rec.get('status')}: {rec.get('reason', '')[:80]} |" + " |" * 12
+    cost = knob_cost(spec, rec, res)
+    e = err or {}
+    inside = f"{e['inside_mean']:.2f} / {e['inside_max']:.2f}" if "inside_mean" in e else ""
+    return (base + f"{rec['seconds']:.2f} | {later_cell(rec, 2)} | "
+            f"{sum(rec['newton_iterations'])} | {rec['factorizations']} | "
+            f"{rec['peak_rss_mb']:.0f} | "
+            + (f"{e['mean']:.3f} | {e['max']:.3f} | {e['rel_mean']:.2%} | "
+               f"{e['rel_max']:.2%} | {e['signed']:+.1%} | {inside} |" if e else
+               "- | - | - | - | - | |")
+            + (f" {cost:.1e} |" if cost is not None else " |"))
+
+
+MARKERS = {"mesh": "o", "steps": "s", "tolerance": "^", "linear solver": "D", "predictor": "v",
+           "K/mu": "x"}
+COLOURS = {"mesh P1": "C0", "mesh P2": "C1", "mesh ANP": "C8", "steps": "C2",
+           "tolerance": "C3", "linear solver": "C4", "predictor": "C5", "K/mu": "C6"}
+
+
+def _plot_liver(ax, liver: str, rows: list) -> None:
+    """Error against seconds on one liver (patch load, K/mu = 200), the Pareto front marked."""
+    pts = []
     for spec, rec, err in rows:
-        solver = (spec["linear_solver"] if spec["linear_solver"] != "direct"
-                  else spec["factorization"])
-        base = (f"| {spec['liver']} | {spec['load']} | {spec['role']} | {element_of(spec)} | "
-                f"{spec['h']:g} | {rec.get('n_vertices', '-')} | {spec['K_over_mu']:g} | "
-                f"{spec['steps']} | {spec['rtol']:.0e} | {solver} | {spec['predictor']} | ")
-        if rec.get("status") != "ok":
-            lines.append(base + f"{rec.get('status')}: {rec.get('reason', '')[:80]} |" +
-                         " |" * 12)
+        if spec["liver"] != liver or spec["load"] != "patch" or not err or \
+                spec["role"] == "reference" or spec["K_over_mu"] != 200.0:
             continue
-        cost = knob_cost(spec, rec, res)
-        its = sum(rec["newton_iterations"])
-        e = err or {}
-        inside = (f"{e['inside_mean']:.2f} / {e['inside_max']:.2f}"
-                  if "inside_mean" in e else "")
-        lines.append(base + f"{rec['seconds']:.2f} | {later_cell(rec, 2)} | {its} | "
-                     f"{rec['factorizations']} | "
-                     f"{rec['peak_rss_mb']:.0f} | "
-                     + (f"{e['mean']:.3f} | {e['max']:.3f} | {e['rel_mean']:.2%} | "
-                        f"{e['rel_max']:.2%} | {e['signed']:+.1%} | {inside} |" if e else
-                        "- | - | - | - | - | |")
-                     + (f" {cost:.1e} |" if cost is not None else " |"))
+        label = f"{spec['role']} {element_of(spec)}" if spec["role"] == "mesh" else \
+            spec["role"]
+        x, y = rec["seconds"], max(err["rel_mean"], 1e-6)
+        pts.append((x, y))
+        ax.scatter(x, y, marker=MARKERS.get(spec["role"], "o"), label=label,
+                   color=COLOURS.get(label, "C7"))
+        if spec["role"] == "mesh":
+            ax.annotate(f"{spec['h']:g}", (x, y), textcoords="offset points", xytext=(4, 3),
+                        fontsize=7)
+    pareto, best = [], np.inf
+    for x, y in sorted(pts):
+        if y < best * (1 - 1e-6):  # runs that differ by round-off only are no gain
+            pareto.append((x, y))
+            best = y
+    if pareto:
+        ax.plot(*zip(*pareto), "k--", lw=1, label="Pareto front")
+    handles, labels = ax.get_legend_handles_labels()
+    uniq = dict(zip(labels, handles))
+    ax.legend(uniq.values(), uniq.keys(), fontsize=7)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("seconds per simulation (1 rank)")
+    ax.set_ylabel("mean displacement error / max |u_ref|")
+    ax.set_title(f"{liver}: patch load, K/mu = 200 (labels: h in mm)")
+    ax.grid(True, which="both", alpha=0.3)
+
+
+def report() -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    res = results()
+    rows = _rows(res)
+    lines = _intro(rows) + [_line(spec, rec, err, res) for spec, rec, err in rows]
     DOCS.mkdir(exist_ok=True)
     (DOCS / "tradeoff_fem.md").write_text("\n".join(lines) + "\n")
-    # Plot: error against seconds, one series per knob, the Pareto front marked.
     livers = sorted({s["liver"] for s, _, _ in rows})
     fig, axes = plt.subplots(1, max(1, len(livers)), figsize=(7 * max(1, len(livers)), 5.5),
                              squeeze=False)
-    markers = {"mesh": "o", "steps": "s", "tolerance": "^", "linear solver": "D",
-               "predictor": "v", "K/mu": "x"}
     for ax, liver in zip(axes[0], livers):
-        pts = []
-        for spec, rec, err in rows:
-            if spec["liver"] != liver or spec["load"] != "patch" or not err or \
-                    spec["role"] == "reference" or spec["K_over_mu"] != 200.0:
-                continue
-            label = f"{spec['role']} {element_of(spec)}" if spec["role"] == "mesh" else \
-                spec["role"]
-            x, y = rec["seconds"], max(err["rel_mean"], 1e-6)
-            pts.append((x, y))
-            colours = {"mesh P1": "C0", "mesh P2": "C1", "mesh ANP": "C8", "steps": "C2",
-                       "tolerance": "C3", "linear solver": "C4", "predictor": "C5",
-                       "K/mu": "C6"}
-            ax.scatter(x, y, marker=markers.get(spec["role"], "o"), label=label,
-                       color=colours.get(label, "C7"))
-            if spec["role"] == "mesh":
-                ax.annotate(f"{spec['h']:g}", (x, y), textcoords="offset points",
-                            xytext=(4, 3), fontsize=7)
-        front = sorted(pts)
-        pareto, best = [], np.inf
-        for x, y in front:
-            if y < best * (1 - 1e-6):  # runs that differ by round-off only are no gain
-                pareto.append((x, y))
-                best = y
-        if pareto:
-            ax.plot(*zip(*pareto), "k--", lw=1, label="Pareto front")
-        handles, labels = ax.get_legend_handles_labels()
-        uniq = dict(zip(labels, handles))
-        ax.legend(uniq.values(), uniq.keys(), fontsize=7)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("seconds per simulation (1 rank)")
-        ax.set_ylabel("mean displacement error / max |u_ref|")
-        ax.set_title(f"{liver}: patch load, K/mu = 200 (labels: h in mm)")
-        ax.grid(True, which="both", alpha=0.3)
+        _plot_liver(ax, liver, rows)
     fig.tight_layout()
     fig.savefig(DOCS / "tradeoff_fem.png", dpi=110)
     print(f"wrote {DOCS / 'tradeoff_fem.md'} and {DOCS / 'tradeoff_fem.png'}")

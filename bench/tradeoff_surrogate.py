@@ -31,6 +31,7 @@ Resumable: datasets are generated with ``fem_sim generate`` (which skips finishe
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import platform
@@ -290,36 +291,65 @@ def simulation_seconds(name: str, n: int) -> float:
     return float(np.mean(per) * n)
 
 
-def budget() -> list[dict]:
-    """Per budget mesh: FE error against the reference, surrogate error against its own FE
-    answer, and the surrogate's error against the reference (the sum a user gets), on the
-    budget's load cases at full load, at the mesh's vertices outside EXCLUDE of the load."""
-    from surrogate import load_predictor
-
+def _fem_runs() -> dict:
+    """The budget's FE records by (case, degree, h)."""
     fem = {}
     path = bf.RESULTS / "runs.jsonl"
     if path.exists():
         for line in path.read_text().splitlines():
             r = json.loads(line)
             fem[(r["case"], r["degree"], r["h"])] = r
+    return fem
+
+
+@functools.cache
+def _ref_offsets(k: int) -> dict:
+    """Where each mesh's vertices start in case k's reference values (MESHES order)."""
+    sizes = []
+    for d2, h2 in bf.MESHES:
+        with np.load(bf.npz_path(k, d2, h2)) as z:
+            sizes.append(z["nodes"].shape[0])
+    return dict(zip(bf.MESHES, np.cumsum([0, *sizes[:-1]])))
+
+
+def _case_errors(k, case, degree, h, ds, predict, fem) -> dict | None:
+    """FE, surrogate and total node errors of load case k on mesh (degree, h); None when a
+    solve is missing."""
+    ref_rec, rec = fem.get((k, *bf.REFERENCE)), fem.get((k, degree, h))
+    if not (ref_rec and rec and ref_rec["status"] == "ok" and rec["status"] == "ok"):
+        return None
+    with np.load(bf.npz_path(k, degree, h)) as z:
+        u, pts = z["u_nodes"], z["nodes"]
+    if pts.shape != ds.points[0].shape or not np.allclose(pts, ds.points[0]):
+        raise RuntimeError(f"{bf.mesh_name(degree, h)}: the budget's mesh is not the dataset's")
+    start = _ref_offsets(k)[(degree, h)]
+    with np.load(bf.npz_path(k, *bf.REFERENCE)) as z:
+        u_ref = z["u"][start:start + pts.shape[0]]
+        scale = np.abs(z["u_nodes"]).max()
+        # Each mesh loads its node nearest to the case's point: how far apart the loaded
+        # points of this mesh and of the reference are.
+        offset = np.linalg.norm(pts[rec["load_node"]] - z["nodes"][ref_rec["load_node"]])
+    s = predict(np.asarray([case["force"]]), [rec["load_node"]])
+    far = np.linalg.norm(pts - np.asarray(case["point"]), axis=1) > EXCLUDE
+    fe, sur, tot = (np.linalg.norm(a - b, axis=1) for a, b in
+                    ((u, u_ref), (s, u), (s, u_ref)))
+    return {"fe": fe[far], "sur": sur[far], "tot": tot[far], "fe_all": fe, "tot_all": tot,
+            "scale": scale, "offset": offset}
+
+
+def budget() -> list[dict]:
+    """Per budget mesh: FE error against the reference, surrogate error against its own FE
+    answer, and the surrogate's error against the reference (the sum a user gets), on the
+    budget's load cases at full load, at the mesh's vertices outside EXCLUDE of the load."""
+    from surrogate import load_predictor
+
+    fem = _fem_runs()
     if not (bf.RESULTS / "cases.json").exists():
         return []
     cases = json.loads((bf.RESULTS / "cases.json").read_text())
     trained = {r["spec"]["data"]: r for r in read_jsonl(RESULTS / "runs.jsonl").values()
                if r["spec"]["group"] == "error budget" or "error budget" in
                r["spec"].get("also", [])}
-    offsets: dict[int, dict] = {}
-
-    def ref_offsets(k: int) -> dict:
-        """Where each mesh's vertices start in case k's reference values (MESHES order)."""
-        if k not in offsets:
-            sizes = []
-            for d2, h2 in bf.MESHES:
-                with np.load(bf.npz_path(k, d2, h2)) as z:
-                    sizes.append(z["nodes"].shape[0])
-            offsets[k] = dict(zip(bf.MESHES, np.cumsum([0, *sizes[:-1]])))
-        return offsets[k]
-
     rows = []
     for degree, h in sorted(bf.MESHES, key=lambda m: (m[0], -m[1])):  # P1 then P2, coarse first
         name = bf.mesh_name(degree, h)
@@ -327,48 +357,26 @@ def budget() -> list[dict]:
             continue
         ds, _ = dataset(name)
         predict = load_predictor(RESULTS / "models" / trained[name]["id"])
-        e_fe, e_sur, e_tot, e_fe_all, e_tot_all, scale, offset = [], [], [], [], [], [], []
-        for k, case in enumerate(cases):
-            ref_rec = fem.get((k, *bf.REFERENCE))
-            rec = fem.get((k, degree, h))
-            if not (ref_rec and rec and ref_rec["status"] == "ok" and rec["status"] == "ok"):
-                continue
-            with np.load(bf.npz_path(k, degree, h)) as z:
-                u, pts = z["u_nodes"], z["nodes"]
-            if pts.shape != ds.points[0].shape or not np.allclose(pts, ds.points[0]):
-                raise RuntimeError(f"{name}: the budget's mesh is not the dataset's mesh")
-            start = ref_offsets(k)[(degree, h)]
-            with np.load(bf.npz_path(k, *bf.REFERENCE)) as z:
-                u_ref = z["u"][start:start + pts.shape[0]]
-                scale.append(np.abs(z["u_nodes"]).max())
-                # Each mesh loads its node nearest to the case's point: how far apart the
-                # loaded points of this mesh and of the reference are.
-                offset.append(np.linalg.norm(pts[rec["load_node"]] -
-                                             z["nodes"][ref_rec["load_node"]]))
-            s = predict(np.asarray([case["force"]]), [rec["load_node"]])
-            far = np.linalg.norm(pts - np.asarray(case["point"]), axis=1) > EXCLUDE
-            fe, sur, tot = (np.linalg.norm(a - b, axis=1) for a, b in
-                            ((u, u_ref), (s, u), (s, u_ref)))
-            e_fe.append(fe[far])
-            e_sur.append(sur[far])
-            e_tot.append(tot[far])
-            e_fe_all.append(fe)
-            e_tot_all.append(tot)
-        if not e_fe:
+        per = [e for k, case in enumerate(cases)
+               if (e := _case_errors(k, case, degree, h, ds, predict, fem)) is not None]
+        if not per:
             continue
-        sim_h = simulation_seconds(name, N_BUDGET) / 3600
-        train_h = trained[name]["training_seconds"] / 3600
-        cat = np.concatenate
+
+        def cat(key, per=per):
+            return np.concatenate([e[key] for e in per])
+
         rows.append({"mesh": name, "degree": degree, "h": h, "vertices": ds.points[0].shape[0],
-                     "cases": len(e_fe), "fe": float(cat(e_fe).mean()),
-                     "surrogate": float(cat(e_sur).mean()), "total": float(cat(e_tot).mean()),
-                     "fe_p95": float(np.percentile(cat(e_fe), 95)),
-                     "total_p95": float(np.percentile(cat(e_tot), 95)),
-                     "fe_all": float(cat(e_fe_all).mean()),
-                     "total_all": float(cat(e_tot_all).mean()),
-                     "u_ref_max": float(np.mean(scale)), "offset": float(np.mean(offset)),
-                     "sim_hours": sim_h,
-                     "train_hours": train_h, "sims": N_BUDGET})
+                     "cases": len(per), "fe": float(cat("fe").mean()),
+                     "surrogate": float(cat("sur").mean()), "total": float(cat("tot").mean()),
+                     "fe_p95": float(np.percentile(cat("fe"), 95)),
+                     "total_p95": float(np.percentile(cat("tot"), 95)),
+                     "fe_all": float(cat("fe_all").mean()),
+                     "total_all": float(cat("tot_all").mean()),
+                     "u_ref_max": float(np.mean([e["scale"] for e in per])),
+                     "offset": float(np.mean([e["offset"] for e in per])),
+                     "sim_hours": simulation_seconds(name, N_BUDGET) / 3600,
+                     "train_hours": trained[name]["training_seconds"] / 3600,
+                     "sims": N_BUDGET})
     return rows
 
 
@@ -380,77 +388,74 @@ def n_params(hidden: list[int], dim: int = 13) -> int:
     return sum(a * b + b for a, b in zip(widths[:-1], widths[1:]))
 
 
-def report() -> None:
-    import matplotlib
+def _groups(r) -> list:
+    return [r["spec"]["group"], *r["spec"].get("also", [])]
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
-    runs = read_jsonl(RESULTS / "runs.jsonl")
-    lat = read_jsonl(RESULTS / "latency.jsonl")
-    rows = [r for r in runs.values() if "all" in r]
+def _m(r, key="all") -> str:
+    x = r[key]
+    return f"{x['mee']:.3f} | {x['ee_p95']:.3f} | {x['pct_ee_lt_1mm']:.1f}"
 
-    def groups(r):
-        return [r["spec"]["group"], *r["spec"].get("also", [])]
 
-    def ms(r, key):
-        v = lat.get(r["id"], {}).get(key)
-        return f"{1e3 * v:.2f}" if v is not None else "-"
+def _ms(lat: dict, r, key) -> str:
+    v = lat.get(r["id"], {}).get(key)
+    return f"{1e3 * v:.2f}" if v is not None else "-"
 
-    def m(r, key="all"):
-        x = r[key]
-        return f"{x['mee']:.3f} | {x['ee_p95']:.3f} | {x['pct_ee_lt_1mm']:.1f}"
 
-    name_of = {tuple(v): k for k, v in NETS.items()}
-    ds_note = ""
-    if (RESULTS / "data" / LEARN_DATA).exists():
-        ds, surface = dataset(LEARN_DATA)
-        n_sims = np.unique(ds.sample_sim).size
-        ds_note = (f"{ds.points[0].shape[0]} nodes ({surface.size} on the surface), "
-                   f"{n_sims} simulations x {ds.n_samples // max(1, n_sims)} load steps")
-    L = [*header("Surrogate price list and the error budget").rstrip().split("\n"),
-         "The FE error budget comes first from `bench/budget_fem.py` (`make tradeoff-surrogate` "
-         "runs both).", "",
-         f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-         "JAX on the CPU. Training seconds are single runs while another training or "
-         "simulation shared the 2 cores (expect 10-30 % noise); latencies are medians of "
-         f"{LATENCY_CALLS} jitted calls for one load case, measured with nothing else "
-         "running.", "",
-         f"Data: scene 1 (`data_spec/scenes/scene1_base.toml`: the phantom liver, P2 on a 16 mm "
-         f"mesh, one random 0.4 N nodal force, 10 load steps): {ds_note}. Every network is "
-         f"trained on the first N simulations (10 % of them held out for early stopping) and "
-         f"measured on the same {N_TEST} held-out simulations (all their load steps), through "
-         "the exported predictor. Unless the row changes it: the paper's scene-1 network "
-         f"{tuple(PAPER1)}, {N_KNOB} training simulations, node fraction 0.25, float32, "
-         f"at most {EPOCHS} epochs. MEE: mean Euclidean error (mm); p95: its 95th percentile; "
-         "< 1 mm: % of node errors under 1 mm; skill: MEE / MEE of the naive "
-         "mean-displacement predictor (paper, scene 1: 0.078).", ""]
-    L += ["## Training simulations (learning curve)", "",
-          "| training sims | MEE mm | p95 mm | < 1 mm % | skill | training s | epochs |",
-          "|---|---|---|---|---|---|---|"]
-    lc = sorted((r for r in rows if "training simulations" in groups(r)),
+NAME_OF = {tuple(v): k for k, v in NETS.items()}
+
+
+def _intro(ds_note: str) -> list[str]:
+    return [*header("Surrogate price list and the error budget").rstrip().split("\n"),
+            "The FE error budget comes first from `bench/budget_fem.py` (`make "
+            "tradeoff-surrogate` runs both).", "",
+            f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+            "JAX on the CPU. Training seconds are single runs while another training or "
+            "simulation shared the 2 cores (expect 10-30 % noise); latencies are medians of "
+            f"{LATENCY_CALLS} jitted calls for one load case, measured with nothing else "
+            "running.", "",
+            f"Data: scene 1 (`data_spec/scenes/scene1_base.toml`: the phantom liver, P2 on a "
+            f"16 mm mesh, one random 0.4 N nodal force, 10 load steps): {ds_note}. Every "
+            "network is trained on the first N simulations (10 % of them held out for early "
+            f"stopping) and measured on the same {N_TEST} held-out simulations (all their load "
+            "steps), through the exported predictor. Unless the row changes it: the paper's "
+            f"scene-1 network {tuple(PAPER1)}, {N_KNOB} training simulations, node fraction "
+            f"0.25, float32, at most {EPOCHS} epochs. MEE: mean Euclidean error (mm); p95: its "
+            "95th percentile; < 1 mm: % of node errors under 1 mm; skill: MEE / MEE of the "
+            "naive mean-displacement predictor (paper, scene 1: 0.078).", ""]
+
+
+def _curve_and_networks(rows, lat, ds_note) -> tuple[list[str], list, list]:
+    L = ["## Training simulations (learning curve)", "",
+         "| training sims | MEE mm | p95 mm | < 1 mm % | skill | training s | epochs |",
+         "|---|---|---|---|---|---|---|"]
+    lc = sorted((r for r in rows if "training simulations" in _groups(r)),
                 key=lambda r: r["spec"]["n_train"])
     for r in lc:
-        L.append(f"| {r['spec']['n_train']} | {m(r)} | {r['all']['mee'] / r['naive_mee']:.3f} "
+        L.append(f"| {r['spec']['n_train']} | {_m(r)} | {r['all']['mee'] / r['naive_mee']:.3f} "
                  f"| {r['training_seconds']:.0f} | {r['epochs']} |")
     L += ["", "## Network size", "",
           f"Latency: one load case, all {ds_note.split(' ')[0] if ds_note else ''} nodes / "
           "surface nodes only, float32.", "",
           "| network | hidden | parameters | MEE mm | p95 mm | < 1 mm % | training s | "
           "latency all ms | latency surface ms |", "|---|---|---|---|---|---|---|---|---|"]
-    nets = sorted((r for r in rows if "network" in groups(r)),
+    nets = sorted((r for r in rows if "network" in _groups(r)),
                   key=lambda r: -n_params(r["spec"]["hidden"]))
     for r in nets:
         hid = r["spec"]["hidden"]
-        L.append(f"| {name_of.get(tuple(hid), '')} | {tuple(hid)} | {n_params(hid):,} | {m(r)} "
-                 f"| {r['training_seconds']:.0f} | {ms(r, 'all_float32')} | "
-                 f"{ms(r, 'surface_float32')} |")
-    L += ["", "## Sampled node fraction per epoch", "",
-          "| node fraction | MEE mm | p95 mm | < 1 mm % | training s | examples seen |",
-          "|---|---|---|---|---|---|"]
-    for r in sorted((r for r in rows if "node fraction" in groups(r)),
+        L.append(f"| {NAME_OF.get(tuple(hid), '')} | {tuple(hid)} | {n_params(hid):,} | "
+                 f"{_m(r)} | {r['training_seconds']:.0f} | {_ms(lat, r, 'all_float32')} | "
+                 f"{_ms(lat, r, 'surface_float32')} |")
+    return L, lc, nets
+
+
+def _fraction_and_precision(rows, lat) -> list[str]:
+    L = ["", "## Sampled node fraction per epoch", "",
+         "| node fraction | MEE mm | p95 mm | < 1 mm % | training s | examples seen |",
+         "|---|---|---|---|---|---|"]
+    for r in sorted((r for r in rows if "node fraction" in _groups(r)),
                     key=lambda r: r["spec"]["node_fraction"]):
-        L.append(f"| {r['spec']['node_fraction']:g} | {m(r)} | {r['training_seconds']:.0f} | "
+        L.append(f"| {r['spec']['node_fraction']:g} | {_m(r)} | {r['training_seconds']:.0f} | "
                  f"{r['examples_seen']:,} |")
     L += ["", "## Inference precision", "",
           "The float32-trained weights cast to 16 bits (`load_predictor(dir, dtype=...)`). "
@@ -464,46 +469,76 @@ def report() -> None:
         for dt in ("float32", "bfloat16", "float16"):
             key = "all" if dt == "float32" else f"all_{dt}"
             change = r[key]["mee"] / r["all"]["mee"] - 1
-            L.append(f"| {name_of.get(hid, hid)} | {r['spec']['n_train']} | {dt} | {m(r, key)} "
-                     f"| {change:+.1%} | {ms(r, f'all_{dt}')} | {ms(r, f'surface_{dt}')} |")
-    L += ["", "## All nodes against the surface only", "",
-          "The paper notes that an application needs the visible surface only. A model "
-          "trained on all nodes and evaluated on the surface nodes, against one trained on "
-          "the surface nodes only.", "",
-          "| trained on | training sims | evaluated on | MEE mm | p95 mm | < 1 mm % | "
-          "training s | latency ms |", "|---|---|---|---|---|---|---|---|"]
+            L.append(f"| {NAME_OF.get(hid, hid)} | {r['spec']['n_train']} | {dt} | "
+                     f"{_m(r, key)} | {change:+.1%} | {_ms(lat, r, f'all_{dt}')} | "
+                     f"{_ms(lat, r, f'surface_{dt}')} |")
+    return L
+
+
+def _surface(rows, lat) -> list[str]:
+    L = ["", "## All nodes against the surface only", "",
+         "The paper notes that an application needs the visible surface only. A model "
+         "trained on all nodes and evaluated on the surface nodes, against one trained on "
+         "the surface nodes only.", "",
+         "| trained on | training sims | evaluated on | MEE mm | p95 mm | < 1 mm % | "
+         "training s | latency ms |", "|---|---|---|---|---|---|---|---|"]
     for r in sorted((r for r in rows if r["spec"]["n_train"] == N_LEARN and
                      r["spec"]["hidden"] == PAPER1), key=lambda r: r["spec"]["nodes"]):
         trained_on = r["spec"]["nodes"]
         for where in (["all", "surface"] if trained_on == "all" else ["surface"]):
-            L.append(f"| {trained_on} nodes | {N_LEARN} | {where} nodes | {m(r, where)} | "
-                     f"{r['training_seconds']:.0f} | {ms(r, where + '_float32')} |")
-    b = budget()
-    L += ["", "## Error budget: the FE mesh against the surrogate", "",
-          f"For each mesh, a dataset of scene 1 on it ({N_BUDGET} simulations), the paper's "
-          f"scene-1 network trained on it, and {bf.N_CASES} new load cases drawn by scene "
-          "1's rule (`bench/budget_fem.py`), solved on that mesh "
-          "and on the reference (P2 on a 6 mm mesh, as in `docs/tradeoff_fem.md`). At the "
-          f"mesh's vertices more than {EXCLUDE:g} mm from the load point (a point load has no "
-          "converged limit next to it), at full load: the FE error (mesh against reference), "
-          "the surrogate's error (network against the FE answer of its own mesh: what "
-          "training reports), and the total (network against the reference: what a user "
-          "gets). Cost: solver CPU-hours of the dataset plus training hours (this machine; "
-          "both measured while up to five processes shared the two cores, so up to ~2.5x "
-          "what they cost alone). "
-          "Each mesh loads its node nearest to the case's point (the load offset column: how "
-          "far that node is from the reference's). A point load has no converged limit, and "
-          "with this stiffening material the far field too depends on how a mesh resolves "
-          "the load: the FE column is the error of each mesh for this scene's loads; "
-          "`docs/tradeoff_fem.md` gives the elements' error under a patch load.",
-          "", "| mesh | vertices | FE error mm | surrogate error mm | total mm | total p95 mm "
-          "| FE error, all nodes mm | total, all nodes mm | mean max u_ref mm | load offset "
-          "mm | simulation CPU-h | training h |", "|" + "---|" * 12]
+            L.append(f"| {trained_on} nodes | {N_LEARN} | {where} nodes | {_m(r, where)} | "
+                     f"{r['training_seconds']:.0f} | {_ms(lat, r, where + '_float32')} |")
+    return L
+
+
+def _budget_section(b: list) -> list[str]:
+    L = ["", "## Error budget: the FE mesh against the surrogate", "",
+         f"For each mesh, a dataset of scene 1 on it ({N_BUDGET} simulations), the paper's "
+         f"scene-1 network trained on it, and {bf.N_CASES} new load cases drawn by scene "
+         "1's rule (`bench/budget_fem.py`), solved on that mesh "
+         "and on the reference (P2 on a 6 mm mesh, as in `docs/tradeoff_fem.md`). At the "
+         f"mesh's vertices more than {EXCLUDE:g} mm from the load point (a point load has no "
+         "converged limit next to it), at full load: the FE error (mesh against reference), "
+         "the surrogate's error (network against the FE answer of its own mesh: what "
+         "training reports), and the total (network against the reference: what a user "
+         "gets). Cost: solver CPU-hours of the dataset plus training hours (this machine; "
+         "both measured while up to five processes shared the two cores, so up to ~2.5x "
+         "what they cost alone). "
+         "Each mesh loads its node nearest to the case's point (the load offset column: how "
+         "far that node is from the reference's). A point load has no converged limit, and "
+         "with this stiffening material the far field too depends on how a mesh resolves "
+         "the load: the FE column is the error of each mesh for this scene's loads; "
+         "`docs/tradeoff_fem.md` gives the elements' error under a patch load.",
+         "", "| mesh | vertices | FE error mm | surrogate error mm | total mm | total p95 mm "
+         "| FE error, all nodes mm | total, all nodes mm | mean max u_ref mm | load offset "
+         "mm | simulation CPU-h | training h |", "|" + "---|" * 12]
     for r in b:
         L.append(f"| P{r['degree']} {r['h']:g} mm | {r['vertices']} | {r['fe']:.3f} | "
                  f"{r['surrogate']:.3f} | {r['total']:.3f} | {r['total_p95']:.3f} | "
                  f"{r['fe_all']:.3f} | {r['total_all']:.3f} | {r['u_ref_max']:.1f} | "
                  f"{r['offset']:.1f} | {r['sim_hours']:.3f} | {r['train_hours']:.3f} |")
+    return L
+
+
+def report() -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    runs = read_jsonl(RESULTS / "runs.jsonl")
+    lat = read_jsonl(RESULTS / "latency.jsonl")
+    rows = [r for r in runs.values() if "all" in r]
+    ds_note = ""
+    if (RESULTS / "data" / LEARN_DATA).exists():
+        ds, surface = dataset(LEARN_DATA)
+        n_sims = np.unique(ds.sample_sim).size
+        ds_note = (f"{ds.points[0].shape[0]} nodes ({surface.size} on the surface), "
+                   f"{n_sims} simulations x {ds.n_samples // max(1, n_sims)} load steps")
+    curve, lc, nets = _curve_and_networks(rows, lat, ds_note)
+    b = budget()
+    L = (_intro(ds_note) + curve + _fraction_and_precision(rows, lat) + _surface(rows, lat)
+         + _budget_section(b))
     DOCS.mkdir(exist_ok=True)
     (DOCS / "tradeoff_surrogate.md").write_text("\n".join(L) + "\n")
     plots(lc, nets, rows, lat, b, plt)
@@ -511,57 +546,55 @@ def report() -> None:
           f"{DOCS / 'error_budget.png'}")
 
 
-def plots(lc, nets, rows, lat, b, plt) -> None:
-    fig, ax = plt.subplots(1, 3, figsize=(17, 5))
-    if lc:
-        n = [r["spec"]["n_train"] for r in lc]
-        ax[0].plot(n, [r["all"]["mee"] for r in lc], "o-", label="MEE")
-        ax[0].plot(n, [r["all"]["ee_p95"] for r in lc], "s--", label="95th percentile")
-        ax[0].set_xscale("log")
-        ax[0].set_yscale("log")
-        ax[0].set_xticks(n, [str(v) for v in n])
-        ax[0].xaxis.set_minor_formatter(plt.NullFormatter())
-        ax[0].set_xlabel("training simulations")
-        ax[0].set_ylabel("error on held-out simulations (mm)")
-        ax[0].set_title("learning curve (paper scene-1 net)")
-        ax[0].legend()
-    name_of = {tuple(v): k for k, v in NETS.items()}
+def _plot_curve(ax, lc, plt) -> None:
+    n = [r["spec"]["n_train"] for r in lc]
+    ax.plot(n, [r["all"]["mee"] for r in lc], "o-", label="MEE")
+    ax.plot(n, [r["all"]["ee_p95"] for r in lc], "s--", label="95th percentile")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xticks(n, [str(v) for v in n])
+    ax.xaxis.set_minor_formatter(plt.NullFormatter())
+    ax.set_xlabel("training simulations")
+    ax.set_ylabel("error on held-out simulations (mm)")
+    ax.set_title("learning curve (paper scene-1 net)")
+    ax.legend()
+
+
+def _plot_networks(ax, nets, lat) -> None:
     for r in nets:
         t = lat.get(r["id"], {}).get("all_float32")
         if t is None:
             continue
-        ax[1].scatter(1e3 * t, r["all"]["mee"], color="C0")
-        ax[1].annotate(name_of.get(tuple(r["spec"]["hidden"]), ""), (1e3 * t, r["all"]["mee"]),
-                       textcoords="offset points", xytext=(4, 3), fontsize=8)
+        ax.scatter(1e3 * t, r["all"]["mee"], color="C0")
+        ax.annotate(NAME_OF.get(tuple(r["spec"]["hidden"]), ""), (1e3 * t, r["all"]["mee"]),
+                    textcoords="offset points", xytext=(4, 3), fontsize=8)
         ts = lat[r["id"]].get("surface_float32")
-        ax[1].scatter(1e3 * ts, r["surface"]["mee"], color="C1", marker="^")
-    ax[1].scatter([], [], color="C0", label="all nodes")
-    ax[1].scatter([], [], color="C1", marker="^", label="surface nodes")
+        ax.scatter(1e3 * ts, r["surface"]["mee"], color="C1", marker="^")
+    ax.scatter([], [], color="C0", label="all nodes")
+    ax.scatter([], [], color="C1", marker="^", label="surface nodes")
     for hz in (300, 1000):
-        ax[1].axvline(1e3 / hz, color="grey", ls=":", lw=1)
-        ax[1].text(1e3 / hz, ax[1].get_ylim()[1] if nets else 1, f" {hz} Hz", fontsize=7,
-                   va="top")
-    ax[1].set_xscale("log")
-    ax[1].set_xlabel("latency per load case (ms, float32)")
-    ax[1].set_ylabel("MEE (mm)")
-    ax[1].set_title(f"network size ({N_KNOB} training sims)")
-    ax[1].legend(fontsize=8)
-    fr = sorted((r for r in rows if "node fraction" in [r["spec"]["group"],
-                                                        *r["spec"].get("also", [])]),
+        ax.axvline(1e3 / hz, color="grey", ls=":", lw=1)
+        ax.text(1e3 / hz, ax.get_ylim()[1] if nets else 1, f" {hz} Hz", fontsize=7, va="top")
+    ax.set_xscale("log")
+    ax.set_xlabel("latency per load case (ms, float32)")
+    ax.set_ylabel("MEE (mm)")
+    ax.set_title(f"network size ({N_KNOB} training sims)")
+    ax.legend(fontsize=8)
+
+
+def _plot_fractions(ax, rows) -> None:
+    fr = sorted((r for r in rows if "node fraction" in _groups(r)),
                 key=lambda r: r["spec"]["node_fraction"])
     for r in fr:
-        ax[2].scatter(r["training_seconds"], r["all"]["mee"], color="C2")
-        ax[2].annotate(f"{r['spec']['node_fraction']:g}", (r["training_seconds"],
-                       r["all"]["mee"]), textcoords="offset points", xytext=(4, 3), fontsize=8)
-    ax[2].set_xlabel("training seconds")
-    ax[2].set_ylabel("MEE (mm)")
-    ax[2].set_title("sampled node fraction per epoch")
-    for a in ax:
-        a.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(DOCS / "tradeoff_surrogate.png", dpi=110)
-    plt.close(fig)
+        ax.scatter(r["training_seconds"], r["all"]["mee"], color="C2")
+        ax.annotate(f"{r['spec']['node_fraction']:g}", (r["training_seconds"],
+                    r["all"]["mee"]), textcoords="offset points", xytext=(4, 3), fontsize=8)
+    ax.set_xlabel("training seconds")
+    ax.set_ylabel("MEE (mm)")
+    ax.set_title("sampled node fraction per epoch")
 
+
+def _plot_budget(b, plt) -> None:
     fig, ax = plt.subplots(figsize=(9, 5))
     if b:
         x = np.arange(len(b))
@@ -582,6 +615,20 @@ def plots(lc, nets, rows, lat, b, plt) -> None:
     fig.tight_layout()
     fig.savefig(DOCS / "error_budget.png", dpi=110)
     plt.close(fig)
+
+
+def plots(lc, nets, rows, lat, b, plt) -> None:
+    fig, ax = plt.subplots(1, 3, figsize=(17, 5))
+    if lc:
+        _plot_curve(ax[0], lc, plt)
+    _plot_networks(ax[1], nets, lat)
+    _plot_fractions(ax[2], rows)
+    for a in ax:
+        a.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(DOCS / "tradeoff_surrogate.png", dpi=110)
+    plt.close(fig)
+    _plot_budget(b, plt)
 
 
 def main() -> int:

@@ -230,6 +230,27 @@ def _check_fixed(f: dict, problems: list[str]) -> None:
             problems.append("fixed.nodes: contains duplicate node ids")
 
 
+def _check_uniform_sample(s: dict, problems: list[str]) -> None:
+    for key in ("c", "m"):
+        if key not in s:
+            problems.append(f"material.sample.{key}: missing (needed when kind = 'uniform')")
+    if isinstance(s.get("c"), list) and isinstance(s.get("m"), list) and (
+            len(s["c"]) != len(s["m"])):
+        problems.append("material.sample: c and m need one range per Ogden term")
+    if "sets" in s:
+        problems.append("material.sample.sets: only used when kind = 'table'")
+
+
+def _check_table_sample(s: dict, problems: list[str]) -> None:
+    if "sets" not in s:
+        problems.append("material.sample.sets: missing (needed when kind = 'table')")
+    for i, item in enumerate(s.get("sets", []) if isinstance(s.get("sets"), list) else []):
+        _check_param_set(f"material.sample.sets[{i}]", item, problems)
+    for key in ("c", "m", "K_over_mu", "n_sets"):
+        if key in s:
+            problems.append(f"material.sample.{key}: only used when kind = 'uniform'")
+
+
 def _check_material(mat: dict, raw: dict, problems: list[str]) -> None:
     if "K" in raw and "K_over_mu" in raw:
         problems.append("material: give K or K_over_mu, not both")
@@ -239,26 +260,11 @@ def _check_material(mat: dict, raw: dict, problems: list[str]) -> None:
     if "sample" in mat and isinstance(mat["sample"], dict):
         mat["sample"] = _check_section("material.sample", mat["sample"],
                                        _SCHEMA["material.sample"], problems)
-        s = mat["sample"]
-        if s.get("kind") == "uniform":
-            for key in ("c", "m"):
-                if key not in s:
-                    problems.append(f"material.sample.{key}: missing (needed when kind = "
-                                    "'uniform')")
-            if isinstance(s.get("c"), list) and isinstance(s.get("m"), list) and (
-                    len(s["c"]) != len(s["m"])):
-                problems.append("material.sample: c and m need one range per Ogden term")
-            if "sets" in s:
-                problems.append("material.sample.sets: only used when kind = 'table'")
-        elif s.get("kind") == "table":
-            if "sets" not in s:
-                problems.append("material.sample.sets: missing (needed when kind = 'table')")
-            for i, item in enumerate(s.get("sets", []) if isinstance(s.get("sets"), list)
-                                     else []):
-                _check_param_set(f"material.sample.sets[{i}]", item, problems)
-            for key in ("c", "m", "K_over_mu", "n_sets"):
-                if key in s:
-                    problems.append(f"material.sample.{key}: only used when kind = 'uniform'")
+        kind = mat["sample"].get("kind")
+        if kind == "uniform":
+            _check_uniform_sample(mat["sample"], problems)
+        elif kind == "table":
+            _check_table_sample(mat["sample"], problems)
 
 
 def _check_param_set(where: str, item: Any, problems: list[str]) -> dict:

@@ -48,14 +48,26 @@ def _collective(run) -> int:
         raise  # not reached
 
 
-def main(argv: list[str] | None = None) -> int:
-    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-    argv = sys.argv[1:] if argv is None else argv
-    if argv[:1] == ["population"]:
-        from fem_sim.batch.population_cli import main as population_main
+# What each command imports that only the solver environment has.
+NEEDS = {"generate": "dolfinx", "population": "gmsh", "phantom": "gmsh"}
 
-        return population_main(argv[1:])
-    logging.getLogger().setLevel(logging.WARNING)  # FFCx's JIT logs to the root logger
+
+def wrong_environment(command: str) -> str | None:
+    """Why ``command`` cannot run in this Python (None when it can): the trainer environment
+    has neither dolfinx nor gmsh.
+    """
+    import importlib.util
+
+    module = NEEDS.get(command)
+    if module is None or importlib.util.find_spec(module) is not None:
+        return None
+    return (f"liverfem-sim {command}: {module} is not importable by {sys.executable}: this "
+            f"command runs in the solver environment (.venv-solver/bin/python -m fem_sim "
+            f"{command}, or make dataset / make population); the trainer environment runs "
+            "liverfem-surrogate")
+
+
+def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="python3 -m fem_sim", epilog=EPILOG,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -87,18 +99,42 @@ def main(argv: list[str] | None = None) -> int:
     s = sub.add_parser("summary", help="print counts and statistics of a dataset")
     s.add_argument("directory")
     s.add_argument("--png", help="picture of deformed livers (default DIR/summary.png)")
+    return parser
+
+
+def _generate(args, parser) -> int:
+    from pathlib import Path
+
+    if args.ranks_per_sim < 1:
+        parser.error("--ranks-per-sim must be >= 1")
+    if not 0.0 <= args.max_failure_rate <= 1.0:
+        parser.error("--max-failure-rate must be in [0, 1]")
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        parser.error(f"--out {args.out} is a file; expected the dataset's directory "
+                     "(created if missing)")
+    from fem_sim.batch.generate import generate
+
+    return _collective(lambda: generate(
+        args.scene, args.out, args.ranks_per_sim, args.only, args.retry_failed,
+        progress=not args.no_progress, max_failure_rate=args.max_failure_rate))
+
+
+def main(argv: list[str] | None = None) -> int:
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    argv = sys.argv[1:] if argv is None else argv
+    why = wrong_environment(argv[0]) if argv else None
+    if why:
+        print(why, file=sys.stderr)
+        return 2
+    if argv[:1] == ["population"]:
+        from fem_sim.batch.population_cli import main as population_main
+
+        return population_main(argv[1:])
+    logging.getLogger().setLevel(logging.WARNING)  # FFCx's JIT logs to the root logger
+    parser = _parser()
     args = parser.parse_args(argv)
-
     if args.command == "generate":
-        if args.ranks_per_sim < 1:
-            parser.error("--ranks-per-sim must be >= 1")
-        if not 0.0 <= args.max_failure_rate <= 1.0:
-            parser.error("--max-failure-rate must be in [0, 1]")
-        from fem_sim.batch.generate import generate
-
-        return _collective(lambda: generate(
-            args.scene, args.out, args.ranks_per_sim, args.only, args.retry_failed,
-            progress=not args.no_progress, max_failure_rate=args.max_failure_rate))
+        return _generate(args, parser)
     if args.command == "phantom":
         return _phantom(args, parser)
     from fem_sim.batch.summary import summary

@@ -221,8 +221,25 @@ def _evaluate(args) -> int:
     return 0
 
 
+def wrong_environment(command: str) -> str | None:
+    """Why ``command`` cannot run in this Python (None when it can): the solver environment
+    has no JAX.
+    """
+    import importlib.util
+
+    if importlib.util.find_spec("jax") is not None:
+        return None
+    return (f"liverfem-surrogate {command}: JAX is not importable by {sys.executable}: this "
+            f"command runs in the trainer environment (.venv-train/bin/python -m surrogate "
+            f"{command}, or make train); the solver environment runs liverfem-sim")
+
+
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
+    why = wrong_environment(args.command)
+    if why:
+        print(why, file=sys.stderr)
+        return 2
     command = {"train": _train, "predict-liver": _predict_liver, "truth-scene": _truth_scene,
                "evaluate": _evaluate}[args.command]
     return command(args)

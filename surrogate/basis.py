@@ -436,7 +436,7 @@ class BasisRuntime:
     contexts = (0,)       # the load-context widths this design reads
 
     def __init__(self, d, pred, hidden: tuple, dropout: float, dtype: str):
-        from surrogate.export import read_params
+        from surrogate.model_files import read_params
 
         meta, spec = pred.meta, pred.spec
         n_out = pred.output_nodes.size

@@ -202,7 +202,7 @@ class NodeWiseRuntime:
     outputs_only = False  # predicts any node of the liver it is given
 
     def __init__(self, d, pred, hidden: tuple, dropout: float, dtype: str):
-        from surrogate.export import read_params
+        from surrogate.model_files import read_params
 
         meta = pred.meta
         params = read_params(d / "params.npz", pred.spec.dim, hidden, version=meta["version"])

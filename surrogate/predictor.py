@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from surrogate.export import read_meta
 from surrogate.features import FeatureSpec, static_node_features
+from surrogate.model_files import read_meta
 
 # Inference precisions: float32 (as trained), or the weights and activations cast to 16 bits.
 PRECISIONS = ("float32", "bfloat16", "float16")

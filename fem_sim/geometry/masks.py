@@ -25,6 +25,34 @@ from fem_sim.geometry.surfaces import clean_surface, mesh_closed_surface
 from fem_sim.geometry.voxels import voxelize, voxelize_surface  # noqa: F401  (re-exported)
 
 
+def _npy(path: Path, spacing):
+    if spacing is None:
+        raise GeometryError(f"{path}: a .npy mask needs its voxel spacing (mm), e.g. "
+                            "geometry.spacing = [0.8, 0.8, 1.5]")
+    return np.load(path, allow_pickle=False), spacing, np.zeros(3)
+
+
+def _npz(path: Path, spacing):
+    with np.load(path, allow_pickle=False) as z:
+        if "mask" not in z:
+            raise GeometryError(f"{path}: no 'mask' array (found {sorted(z.files)})")
+        if spacing is None and "spacing" not in z:
+            raise GeometryError(f"{path}: no 'spacing' array and none given")
+        origin = np.asarray(z["origin"], dtype=float) if "origin" in z else np.zeros(3)
+        return z["mask"], z["spacing"] if spacing is None else spacing, origin
+
+
+def _nifti(path: Path, spacing):
+    import nibabel
+
+    img = nibabel.load(str(path))
+    lin = img.affine[:3, :3]
+    if np.abs(lin - np.diag(np.diag(lin))).max() > 1e-6 * np.abs(lin).max():
+        raise GeometryError(f"{path}: rotated/oblique NIfTI affines are not supported")
+    return (np.asarray(img.dataobj), np.abs(np.diag(lin)) if spacing is None else spacing,
+            img.affine[:3, 3].copy())
+
+
 def read_mask(path: str | Path, spacing=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(mask bool (nx, ny, nz), spacing (3,) mm, origin (3,) mm) from a file.
 
@@ -36,39 +64,12 @@ def read_mask(path: str | Path, spacing=None) -> tuple[np.ndarray, np.ndarray, n
     if not path.exists():
         raise GeometryError(f"{path}: mask file not found")
     name = path.name.lower()
-    origin = np.zeros(3)
+    readers = {".npy": _npy, ".npz": _npz, ".nii": _nifti, ".nii.gz": _nifti}
+    reader = next((r for ext, r in readers.items() if name.endswith(ext)), None)
+    if reader is None:
+        raise GeometryError(f"{path}: unknown mask format (expected .npy, .npz, .nii, .nii.gz)")
     try:
-        if name.endswith(".npy"):
-            mask = np.load(path, allow_pickle=False)
-            if spacing is None:
-                raise GeometryError(f"{path}: a .npy mask needs its voxel spacing (mm), e.g. "
-                                    "geometry.spacing = [0.8, 0.8, 1.5]")
-        elif name.endswith(".npz"):
-            with np.load(path, allow_pickle=False) as z:
-                if "mask" not in z:
-                    raise GeometryError(f"{path}: no 'mask' array (found {sorted(z.files)})")
-                mask = z["mask"]
-                if spacing is None:
-                    if "spacing" not in z:
-                        raise GeometryError(f"{path}: no 'spacing' array and none given")
-                    spacing = z["spacing"]
-                if "origin" in z:
-                    origin = np.asarray(z["origin"], dtype=float)
-        elif name.endswith((".nii", ".nii.gz")):
-            import nibabel
-
-            img = nibabel.load(str(path))
-            mask = np.asarray(img.dataobj)
-            aff = img.affine
-            lin = aff[:3, :3]
-            if np.abs(lin - np.diag(np.diag(lin))).max() > 1e-6 * np.abs(lin).max():
-                raise GeometryError(f"{path}: rotated/oblique NIfTI affines are not supported")
-            if spacing is None:
-                spacing = np.abs(np.diag(lin))
-            origin = aff[:3, 3].copy()
-        else:
-            raise GeometryError(f"{path}: unknown mask format (expected .npy, .npz, .nii, "
-                                ".nii.gz)")
+        mask, spacing, origin = reader(path, spacing)
     except GeometryError:
         raise
     except Exception as exc:

@@ -20,20 +20,11 @@ from petsc4py import PETSc
 from fem_sim.solver import dolfinx_compat as dc
 
 
-def textbook_simulation(g, fixed, node, force, mat, fractions):
-    """One simulation the textbook way on the mesh ``g`` (points, cells), fixed at the nodes
-    ``fixed``, the nodal force ``force`` (N) on node ``node`` scaled by each of ``fractions``.
-    Returns (u at the mesh's nodes per step (one rank; None per step on several), Newton
-    iterations per step, seconds of the steps, seconds of the set-up).
+def ufl_ogden_energy(u, mat):
+    """The uncoupled one-term Ogden energy density of the displacement ``u`` in UFL: the
+    principal stretches from the closed-form eigenvalues of C-bar (trigonometric formula), a
+    1e-8 symmetric perturbation separating equal eigenvalues, K/2 (ln J)^2.
     """
-    from dolfinx import fem, nls
-    from dolfinx.fem.petsc import NonlinearProblem
-
-    comm = MPI.COMM_WORLD
-    t0 = time.perf_counter()
-    msh = dc.create_mesh(comm, g.points, g.cells)
-    V = fem.VectorFunctionSpace(msh, ("Lagrange", 1))
-    u, v = fem.Function(V), ufl.TestFunction(V)
     d = 3
     F = ufl.Identity(d) + ufl.grad(u)
     J = ufl.det(F)
@@ -51,8 +42,25 @@ def textbook_simulation(g, fixed, node, force, mat, fractions):
     l3 = q + 2 * p * ufl.cos(phi + 2 * np.pi / 3)
     l2 = 3 * q - l1 - l3
     c, m = mat.c[0], mat.m[0]
-    W = c / m**2 * (l1 ** (m / 2) + l2 ** (m / 2) + l3 ** (m / 2) - 3) \
+    return c / m**2 * (l1 ** (m / 2) + l2 ** (m / 2) + l3 ** (m / 2) - 3) \
         + mat.K / 2 * ufl.ln(J) ** 2
+
+
+def textbook_simulation(g, fixed, node, force, mat, fractions):
+    """One simulation the textbook way on the mesh ``g`` (points, cells), fixed at the nodes
+    ``fixed``, the nodal force ``force`` (N) on node ``node`` scaled by each of ``fractions``.
+    Returns (u at the mesh's nodes per step (one rank; None per step on several), Newton
+    iterations per step, seconds of the steps, seconds of the set-up).
+    """
+    from dolfinx import fem, nls
+    from dolfinx.fem.petsc import NonlinearProblem
+
+    comm = MPI.COMM_WORLD
+    t0 = time.perf_counter()
+    msh = dc.create_mesh(comm, g.points, g.cells)
+    V = fem.VectorFunctionSpace(msh, ("Lagrange", 1))
+    u, v = fem.Function(V), ufl.TestFunction(V)
+    W = ufl_ogden_energy(u, mat)
     dx = ufl.dx(metadata={"quadrature_degree": 1})
     R = ufl.derivative(W * dx, u, v)
     blocks, src = dc.vertex_dof_source_ids(msh, V)

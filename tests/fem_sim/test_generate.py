@@ -371,3 +371,11 @@ def test_the_rule_tables_message_says_each_row_once(tmp_path):
     assert res.returncode == 2 and "not a supported combination" in res.stderr, res.stderr
     for line in res.stderr.splitlines():
         assert "one rank: one rank" not in line and line.count("any ranks") <= 1, line
+
+
+def test_an_out_that_is_a_file_is_refused_naming_the_flag(tmp_path):
+    (tmp_path / "a_file").write_text("")
+    res = generate(TINY, tmp_path / "a_file", n=1, timeout=120)
+    assert res.returncode == 2, res.stderr
+    assert "--out" in res.stderr and "is a file; expected the dataset's directory" in res.stderr
+    assert "Errno" not in res.stderr

@@ -647,3 +647,25 @@ def test_a_users_krylov_options_win_over_the_settings():
                    [NodalLoad([node], [[0.0, 0.0, -0.1]])], [1.0])
     assert s.status == "ok", s.failure_reason
     assert prob.linear._ksp.getTolerances()[3] == 321
+
+
+@pytest.mark.skipif(MPI.COMM_WORLD.size > 1, reason="the textbook solver gathers on one rank")
+def test_the_textbook_dolfinx_solver_gives_our_answer():
+    """The benchmark's baseline (fem_sim.solver.textbook: dolfinx's NewtonSolver on the Ogden
+    energy in closed-form UFL, LU) and OgdenProblem solve the same nodal load on the same
+    mesh to the same displacement: two independent routes (UFL eigenvalues against the
+    principal-stretch point kernel) to one answer."""
+    from fem_sim.solver.textbook import textbook_simulation
+
+    g = make_phantom(0, 20.0)
+    fixed = g.regions["vena_cava"]
+    node = int(np.argmax(g.points[:, 0]))
+    force = np.array([0.0, 0.0, -0.4])
+    fractions = np.array([0.5, 1.0])
+    u_tb, its, _, _ = textbook_simulation(g, fixed, node, force, MAT, fractions)
+    prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, settings={"rtol": 1e-10},
+                        prefix="ours_vs_textbook_")
+    s = prob.solve(MAT, [Constraint(fixed)], [NodalLoad([node], [force])], fractions)
+    assert s.status == "ok" and len(its) == 2
+    ref = s.displacement[-1]
+    assert np.abs(u_tb[-1] - ref).max() <= 1e-5 * np.abs(ref).max()
