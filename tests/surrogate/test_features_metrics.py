@@ -105,24 +105,26 @@ def test_learning_rate_rules_are_optax_transforms():
 
 
 def test_weight_decay_is_the_gradient_of_the_l2_penalty_on_the_weight_matrices():
-    """l2 > 0 adds l2 w to the gradient of every kernel (the penalty l2 |w|^2 / 2), not to
-    biases: with a zero loss gradient and plain SGD-like scaling checked through Adam's
-    first step direction."""
+    """The engine's optimiser with l2 = 0.1 adds 0.1 w to the gradient of every kernel (the
+    penalty l2 |w|^2 / 2), not of the biases. Adam's first step is -lr * sign(gradient)
+    (m / sqrt(v) = g / |g|), so the sign of each step says which gradient Adam saw. By hand:
+    kernel w = (2, -3), g = (0.05, 0.05): with decay g' = (0.25, -0.25), steps (-lr, +lr);
+    without, g' = g, steps (-lr, -lr). Bias b = 5, g = -0.1: decayed it would be 0.4 and step
+    -lr; it must stay -0.1 and step +lr."""
     import jax.numpy as jnp
-    import optax
 
     from surrogate.config import get_config
-    from surrogate.engine import kernel_mask
+    from surrogate.engine import kernel_mask, optimizer
 
     params = {"layer": {"kernel": jnp.array([2.0, -3.0]), "bias": jnp.array([5.0])}}
-    mask = kernel_mask(params)
-    assert mask == {"layer": {"kernel": True, "bias": False}}
-    tx = optax.add_decayed_weights(0.1, mask=kernel_mask)
-    g = {"layer": {"kernel": jnp.zeros(2), "bias": jnp.zeros(1)}}
-    u, _ = tx.update(g, tx.init(params), params)
-    np.testing.assert_allclose(u["layer"]["kernel"], [0.2, -0.3], rtol=1e-6)
-    np.testing.assert_allclose(u["layer"]["bias"], [0.0])
-    assert get_config("small", l2=0.1)["l2"] == 0.1
+    assert kernel_mask(params) == {"layer": {"kernel": True, "bias": False}}
+    g = {"layer": {"kernel": jnp.array([0.05, 0.05]), "bias": jnp.array([-0.1])}}
+    lr = 1e-3
+    for l2, kernel_steps in ((0.1, [-lr, lr]), (0.0, [-lr, -lr])):
+        tx = optimizer(get_config("small", l2=l2, lr_rule="decay", learning_rate=lr), 10)
+        u, _ = tx.update(g, tx.init(params), params)
+        np.testing.assert_allclose(u["layer"]["kernel"], kernel_steps, rtol=1e-4)
+        np.testing.assert_allclose(u["layer"]["bias"], [lr], rtol=1e-4)
 
 
 def test_config_names_exactly_the_registered_designs():

@@ -132,7 +132,11 @@ def test_off_screen_frames_are_drawn_and_differ_between_forces(m, tmp_path):
     script.write_text(json.dumps({"fps": 4, "frames": [
         {"nodes": [node], "forces": [[0.0, 0.0, 0.3]]},
         {"nodes": [node], "forces": [[0.0, 0.0, -0.3]]}]}))
+    import time
+
+    t0 = time.perf_counter()
     t = run_offscreen(m, display_range(m), script, tmp_path / "out", (320, 240))
+    wall = time.perf_counter() - t0
     a, b = _frame(tmp_path / "out" / "frame_0000.png"), _frame(tmp_path / "out" / "frame_0001.png")
     assert a.shape == (240, 320, 3)
     assert np.any(np.abs(a - 255) > 30, axis=2).mean() > 0.05  # the liver is there
@@ -141,10 +145,10 @@ def test_off_screen_frames_are_drawn_and_differ_between_forces(m, tmp_path):
 
     with Image.open(t["gif"]) as gif:
         assert gif.n_frames == 2
-    # the timings are of these frames: inference is part of a frame, fps is 1 / frame time
+    # the timings are of these frames: inference is part of a frame, and the frames fit in the
+    # wall-clock time of the whole run (two frames: their median is their mean)
     assert 0 < t["inference_ms_median"] <= t["frame_ms_median"]
-    assert t["fps_median"] == pytest.approx(1e3 / t["frame_ms_median"], rel=1e-9)
-    assert t["frames"] == 2
+    assert t["frames"] == 2 and t["frames"] / t["fps_median"] <= wall
 
 
 @pytest.mark.parametrize("frames, message", [
