@@ -122,3 +122,19 @@ def components(n_nodes: int, cells: np.ndarray) -> np.ndarray:
     cols = cells[:, 1:].ravel()
     g = coo_matrix((np.ones(rows.size), (rows, cols)), shape=(n_nodes, n_nodes))
     return connected_components(g, directed=False)[1]
+
+
+def dihedral_angles(points: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """(n_cells, 6) interior dihedral angles in degrees at the six edges of each tetrahedron:
+    pi minus the angle between the outward normals of the two faces that meet there (a
+    regular tetrahedron: arccos(1/3) = 70.53 degrees everywhere; a flat one: near 0).
+    """
+    x = np.asarray(points, dtype=np.float64)[np.asarray(cells)[:, :4]]
+    faces = ((1, 2, 3), (0, 3, 2), (0, 1, 3), (0, 2, 1))  # opposite vertex 0, 1, 2, 3
+    n = []
+    for a, b, c in faces:
+        v = np.cross(x[:, b] - x[:, a], x[:, c] - x[:, a])
+        n.append(v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-300))
+    out = [np.pi - np.arccos(np.clip(np.einsum("ij,ij->i", n[i], n[j]), -1.0, 1.0))
+           for i, j in ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))]
+    return np.degrees(np.stack(out, axis=1))

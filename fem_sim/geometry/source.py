@@ -142,7 +142,7 @@ def scene_geometry(scene: Scene, index: int = 0) -> Geometry:
     return read_any(g["path"], g["mesh_size"], g["scale_to_mm"], g.get("spacing"))
 
 
-SURFACES = (".vtk", ".stl", ".obj", ".ply")
+SURFACES = (".vtk", ".vtp", ".stl", ".obj", ".ply")
 MASKS = (".npy", ".npz", ".nii", ".nii.gz")
 
 

@@ -60,9 +60,16 @@ def read_vtk_polydata(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def read_surface(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """(points, triangles) of a surface file: legacy VTK POLYDATA and OBJ read here, the rest
+    (STL, PLY, VTP) through meshio; polygons are fanned into triangles.
+    """
     path = Path(path)
     if path.suffix.lower() == ".vtk":
         return read_vtk_polydata(path)
+    if path.suffix.lower() == ".obj":
+        from fem_sim.geometry.repair import read_obj
+
+        return read_obj(path)
     import meshio
 
     try:
@@ -70,6 +77,8 @@ def read_surface(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     except Exception as exc:
         raise GeometryError(f"{path}: cannot read surface: {exc}") from None
     tris = [c.data for c in m.cells if c.type == "triangle"]
+    tris += [c.data[:, [0, k, k + 1]] for c in m.cells if c.type in ("quad", "polygon")
+             for k in range(1, c.data.shape[1] - 1)]
     if not tris:
         raise GeometryError(f"{path}: no triangles")
     return np.asarray(m.points, dtype=np.float64)[:, :3], np.concatenate(tris).astype(np.int64)
@@ -166,12 +175,19 @@ def mesh_closed_surface(points, tris, mesh_size: float, description: str = "") -
 
 def mesh_surface_file(path: str | Path, mesh_size: float, scale_to_mm: float = 1.0,
                       fixed_radius: float = 25.0) -> Geometry:
-    """Read, clean and mesh a surface file. As a default fixed region (``vena_cava``) it marks
-    the surface nodes within ``fixed_radius`` mm of the most posterior (max y) surface point;
-    scenes can select any other region.
+    """Read, repair and mesh a surface file (:mod:`fem_sim.geometry.repair`: every repair
+    logged; a liver the repair would move beyond its bounds refused). As a default fixed
+    region (``vena_cava``) it marks the surface nodes within ``fixed_radius`` mm of the most
+    posterior (max y) surface point; scenes can select any other region.
     """
-    pts, tris = read_surface(path)
-    pts, tris = clean_surface(pts * scale_to_mm, tris, str(path))
-    g = mesh_closed_surface(pts, tris, mesh_size, f"{Path(path).name}, mesh size {mesh_size}")
+    from fem_sim.geometry.repair import mesh_liver_file
+
+    g, report = mesh_liver_file(path, mesh_size, scale_to_mm)
+    if report.route != "remeshed surface" or report.pieces_dropped:
+        log.warning("%s: %d holes closed (%.0f mm^2), %d self-intersecting triangles, pieces "
+                    "of %s triangles dropped; %s; volume %+.2f%%, the input within %.1f mm",
+                    path, report.holes, report.area_added_mm2,
+                    report.self_intersecting_triangles, report.pieces_dropped[:5],
+                    report.route, 100 * report.volume_change, report.max_distance_mm)
     g.regions["vena_cava"] = default_vena_cava(g, fixed_radius)
     return g

@@ -19,13 +19,16 @@ def voxelize(points: np.ndarray, cells: np.ndarray, spacing: float,
 
 
 def voxelize_surface(points: np.ndarray, tris: np.ndarray, spacing: float, origin=None,
-                     shape=None) -> tuple[np.ndarray, np.ndarray]:
-    """Boolean mask of the voxel centres inside a closed triangle surface (ray parity along z).
+                     shape=None, rule: str = "parity") -> tuple[np.ndarray, np.ndarray]:
+    """Boolean mask of the voxel centres inside a closed triangle surface (rays along z).
 
     Each triangle toggles, in every (i, j) column its xy-projection covers, the voxels above
     the height where the column's ray crosses it; a running parity along z then marks the
-    inside. Rays pass through voxel centres, shifted by a tiny irrational offset so that they
-    never hit an edge or a vertex exactly. Returns (mask, origin) as :func:`voxelize`.
+    inside. ``rule = "nonzero"`` counts each crossing with its sign instead (entering +1,
+    leaving -1, by the triangle's orientation) and marks where the count is not zero: the
+    union of overlapping sheets, where parity would take their overlap out. Rays pass through
+    voxel centres, shifted by a tiny irrational offset so that they never hit an edge or a
+    vertex exactly. Returns (mask, origin) as :func:`voxelize`.
     """
     points = np.asarray(points, dtype=float)
     if origin is None:
@@ -35,7 +38,7 @@ def voxelize_surface(points: np.ndarray, tris: np.ndarray, spacing: float, origi
         shape = tuple(np.ceil((points.max(axis=0) + 2 * spacing - origin) / spacing)
                       .astype(int) + 1)
     nx, ny, nz = shape
-    toggles = np.zeros((nx, ny, nz + 1), dtype=np.int8)
+    toggles = np.zeros((nx, ny, nz + 1), dtype=np.int16)
     eps = np.array([1e-7 * np.sqrt(2.0), 1e-7 * np.sqrt(3.0)]) * spacing
     P = (points - origin) / spacing  # voxel units: centres at integers
     T = P[tris]  # (m, 3, 3)
@@ -60,6 +63,29 @@ def voxelize_surface(points: np.ndarray, tris: np.ndarray, spacing: float, origi
             z = a[..., 2] + s * (b - a)[..., 2] + t * (c - a)[..., 2]
         k = np.clip(np.ceil(z[hit]).astype(int), 0, nz)
         i, j = ij[hit][:, 0], ij[hit][:, 1]
-        np.add.at(toggles, (i, j, k), 1)
-    mask = (np.cumsum(toggles, axis=2, dtype=np.int32)[:, :, :nz] % 2) == 1
-    return mask, origin
+        # entering a closed outward surface upward crosses a triangle facing down (den < 0)
+        sign = -np.sign(np.broadcast_to(den, hit.shape)[hit]).astype(np.int16)
+        np.add.at(toggles, (i, j, k), 1 if rule == "parity" else sign)
+    count = np.cumsum(toggles, axis=2, dtype=np.int32)[:, :, :nz]
+    return ((count % 2) == 1 if rule == "parity" else count != 0), origin
+
+
+def voxelize_majority(points: np.ndarray, tris: np.ndarray, spacing: float,
+                      pad: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Inside mask of a surface that may be open or cross itself, as a segmentation's is:
+    signed crossings along x, y and z (:func:`voxelize_surface` with the nonzero rule: the
+    union of overlapping sheets), a voxel inside where two of the three agree. A hole spoils
+    the count of the rays through it along one axis only, so the vote keeps it out. Returns
+    (mask, origin) as :func:`voxelize`.
+    """
+    points = np.asarray(points, dtype=float)
+    origin = points.min(axis=0) - pad * spacing
+    shape = tuple(np.ceil((points.max(axis=0) + pad * spacing - origin) / spacing)
+                  .astype(int) + 1)
+    votes = np.zeros(shape, dtype=np.int8)
+    for axis in range(3):
+        order = [k for k in range(3) if k != axis] + [axis]  # the ray axis last
+        mask, _ = voxelize_surface(points[:, order], tris, spacing, origin[order],
+                                   tuple(shape[k] for k in order), rule="nonzero")
+        votes += np.transpose(mask, np.argsort(order)).astype(np.int8)
+    return votes >= 2, origin

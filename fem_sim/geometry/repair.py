@@ -1,0 +1,437 @@
+"""Real liver surfaces in: read what segmentations come as, repair, mesh with gmsh.
+
+A surface segmented from CT has holes (a few to a hundred open edges), staircases, separate
+specks and self-intersections. The route, each step reported (:class:`RepairReport`):
+
+1. read: OBJ (with normals or texture coordinates, polygons fanned into triangles), STL,
+   PLY, VTK/VTP; the largest piece is kept and the others reported;
+2. a clean surface (closed, manifold, not crossing itself) is meshed as it is: gmsh remeshes
+   it at the mesh size (its reparametrisation);
+3. a surface with defects, or one gmsh cannot reparametrise, takes the segmentation route it
+   came from, as the paper's livers did: the solid it encloses at 1 mm voxels (ray parity
+   along three axes, two of three deciding, so that a hole cannot leak), an opening and a
+   closing by one voxel, marching cubes, Taubin smoothing; then decimated to the mesh size
+   (``fast-simplification``), repaired by MeshFix (``pymeshfix``: a decimation may fold a
+   triangle over another) and meshed inside by gmsh (HXT), which keeps that surface;
+4. measured: the volume before (the input with its holes closed by flat patches) and after
+   (the tetrahedra), the largest and mean distance from the input's vertices to the meshed
+   surface, the mesh's smallest dihedral angle and mean ratio. A liver moved beyond
+   :data:`BOUNDS` is refused, naming the file, the defect and the bound.
+
+MeshFix alone is not the repair of record: its removal of self-intersections deletes whole
+sheets of a staircase segmentation (docs/real_livers.md).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from data_spec.geometry import Geometry, signed_volumes
+from fem_sim.geometry.errors import GeometryError
+
+log = logging.getLogger(__name__)
+
+# A liver is refused where the repair moved it beyond these (before meshing: what the mesh
+# size then changes is the user's choice, reported beside): the repaired surface encloses a
+# volume more than ``volume`` (relative) off the input's with its holes closed, or a vertex of
+# the input lies farther than ``distance_mm`` from it.
+BOUNDS = {"volume": 0.02, "distance_mm": 3.0}
+DECIMATE_EDGE = 0.6  # the decimated surface's target edge, in mesh sizes
+
+
+@dataclass
+class RepairReport:
+    """What was done to one liver surface, and what it cost in geometry."""
+
+    file: str
+    mesh_size: float
+    input_vertices: int = 0
+    input_triangles: int = 0
+    pieces_dropped: list = field(default_factory=list)   # triangles of each dropped piece
+    boundary_edges: int = 0
+    holes: int = 0
+    nonmanifold_edges: int = 0
+    self_intersecting_triangles: int = 0
+    area_added_mm2: float = 0.0    # the flat patches that close the holes
+    route: str = ""                # "remeshed surface" or "segmentation route"
+    volume_before_ml: float = 0.0  # the input with its holes closed
+    volume_repaired_ml: float = 0.0  # the repaired surface, before meshing
+    volume_after_ml: float = 0.0   # the tetrahedral mesh
+    repair_distance_mm: float = 0.0  # the largest, input vertices to the repaired surface
+    max_distance_mm: float = 0.0   # input vertices to the meshed surface
+    mean_distance_mm: float = 0.0
+    nodes: int = 0
+    tetrahedra: int = 0
+    min_dihedral_deg: float = 0.0
+    min_mean_ratio: float = 0.0
+    seconds: float = 0.0
+
+    @property
+    def volume_change(self) -> float:
+        return self.volume_after_ml / self.volume_before_ml - 1.0
+
+    @property
+    def repair_volume_change(self) -> float:
+        return self.volume_repaired_ml / self.volume_before_ml - 1.0
+
+    def to_dict(self) -> dict:
+        return {**asdict(self), "volume_change": self.volume_change,
+                "repair_volume_change": self.repair_volume_change}
+
+
+# ----------------------------------------------------------------------------------------------
+# Reading
+# ----------------------------------------------------------------------------------------------
+
+
+def read_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(points, triangles) of a Wavefront OBJ: ``v`` lines, ``f`` lines with ``i``, ``i/t``,
+    ``i//n`` or ``i/t/n`` entries (1-based or negative), polygons fanned into triangles.
+    """
+    verts, faces = [], []
+    for k, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
+        parts = line.split()
+        if not parts:
+            continue
+        try:
+            if parts[0] == "v":
+                verts.append([float(x) for x in parts[1:4]])
+            elif parts[0] == "f":
+                idx = [int(p.split("/")[0]) for p in parts[1:]]
+                idx = [i - 1 if i > 0 else len(verts) + i for i in idx]
+                faces += [[idx[0], idx[j], idx[j + 1]] for j in range(1, len(idx) - 1)]
+        except (ValueError, IndexError):
+            raise GeometryError(f"{path}: line {k}: cannot read {line.strip()[:60]!r}") from None
+    points, tris = np.asarray(verts, dtype=np.float64), np.asarray(faces, dtype=np.int64)
+    if points.ndim != 2 or points.shape[1] != 3 or tris.size == 0:
+        raise GeometryError(f"{path}: no vertices or no faces")
+    if tris.min() < 0 or tris.max() >= len(points):
+        raise GeometryError(f"{path}: a face refers to a vertex that does not exist")
+    return points, tris
+
+
+def read_any_surface(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """(points, triangles) of a surface file: .obj, .stl, .ply, .vtk (POLYDATA), .vtp."""
+    from fem_sim.geometry.surfaces import read_surface
+
+    path = Path(path)
+    if not path.exists():
+        raise GeometryError(f"{path}: no such file")
+    if path.suffix.lower() == ".obj":
+        return read_obj(path)
+    if path.suffix.lower() not in (".stl", ".ply", ".vtk", ".vtp"):
+        raise GeometryError(f"{path}: unknown surface type {path.suffix!r} (expected .obj, "
+                            ".stl, .ply, .vtk, .vtp)")
+    return read_surface(path)
+
+
+# ----------------------------------------------------------------------------------------------
+# Measuring
+# ----------------------------------------------------------------------------------------------
+
+
+def edges_of(tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(unique undirected edges, how many triangles share each)."""
+    e = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+    return np.unique(e, axis=0, return_counts=True)
+
+
+def boundary_loops(tris: np.ndarray) -> int:
+    """The number of holes: connected loops of boundary edges."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    edges, counts = edges_of(tris)
+    b = edges[counts == 1]
+    if b.size == 0:
+        return 0
+    nodes, inv = np.unique(b, return_inverse=True)
+    inv = inv.reshape(-1, 2)
+    g = coo_matrix((np.ones(len(inv)), (inv[:, 0], inv[:, 1])), shape=(nodes.size,) * 2)
+    return int(connected_components(g, directed=False)[0])
+
+
+def area(points, tris) -> float:
+    x = points[tris]
+    return float(0.5 * np.linalg.norm(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]),
+                                      axis=1).sum())
+
+
+def surface_samples(points, tris, spacing: float = 0.5) -> np.ndarray:
+    """Points on every triangle at about ``spacing`` mm (its vertices, a barycentric grid)."""
+    x = points[tris]
+    longest = np.linalg.norm(x - np.roll(x, 1, axis=1), axis=2).max(axis=1)
+    out = [points]
+    for n in np.unique(np.maximum(1, np.ceil(longest / spacing)).astype(int)):
+        sel = x[longest <= n * spacing][np.maximum(1, np.ceil(longest[longest <= n * spacing]
+                                                              / spacing)) == n]
+        i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+        keep = i + j <= n
+        w = np.stack([i[keep], j[keep], n - i[keep] - j[keep]], axis=1) / n  # (k, 3)
+        out.append(np.einsum("kv,tvd->tkd", w, sel).reshape(-1, 3))
+    return np.concatenate(out)
+
+
+def distances(from_points, points, tris) -> np.ndarray:
+    """(n,) mm from each point to the surface (points, tris), to 0.25 mm."""
+    from scipy.spatial import cKDTree
+
+    return cKDTree(surface_samples(points, tris, 0.5)).query(from_points)[0]
+
+
+def hole_patches(points, tris) -> tuple[np.ndarray, np.ndarray]:
+    """(points, patch triangles) that close every hole by a fan from its boundary loop's
+    centroid (the centroids appended to the points), facing as the surface around it.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    directed = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+    key = np.sort(directed, axis=1)
+    _, first, counts = np.unique(key, axis=0, return_index=True, return_counts=True)
+    boundary = directed[first[counts == 1]]  # each open edge as its triangle runs it
+    if boundary.size == 0:
+        return points, np.zeros((0, 3), dtype=np.int64)
+    nodes, inv = np.unique(boundary, return_inverse=True)
+    inv = inv.reshape(-1, 2)
+    g = coo_matrix((np.ones(len(inv)), (inv[:, 0], inv[:, 1])), shape=(nodes.size,) * 2)
+    label = connected_components(g, directed=False)[1][inv[:, 0]]
+    centres = np.array([points[np.unique(boundary[label == k])].mean(axis=0)
+                        for k in range(label.max() + 1)])
+    patch = np.column_stack([boundary[:, 1], boundary[:, 0], len(points) + label])
+    return np.concatenate([points, centres]), patch.astype(np.int64)
+
+
+# ----------------------------------------------------------------------------------------------
+# Repairing and meshing
+# ----------------------------------------------------------------------------------------------
+
+
+def _largest_piece(points, tris, report: RepairReport) -> tuple[np.ndarray, np.ndarray]:
+    """Duplicates merged, degenerate triangles dropped, the largest connected piece kept."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    _, inv = np.unique(np.round(points, 9), axis=0, return_inverse=True)
+    inv = inv.ravel()
+    pts = np.zeros((inv.max() + 1, 3))
+    pts[inv] = points
+    tris = inv[tris]
+    tris = tris[(tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2])
+                & (tris[:, 0] != tris[:, 2])]
+    e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]]])
+    g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(pts),) * 2)
+    label = connected_components(g, directed=False)[1][tris[:, 0]]
+    sizes = np.bincount(label)
+    keep = int(sizes.argmax())
+    report.pieces_dropped = sorted((int(s) for i, s in enumerate(sizes) if s and i != keep),
+                                   reverse=True)
+    tris = tris[label == keep]
+    used = np.unique(tris)
+    renum = np.full(len(pts), -1)
+    renum[used] = np.arange(used.size)
+    return pts[used], renum[tris]
+
+
+def _meshfix(points, tris) -> tuple[np.ndarray, np.ndarray]:
+    import pymeshfix
+
+    mf = pymeshfix.MeshFix(np.asarray(points, dtype=np.float64),
+                           np.asarray(tris, dtype=np.int64))
+    mf.repair(joincomp=False, remove_smallest_components=True)
+    return np.asarray(mf.points, dtype=np.float64), np.asarray(mf.faces, dtype=np.int64)
+
+
+def _defects(points, tris, report: RepairReport) -> None:
+    """Open and non-manifold edges, holes, triangles that cross another (MeshFix's test),
+    and the volume and patch area of the surface with its holes closed.
+    """
+    import pymeshfix
+
+    from fem_sim.geometry.surfaces import enclosed_volume
+
+    _, counts = edges_of(tris)
+    report.boundary_edges = int(np.sum(counts == 1))
+    report.nonmanifold_edges = int(np.sum(counts > 2))
+    report.holes = boundary_loops(tris)
+    t = pymeshfix.PyTMesh()
+    t.set_quiet(True)
+    t.load_array(np.asarray(points, dtype=np.float64), np.asarray(tris, dtype=np.int64))
+    report.self_intersecting_triangles = len(t.select_intersecting_triangles(justproper=True))
+    closed, patch = hole_patches(points, tris)
+    report.area_added_mm2 = area(closed, patch) if len(patch) else 0.0
+    report.volume_before_ml = abs(enclosed_volume(closed, np.concatenate([tris, patch]))) / 1e3
+
+
+def decimated(points, tris, mesh_size: float) -> tuple[np.ndarray, np.ndarray]:
+    """The surface decimated to triangles of about DECIMATE_EDGE mesh sizes (quadric error),
+    repaired again (decimation may fold a triangle over another).
+    """
+    import fast_simplification
+
+    from fem_sim.geometry.surfaces import clean_surface
+
+    target = area(points, tris) / (0.433 * (DECIMATE_EDGE * mesh_size) ** 2)
+    reduction = float(np.clip(1.0 - target / len(tris), 0.0, 0.99))
+    p, t = fast_simplification.simplify(points.astype(np.float32), tris.astype(np.int32),
+                                        target_reduction=reduction)
+    p, t = _meshfix(np.asarray(p, dtype=np.float64), np.asarray(t, dtype=np.int64))
+    return clean_surface(p, t, "decimated surface")
+
+
+def segmentation_surface(points, tris, voxel: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """The surface of the solid a segmentation surface encloses, at ``voxel`` mm (the module
+    docstring's step 3): closed, manifold, outward and smooth.
+    """
+    from fem_sim.geometry.masks import mask_surface
+    from fem_sim.geometry.voxels import voxelize_majority
+
+    mask, origin = voxelize_majority(points, tris, voxel)
+    return mask_surface(mask, np.full(3, voxel), origin, voxel=voxel, radius=1)
+
+
+def _repaired(points, tris, report: RepairReport) -> tuple[np.ndarray, np.ndarray]:
+    """The surface gmsh meshes: a clean input as it is, else its segmentation surface;
+    refused (GeometryError) where the repair moved it beyond :data:`BOUNDS`.
+    """
+    from fem_sim.geometry.surfaces import clean_surface, enclosed_volume
+
+    if report.boundary_edges or report.nonmanifold_edges or report.self_intersecting_triangles:
+        surface = segmentation_surface(points, tris)
+    else:
+        surface = clean_surface(points, tris, report.file)
+    report.volume_repaired_ml = abs(enclosed_volume(*surface)) / 1e3
+    report.repair_distance_mm = float(distances(points, *surface).max())
+    why = refusal(report)
+    if why:
+        raise GeometryError(why)
+    return surface
+
+
+def mesh_inside(points, tris, mesh_size: float, description: str) -> Geometry:
+    """Tetrahedra of the solid inside a closed surface whose triangles gmsh keeps as they are
+    (no reparametrisation): the last step of the decimated routes.
+    """
+    import gmsh
+
+    from data_spec.geometry import boundary_triangles
+    from fem_sim.geometry.meshing import gmsh_tetrahedra
+
+    gmsh.initialize([], readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("General.NumThreads", 1)
+        gmsh.model.add("liver")
+        s = gmsh.model.addDiscreteEntity(2)
+        gmsh.model.mesh.addNodes(2, s, np.arange(1, len(points) + 1), points.ravel())
+        gmsh.model.mesh.addElementsByType(s, 2, [], (tris + 1).ravel())
+        gmsh.model.geo.addVolume([gmsh.model.geo.addSurfaceLoop([s])])
+        gmsh.model.geo.synchronize()
+        gmsh.option.setNumber("Mesh.MeshSizeMin", 0.5 * mesh_size)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size)
+        gmsh.option.setNumber("Mesh.Algorithm3D", 10)  # HXT: fewer slivers on a kept surface
+        gmsh.option.setNumber("Mesh.Optimize", 1)
+        try:
+            gmsh.model.mesh.generate(3)
+        except Exception as exc:
+            raise GeometryError(f"{description}: gmsh could not mesh the volume ({exc})") \
+                from None
+        pts, cells = gmsh_tetrahedra()
+    finally:
+        gmsh.finalize()
+    if cells.size == 0:
+        raise GeometryError(f"{description}: gmsh produced no tetrahedra")
+    return Geometry(points=pts, cells=cells, surface_triangles=boundary_triangles(cells, pts),
+                    description=description)
+
+
+def _mesh(points, tris, mesh_size: float, report: RepairReport) -> Geometry:
+    """The repaired surface remeshed by gmsh at the mesh size (a clean input's route); a
+    segmentation surface, or one gmsh cannot reparametrise, decimated to the mesh size and
+    meshed inside.
+    """
+    from fem_sim.geometry.quality import mesh_problems
+    from fem_sim.geometry.surfaces import mesh_closed_surface
+
+    description = f"{Path(report.file).name}, mesh size {mesh_size:g}"
+    clean = not (report.boundary_edges or report.nonmanifold_edges
+                 or report.self_intersecting_triangles)
+    surface = _repaired(points, tris, report)
+    if clean:
+        try:
+            g = mesh_closed_surface(*surface, mesh_size, description)
+            if not mesh_problems(g.points, g.cells):
+                report.route = "remeshed surface"
+                return g
+        except Exception as exc:  # gmsh raises plain Exceptions
+            log.info("%s: gmsh could not remesh the surface (%s)", description, exc)
+    report.route = "decimated surface" if clean else "segmentation route"
+    g = mesh_inside(*decimated(*surface, mesh_size), mesh_size, description)
+    bad = mesh_problems(g.points, g.cells)
+    if bad:
+        raise GeometryError(f"{report.file}: the meshed liver is unusable: {'; '.join(bad)}")
+    return g
+
+
+def _measure(g: Geometry, input_points, report: RepairReport) -> None:
+    from fem_sim.geometry.quality import dihedral_angles, mean_ratio
+
+    report.nodes, report.tetrahedra = g.n_nodes, int(g.cells.shape[0])
+    report.volume_after_ml = float(np.abs(signed_volumes(g.points, g.cells)).sum()) / 1e3
+    d = distances(input_points, g.points, g.surface_triangles)
+    report.max_distance_mm, report.mean_distance_mm = float(d.max()), float(d.mean())
+    report.min_dihedral_deg = float(dihedral_angles(g.points, g.cells).min())
+    report.min_mean_ratio = float(mean_ratio(g.points, g.cells).min())
+
+
+def refusal(report: RepairReport) -> str | None:
+    """Why the repair moved the liver too far from its input (None when within
+    :data:`BOUNDS`): the message names the file, the defects and the bound.
+    """
+    defects = (f"{report.holes} holes, {report.self_intersecting_triangles} self-intersecting "
+               f"triangles, {report.nonmanifold_edges} non-manifold edges")
+    if abs(report.repair_volume_change) > BOUNDS["volume"]:
+        return (f"{report.file}: repairing it ({defects}) changes its volume by "
+                f"{report.repair_volume_change:+.1%} from {report.volume_before_ml:.0f} mL, "
+                f"beyond the bound of {BOUNDS['volume']:.0%}")
+    if report.repair_distance_mm > BOUNDS["distance_mm"]:
+        return (f"{report.file}: repairing it ({defects}) moves a vertex by "
+                f"{report.repair_distance_mm:.1f} mm, beyond the bound of "
+                f"{BOUNDS['distance_mm']:g} mm")
+    return None
+
+
+def mesh_liver_surface(points, tris, mesh_size: float, file: str = "surface",
+                       scale_to_mm: float = 1.0) -> tuple[Geometry, RepairReport]:
+    """(tetrahedral mesh, repair report) of a liver surface (points in the file's unit times
+    ``scale_to_mm``); GeometryError naming the file, the defect and the bound when the mesh
+    would change the liver beyond :data:`BOUNDS`. The default fixed region (``vena_cava``):
+    the surface nodes within 25 mm of the most posterior surface point.
+    """
+    from fem_sim.geometry.meshing import check_mesh_size
+    from fem_sim.geometry.regions import default_vena_cava
+
+    t0 = time.perf_counter()
+    report = RepairReport(file=str(file), mesh_size=float(mesh_size))
+    points = np.asarray(points, dtype=np.float64) * scale_to_mm
+    report.input_vertices, report.input_triangles = len(points), len(tris)
+    piece, ptris = _largest_piece(points, np.asarray(tris, dtype=np.int64), report)
+    _defects(piece, ptris, report)
+    check_mesh_size(report.volume_before_ml * 1e3, mesh_size, str(file))
+    g = _mesh(piece, ptris, mesh_size, report)
+    _measure(g, piece, report)
+    report.seconds = time.perf_counter() - t0
+    g.regions["vena_cava"] = default_vena_cava(g)
+    return g, report
+
+
+def mesh_liver_file(path: str | Path, mesh_size: float,
+                    scale_to_mm: float = 1.0) -> tuple[Geometry, RepairReport]:
+    """:func:`mesh_liver_surface` of a surface file."""
+    points, tris = read_any_surface(path)
+    return mesh_liver_surface(points, tris, mesh_size, str(path), scale_to_mm)
