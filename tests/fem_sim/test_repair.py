@@ -32,7 +32,7 @@ def sphere(radius: float = R, levels: int = 4, centre=(0.0, 0.0, 0.0)):
     for _ in range(levels):
         mid, new = {}, []
 
-        def m(a, b):
+        def m(a, b, mid=mid):
             key = (min(a, b), max(a, b))
             if key not in mid:
                 pts.append((pts[a] + pts[b]) / 2)
