@@ -144,6 +144,29 @@ def shard_problems(path: str | Path, geometry_cache: dict | None = None) -> list
     return p
 
 
+def _missing_problems(directory: Path, shards: list[Path]) -> list[str]:
+    """The scene's simulations without a shard (each index named, with the command that makes
+    just those), and XDMF files without their shard.
+    """
+    from data_spec.scene import SceneError, load_scene
+
+    p = [f"{x}: an XDMF file without its shard {x.with_suffix('.h5').name}"
+         for x in sorted((directory / "sims").glob("sim_*.xdmf"))
+         if not x.with_suffix(".h5").exists()]
+    try:
+        n = load_scene(directory / "scene.toml").n_simulations
+    except (SceneError, OSError):
+        return p  # the scene's own problem is reported by _scene_problems
+    have = {int(s.stem.split("_")[1]) for s in shards if s.stem.split("_")[1].isdigit()}
+    missing = sorted(set(range(n)) - have)
+    if missing:
+        shown = ", ".join(map(str, missing[:10])) + (" ..." if len(missing) > 10 else "")
+        p.append(f"{directory}: {len(missing)} of the scene's {n} simulations have no shard "
+                 f"(simulation {shown}); `mpirun -n 2 python -m fem_sim generate "
+                 f"{directory}/scene.toml --out {directory}` makes just those")
+    return p
+
+
 def _scene_problems(path: Path, shard_hashes: set[str]) -> list[str]:
     """The dataset's scene.toml: present, valid, and the scene its shards were made from."""
     from data_spec.scene import SceneError, load_scene
@@ -183,6 +206,7 @@ def validate_dataset(directory: str | Path) -> list[str]:
         problems.append(f"{directory}: shards come from {len(hashes)} different scenes "
                         "(scene_hash differs)")
     problems += _scene_problems(directory / "scene.toml", hashes)
+    problems += _missing_problems(directory, shards)
     for tmp in leftover_temporaries(directory):
         problems.append(f"{tmp}: leftover temporary file of an interrupted writer")
     return problems

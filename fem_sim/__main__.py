@@ -49,7 +49,7 @@ def _collective(run) -> int:
 
 
 # What each command imports that only the solver environment has.
-NEEDS = {"generate": "dolfinx", "population": "gmsh", "phantom": "gmsh"}
+NEEDS = {"generate": "dolfinx", "population": "gmsh", "phantom": "gmsh", "mesh": "gmsh"}
 
 
 def wrong_environment(command: str) -> str | None:
@@ -96,6 +96,15 @@ def _parser() -> argparse.ArgumentParser:
                          "centres (default 1: the population's)")
     ph.add_argument("--mesh-size", type=float, default=16.0, metavar="H",
                     help="target edge length, mm (default 16, the shipped scenes')")
+    me = sub.add_parser("mesh", help="repair and mesh one liver surface (CT segmentations: "
+                        "holes, crossing triangles, pieces) into a data_spec geometry file, "
+                        "with its repair report and a picture")
+    me.add_argument("liver", help="surface file: .obj .stl .ply .vtk .vtp")
+    me.add_argument("--mesh-size", type=float, required=True, metavar="H", help="mm")
+    me.add_argument("--out", required=True, help="geometry file to write (.h5)")
+    me.add_argument("--scale-to-mm", type=float, default=1.0,
+                    help="multiply the file's coordinates by this (1000 for metres)")
+    me.add_argument("--no-picture", action="store_true")
     s = sub.add_parser("summary", help="print counts and statistics of a dataset")
     s.add_argument("directory")
     s.add_argument("--png", help="picture of deformed livers (default DIR/summary.png)")
@@ -137,6 +146,11 @@ def main(argv: list[str] | None = None) -> int:
         return _generate(args, parser)
     if args.command == "phantom":
         return _phantom(args, parser)
+    if args.command == "mesh":
+        from fem_sim.geometry.mesh_command import run
+
+        return run(args.liver, args.mesh_size, args.out, args.scale_to_mm,
+                   picture=not args.no_picture)
     from fem_sim.batch.summary import summary
 
     return summary(args.directory, png=args.png)

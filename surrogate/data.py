@@ -53,6 +53,7 @@ class Dataset:
     # shards (None: the scene lists its cases explicitly)
     loadable: list | None = None
     directory: Path | None = None   # the dataset directory it was read from
+    missing_sims: tuple = ()        # simulations of the scene without a shard
 
     @property
     def n_samples(self) -> int:
@@ -200,10 +201,19 @@ def load_dataset(directory: str | Path, stream: bool | str = "auto",
                 raise DataError(f"{p}: cannot be read ({exc}); run `python -m data_spec "
                                 f"validate {directory}` and regenerate it") from None
             reader.add(sh)
+    have = {int(p.stem.split("_")[1]) for p in paths if p.stem.split("_")[1].isdigit()}
+    missing = tuple(sorted(set(range(scene.n_simulations)) - have))
+    if missing:
+        log.warning("%s: %d of the scene's %d simulations have no shard (%s%s): training on "
+                    "the %d there", directory, len(missing), scene.n_simulations,
+                    ", ".join(map(str, missing[:10])), " ..." if len(missing) > 10 else "",
+                    len(have))
     if not reader.smp["geo"]:
         raise DataError(f"{directory}: none of the {len(paths)} shards has a converged load "
                         f"step ({reader.failed} failed): nothing to train on")
-    return reader.dataset(final)
+    ds = reader.dataset(final)
+    ds.missing_sims = missing
+    return ds
 
 
 def restrict_nodes(ds: Dataset, keep: list[np.ndarray]) -> Dataset:

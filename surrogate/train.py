@@ -148,6 +148,11 @@ def _load(data_dir, run: Path, cfg: dict, say) -> Dataset:
         f"simulations, {ds.failed_sims} failed), {ds.targets.shape[0]:,} node examples, "
         f"{ds.spec.dim} features: {', '.join(ds.spec.names())}"
         + ("; targets streamed from disk" if isinstance(ds.targets, np.memmap) else ""))
+    if ds.missing_sims:
+        say(f"warning: {len(ds.missing_sims)} of the scene's simulations have no shard "
+            f"(simulation {', '.join(map(str, ds.missing_sims[:10]))}"
+            f"{' ...' if len(ds.missing_sims) > 10 else ''}): `python -m data_spec validate "
+            f"{data_dir}` says how to make them")
     DESIGNS[cfg["design"]].check(ds)
     return ds
 

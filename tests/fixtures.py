@@ -4,6 +4,7 @@ tests build datasets without the solver).
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -46,13 +47,18 @@ def synthetic_shard(geometry: Geometry, index: int, *, n_steps: int = 3, seed: i
 TEST_SCENE = Path(__file__).parents[1] / "data_spec" / "scenes" / "tiny_scene1.toml"
 
 
-def write_test_scene(directory: str | Path, scene_file: str | Path = TEST_SCENE):
-    """Copy a scene into a dataset directory as its ``scene.toml``; returns the Scene."""
+def write_test_scene(directory: str | Path, scene_file: str | Path = TEST_SCENE,
+                     n_simulations: int | None = None):
+    """Copy a scene into a dataset directory as its ``scene.toml`` (with ``n_simulations``
+    when given: how many the dataset holds); returns the Scene."""
     from data_spec.scene import load_scene
 
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    (directory / "scene.toml").write_text(Path(scene_file).read_text())
+    text = Path(scene_file).read_text()
+    if n_simulations is not None:
+        text = re.sub(r"(?m)^n_simulations = \d+", f"n_simulations = {n_simulations}", text)
+    (directory / "scene.toml").write_text(text)
     return load_scene(directory / "scene.toml")
 
 
@@ -62,7 +68,7 @@ def synthetic_dataset(directory: str | Path, n_sims: int = 3, n: int = 3,
     shards carry the scene's name and hash and its number of loads, so the dataset validates).
     """
     directory = Path(directory)
-    scene = write_test_scene(directory, scene_file)
+    scene = write_test_scene(directory, scene_file, n_sims)  # the scene says how many
     geo = box_mesh(n)
     write_geometry(geometry_path(directory, geo.geometry_id), geo)
     for i in range(n_sims):

@@ -40,7 +40,7 @@ log = logging.getLogger(__name__)
 # size then changes is the user's choice, reported beside): the repaired surface encloses a
 # volume more than ``volume`` (relative) off the input's with its holes closed, or a vertex of
 # the input lies farther than ``distance_mm`` from it.
-BOUNDS = {"volume": 0.02, "distance_mm": 3.0}
+BOUNDS = {"volume": 0.02, "distance_mm": 10.0}
 DECIMATE_EDGE = 0.6  # the decimated surface's target edge, in mesh sizes
 
 
@@ -309,7 +309,9 @@ def _repaired(points, tris, report: RepairReport) -> tuple[np.ndarray, np.ndarra
     report.repair_distance_mm = float(distances(points, *surface).max())
     why = refusal(report)
     if why:
-        raise GeometryError(why)
+        exc = GeometryError(why)
+        exc.report = report  # what was measured, for a study of the refusals
+        raise exc
     return surface
 
 

@@ -136,8 +136,8 @@ def test_a_repair_beyond_the_bound_is_refused_naming_file_defect_and_bound():
                      volume_repaired_ml=1400.0)
     why = refusal(r)
     assert "liver.obj" in why and "12 holes" in why and "-6.7%" in why and "2%" in why
-    r.volume_repaired_ml, r.repair_distance_mm = 1500.0, 4.5
-    assert "4.5 mm, beyond the bound of 3 mm" in refusal(r)
+    r.volume_repaired_ml, r.repair_distance_mm = 1500.0, 12.5
+    assert "12.5 mm, beyond the bound of 10 mm" in refusal(r)
     r.repair_distance_mm = 1.0
     assert refusal(r) is None
 

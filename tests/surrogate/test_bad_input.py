@@ -83,3 +83,21 @@ def test_basis_design_on_a_many_liver_scene_is_refused_before_any_work(tmp_path,
                  "--config", "basis"]) == 2
     assert "design 'basis' needs a scene with one liver" in capsys.readouterr().err
     assert not (tmp_path / "r").exists()
+
+
+def test_the_trainer_says_which_simulations_are_missing(tmp_path):
+    """11 of the scene's 12 simulations there: the trainer trains on them and says which one
+    is missing, pointing at the validator."""
+    from surrogate.config import get_config
+    from surrogate.train import train_and_evaluate
+    from tests.fixtures import synthetic_dataset
+
+    d = synthetic_dataset(tmp_path / "d", n_sims=12)
+    for p in (d / "sims").glob("sim_000004.*"):
+        p.unlink()
+    lines = []
+    cfg = get_config("small", folds=2, epochs=1, final_fit=False, hidden=[8])
+    result = train_and_evaluate(d, tmp_path / "run", cfg, log_fn=lines.append)
+    assert result["n_simulations"] == 11
+    assert any("warning: 1 of the scene's simulations have no shard (simulation 4)" in line
+               for line in lines), lines
