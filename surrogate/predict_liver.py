@@ -96,10 +96,11 @@ def _checked(path, points, triangles):
     if triangles.shape[0] < 100:
         raise LiverFileError(f"{path}: {triangles.shape[0]} surface triangles; a liver "
                              "surface needs many more (at least 100)")
-    size = np.ptp(points, axis=0).max()
-    if not 30.0 <= size <= 600.0:
-        raise LiverFileError(f"{path}: the liver spans {size:.3g} units; expected millimetres "
-                             "(30-600 mm): give scale_to_mm (e.g. 1000 for metres)")
+    from data_spec.units import span_problem
+
+    why = span_problem(float(np.ptp(points, axis=0).max()), str(path))
+    if why:
+        raise LiverFileError(why)
     return points, np.asarray(triangles, dtype=np.int64)
 
 

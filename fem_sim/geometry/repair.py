@@ -409,7 +409,8 @@ def refusal(report: RepairReport) -> str | None:
 
 
 def mesh_liver_surface(points, tris, mesh_size: float, file: str = "surface",
-                       scale_to_mm: float = 1.0) -> tuple[Geometry, RepairReport]:
+                       scale_to_mm: float = 1.0,
+                       flag: str = "--scale-to-mm") -> tuple[Geometry, RepairReport]:
     """(tetrahedral mesh, repair report) of a liver surface (points in the file's unit times
     ``scale_to_mm``); GeometryError naming the file, the defect and the bound when the mesh
     would change the liver beyond :data:`BOUNDS`. The default fixed region (``vena_cava``):
@@ -422,6 +423,11 @@ def mesh_liver_surface(points, tris, mesh_size: float, file: str = "surface",
     report = RepairReport(file=str(file), mesh_size=float(mesh_size))
     points = np.asarray(points, dtype=np.float64) * scale_to_mm
     report.input_vertices, report.input_triangles = len(points), len(tris)
+    from data_spec.units import span_problem
+
+    why = span_problem(float(np.ptp(points, axis=0).max()), str(file), flag)
+    if why:
+        raise GeometryError(why)
     piece, ptris = _largest_piece(points, np.asarray(tris, dtype=np.int64), report)
     _defects(piece, ptris, report)
     check_mesh_size(report.volume_before_ml * 1e3, mesh_size, str(file))
@@ -432,8 +438,8 @@ def mesh_liver_surface(points, tris, mesh_size: float, file: str = "surface",
     return g, report
 
 
-def mesh_liver_file(path: str | Path, mesh_size: float,
-                    scale_to_mm: float = 1.0) -> tuple[Geometry, RepairReport]:
+def mesh_liver_file(path: str | Path, mesh_size: float, scale_to_mm: float = 1.0,
+                    flag: str = "--scale-to-mm") -> tuple[Geometry, RepairReport]:
     """:func:`mesh_liver_surface` of a surface file."""
     points, tris = read_any_surface(path)
-    return mesh_liver_surface(points, tris, mesh_size, str(path), scale_to_mm)
+    return mesh_liver_surface(points, tris, mesh_size, str(path), scale_to_mm, flag)

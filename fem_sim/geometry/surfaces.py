@@ -182,7 +182,7 @@ def mesh_surface_file(path: str | Path, mesh_size: float, scale_to_mm: float = 1
     """
     from fem_sim.geometry.repair import mesh_liver_file
 
-    g, report = mesh_liver_file(path, mesh_size, scale_to_mm)
+    g, report = mesh_liver_file(path, mesh_size, scale_to_mm, flag="geometry.scale_to_mm")
     if report.route != "remeshed surface" or report.pieces_dropped:
         log.warning("%s: %d holes closed (%.0f mm^2), %d self-intersecting triangles, pieces "
                     "of %s triangles dropped; %s; volume %+.2f%%, the input within %.1f mm",

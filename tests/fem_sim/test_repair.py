@@ -160,3 +160,28 @@ def test_the_mask_route_and_the_surface_route_agree_on_a_real_liver():
     vol_mask = np.abs(signed_volumes(m.points, m.cells)).sum() / 1e3
     assert r.volume_after_ml == pytest.approx(vol_mask, rel=0.02)
     assert r.volume_after_ml == pytest.approx(r.volume_before_ml, rel=0.02)
+
+
+def test_the_mesh_command_writes_the_geometry_the_report_and_the_picture(tmp_path, capsys):
+    import json
+
+    from data_spec.geometry import read_geometry
+    from fem_sim.__main__ import main
+
+    P, T = sphere(levels=3)
+    T = T[np.linalg.norm(P[T].mean(axis=1) - P[0], axis=1) > 8.0]  # one hole
+    obj = tmp_path / "liver.obj"
+    obj.write_text("\n".join([f"v {x} {y} {z}" for x, y, z in P]
+                             + [f"f {a + 1}//1 {b + 1}//1 {c + 1}//1" for a, b, c in T]))
+    out = tmp_path / "out" / "liver.h5"
+    assert main(["mesh", str(obj), "--mesh-size", "16", "--out", str(out)]) == 0
+    g = read_geometry(out)
+    report = json.loads((tmp_path / "out" / "liver.repair.json").read_text())
+    assert report["holes"] == 1 and report["nodes"] == g.n_nodes
+    assert (tmp_path / "out" / "liver.png").stat().st_size > 10_000
+    assert "1 holes closed" in capsys.readouterr().out
+    assert main(["mesh", str(obj), "--mesh-size", "16", "--out", str(tmp_path / "x.vtu")]) == 2
+    assert "expected a .h5 data_spec geometry file" in capsys.readouterr().err
+    assert main(["mesh", str(obj), "--mesh-size", "16", "--out", str(out),
+                 "--scale-to-mm", "1000"]) == 2
+    assert "too large for millimetres" in capsys.readouterr().err

@@ -5,6 +5,7 @@ registered template, writes a ParaView file, and refuses bad files and single-li
 
 import json
 import os
+import re
 import warnings
 from pathlib import Path
 
@@ -142,8 +143,11 @@ def test_bad_files_and_single_liver_models_are_refused(run, tmp_path, capsys):
     with pytest.raises(LiverFileError, match="liver.stl"):
         read_liver_surface(broken)
     path, _ = _population_liver(1)
-    with pytest.raises(LiverFileError, match="expected millimetres"):
+    with pytest.raises(LiverFileError, match="if the file is in metres, give --scale-to-mm 1000"):
         read_liver_surface(path, scale_to_mm=1e-3)
+    with pytest.raises(LiverFileError, match="too large for millimetres") as big:
+        read_liver_surface(path, scale_to_mm=10.0)
+    assert not re.search(r"\bmetres\b", str(big.value)) and "--scale-to-mm 0.1" in str(big.value)
     assert main(["predict-liver", str(run), str(bad), "--force", "0", "0", "0", "0", "0",
                  "-0.4"]) == 2
     assert "unknown liver file type" in capsys.readouterr().err
