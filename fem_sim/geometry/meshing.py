@@ -49,3 +49,47 @@ def check_mesh_size(volume: float, mesh_size: float, where: str,
                             f"{estimate:.2g} nodes for {volume / 1e6:.2g} L (at most "
                             f"{max_nodes:,} here); use mesh_size >= {h_min:.2g} mm")
     return int(estimate)
+
+
+def discrete_surface_solid(points, tris, mesh_size: float, description: str, *,
+                           reparametrise: bool, algorithm: int) -> Geometry:
+    """Gmsh's tetrahedra inside a closed triangle surface: remeshed at the mesh size after
+    reparametrising the surface (``reparametrise``: patches split at 45 degrees) or with the
+    surface's triangles kept; ``algorithm`` is gmsh's 3D one (1 Delaunay, 10 HXT).
+    """
+    import gmsh
+
+    from data_spec.geometry import boundary_triangles
+
+    gmsh.initialize([], readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("General.NumThreads", 1)
+        gmsh.model.add("liver")
+        s = gmsh.model.addDiscreteEntity(2)
+        gmsh.model.mesh.addNodes(2, s, np.arange(1, len(points) + 1), points.ravel())
+        gmsh.model.mesh.addElementsByType(s, 2, [], (tris + 1).ravel())
+        surfaces = [s]
+        if reparametrise:
+            gmsh.model.mesh.classifySurfaces(np.pi / 4, True, True, np.pi)
+            gmsh.model.mesh.createGeometry()
+            surfaces = [t for _, t in gmsh.model.getEntities(2)]
+        gmsh.model.geo.addVolume([gmsh.model.geo.addSurfaceLoop(surfaces)])
+        gmsh.model.geo.synchronize()
+        gmsh.option.setNumber("Mesh.MeshSizeMin", 0.5 * mesh_size)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size)
+        gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
+        gmsh.option.setNumber("Mesh.Algorithm3D", algorithm)
+        gmsh.option.setNumber("Mesh.Optimize", 1)
+        try:
+            gmsh.model.mesh.generate(3)
+        except Exception as exc:
+            raise GeometryError(f"{description}: gmsh could not mesh the volume ({exc}); "
+                                "self-intersecting surface?") from None
+        pts, cells = gmsh_tetrahedra()
+    finally:
+        gmsh.finalize()
+    if cells.size == 0:
+        raise GeometryError(f"{description}: gmsh produced no tetrahedra")
+    return Geometry(points=pts, cells=cells, surface_triangles=boundary_triangles(cells, pts),
+                    description=description)

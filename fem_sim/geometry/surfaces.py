@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from data_spec.geometry import Geometry, boundary_triangles
+from data_spec.geometry import Geometry
 from fem_sim.geometry.errors import GeometryError
-from fem_sim.geometry.meshing import check_mesh_size, gmsh_tetrahedra
+from fem_sim.geometry.meshing import check_mesh_size
 from fem_sim.geometry.regions import default_vena_cava
 
 log = logging.getLogger(__name__)
@@ -135,42 +135,14 @@ def clean_surface(points, tris, source: str = "surface") -> tuple[np.ndarray, np
 
 
 def mesh_closed_surface(points, tris, mesh_size: float, description: str = "") -> Geometry:
-    """Tetrahedral mesh of the solid bounded by a clean closed surface (gmsh)."""
-    import gmsh
+    """Tetrahedral mesh of the solid bounded by a clean closed surface (gmsh), the surface
+    remeshed at the mesh size.
+    """
+    from fem_sim.geometry.meshing import discrete_surface_solid
 
     check_mesh_size(abs(enclosed_volume(points, tris)), mesh_size, description or "surface")
-
-    gmsh.initialize([], readConfigFiles=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.option.setNumber("General.NumThreads", 1)
-        gmsh.model.add("surface")
-        s = gmsh.model.addDiscreteEntity(2)
-        gmsh.model.mesh.addNodes(2, s, np.arange(1, len(points) + 1), points.ravel())
-        gmsh.model.mesh.addElementsByType(s, 2, [], (tris + 1).ravel())
-        gmsh.model.mesh.classifySurfaces(np.pi / 4, True, True, np.pi)
-        gmsh.model.mesh.createGeometry()
-        surfaces = [t for _, t in gmsh.model.getEntities(2)]
-        loop = gmsh.model.geo.addSurfaceLoop(surfaces)
-        gmsh.model.geo.addVolume([loop])
-        gmsh.model.geo.synchronize()
-        gmsh.option.setNumber("Mesh.MeshSizeMin", 0.5 * mesh_size)
-        gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size)
-        gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
-        gmsh.option.setNumber("Mesh.Algorithm3D", 1)
-        gmsh.option.setNumber("Mesh.Optimize", 1)
-        try:
-            gmsh.model.mesh.generate(3)
-        except Exception as exc:
-            raise GeometryError(f"{description}: gmsh could not mesh the volume ({exc}); "
-                                "self-intersecting surface?") from None
-        pts, cells = gmsh_tetrahedra()
-    finally:
-        gmsh.finalize()
-    if cells.size == 0:
-        raise GeometryError(f"{description}: gmsh produced no tetrahedra")
-    return Geometry(points=pts, cells=cells, surface_triangles=boundary_triangles(cells, pts),
-                    description=description)
+    return discrete_surface_solid(points, tris, mesh_size, description, reparametrise=True,
+                                  algorithm=1)
 
 
 def mesh_surface_file(path: str | Path, mesh_size: float, scale_to_mm: float = 1.0,
