@@ -62,7 +62,7 @@ def liver(kind: str, h: float):
     farthest from the fixed region."""
     if (kind, h) not in _MESHES:
         from fem_sim.geometry.phantom import make_phantom
-        from fem_sim.geometry.surfaces import mesh_surface_file
+        from fem_sim.geometry.repair import mesh_surface_file
 
         if kind == "sofa":
             g = mesh_surface_file(SOFA, h)

@@ -35,7 +35,7 @@ SOFA = ROOT.parent / "shared" / "data" / "livers" / "sofa_liver.vtk"
 def load_mesh(kind: str, h: float):
     """(geometry, its name): the real liver or the phantom of seed 0 at mesh size ``h``."""
     from fem_sim.geometry.phantom import make_phantom
-    from fem_sim.geometry.surfaces import mesh_surface_file
+    from fem_sim.geometry.repair import mesh_surface_file
 
     if kind == "sofa":
         return mesh_surface_file(SOFA, h), "sofa_liver.vtk"

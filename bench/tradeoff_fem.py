@@ -164,7 +164,7 @@ def mesh(liver: str, h: float):
 
         g = make_phantom(0, h)
         return g, g.regions["vena_cava"]
-    from fem_sim.geometry.surfaces import mesh_surface_file
+    from fem_sim.geometry.repair import mesh_surface_file
 
     g = mesh_surface_file(SOFA, h)
     # The default region (surface nodes within 25 mm of the most posterior surface node)

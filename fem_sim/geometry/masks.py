@@ -162,7 +162,7 @@ def mesh_mask(mask, spacing, mesh_size: float, origin=(0.0, 0.0, 0.0), *,
               description: str = "mask", fixed_radius: float = 25.0, **kw) -> Geometry:
     """Tetrahedral mesh of a segmentation mask (see the module docstring). As a default fixed
     region (``vena_cava``) it marks the surface nodes within ``fixed_radius`` mm of the most
-    posterior (max y) surface point, as :func:`fem_sim.geometry.surfaces.mesh_surface_file`.
+    posterior (max y) surface point, as :func:`fem_sim.geometry.repair.mesh_surface_file`.
     """
     pts, tris = mask_surface(mask, spacing, origin, **kw)
     g = mesh_closed_surface(pts, tris, mesh_size, f"{description}, mesh size {mesh_size}")

@@ -33,6 +33,8 @@ import numpy as np
 
 from data_spec.geometry import Geometry, signed_volumes
 from fem_sim.geometry.errors import GeometryError
+from fem_sim.geometry.regions import default_vena_cava
+from fem_sim.geometry.surfaces import read_obj
 
 log = logging.getLogger(__name__)
 
@@ -89,30 +91,6 @@ class RepairReport:
 # ----------------------------------------------------------------------------------------------
 
 
-def read_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(points, triangles) of a Wavefront OBJ: ``v`` lines, ``f`` lines with ``i``, ``i/t``,
-    ``i//n`` or ``i/t/n`` entries (1-based or negative), polygons fanned into triangles.
-    """
-    verts, faces = [], []
-    for k, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
-        parts = line.split()
-        if not parts:
-            continue
-        try:
-            if parts[0] == "v":
-                verts.append([float(x) for x in parts[1:4]])
-            elif parts[0] == "f":
-                idx = [int(p.split("/")[0]) for p in parts[1:]]
-                idx = [i - 1 if i > 0 else len(verts) + i for i in idx]
-                faces += [[idx[0], idx[j], idx[j + 1]] for j in range(1, len(idx) - 1)]
-        except (ValueError, IndexError):
-            raise GeometryError(f"{path}: line {k}: cannot read {line.strip()[:60]!r}") from None
-    points, tris = np.asarray(verts, dtype=np.float64), np.asarray(faces, dtype=np.int64)
-    if points.ndim != 2 or points.shape[1] != 3 or tris.size == 0:
-        raise GeometryError(f"{path}: no vertices or no faces")
-    if tris.min() < 0 or tris.max() >= len(points):
-        raise GeometryError(f"{path}: a face refers to a vertex that does not exist")
-    return points, tris
 
 
 def read_any_surface(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
@@ -391,7 +369,6 @@ def mesh_liver_surface(points, tris, mesh_size: float, file: str = "surface",
     the surface nodes within 25 mm of the most posterior surface point.
     """
     from fem_sim.geometry.meshing import check_mesh_size
-    from fem_sim.geometry.regions import default_vena_cava
 
     t0 = time.perf_counter()
     report = RepairReport(file=str(file), mesh_size=float(mesh_size))
@@ -417,3 +394,22 @@ def mesh_liver_file(path: str | Path, mesh_size: float, scale_to_mm: float = 1.0
     """:func:`mesh_liver_surface` of a surface file."""
     points, tris = read_any_surface(path)
     return mesh_liver_surface(points, tris, mesh_size, str(path), scale_to_mm, flag)
+
+
+def mesh_surface_file(path: str | Path, mesh_size: float, scale_to_mm: float = 1.0,
+                      fixed_radius: float = 25.0) -> Geometry:
+    """Read, repair and mesh a surface file as a scene's file route does (this module's
+    route: every repair logged; a liver the repair would move beyond its bounds refused). As
+    a default fixed region (``vena_cava``) it marks the surface nodes within
+    ``fixed_radius`` mm of the most posterior (max y) surface point; scenes can select any
+    other region.
+    """
+    g, report = mesh_liver_file(path, mesh_size, scale_to_mm, flag="geometry.scale_to_mm")
+    if report.route != "remeshed surface" or report.pieces_dropped:
+        log.warning("%s: %d holes closed (%.0f mm^2), %d self-intersecting triangles, pieces "
+                    "of %s triangles dropped; %s; volume %+.2f%%, the input within %.1f mm",
+                    path, report.holes, report.area_added_mm2,
+                    report.self_intersecting_triangles, report.pieces_dropped[:5],
+                    report.route, 100 * report.volume_change, report.max_distance_mm)
+    g.regions["vena_cava"] = default_vena_cava(g, fixed_radius)
+    return g

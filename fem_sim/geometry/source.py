@@ -157,7 +157,7 @@ def read_any(path, mesh_size: float, scale_to_mm: float = 1.0, spacing=None) -> 
 
         return mesh_mask_file(path, mesh_size, spacing)
     if name.endswith(SURFACES) and not _is_volume_vtk(path):
-        from fem_sim.geometry.surfaces import mesh_surface_file
+        from fem_sim.geometry.repair import mesh_surface_file
 
         return mesh_surface_file(path, mesh_size, scale_to_mm)
     return read_mesh_file(path, scale_to_mm)

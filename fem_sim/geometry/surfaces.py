@@ -1,9 +1,10 @@
-"""Closed liver surfaces in, tetrahedral meshes out.
+"""Surface files in, clean closed surfaces and their gmsh meshes out: the low-level pieces
+of the file route (:mod:`fem_sim.geometry.repair` is the route itself).
 
-Reads legacy VTK POLYDATA (ASCII or binary; meshio 5 cannot) and, through meshio, STL/OBJ/PLY/
-VTU surfaces; cleans the triangulation (largest connected component, merged duplicate
-vertices, no degenerate triangles, consistent outward orientation), checks that it is closed,
-and remeshes the volume with gmsh at the requested size (the surface is re-triangulated too).
+Reads legacy VTK POLYDATA (ASCII or binary; meshio 5 cannot) and OBJ here, STL/PLY/VTP
+through meshio; cleans a triangulation (largest connected component, merged duplicate
+vertices, no degenerate triangles, consistent outward orientation) and checks that it is
+closed; meshes the solid inside a clean closed surface with gmsh at the requested size.
 """
 
 from __future__ import annotations
@@ -16,7 +17,6 @@ import numpy as np
 from data_spec.geometry import Geometry
 from fem_sim.geometry.errors import GeometryError
 from fem_sim.geometry.meshing import check_mesh_size
-from fem_sim.geometry.regions import default_vena_cava
 
 log = logging.getLogger(__name__)
 
@@ -67,8 +67,6 @@ def read_surface(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     if path.suffix.lower() == ".vtk":
         return read_vtk_polydata(path)
     if path.suffix.lower() == ".obj":
-        from fem_sim.geometry.repair import read_obj
-
         return read_obj(path)
     import meshio
 
@@ -145,21 +143,27 @@ def mesh_closed_surface(points, tris, mesh_size: float, description: str = "") -
                                   algorithm=1)
 
 
-def mesh_surface_file(path: str | Path, mesh_size: float, scale_to_mm: float = 1.0,
-                      fixed_radius: float = 25.0) -> Geometry:
-    """Read, repair and mesh a surface file (:mod:`fem_sim.geometry.repair`: every repair
-    logged; a liver the repair would move beyond its bounds refused). As a default fixed
-    region (``vena_cava``) it marks the surface nodes within ``fixed_radius`` mm of the most
-    posterior (max y) surface point; scenes can select any other region.
+def read_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(points, triangles) of a Wavefront OBJ: ``v`` lines, ``f`` lines with ``i``, ``i/t``,
+    ``i//n`` or ``i/t/n`` entries (1-based or negative), polygons fanned into triangles.
     """
-    from fem_sim.geometry.repair import mesh_liver_file
-
-    g, report = mesh_liver_file(path, mesh_size, scale_to_mm, flag="geometry.scale_to_mm")
-    if report.route != "remeshed surface" or report.pieces_dropped:
-        log.warning("%s: %d holes closed (%.0f mm^2), %d self-intersecting triangles, pieces "
-                    "of %s triangles dropped; %s; volume %+.2f%%, the input within %.1f mm",
-                    path, report.holes, report.area_added_mm2,
-                    report.self_intersecting_triangles, report.pieces_dropped[:5],
-                    report.route, 100 * report.volume_change, report.max_distance_mm)
-    g.regions["vena_cava"] = default_vena_cava(g, fixed_radius)
-    return g
+    verts, faces = [], []
+    for k, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
+        parts = line.split()
+        if not parts:
+            continue
+        try:
+            if parts[0] == "v":
+                verts.append([float(x) for x in parts[1:4]])
+            elif parts[0] == "f":
+                idx = [int(p.split("/")[0]) for p in parts[1:]]
+                idx = [i - 1 if i > 0 else len(verts) + i for i in idx]
+                faces += [[idx[0], idx[j], idx[j + 1]] for j in range(1, len(idx) - 1)]
+        except (ValueError, IndexError):
+            raise GeometryError(f"{path}: line {k}: cannot read {line.strip()[:60]!r}") from None
+    points, tris = np.asarray(verts, dtype=np.float64), np.asarray(faces, dtype=np.int64)
+    if points.ndim != 2 or points.shape[1] != 3 or tris.size == 0:
+        raise GeometryError(f"{path}: no vertices or no faces")
+    if tris.min() < 0 or tris.max() >= len(points):
+        raise GeometryError(f"{path}: a face refers to a vertex that does not exist")
+    return points, tris

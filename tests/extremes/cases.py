@@ -45,7 +45,7 @@ def liver(name: str):
 
         g = make_phantom(0, MESH_SIZE)
     else:
-        from fem_sim.geometry.surfaces import mesh_surface_file
+        from fem_sim.geometry.repair import mesh_surface_file
 
         g = mesh_surface_file(SOFA, MESH_SIZE)
     return g, g.regions["vena_cava"]

@@ -18,8 +18,9 @@ from fem_sim.geometry.phantom import (
     with_groove,
 )
 from fem_sim.geometry.quality import flat_tetrahedra, mean_ratio, mesh_problems
+from fem_sim.geometry.repair import mesh_surface_file
 from fem_sim.geometry.source import GeometryError
-from fem_sim.geometry.surfaces import clean_surface, mesh_surface_file, read_vtk_polydata
+from fem_sim.geometry.surfaces import clean_surface, read_vtk_polydata
 
 SOFA = Path(__file__).resolve().parents[3] / "shared" / "data" / "livers" / "sofa_liver.vtk"
 

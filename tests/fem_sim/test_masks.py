@@ -58,7 +58,7 @@ def test_phantom_mask_round_trip_keeps_the_volume(spacing, tmp_path):
 @pytest.mark.slow
 @pytest.mark.skipif(not SOFA.exists(), reason="shared/data/livers/sofa_liver.vtk not present")
 def test_real_liver_mask_keeps_the_volume(tmp_path):
-    from fem_sim.geometry.surfaces import mesh_surface_file
+    from fem_sim.geometry.repair import mesh_surface_file
 
     g = mesh_surface_file(SOFA, 8.0)
     vol = mesh_volume(g)
