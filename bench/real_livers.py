@@ -139,7 +139,7 @@ def _mesh_section(rows: list, h: float) -> list[str]:
     out = [f"### {h:g} mm", "",
            f"**{len(ok)} of {len(at)} livers mesh** ({100 * len(ok) / max(1, len(at)):.1f} %): "
            + ", ".join(f"{n} by the {k}" for k, n in routes.items() if n) + ".", "",
-           "| measure | median / max (or median (min to max)) |", "|---|---|"]
+           "| measure | median / max, or median (min to max), or median, worst |", "|---|---|"]
     for label, key, scale in (
             ("holes closed", "holes", 1), ("open edges", "boundary_edges", 1),
             ("area added by the hole patches, mm^2", "area_added_mm2", 1),
@@ -155,7 +155,11 @@ def _mesh_section(rows: list, h: float) -> list[str]:
             ("smallest mean ratio", "min_mean_ratio", 1), ("seconds", "seconds", 1)):
         vals = [len(r[key]) if isinstance(r.get(key), list) else
                 (r[key] * scale if r.get(key) is not None else None) for r in ok]
-        out.append(f"| {label} | {_stats(vals)} |")
+        if key.startswith("min_"):  # quality: the worst liver is the smallest
+            v = np.asarray(vals, dtype=float)
+            out.append(f"| {label} | {np.median(v):.3g}, worst {v.min():.3g} |")
+        else:
+            out.append(f"| {label} | {_stats(vals)} |")
     refused = [r for r in at if not r["ok"]]
     if refused:
         out += ["", "Refused (the reason as the command gives it):", ""]
