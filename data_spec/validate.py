@@ -146,13 +146,11 @@ def shard_problems(path: str | Path, geometry_cache: dict | None = None) -> list
 
 def _missing_problems(directory: Path, shards: list[Path]) -> list[str]:
     """The scene's simulations without a shard (each index named, with the command that makes
-    just those), and XDMF files without their shard.
+    just those).
     """
     from data_spec.scene import SceneError, load_scene
 
-    p = [f"{x}: an XDMF file without its shard {x.with_suffix('.h5').name}"
-         for x in sorted((directory / "sims").glob("sim_*.xdmf"))
-         if not x.with_suffix(".h5").exists()]
+    p = []
     try:
         n = load_scene(directory / "scene.toml").n_simulations
     except (SceneError, OSError):
@@ -184,8 +182,11 @@ def _scene_problems(path: Path, shard_hashes: set[str]) -> list[str]:
     return []
 
 
-def validate_dataset(directory: str | Path) -> list[str]:
-    """Every problem of a dataset directory (empty list if valid)."""
+def validate_dataset(directory: str | Path, complete: bool = True) -> list[str]:
+    """Every problem of a dataset directory (empty list if valid). ``complete``: every
+    simulation of its scene must have a shard (False: a subset, such as held-out simulations
+    or a view of the first n, is valid too).
+    """
     directory = Path(directory)
     if not directory.is_dir():
         return [f"{directory}: not a directory"]
@@ -206,7 +207,11 @@ def validate_dataset(directory: str | Path) -> list[str]:
         problems.append(f"{directory}: shards come from {len(hashes)} different scenes "
                         "(scene_hash differs)")
     problems += _scene_problems(directory / "scene.toml", hashes)
-    problems += _missing_problems(directory, shards)
+    problems += [f"{x}: an XDMF file without its shard {x.with_suffix('.h5').name}"
+                 for x in sorted((directory / "sims").glob("sim_*.xdmf"))
+                 if not x.with_suffix(".h5").exists()]
+    if complete:
+        problems += _missing_problems(directory, shards)
     for tmp in leftover_temporaries(directory):
         problems.append(f"{tmp}: leftover temporary file of an interrupted writer")
     return problems
