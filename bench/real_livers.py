@@ -250,7 +250,10 @@ def report(md: Path) -> None:
                   "volume change median / worst "
                   f"{100 * np.median(mf):.1f} % / {100 * max(mf, key=abs):.1f} %"
                   f", against the segmentation route's above: it deletes whole sheets of a "
-                  "staircase surface where they cross.", ""]
+                  "staircase surface where they cross. Also tried on the first 12 livers and "
+                  "not kept: gmsh's reparametrisation after MeshFix (2 of 12 meshed), and "
+                  "fTetWild (`pytetwild`) to regularise the surface first (10-60 s per liver; "
+                  "gmsh then meshed 4 of 12).", ""]
     lines += _fe_section(fe, {r["liver"] for r in rows if r["h"] == SIZES[0] and not r["ok"]})
     names = sorted({r["liver"] for r in rows if r["ok"] and r["h"] == SIZES[0]})
     if names:
