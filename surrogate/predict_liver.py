@@ -409,8 +409,12 @@ def _checked_request(args, fail):
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         return fail(f"--out {out} is a file; expected a directory (it is created if missing)")
+    parent = next(p for p in [out, *out.absolute().parents] if p.exists())
     try:
-        check_writable(out)
+        if parent.is_dir():
+            check_writable(parent)  # a probe file there, removed: nothing created for --out
+        else:
+            raise OSError(f"{parent}: not a directory")
         predictor = load_predictor(Path(args.run) / "model")
     except (OSError, ValueError) as exc:
         return fail(f"--out: {exc}" if isinstance(exc, OSError) else exc)
@@ -457,6 +461,7 @@ def main(args) -> int:
                              center=not args.no_center, frame=args.frame, shape=args.shape)
     pred.warnings = said + pred.warnings
     out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
     vtu = pred.write_vtu(out / "liver_deformed.vtu")
     summary = _summary(args, predictor, pred, asked)
     (out / "prediction.json").write_text(json.dumps(summary, indent=1))

@@ -485,7 +485,7 @@ def test_a_force_off_the_liver_is_said_or_refused_before_the_registration(run, t
                  "-0.4", "--out", str(tmp_path / "far"), "--no-picture"]) == 2
     err = capsys.readouterr().err
     assert f"more than {REFUSE_MM:g} mm, not a point of this liver" in err
-    assert "registering" not in err and not (tmp_path / "far" / "prediction.json").exists()
+    assert "registering" not in err and not (tmp_path / "far").exists()  # nothing created
     (tmp_path / "a_file").write_text("")
     assert main(["predict-liver", str(run), str(SOFA), "--force", *map(str, tip), "0", "0",
                  "-0.4", "--out", str(tmp_path / "a_file"), "--no-picture"]) == 2
