@@ -16,15 +16,6 @@ def _outputs(out: Path) -> tuple[Path, Path]:
     return stem.with_name(stem.name + ".repair.json"), stem.with_name(stem.name + ".png")
 
 
-def summary_line(r) -> str:
-    return (f"{Path(r.file).name}: {r.holes} holes closed ({r.area_added_mm2:.0f} mm^2), "
-            f"{r.self_intersecting_triangles} crossing triangles, pieces dropped "
-            f"{r.pieces_dropped[:3]}; {r.route}; volume {r.volume_before_ml:.0f} -> "
-            f"{r.volume_after_ml:.0f} mL ({r.volume_change:+.2%}); input within "
-            f"{r.max_distance_mm:.1f} mm; {r.nodes:,} nodes, smallest dihedral "
-            f"{r.min_dihedral_deg:.1f} deg; {r.seconds:.1f} s")
-
-
 def run(liver: str, mesh_size: float, out: str, scale_to_mm: float = 1.0,
         picture: bool = True) -> int:
     from data_spec.atomic import write_text_atomic
@@ -47,7 +38,7 @@ def run(liver: str, mesh_size: float, out: str, scale_to_mm: float = 1.0,
     write_geometry(out, g)
     report_path, png = _outputs(out)
     write_text_atomic(report_path, json.dumps(report.to_dict(), indent=1))
-    print(summary_line(report))
+    print(report.summary())
     if picture:
         from fem_sim.geometry.quality import dihedral_angles
         from liverviz.repair_picture import repair_picture
@@ -55,6 +46,6 @@ def run(liver: str, mesh_size: float, out: str, scale_to_mm: float = 1.0,
         edges, counts = edges_of(tris)
         repair_picture(png, points * scale_to_mm, tris, edges[counts == 1], g.points,
                        g.surface_triangles, dihedral_angles(g.points, g.cells).min(axis=1),
-                       summary_line(report))
+                       report.summary())
     print(f"wrote {out}, {report_path}" + (f", {png}" if picture else ""))
     return 0

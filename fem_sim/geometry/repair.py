@@ -34,7 +34,7 @@ import numpy as np
 from data_spec.geometry import Geometry, signed_volumes
 from fem_sim.geometry.errors import GeometryError
 from fem_sim.geometry.regions import default_vena_cava
-from fem_sim.geometry.surfaces import read_obj
+from fem_sim.geometry.surfaces import largest_piece, read_obj
 
 log = logging.getLogger(__name__)
 
@@ -81,6 +81,15 @@ class RepairReport:
     def repair_volume_change(self) -> float:
         return self.volume_repaired_ml / self.volume_before_ml - 1.0
 
+    def summary(self) -> str:
+        """One line: what was repaired, how, and what it cost in volume and distance."""
+        return (f"{Path(self.file).name}: {self.holes} holes closed ({self.area_added_mm2:.0f} "
+                f"mm^2), {self.self_intersecting_triangles} crossing triangles, pieces dropped "
+                f"{self.pieces_dropped[:3]}; {self.route}; volume {self.volume_before_ml:.0f} -> "
+                f"{self.volume_after_ml:.0f} mL ({self.volume_change:+.2%}); input within "
+                f"{self.max_distance_mm:.1f} mm; {self.nodes:,} nodes, smallest dihedral "
+                f"{self.min_dihedral_deg:.1f} deg; {self.seconds:.1f} s")
+
     def to_dict(self) -> dict:
         return {**asdict(self), "volume_change": self.volume_change,
                 "repair_volume_change": self.repair_volume_change}
@@ -119,19 +128,6 @@ def edges_of(tris: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.unique(e, axis=0, return_counts=True)
 
 
-def boundary_loops(tris: np.ndarray) -> int:
-    """The number of holes: connected loops of boundary edges."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    edges, counts = edges_of(tris)
-    b = edges[counts == 1]
-    if b.size == 0:
-        return 0
-    nodes, inv = np.unique(b, return_inverse=True)
-    inv = inv.reshape(-1, 2)
-    g = coo_matrix((np.ones(len(inv)), (inv[:, 0], inv[:, 1])), shape=(nodes.size,) * 2)
-    return int(connected_components(g, directed=False)[0])
 
 
 def area(points, tris) -> float:
@@ -190,30 +186,6 @@ def hole_patches(points, tris) -> tuple[np.ndarray, np.ndarray]:
 # ----------------------------------------------------------------------------------------------
 
 
-def _largest_piece(points, tris, report: RepairReport) -> tuple[np.ndarray, np.ndarray]:
-    """Duplicates merged, degenerate triangles dropped, the largest connected piece kept."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    _, inv = np.unique(np.round(points, 9), axis=0, return_inverse=True)
-    inv = inv.ravel()
-    pts = np.zeros((inv.max() + 1, 3))
-    pts[inv] = points
-    tris = inv[tris]
-    tris = tris[(tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2])
-                & (tris[:, 0] != tris[:, 2])]
-    e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]]])
-    g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(pts),) * 2)
-    label = connected_components(g, directed=False)[1][tris[:, 0]]
-    sizes = np.bincount(label)
-    keep = int(sizes.argmax())
-    report.pieces_dropped = sorted((int(s) for i, s in enumerate(sizes) if s and i != keep),
-                                   reverse=True)
-    tris = tris[label == keep]
-    used = np.unique(tris)
-    renum = np.full(len(pts), -1)
-    renum[used] = np.arange(used.size)
-    return pts[used], renum[tris]
 
 
 def _meshfix(points, tris) -> tuple[np.ndarray, np.ndarray]:
@@ -236,12 +208,12 @@ def _defects(points, tris, report: RepairReport) -> None:
     _, counts = edges_of(tris)
     report.boundary_edges = int(np.sum(counts == 1))
     report.nonmanifold_edges = int(np.sum(counts > 2))
-    report.holes = boundary_loops(tris)
     t = pymeshfix.PyTMesh()
     t.set_quiet(True)
     t.load_array(np.asarray(points, dtype=np.float64), np.asarray(tris, dtype=np.int64))
     report.self_intersecting_triangles = len(t.select_intersecting_triangles(justproper=True))
     closed, patch = hole_patches(points, tris)
+    report.holes = len(closed) - len(points)  # a patch centre per boundary loop
     report.area_added_mm2 = area(closed, patch) if len(patch) else 0.0
     report.volume_before_ml = abs(enclosed_volume(closed, np.concatenate([tris, patch]))) / 1e3
 
@@ -379,7 +351,8 @@ def mesh_liver_surface(points, tris, mesh_size: float, file: str = "surface",
     why = span_problem(float(np.ptp(points, axis=0).max()), str(file), flag)
     if why:
         raise GeometryError(why)
-    piece, ptris = _largest_piece(points, np.asarray(tris, dtype=np.int64), report)
+    piece, ptris, report.pieces_dropped = largest_piece(points,
+                                                        np.asarray(tris, dtype=np.int64))
     _defects(piece, ptris, report)
     check_mesh_size(report.volume_before_ml * 1e3, mesh_size, str(file))
     g = _mesh(piece, ptris, mesh_size, report)
@@ -406,10 +379,6 @@ def mesh_surface_file(path: str | Path, mesh_size: float, scale_to_mm: float = 1
     """
     g, report = mesh_liver_file(path, mesh_size, scale_to_mm, flag="geometry.scale_to_mm")
     if report.route != "remeshed surface" or report.pieces_dropped:
-        log.warning("%s: %d holes closed (%.0f mm^2), %d self-intersecting triangles, pieces "
-                    "of %s triangles dropped; %s; volume %+.2f%%, the input within %.1f mm",
-                    path, report.holes, report.area_added_mm2,
-                    report.self_intersecting_triangles, report.pieces_dropped[:5],
-                    report.route, 100 * report.volume_change, report.max_distance_mm)
+        log.warning("%s", report.summary())
     g.regions["vena_cava"] = default_vena_cava(g, fixed_radius)
     return g

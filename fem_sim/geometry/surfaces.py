@@ -90,43 +90,52 @@ def enclosed_volume(points, tris) -> float:
     return float(np.einsum("ij,ij->", x[:, 0], np.cross(x[:, 1], x[:, 2])) / 6.0)
 
 
-def clean_surface(points, tris, source: str = "surface") -> tuple[np.ndarray, np.ndarray]:
-    """Largest closed component, outward orientation, no duplicates or degenerate triangles."""
+def largest_piece(points, tris, drop_flat: bool = False) -> tuple[np.ndarray, np.ndarray, list]:
+    """(points, triangles, triangles of each dropped piece): duplicate vertices merged,
+    degenerate triangles dropped (``drop_flat``: also those of near-zero area), the largest
+    connected piece kept and renumbered.
+    """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
+    _, inv = np.unique(np.round(points, 9), axis=0, return_inverse=True)
+    inv = inv.ravel()
+    pts = np.zeros((inv.max() + 1, 3))
+    pts[inv] = points
+    tris = inv[tris]
+    tris = tris[(tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2])
+                & (tris[:, 0] != tris[:, 2])]
+    if drop_flat:
+        a = np.linalg.norm(np.cross(pts[tris[:, 1]] - pts[tris[:, 0]],
+                                    pts[tris[:, 2]] - pts[tris[:, 0]]), axis=1)
+        tris = tris[a > 1e-12 * a.max()]
+    e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]]])
+    g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(pts),) * 2)
+    label = connected_components(g, directed=False)[1][tris[:, 0]]
+    sizes = np.bincount(label)
+    keep = int(sizes.argmax())
+    dropped = sorted((int(s) for i, s in enumerate(sizes) if s and i != keep), reverse=True)
+    tris = tris[label == keep]
+    used = np.unique(tris)
+    renum = np.full(len(pts), -1)
+    renum[used] = np.arange(used.size)
+    return pts[used], renum[tris], dropped
+
+
+def clean_surface(points, tris, source: str = "surface") -> tuple[np.ndarray, np.ndarray]:
+    """Largest closed component, outward orientation, no duplicates or degenerate triangles."""
     if len(tris) == 0:
         raise GeometryError(f"{source}: empty surface")
-    _, inv = np.unique(np.round(points, 9), axis=0, return_inverse=True)
-    tris = inv.ravel()[tris]
-    tris = tris[(tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) &
-                (tris[:, 0] != tris[:, 2])]
-    pts = np.zeros((inv.max() + 1, 3))
-    pts[inv.ravel()] = points
-    a = np.linalg.norm(np.cross(pts[tris[:, 1]] - pts[tris[:, 0]],
-                                pts[tris[:, 2]] - pts[tris[:, 0]]), axis=1)
-    tris = tris[a > 1e-12 * a.max()]
-    n = pts.shape[0]
-    e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
-    g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-    _, label = connected_components(g, directed=False)
-    sizes = np.bincount(label[tris[:, 0]])
-    keep = sizes.argmax()
-    dropped = sorted((int(sizes[i]) for i in np.flatnonzero(sizes) if i != keep), reverse=True)
+    pts, tris, dropped = largest_piece(points, tris, drop_flat=True)
     if dropped:
         log.warning("%s: %d separate surface pieces; kept the largest (%d triangles), dropped "
-                    "pieces of %s triangles", source, int(np.sum(sizes > 0)), int(sizes[keep]),
+                    "pieces of %s triangles", source, len(dropped) + 1, len(tris),
                     dropped[:10])
-    tris = tris[label[tris[:, 0]] == keep]
     edges = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
     _, counts = np.unique(edges, axis=0, return_counts=True)
     if np.any(counts != 2):
         raise GeometryError(f"{source}: the surface is not closed ({int(np.sum(counts == 1))} "
                             f"boundary edges, {int(np.sum(counts > 2))} non-manifold edges)")
-    used = np.unique(tris)
-    renum = np.full(n, -1)
-    renum[used] = np.arange(used.size)
-    pts, tris = pts[used], renum[tris]
     if enclosed_volume(pts, tris) < 0:
         tris = tris[:, [0, 2, 1]]
     return pts, tris
