@@ -165,20 +165,16 @@ def _train(args) -> int:
     return 0
 
 
-def _model_dir(run: str) -> Path:
-    d = Path(run)
-    return d / "model" if (d / "model" / "model.json").exists() else d
-
-
 def _truth_scene(args) -> int:
     from surrogate.evaluate import truth_scene
     from surrogate.predictor import load_predictor
+    from surrogate.viewer import model_dir
 
     out = Path(args.out)
     if out.is_dir():
         return _fail("truth-scene", f"--out {out} is a directory; expected a .toml file")
     try:
-        pred = load_predictor(_model_dir(args.run))
+        pred = load_predictor(model_dir(Path(args.run)))
         if pred.shape_model is None:
             return _fail("truth-scene", f"{args.run}: its model was not trained on a "
                          "population (no shape model): evaluate it on a dataset of its liver")
@@ -196,12 +192,13 @@ def _evaluate(args) -> int:
     from data_spec import validate_dataset
     from surrogate.evaluate import evaluate_liver, evaluate_own, place
     from surrogate.predictor import load_predictor
+    from surrogate.viewer import model_dir
 
     problems = validate_dataset(args.data, complete=False)  # held-out subsets are fine
     if problems:
         return _fail("evaluate", f"{args.data}: not a valid dataset: " + "; ".join(problems[:5]))
     try:
-        pred = load_predictor(_model_dir(args.run))
+        pred = load_predictor(model_dir(Path(args.run)))
         if pred.static is None and not args.liver:
             return _fail("evaluate", f"{args.run}: a model of a population: give --liver, the "
                          "file the dataset was solved on (its truth: truth-scene)")

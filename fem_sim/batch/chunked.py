@@ -3,7 +3,7 @@
 ``generate_chunks`` runs ``mpirun -n NP SOLVER_PYTHON -m fem_sim generate SCENE --only 0..k``
 for growing k until the dataset holds ``n`` simulations or the budget is spent; the wall seconds
 accumulate in ``DATA/../generation.json`` so that a study run again (or in another session)
-goes on where it stopped. Standard library only: the trainer's environment drives the solver's
+goes on where it stopped. It imports no solver: the trainer's environment drives the solver's
 this way (``fem_sim generate`` itself skips the shards that exist).
 """
 
@@ -16,11 +16,9 @@ import sys
 import time
 from pathlib import Path
 
+from data_spec.views import shard_count
+
 ROOT = Path(__file__).resolve().parents[2]
-
-
-def _shards(data: Path) -> int:
-    return len(list((data / "sims").glob("sim_*.h5")))
 
 
 def generate_chunks(scene: str | Path, data: str | Path, n: int, *, ranks: int = 2,
@@ -34,7 +32,7 @@ def generate_chunks(scene: str | Path, data: str | Path, n: int, *, ranks: int =
     solver_python = solver_python or ROOT / ".venv-solver" / "bin" / "python"
     state_path = data.parent / "generation.json"
     state = json.loads(state_path.read_text()) if state_path.exists() else {"seconds": 0.0}
-    have = _shards(data) if data.exists() else 0
+    have = shard_count(data)
     # one BLAS thread per MPI rank (the ranks take the cores); Open MPI refuses root unless
     # told (the caller's environment may say otherwise)
     env = {"OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
@@ -50,9 +48,9 @@ def generate_chunks(scene: str | Path, data: str | Path, n: int, *, ranks: int =
         state["seconds"] += time.perf_counter() - t
         data.parent.mkdir(parents=True, exist_ok=True)
         state_path.write_text(json.dumps(state))
-        if _shards(data) <= have:
+        if shard_count(data) <= have:
             raise RuntimeError(f"{data}: generate made no new shard")
-        have = _shards(data)
+        have = shard_count(data)
     state["sims"] = have
     data.parent.mkdir(parents=True, exist_ok=True)
     state_path.write_text(json.dumps(state))
