@@ -24,7 +24,7 @@ from liverviz.report import ROOT, header
 
 LIVERS = ROOT.parent / "shared" / "data" / "livers" / "real"
 RESULTS = ROOT / "bench" / "results" / "real_livers"
-SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
+SCENE = ROOT / "data_spec" / "scenes" / "scene4_phantoms.toml"
 SIZES = (16.0, 8.0)
 
 

@@ -46,7 +46,7 @@ from surrogate.train import train_or_reuse
 
 RESULTS = ROOT / "bench" / "results" / "table4"
 SCENES = {1: "scene1_base.toml", 2: "scene2_two_forces.toml", 3: "scene3_materials.toml",
-          4: "scene4_livers.toml"}
+          4: "scene4_phantoms.toml"}
 # What this machine (2 cores) affords in about an hour per scene; the scene files keep the
 # paper's sizes. Scene 4 holds out all simulations of 1/8 of the livers, as the paper does
 # (one fold of 8).

@@ -18,6 +18,7 @@ import copy
 import dataclasses
 import hashlib
 import json
+import os
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -190,19 +191,19 @@ def _check_geometry(g: dict, problems: list[str]) -> None:
     if src == "file" and "path" not in g:
         problems.append("geometry.path: missing (expected a mesh/surface file when "
                         "source = 'file')")
-    if src == "population" and "population_size" not in g:
+    if src == "population" and "population_size" not in g and "livers" not in g:
         problems.append("geometry.population_size: missing (expected an integer >= 1 when "
                         "source = 'population')")
     if src != "file":
         for key in ("path",):
             if key in g:
                 problems.append(f"geometry.{key}: only used when source = 'file'")
-    if src == "population" and "population_size" in g and \
+    if src == "population" and "population_size" in g and "livers" not in g and \
             g.get("pca_components", 27) > g["population_size"] - 1:
         problems.append(f"geometry.pca_components: {g.get('pca_components', 27)} components "
                         f"need more than {g['population_size']} livers (expected at most "
                         "population_size - 1)")
-    for key in ("population_size", "variety"):
+    for key in ("population_size", "variety", "livers", "fixed_area_min"):
         if src != "population" and key in g:
             problems.append(f"geometry.{key}: only used when source = 'population'")
 
@@ -369,9 +370,28 @@ def parse_scene(raw: dict, source: str = "<dict>", base_dir: Path | None = None)
                 problems.extend(mesh_problems(Scene(source, data), n_nodes))
             except (OSError, KeyError, ValueError) as exc:
                 problems.append(f"geometry.path: cannot read geometry file {str(path)!r}: {exc}")
+    if geom.get("source") == "population" and isinstance(geom.get("livers"), str):
+        problems.extend(_population_files(geom, base_dir))
     if problems:
         raise SceneError(source, problems)
     return Scene(source, data)
+
+
+def _population_files(geom: dict, base_dir: Path | None) -> list[str]:
+    """A file population's folder made absolute, its files and its size checked."""
+    from data_spec.livers import file_problems, members
+
+    path = Path(geom["livers"])
+    if not path.is_absolute() and base_dir is not None:
+        geom["livers"] = os.path.normpath(Path(base_dir).resolve() / path)
+    found = file_problems(geom)
+    if found:
+        return found
+    n = len(members(geom))
+    if geom.get("pca_components", 27) > n - 1:
+        return [f"geometry.pca_components: {geom.get('pca_components', 27)} components need "
+                f"more than {n} livers (expected at most {n - 1})"]
+    return []
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -401,13 +421,14 @@ def dataset_copy_text(path: str | Path) -> str:
     path = Path(path)
     text = path.read_text(encoding="utf-8")
     geom = tomllib.loads(text).get("geometry", {})
-    rel = geom.get("path")
-    if geom.get("source") != "file" or not isinstance(rel, str) or Path(rel).is_absolute():
+    key = {"file": "path", "population": "livers"}.get(geom.get("source"))
+    rel = geom.get(key) if key else None
+    if not isinstance(rel, str) or Path(rel).is_absolute():
         return text
-    absolute = str((path.parent / rel).resolve())
+    absolute = os.path.normpath(path.parent.resolve() / rel)
     lines = text.splitlines(keepends=True)
     section, done = None, False
-    assign = re.compile(r"""^(\s*path\s*=\s*)("[^"]*"|'[^']*')""")
+    assign = re.compile(rf"""^(\s*{key}\s*=\s*)("[^"]*"|'[^']*')""")
     for k, line in enumerate(lines):
         header = re.match(r"^\s*\[\s*([A-Za-z0-9_.\-]+)\s*\]", line)
         if header:
@@ -416,8 +437,8 @@ def dataset_copy_text(path: str | Path) -> str:
             lines[k] = assign.sub(lambda m: m.group(1) + json.dumps(absolute), line, count=1)
             done = True
     out = "".join(lines)
-    if not done or tomllib.loads(out)["geometry"].get("path") != absolute:
-        raise SceneError(str(path), ["geometry.path: cannot rewrite it as an absolute path in "
-                                     "the dataset's copy; write geometry.path as a plain "
-                                     "string on its own line under [geometry]"])
+    if not done or tomllib.loads(out)["geometry"].get(key) != absolute:
+        raise SceneError(str(path), [f"geometry.{key}: cannot rewrite it as an absolute path "
+                                     "in the dataset's copy; write it as a plain string on "
+                                     "its own line under [geometry]"])
     return out

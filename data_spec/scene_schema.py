@@ -101,6 +101,11 @@ def _num_list(positive: bool = False, nonzero: bool = False) -> Check:
     return check
 
 
+def _names(v: Any) -> str | None:
+    ok = isinstance(v, list) and all(isinstance(x, str) and x for x in v)
+    return None if ok else "a list of liver names (file names without their suffix)"
+
+
 def _table(v: Any) -> str | None:
     return None if isinstance(v, dict) else "a table"
 
@@ -161,7 +166,21 @@ _SCHEMA: dict[str, dict[str, Key]] = {
         "phantom_seed": Key(_int(0), 0, "shape seed of the embedded phantom"),
         "path": Key(_string, OPTIONAL, "mesh or surface file (relative to the scene file)"),
         "scale_to_mm": Key(_num(0.0), 1.0, "factor from the file's length unit to mm"),
-        "population_size": Key(_int(1), OPTIONAL, "number of livers (population)"),
+        "population_size": Key(_int(1), OPTIONAL, "number of livers (population of phantoms); "
+                               "with livers: at most this many liver files"),
+        "livers": Key(_string, OPTIONAL, "population: a folder or a glob of liver surface files "
+                      "(relative to the scene file); data_spec/livers.py"),
+        "validation": Key(_names, [], "population: livers of the folder set aside, never "
+                          "simulated, registered into the PCA or trained on"),
+        "exclude": Key(_names, [], "population: livers of the folder left out (named with "
+                       "the reason in a comment, e.g. refused by the repair)"),
+        "phantoms": Key(_int(0), 0, "population with livers: this many phantoms as well "
+                        "(seeds population_seed onward)"),
+        "frame": Key(_choice("population", "LPS", "RAS", "auto"), "LPS",
+                     "population with livers: the files' frame (refined by a rigid fit onto "
+                     "the template), or auto: the best of 48 axis maps"),
+        "fixed_area_min": Key(_num(0.0), OPTIONAL, "population with livers: the fixed region "
+                              "grows to at least this area, mm^2 (default: half the template's)"),
         "population_seed": Key(_int(0), 0, "first phantom seed of the population"),
         "pca_components": Key(_int(1), 27, "shape coefficients per liver (population)"),
         "variety": Key(_choice("anatomical", "narrow"), OPTIONAL,

@@ -143,6 +143,8 @@ class Population:
     registration_error: np.ndarray   # (R,) mean surface distance, moved template <-> liver (mm)
     iterations: list
     inverted: np.ndarray = None      # (R,) template tetrahedra the placement turned inside out
+    min_jacobian: np.ndarray = None  # (R,) smallest moved / template cell volume per liver
+    template_member: bool = True     # the template is one of the livers (else: given apart)
 
     @property
     def explained_variance_ratio(self) -> np.ndarray:
@@ -172,20 +174,31 @@ class Registration:
     residual: float      # symmetric mean distance, moved template surface <-> liver, mm
     inverted: int        # template tetrahedra the move turned inside out
     iterations: list     # CPD iterations per stage
+    min_jacobian: float = 1.0  # smallest moved / template cell volume
+    unfold_rounds: int = 0     # rounds of relaxation the surface needed to fold no cell
 
 
-def register(morph: SurfaceMorph, Y: np.ndarray, template_dense: np.ndarray, X: np.ndarray,
+def register(morph: SurfaceMorph, Y: np.ndarray, triangles: np.ndarray, X: np.ndarray,
              liver_dense: np.ndarray, schedule=STAGED) -> Registration:
     """One liver's registration, as the population and a new liver both get it: CPD of the
     template's surface samples Y onto the liver's X, the template surface moved by it and
-    the interior by harmonic extension (``morph``: the template with its surface nodes as
-    boundary), and the residual between the densely sampled surfaces.
+    the interior with it, with no cell folded where that can be had
+    (:meth:`liverreg.morph.SurfaceMorph.unfold`; ``morph``: the template with its surface
+    nodes as boundary), and the residual between the densely sampled surfaces (the moved
+    template's boundary ``triangles`` and ``liver_dense``). Where the relaxation cannot undo a
+    fold, the finest CPD stages are dropped one by one (a smoother field) until none is left.
     """
     res = cpd_nonrigid(X, Y, schedule)
-    moved = morph.move(res.transform(morph.points[morph.boundary]))
+    stages = list(res.stages)
+    for k in range(len(stages), 0, -1):  # the finest stages fold first: drop them if need be
+        res.stages = stages[:k]
+        moved, rounds = morph.unfold(res.transform(morph.points[morph.boundary]))
+        if morph.inverted(moved) == 0:
+            break
     return Registration(points=moved,
-                        residual=float(chamfer(res.transform(template_dense), liver_dense)),
-                        inverted=morph.inverted(moved), iterations=res.iterations)
+                        residual=float(chamfer(dense_surface(moved, triangles), liver_dense)),
+                        inverted=morph.inverted(moved), iterations=res.iterations,
+                        min_jacobian=morph.min_jacobian(moved), unfold_rounds=rounds)
 
 
 def project(displacements: np.ndarray, mean: np.ndarray, components: np.ndarray) -> np.ndarray:
@@ -195,25 +208,28 @@ def project(displacements: np.ndarray, mean: np.ndarray, components: np.ndarray)
     return (np.asarray(displacements) - mean) @ np.asarray(components).T
 
 
-def build_population(livers: list[Geometry], template: int = 0, n_points: int = 600,
-                     schedule=STAGED, progress=None) -> Population:
-    """Register the template (``livers[template]``) onto every liver and run the PCA of the
-    displacements of the template's surface nodes (the template's interior is not constrained
-    by a surface registration, so it takes no part).
+def build_population(livers: list[Geometry], template: int | Geometry = 0,
+                     n_points: int = 600, schedule=STAGED, progress=None,
+                     known: dict | None = None) -> Population:
+    """Register the template (``livers[template]``, or a Geometry of its own) onto every
+    liver and run the PCA of the displacements of the template's surface nodes (the
+    template's interior is not constrained by a surface registration, so it takes no part).
+    ``known``: registrations already made, by geometry id (the file population's).
     """
-    M = livers[template]
+    M = livers[template] if isinstance(template, int) else template
     Y = surface_samples(M, n_points)
     S = M.points[M.surface_nodes]
-    dense = surface_points(M)
     morph = SurfaceMorph(M.points, M.cells, M.surface_nodes)
-    disp, err, its, inv = [], [], [], []
+    disp, err, its, inv, jac = [], [], [], [], []
     for r, g in enumerate(livers):
-        reg = register(morph, Y, dense, surface_samples(g, n_points), surface_points(g),
-                       schedule)
+        reg = (known or {}).get(g.geometry_id) or register(
+            morph, Y, M.surface_triangles, surface_samples(g, n_points), surface_points(g),
+            schedule)
         disp.append((reg.points[M.surface_nodes] - S).ravel())
         err.append(reg.residual)
         its.append(reg.iterations)
         inv.append(reg.inverted)
+        jac.append(reg.min_jacobian)
         if progress is not None:
             progress(r)
     D = np.asarray(disp)
@@ -223,7 +239,8 @@ def build_population(livers: list[Geometry], template: int = 0, n_points: int = 
     return Population(template=M, displacements=D, mean=mean, components=Vt,
                       singular_values=Sv, coefficients=coeff,
                       registration_error=np.asarray(err), iterations=its,
-                      inverted=np.asarray(inv))
+                      inverted=np.asarray(inv), min_jacobian=np.asarray(jac),
+                      template_member=isinstance(template, int))
 
 
 def surface_points(g: Geometry, per_triangle: int = 6) -> np.ndarray:

@@ -2,9 +2,21 @@
 them, the interior follows by harmonic extension (each interior displacement the mean of its
 edge neighbours'). The CPD field evaluated deep inside the template would fold the mesh where
 the surface moved far; the extension keeps the interior in step with the surface.
+
+A surface registration may still fold the mesh: where the template is one element thick (a
+thin lobe) two facing surfaces can be moved through each other, and a harmonic interior can
+turn a tetrahedron inside out near a sharp bend. :meth:`SurfaceMorph.unfold` gives a move with
+no inverted tetrahedron: the interior by harmonic extension, or, where that folds, by a
+pseudo-elastic move in steps whose compressed cells stiffen (Young's modulus (V0/V)^2, the
+mesh-moving rule of Jacobian-based stiffening); where the surface itself folds, the
+displacements of the folded cells' surface nodes are relaxed toward their neighbours' (along
+the tetrahedra's edges, so the two faces of a thin lobe move together), round by round, until
+no cell is folded. The price is a larger residual there, which the caller measures.
 """
 
 from __future__ import annotations
+
+import functools
 
 import numpy as np
 
@@ -44,6 +56,114 @@ class SurfaceMorph:
     def inverted(self, moved: np.ndarray) -> int:
         """Tetrahedra the move turned inside out (non-positive volume)."""
         return int(np.sum(signed_volumes(moved, self.cells) <= 0))
+
+    def min_jacobian(self, moved: np.ndarray) -> float:
+        """The smallest ratio of moved to template volume over the cells (the determinant of
+        each linear tetrahedron's deformation gradient): <= 0 where a cell folded.
+        """
+        return float(np.min(signed_volumes(moved, self.cells) / self._volumes))
+
+    @functools.cached_property
+    def _volumes(self) -> np.ndarray:
+        return signed_volumes(self.points, self.cells)
+
+    def place(self, boundary_points: np.ndarray) -> np.ndarray:
+        """All nodes for the boundary at ``boundary_points``: the harmonic extension, or, when
+        it folds a cell, the stiffened pseudo-elastic move if that folds fewer.
+        """
+        moved = self.move(boundary_points)
+        if self.inverted(moved) == 0 or self.inner.size == 0:
+            return moved
+        elastic = stiffened_move(self.points, self.cells, self.boundary, boundary_points)
+        return elastic if self.inverted(elastic) < self.inverted(moved) else moved
+
+    def unfold(self, boundary_points: np.ndarray, rounds: int = 150,
+               relax: float = 0.5) -> tuple[np.ndarray, int]:
+        """(all nodes, rounds used): :meth:`place` of the boundary at ``boundary_points``,
+        with the displacement of every surface node of a folded cell (and of its neighbours)
+        relaxed by ``relax`` toward its neighbours' mean, round by round, until no cell is
+        folded (or ``rounds`` ran out: the caller counts what is left).
+        """
+        d = np.asarray(boundary_points, dtype=np.float64) - self.points[self.boundary]
+        A, degree = self._boundary_graph
+        local = np.full(self.points.shape[0], -1)
+        local[self.boundary] = np.arange(self.boundary.size)
+        for k in range(rounds + 1):
+            moved = self.place(self.points[self.boundary] + d)
+            bad = signed_volumes(moved, self.cells) <= 0
+            if not bad.any() or k == rounds:
+                return moved, k
+            ids = local[self.cells[bad]]
+            near = np.zeros(self.boundary.size, dtype=bool)
+            near[ids[ids >= 0]] = True
+            for _ in range(1 + k // 50):  # a fold that outlasts 50 rounds: a wider patch
+                near |= (A @ near) > 0
+            mean = (A @ d) / degree[:, None]
+            d[near] = (1.0 - relax) * d[near] + relax * mean[near]
+        return moved, rounds
+
+    @functools.cached_property
+    def _boundary_graph(self):
+        """The boundary nodes' adjacency along the tetrahedra's edges, and its degrees."""
+        from scipy.sparse import coo_matrix
+
+        local = np.full(self.points.shape[0], -1)
+        local[self.boundary] = np.arange(self.boundary.size)
+        c = local[self.cells]
+        e = np.concatenate([c[:, [a, b]] for a in range(4) for b in range(a + 1, 4)])
+        e = e[(e >= 0).all(axis=1)]
+        n = self.boundary.size
+        A = coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
+                       shape=(n, n)).tocsr()
+        A.data[:] = 1.0
+        return A, np.maximum(np.asarray(A.sum(axis=1)).ravel(), 1.0)
+
+
+def elastic_stiffness(points: np.ndarray, cells: np.ndarray, young: np.ndarray,
+                      poisson: float = 0.3):
+    """The (3n, 3n) stiffness of linear tetrahedra (small-strain elasticity), Young's modulus
+    per cell: K_e = V B^T D B, written out as V (lam g_a g_b^T + mu g_b g_a^T + mu g_a.g_b I)
+    for the node pair (a, b), g the shape functions' gradients.
+    """
+    from scipy.sparse import coo_matrix
+
+    X = points[cells]
+    D = X[:, 1:] - X[:, :1]
+    V = np.abs(np.linalg.det(D)) / 6.0
+    inv = np.linalg.inv(D)
+    G = np.concatenate([-inv.sum(axis=2, keepdims=True), inv], axis=2)  # (c, 3, 4)
+    lam = young * poisson / ((1 + poisson) * (1 - 2 * poisson)) * V
+    mu = young / (2 * (1 + poisson)) * V
+    gg = np.einsum("cia,cib->cab", G, G)
+    Ke = (lam[:, None, None, None, None] * np.einsum("cia,cjb->caibj", G, G)
+          + mu[:, None, None, None, None] * np.einsum("cja,cib->caibj", G, G)
+          + mu[:, None, None, None, None] * np.einsum("cab,ij->caibj", gg, np.eye(3)))
+    dof = (3 * cells[:, :, None] + np.arange(3)).reshape(len(cells), 12)
+    n = 3 * points.shape[0]
+    return coo_matrix((Ke.reshape(len(cells), 144).ravel(),
+                       (np.repeat(dof, 12, axis=1).ravel(), np.tile(dof, (1, 12)).ravel())),
+                      shape=(n, n)).tocsr()
+
+
+def stiffened_move(points, cells, boundary, boundary_points, steps: int = 10) -> np.ndarray:
+    """The interior moved with the boundary in ``steps`` pseudo-elastic increments, each on
+    the current mesh with cells stiffened as they are compressed (E = (V0 / V)^2).
+    """
+    from scipy.sparse.linalg import splu
+
+    P = np.asarray(points, dtype=np.float64).copy()
+    bd = (3 * np.asarray(boundary)[:, None] + np.arange(3)).ravel()
+    inner = np.setdiff1d(np.arange(P.size), bd)
+    du = (np.asarray(boundary_points, dtype=np.float64) - P[boundary]).ravel() / steps
+    V0 = signed_volumes(P, cells)
+    for _ in range(steps):
+        V = np.maximum(signed_volumes(P, cells), 1e-3 * V0)
+        K = elastic_stiffness(P, cells, (V0 / V) ** 2)
+        u = np.zeros(P.size)
+        u[bd] = du
+        u[inner] = splu(K[inner][:, inner].tocsc()).solve(-(K[inner][:, bd] @ du))
+        P += u.reshape(-1, 3)
+    return P
 
 
 def interpolation_matrix(nodes: np.ndarray, at: np.ndarray):

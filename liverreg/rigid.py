@@ -117,13 +117,15 @@ def _icp(X, Y, Q0, tree_y, iterations, tol):
 
 
 def orient(X: np.ndarray, Y: np.ndarray, frame: str = "auto", iterations: int = 60,
-           tol: float = 1e-5, coarse: int = 200, finalists: int = 3) -> RigidFit:
+           tol: float = 1e-5, coarse: int = 200, finalists: int = 3,
+           refine: bool = False) -> RigidFit:
     """The orthogonal map of liver samples X (n, 3) onto population samples Y (m, 3), mm.
 
     ``frame``: the liver's frame, a key of :data:`FRAMES` (its axis map, then the centroids
-    matched: nothing is fitted); or ``"auto"``: the best rigid fit, ICP started from the frames
-    and the 48 principal-axis maps (searched on ``coarse`` samples, the ``finalists`` best
-    refined on all).
+    matched: nothing is fitted; ``refine``: then refined by rigid ICP, proper rotations only,
+    for livers known to lie in that frame up to the patient's pose); or ``"auto"``: the best
+    rigid fit, ICP started from the frames and the 48 principal-axis maps (searched on
+    ``coarse`` samples, the ``finalists`` best refined on all).
     """
     from scipy.spatial import cKDTree
 
@@ -136,8 +138,11 @@ def orient(X: np.ndarray, Y: np.ndarray, frame: str = "auto", iterations: int = 
             raise ValueError(f"frame: expected 'auto' or one of {', '.join(FRAMES)}, got "
                              f"{frame!r}")
         Q = FRAMES[frame]
-        t = Y.mean(axis=0) - (X @ Q.T).mean(axis=0)
-        return RigidFit(Q=Q, t=t, distance=_distance(X @ Q.T + t, Y), candidates=1)
+        if not refine:
+            t = Y.mean(axis=0) - (X @ Q.T).mean(axis=0)
+            return RigidFit(Q=Q, t=t, distance=_distance(X @ Q.T + t, Y), candidates=1)
+        Q, t, dist = _icp(X, Y, Q, cKDTree(Y), iterations, tol)
+        return RigidFit(Q=Q, t=t, distance=dist, candidates=1)
     Ex, Ey = principal_axes(X), principal_axes(Y)
     starts = list(FRAMES.values()) + [Ey @ P @ Ex.T for P in axis_maps()]
     xs, ys = X[farthest_points(X, coarse)], Y[farthest_points(Y, coarse)]

@@ -111,6 +111,7 @@ class ShapeModel:
     population_inverted: np.ndarray = None  # (R,) template tetrahedra each liver inverted
     population_coefficients: np.ndarray = None  # (R, K) each liver's shape coefficients
     population_fixed_area: np.ndarray = None  # (R,) mm^2, the fixed region on each liver
+    frame: str = ""  # the population's liver files' frame: a new liver's default ("": LPS)
 
     def __post_init__(self):
         if self.loadable_nodes is None:
@@ -125,6 +126,7 @@ class ShapeModel:
             self.schedule = np.asarray(STAGED, dtype=np.float64)
         self.schedule = np.asarray(self.schedule, dtype=np.float64).reshape(-1, 3)
         self.n_points = int(self.n_points)
+        self.frame = str(self.frame)
 
     @property
     def surface_nodes(self) -> np.ndarray:
@@ -135,14 +137,15 @@ class ShapeModel:
         return int(self.components.shape[0])
 
     def place(self, points: np.ndarray, triangles: np.ndarray, center: bool = True,
-              frame: str = DEFAULT_FRAME) -> Placement:
+              frame: str | None = None) -> Placement:
         """Register the template onto the liver surface (points (p, 3) mm, triangles (t, 3)).
 
         The placement is in the population's frame: the liver is first mapped into it
-        (:func:`liverreg.rigid.orient`; ``frame``: the liver's frame, ``LPS`` (DICOM, ITK: the
-        default), ``RAS`` or ``population``, or ``auto``: the best rigid fit onto the
-        population's mean surface, which may turn a liver unlike the population's away from
-        its anatomy).
+        (:func:`liverreg.rigid.orient`; ``frame``: the liver's frame, ``LPS`` (DICOM, ITK),
+        ``RAS`` or ``population``, refined by a rigid fit; None: the frame of the
+        population's own liver files, LPS for a population of phantoms; or ``auto``: the best
+        rigid fit onto the population's mean surface, which may turn a liver unlike the
+        population's away from its anatomy).
         ``center=False``: as given, for livers already in that frame and place (those the
         solver's population pipeline made).
         """
@@ -163,8 +166,7 @@ class ShapeModel:
         # the samples of liverreg.cpd.surface_samples (farthest points, seed 0) and the
         # registration of liverreg.cpd.build_population
         reg = register(SurfaceMorph(self.template_points, self.template_cells, surf),
-                       S[farthest_points(S, self.n_points)],
-                       dense_surface(self.template_points, self.surface_triangles),
+                       S[farthest_points(S, self.n_points)], self.surface_triangles,
                        verts[farthest_points(verts, self.n_points)],
                        dense_surface(points, triangles), [tuple(r) for r in self.schedule])
         coeff = project((reg.points[surf] - S).ravel(), self.mean, self.components)
@@ -191,14 +193,15 @@ class ShapeModel:
             out.append(self.fixed_area(P))
         return np.asarray(out)
 
-    def rigid_fit(self, points, triangles, frame: str = DEFAULT_FRAME) -> RigidFit:
+    def rigid_fit(self, points, triangles, frame: str | None = None) -> RigidFit:
         """The map of a liver surface into the population's frame (:func:`orient` of the
         surfaces' farthest-point samples: the liver's and the population's mean surface).
         """
         verts = np.asarray(points, dtype=np.float64)[np.unique(triangles)]
         mean_surface = self.template_points[self.surface_nodes] + self.mean.reshape(-1, 3)
         return orient(verts[farthest_points(verts, self.n_points)],
-                      mean_surface[farthest_points(mean_surface, self.n_points)], frame)
+                      mean_surface[farthest_points(mean_surface, self.n_points)],
+                      frame or self.frame or DEFAULT_FRAME, refine=True)
 
     def outside_range(self, coefficients) -> np.ndarray:
         """Indices of shape coefficients outside the population's range (by more than 5 % of
@@ -322,5 +325,7 @@ class ShapeModel:
         except (OSError, KeyError, ValueError) as exc:
             raise ValueError(f"{path}: not a readable shape model ({exc})") from None
         kw["n_points"] = int(kw["n_points"])
+        if "frame" in kw:
+            kw["frame"] = str(kw["frame"])
         return cls(**kw)
 

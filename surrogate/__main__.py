@@ -59,12 +59,12 @@ def _add_predict_liver(sub) -> None:
                    help="keep the liver where the file puts it (a liver already in the "
                    "population's frame and place); by default it is mapped onto the "
                    "population's mean liver (--frame)")
-    p.add_argument("--frame", choices=FRAMES, default="LPS",
-                   help="the liver file's frame: LPS (DICOM, ITK; the default), RAS (NIfTI, "
+    p.add_argument("--frame", choices=FRAMES, default=None,
+                   help="the liver file's frame: LPS (DICOM, ITK), RAS (NIfTI, "
                    "Slicer), population (x toward the right lobe, y posterior, z up), or auto "
                    "(the best rigid fit onto the population's mean liver, mirror images "
                    "included; it may turn a liver unlike the population's away from its "
-                   "anatomy)")
+                   "anatomy); default: the population's liver files' frame, LPS for phantoms")
     p.add_argument("--shape", choices=SHAPE_RULES,
                    help="the shape the network is told for a liver outside the population: "
                    "own, range, radius, hull or outside (docs/shape_rule.md); default: the "
@@ -80,7 +80,7 @@ def _add_evaluate(sub) -> None:
     s.add_argument("--scene", required=True, help="the population scene whose loads, "
                    "material, steps and solver the truth takes")
     s.add_argument("--sims", type=int, default=60, help="simulations of the truth")
-    s.add_argument("--frame", choices=FRAMES, default="LPS", help="as predict-liver's")
+    s.add_argument("--frame", choices=FRAMES, default=None, help="as predict-liver's")
     s.add_argument("--out", required=True, help="the scene file to write")
     e = sub.add_parser("evaluate", help="a trained model against a dataset it never trained "
                        "on: of its own liver, or the FE truth of a liver it never saw")
@@ -88,7 +88,7 @@ def _add_evaluate(sub) -> None:
     e.add_argument("data", help="a dataset directory written by fem_sim generate")
     e.add_argument("--liver", help="the liver file the dataset was solved on, for a "
                    "population model (it is placed as predict-liver places it)")
-    e.add_argument("--frame", choices=FRAMES, default="LPS", help="as predict-liver's")
+    e.add_argument("--frame", choices=FRAMES, default=None, help="as predict-liver's")
     e.add_argument("--population", help="the population dataset whose mean displacement is "
                    "the naive model (default: the evaluated dataset's own mean)")
     e.add_argument("--out", help="write the metrics here as JSON")
@@ -113,7 +113,8 @@ def _predict_liver(args) -> int:
         from surrogate.viewer import main as viewer
 
         return viewer([str(args.run), "--place", str(args.liver), "--scale-to-mm",
-                       str(args.scale_to_mm), "--frame", args.frame,
+                       str(args.scale_to_mm),
+                       *(["--frame", args.frame] if args.frame else []),
                        *(["--shape", args.shape] if args.shape else [])]
                       + (["--no-center"] if args.no_center else []))
     from surrogate.predict_liver import main as predict_liver

@@ -43,7 +43,9 @@ def population_shape_model(ds):
         inverted = z["inverted"] if "inverted" in z.files else None
     template = template_geometry(ds.directory)
     scene = load_scene(Path(ds.directory) / "scene.toml")
-    if ids[0] in ds.geo_ids:
+    if "template_fixed" in template.regions:  # a file population's template: not a member
+        fixed = template.regions["template_fixed"]
+    elif ids[0] in ds.geo_ids:
         fixed = ds.fixed[ds.geo_ids.index(ids[0])]
     else:  # the template's simulations are not in this dataset: its region, as the scene says
         fixed = template.regions[scene["fixed"]["name"]]
@@ -54,7 +56,9 @@ def population_shape_model(ds):
                     mean=mean, components=comps, coefficient_min=coeff.min(axis=0),
                     coefficient_max=coeff.max(axis=0), residuals=residuals,
                     loadable_nodes=loadable, population_inverted=inverted,
-                    population_coefficients=coeff)
+                    population_coefficients=coeff,
+                    frame=scene["geometry"].get("frame", "") if "livers" in scene["geometry"]
+                    else "")
     sm.population_fixed_area = sm.fixed_areas(D)
     return sm
 
@@ -67,10 +71,18 @@ def surface_displacements(z) -> np.ndarray:
 
 
 def template_geometry(directory):
-    """The template's own mesh: the population's liver 0 (:class:`data_spec.Geometry`) of the
-    dataset in ``directory``.
+    """The template's own mesh (:class:`data_spec.Geometry`) of the dataset in ``directory``:
+    the population's liver 0, or the template kept in population.npz when it is not one of
+    the livers (a file population; its fixed region as ``regions["template_fixed"]``).
     """
+    from data_spec import Geometry
+
     with np.load(population_file(directory), allow_pickle=False) as z:
+        if "template_points" in z.files:
+            return Geometry(points=z["template_points"], cells=z["template_cells"],
+                            surface_triangles=z["template_triangles"],
+                            regions={"template_fixed": z["template_fixed"]},
+                            description="population template")
         first = str(z["geometry_ids"][0])
     return read_geometry(geometry_path(directory, first))
 
@@ -89,4 +101,4 @@ def registered_templates(directory) -> dict[str, np.ndarray]:
     surf = template.surface_nodes
     morph = SurfaceMorph(template.points, template.cells, surf)
     S = template.points[surf]
-    return {gid: morph.move(S + d.reshape(-1, 3)) for gid, d in zip(ids, D)}
+    return {gid: morph.place(S + d.reshape(-1, 3)) for gid, d in zip(ids, D)}

@@ -35,7 +35,6 @@ from pathlib import Path
 import numpy as np
 
 from liverreg.morph import interpolation_matrix
-from liverreg.shape_model import DEFAULT_FRAME
 from surrogate.predictor import check_load_nodes
 
 SURFACE_SUFFIXES = (".vtk", ".vtp", ".vtu", ".stl", ".obj", ".ply", ".h5")
@@ -156,7 +155,7 @@ class LiverPrediction:
 
 
 def place_liver(predictor, points, triangles, center: bool = True,
-                frame: str = DEFAULT_FRAME):
+                frame: str | None = None):
     """(placement, warnings): the template registered onto the liver surface, with the
     reasons (numbers included) it lies outside the training population. The liver is first
     mapped into the population's frame: ``frame`` names its frame (``LPS``, the default:
@@ -214,7 +213,7 @@ def nearest_surface_nodes(points, triangles, at) -> np.ndarray:
 
 
 def predict_liver(predictor, points, triangles, forces, at=None, load_nodes=None,
-                  placement=None, center: bool = True, frame: str = DEFAULT_FRAME,
+                  placement=None, center: bool = True, frame: str | None = None,
                   shape: str | None = None) -> LiverPrediction:
     """Place the liver (points, triangles: its surface; :func:`place_liver`) and predict the
     displacement under ``forces`` (n_loads, 3) N acting at the template nodes nearest to
@@ -277,7 +276,7 @@ class PlacedModel:
     """
 
     def __init__(self, predictor, points=None, triangles=None, nodes=None, *,
-                 placement=None, center: bool = True, frame: str = DEFAULT_FRAME,
+                 placement=None, center: bool = True, frame: str | None = None,
                  shape: str | None = None):
         sm = predictor.shape_model
         if sm is None:

@@ -593,7 +593,7 @@ def main(argv=None) -> int:
                     help="with --place: multiply the file's coordinates by this")
     ap.add_argument("--no-center", action="store_true",
                     help="with --place: keep the liver where the file puts it")
-    ap.add_argument("--frame", choices=("LPS", "RAS", "population", "auto"), default="LPS",
+    ap.add_argument("--frame", choices=("LPS", "RAS", "population", "auto"), default=None,
                     help="with --place: the file's frame (as predict-liver; the liver is "
                     "shown in the population's frame)")
     ap.add_argument("--shape", choices=SHAPE_RULES,

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from data_spec import Geometry, OgdenMaterial, Scene, eligible_loads
+from data_spec.livers import population_count
 
 _MATERIAL_TABLE_STREAM = 2**31 - 1  # rng stream of the scene-wide material table
 
@@ -127,7 +128,7 @@ def make_case(scene: Scene, index: int, g: Geometry, fixed: np.ndarray,
     rng = np.random.default_rng([scene.seed, index])
     geometry_index = 0
     if scene["geometry"]["source"] == "population":
-        geometry_index = index % scene["geometry"]["population_size"]
+        geometry_index = index % population_count(scene["geometry"])
     patch = float(ld.get("patch_radius", 0.0)) if ld["kind"] == "patch" else 0.0
     if scene.cases:
         spec = scene.cases[index]

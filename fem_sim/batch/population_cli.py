@@ -25,6 +25,11 @@ def _livers(scene_file):
             src = scene["geometry"]["source"]
             raise SceneError(str(scene_file), ["geometry.source: expected 'population' for "
                                                f"this command, got {src!r}"])
+        if "livers" in scene["geometry"]:
+            raise SceneError(str(scene_file), [
+                "geometry.livers: this command builds populations of phantoms; a population "
+                "of liver files is built by `fem_sim generate` (DATA/geometry/livers.json, "
+                "population.npz)"])
         t0 = time.perf_counter()
         livers = [scene_geometry(scene, i) for i in range(n_geometries(scene))]
     except (SceneError, GeometryError, ValueError) as exc:

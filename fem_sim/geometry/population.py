@@ -101,11 +101,14 @@ def plot_report(rows: list[dict], png, title: str) -> None:
 
 
 def attach_shape_coefficients(livers: list[Geometry], n_components: int, cache=None,
-                              n_points: int = 600, progress=None) -> Population | None:
+                              n_points: int = 600, progress=None, template=0, known=None,
+                              region: str = "vena_cava") -> Population | None:
     """Set ``shape_coefficients`` (first ``n_components`` PCA coefficients) on every liver.
 
     ``cache``: an ``.npz`` path; reused when it was made for the same livers (geometry ids),
     written otherwise. Returns the Population when it was computed, None when cached.
+    ``template``, ``known``: :func:`liverreg.cpd.build_population`'s; ``region``: the
+    template's fixed region, kept with a template that is not one of the livers.
     """
     from pathlib import Path
 
@@ -120,10 +123,10 @@ def attach_shape_coefficients(livers: list[Geometry], n_components: int, cache=N
                 for g, c in zip(livers, z["coefficients"]):
                     g.shape_coefficients = c[:n_components].copy()
                 return None
-    pop = build_population(livers, 0, n_points, progress=progress)
+    pop = build_population(livers, template, n_points, progress=progress, known=known)
     set_coefficients(livers, pop, n_components)
     if cache is not None:
-        save_population(cache, livers, pop)
+        save_population(cache, livers, pop, region)
     return pop
 
 
@@ -133,12 +136,23 @@ def set_coefficients(livers: list[Geometry], pop: Population, n_components: int)
         g.shape_coefficients = c[:n_components].copy()
 
 
-def save_population(path, livers: list[Geometry], pop: Population) -> None:
-    """The PCA (and the geometry ids it belongs to) as an .npz, written atomically."""
+def save_population(path, livers: list[Geometry], pop: Population,
+                    region: str = "vena_cava") -> None:
+    """The PCA (and the geometry ids it belongs to) as an .npz, written atomically; with a
+    template that is not one of the livers, the template's mesh and fixed region (``region``).
+    """
     from data_spec.atomic import atomic_path
 
+    extra = {}
+    if not pop.template_member:
+        T = pop.template
+        extra = {"template_points": T.points, "template_cells": T.cells,
+                 "template_triangles": T.surface_triangles,
+                 "template_fixed": T.regions[region]}
+    if pop.min_jacobian is not None:
+        extra["min_jacobian"] = pop.min_jacobian
     with atomic_path(path) as tmp, open(tmp, "wb") as f:  # a file object: no ".npz" appended
         np.savez(f, geometry_ids=np.array([g.geometry_id for g in livers]),
                  coefficients=pop.coefficients, mean=pop.mean, components=pop.components,
                  singular_values=pop.singular_values,
-                 registration_error=pop.registration_error, inverted=pop.inverted)
+                 registration_error=pop.registration_error, inverted=pop.inverted, **extra)

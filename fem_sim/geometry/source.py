@@ -15,6 +15,7 @@ import numpy as np
 
 from data_spec import Geometry, Scene, geometry_path, read_geometry
 from data_spec.geometry import boundary_triangles, geometry_problems
+from data_spec.livers import members
 from fem_sim.geometry.errors import GeometryError
 from fem_sim.geometry.quality import mesh_problems, orient
 from fem_sim.geometry.regions import default_vena_cava
@@ -22,7 +23,7 @@ from fem_sim.geometry.regions import default_vena_cava
 
 def n_geometries(scene: Scene) -> int:
     g = scene["geometry"]
-    return g["population_size"] if g["source"] == "population" else 1
+    return len(members(g)) if g["source"] == "population" else 1
 
 
 def scene_geometries(scene: Scene, cache=None, progress=None, dataset=None,
@@ -36,21 +37,25 @@ def scene_geometries(scene: Scene, cache=None, progress=None, dataset=None,
     caller's, so an entry whose file is missing or holds another mesh is meshed again).
     ``meshed(i)`` is called as each geometry is ready; ``progress`` during the registration.
     """
+    g = scene["geometry"]
+    if g["source"] == "population" and "livers" in g:
+        from fem_sim.geometry.file_population import population_geometries
+
+        return population_geometries(scene, cache, dataset, meshed, progress)
     index = _read_index(dataset)
     livers, new = [], {}
     for i in range(n_geometries(scene)):
         key = _mesh_key(scene, i)
-        g = _indexed(dataset, index.get(key)) if key else None
-        if g is None:
-            g = scene_geometry(scene, i)
+        liver = _indexed(dataset, index.get(key)) if key else None
+        if liver is None:
+            liver = scene_geometry(scene, i)
             if key:
-                new[key] = g.geometry_id
-        livers.append(g)
+                new[key] = liver.geometry_id
+        livers.append(liver)
         if meshed:
             meshed(i)
     if new and dataset is not None:
         _write_index(dataset, {**index, **new})
-    g = scene["geometry"]
     if g["source"] == "population" and len(livers) > 1:
         from fem_sim.geometry.population import attach_shape_coefficients
 
@@ -137,8 +142,11 @@ def scene_geometry(scene: Scene, index: int = 0) -> Geometry:
     if g["source"] == "population":
         from fem_sim.geometry.phantom import make_phantom
 
-        return make_phantom(g["population_seed"] + index, g["mesh_size"],
-                            g.get("variety", "anatomical"))
+        member = members(g)[index]
+        if member.path is not None:
+            raise ValueError("a population's liver files are meshed with the population "
+                             "(scene_geometries), not one by one")
+        return make_phantom(member.seed, g["mesh_size"], g.get("variety", "anatomical"))
     return read_any(g["path"], g["mesh_size"], g["scale_to_mm"], g.get("spacing"))
 
 

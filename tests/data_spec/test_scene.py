@@ -32,12 +32,14 @@ def test_paper_scene_sizes_and_what_varies():
     by_name = {p.stem: load_scene(p) for p in SCENES}
     sizes = {k: v.n_simulations for k, v in by_name.items() if k.startswith("scene")}
     assert sizes == {"scene1_base": 400, "scene2_two_forces": 1500,
-                     "scene3_materials": 3000, "scene4_livers": 10200}
+                     "scene3_materials": 3000, "scene4_livers": 1015,
+                     "scene4_phantoms": 10200}
     assert by_name["scene1_base"].varies == {"loads": True, "material": False,
                                              "geometry": False}
     assert by_name["scene2_two_forces"]["loads"]["count"] == 2
     assert by_name["scene3_materials"].varies["material"]
     assert by_name["scene4_livers"].varies["geometry"]
+    assert by_name["scene4_phantoms"].varies["geometry"]
 
 
 def test_defaults_filled_and_hash_stable():

@@ -78,7 +78,7 @@ def test_basis_design_on_a_many_liver_scene_is_refused_before_any_work(tmp_path,
     data = tmp_path / "data"
     data.mkdir()
     scenes = Path(__file__).parents[2] / "data_spec" / "scenes"
-    shutil.copy(scenes / "scene4_livers.toml", data / "scene.toml")
+    shutil.copy(scenes / "scene4_phantoms.toml", data / "scene.toml")
     assert main(["train", "--data", str(data), "--run", str(tmp_path / "r"),
                  "--config", "basis"]) == 2
     assert "design 'basis' needs a scene with one liver" in capsys.readouterr().err

@@ -17,7 +17,7 @@ def test_feature_blocks_follow_the_scene():
     # 11 static + 7 per force (+ c1, m1, K when the material varies)
     assert dims == {"scene1_base": 18, "scene2_two_forces": 25, "scene3_materials": 21}
     s4 = FeatureSpec.from_scene(load_scene(ROOT / "data_spec" / "scenes" /
-                                           "scene4_livers.toml"), n_shape=27)
+                                           "scene4_phantoms.toml"), n_shape=27)
     assert s4.dim == 18 + 27 and s4.material_dim == 0
 
 

@@ -1,0 +1,245 @@
+"""A population of liver files (``geometry.livers``): each liver read, repaired and meshed
+(:mod:`fem_sim.geometry.repair`), turned into the template's frame by a rigid fit, the template
+registered onto it without folding a tetrahedron (:func:`liverreg.cpd.register`), and fixed
+where the template's vena-cava region lands.
+
+The template is the phantom of seed ``population_seed`` (:mod:`data_spec.livers`). Its fixed
+region carries over by nearest moved template node: each surface node of the liver takes the
+label of the template surface node the registration put nearest to it. A region smaller than
+``fixed_area_min`` (by default half the template's own) grows by rings of surface neighbours
+until it is that large, so that no liver hangs on a few nodes; the area, the rings and every
+registration figure are kept per liver (:class:`LiverRecord`).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from data_spec import Geometry
+from data_spec.geometry import region_area
+from liverreg.cpd import register, surface_points, surface_samples
+from liverreg.morph import SurfaceMorph
+from liverreg.rigid import orient
+
+N_POINTS = 600  # CPD samples per surface (liverreg.cpd.build_population's)
+# What a prepared liver depends on besides the modules its key digests: change this text when
+# the rules of this module change (its other edits then keep the prepared livers).
+RULES = "rigid fit refined from the frame; region by nearest moved template surface node; " \
+    "grown by rings of surface neighbours to fixed_area_min or half the template's area"
+
+
+@dataclass
+class LiverRecord:
+    """How one liver file entered the population."""
+
+    name: str
+    nodes: int
+    volume_ml: float
+    extent_mm: list
+    repair: str            # the repair report's summary
+    frame: str             # how the rigid fit turned it
+    rigid_distance: float  # mm, after the rigid fit
+    residual: float        # mm, moved template surface <-> liver surface
+    inverted: int          # template tetrahedra the registration folded
+    min_jacobian: float    # smallest moved / template cell volume
+    unfold_rounds: int
+    fixed_nodes: int
+    fixed_area: float      # mm^2
+    grown_rings: int       # rings added to reach fixed_area_min
+    seconds: float
+
+
+class Registrar:
+    """The template, its samples and its morph, set up once for a population."""
+
+    def __init__(self, template: Geometry, region: str, frame: str = "LPS"):
+        self.template = template
+        self.frame = frame
+        self.region = region
+        self.samples = surface_samples(template, N_POINTS)
+        self.morph = SurfaceMorph(template.points, template.cells, template.surface_nodes)
+        self.area = region_area(template.points, template.surface_triangles,
+                                template.regions[region])
+
+    def aligned(self, liver: Geometry):
+        """(the liver in the template's frame, the rigid fit)."""
+        verts = liver.points[liver.surface_nodes]
+        fit = orient(verts, self.template.points[self.template.surface_nodes], self.frame,
+                     refine=True)
+        moved = Geometry(points=liver.points @ fit.Q.T + fit.t, cells=liver.cells,
+                         surface_triangles=liver.surface_triangles, regions=dict(liver.regions),
+                         description=liver.description)
+        if fit.mirrored:  # a mirror image turns every cell inside out: swap two nodes
+            moved.cells = moved.cells[:, [0, 2, 1, 3]]
+            moved.surface_triangles = moved.surface_triangles[:, [0, 2, 1]]
+        return moved, fit
+
+    def register(self, liver: Geometry):
+        """The template registered onto a liver already in its frame."""
+        return register(self.morph, self.samples, self.template.surface_triangles,
+                        surface_samples(liver, N_POINTS), surface_points(liver))
+
+
+def landed_region(template: Geometry, moved: np.ndarray, liver: Geometry,
+                  region: np.ndarray) -> np.ndarray:
+    """The liver's surface nodes whose nearest moved template surface node is in ``region``."""
+    from scipy.spatial import cKDTree
+
+    surf = template.surface_nodes
+    near = cKDTree(moved[surf]).query(liver.points[liver.surface_nodes])[1]
+    return liver.surface_nodes[np.isin(surf[near], region)]
+
+
+def grown(liver: Geometry, nodes: np.ndarray, area_min: float) -> tuple[np.ndarray, int]:
+    """(nodes, rings): ``nodes`` grown by rings of surface neighbours until their region's
+    area reaches ``area_min`` (mm^2).
+    """
+    tris = liver.surface_triangles
+    rings = 0
+    nodes = np.unique(nodes)
+    while region_area(liver.points, tris, nodes) < area_min and rings < 50:
+        touching = tris[np.isin(tris, nodes).any(axis=1)]
+        if nodes.size == 0:  # nothing landed: start at the surface node nearest the centre
+            touching = tris[:1]
+        nodes = np.union1d(nodes, touching.ravel())
+        rings += 1
+    return nodes, rings
+
+
+def prepare(path, registrar: Registrar, mesh_size: float, area_min: float | None = None):
+    """(the liver file meshed, in the template's frame, fixed where the template's region
+    lands; its registration; its record).
+    """
+    import time
+
+    from fem_sim.geometry.repair import mesh_liver_file
+
+    t0 = time.perf_counter()
+    raw, report = mesh_liver_file(path, mesh_size)
+    liver, fit = registrar.aligned(raw)
+    reg = registrar.register(liver)
+    region = registrar.template.regions[registrar.region]
+    fixed, rings = grown(liver, landed_region(registrar.template, reg.points, liver, region),
+                         0.5 * registrar.area if area_min is None else area_min)
+    liver.regions = {registrar.region: fixed}
+    liver.description = f"{Path(path).name} ({fit.describe()})"
+    rec = LiverRecord(
+        name=Path(path).stem, nodes=liver.n_nodes, volume_ml=report.volume_after_ml,
+        extent_mm=np.ptp(liver.points, axis=0).round(1).tolist(), repair=report.summary(),
+        frame=fit.describe(), rigid_distance=fit.distance, residual=reg.residual,
+        inverted=reg.inverted, min_jacobian=reg.min_jacobian,
+        unfold_rounds=reg.unfold_rounds, fixed_nodes=int(fixed.size),
+        fixed_area=region_area(liver.points, liver.surface_triangles, fixed),
+        grown_rings=rings, seconds=time.perf_counter() - t0)
+    return liver, reg, rec
+
+
+def write_records(path, records: list[LiverRecord]) -> None:
+    """The population's per-liver records as JSON (written atomically)."""
+    from data_spec.atomic import atomic_path
+
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps([asdict(r) for r in records], indent=1) + "\n")
+
+
+def template_of(g: dict) -> Geometry:
+    """The population's template: the phantom of seed ``population_seed``."""
+    from fem_sim.geometry.phantom import make_phantom
+
+    return make_phantom(g.get("population_seed", 0), g["mesh_size"],
+                        g.get("variety", "anatomical"))
+
+
+def region_name(scene) -> str:
+    f = scene["fixed"]
+    return f["name"] if f["kind"] == "region" else "vena_cava"
+
+
+def _file_key(path, g: dict) -> str:
+    """What a liver file's prepared mesh depends on: the file, the settings and the code."""
+    import hashlib
+
+    from fem_sim.geometry import repair, surfaces
+    from fem_sim.geometry.source import _phantom_code
+    from liverreg import cpd, morph, rigid
+
+    h = hashlib.sha256(Path(path).read_bytes())
+    for module in (repair, surfaces, cpd, morph, rigid):
+        h.update(Path(module.__file__).read_bytes())
+    h.update(RULES.encode())
+    return (f"file {Path(path).name} {h.hexdigest()[:16]}, mesh size {float(g['mesh_size'])!r}, "
+            f"frame {g.get('frame', 'LPS')}, template {g.get('population_seed', 0)} "
+            f"{g.get('variety', 'anatomical')}, area {g.get('fixed_area_min')}, "
+            f"{_phantom_code()}")
+
+
+def population_geometries(scene, cache=None, dataset=None, meshed=None, progress=None):
+    """Every liver of a file population (:func:`data_spec.livers.members`), with its fixed
+    region and its shape coefficients; prepared livers are reused from ``dataset``'s mesh
+    index, and the records go to DATA/geometry/livers.json.
+    """
+    from data_spec.livers import members
+    from fem_sim.geometry.population import attach_shape_coefficients
+    from fem_sim.geometry.source import _indexed, _read_index, scene_geometry
+
+    g = scene["geometry"]
+    template = template_of(g)
+    registrar = Registrar(template, region_name(scene), g.get("frame", "LPS"))
+    index = _read_index(dataset)
+    records = _read_records(dataset)
+    livers, known = [], {}
+    for i, m in enumerate(members(g)):
+        key = _file_key(m.path, g) if m.path else None
+        liver = _indexed(dataset, index.get(key)) if key else None
+        if m.path is None:
+            liver = scene_geometry(scene, i)
+        elif liver is None:
+            liver, reg, records[m.name] = _prepared(m.path, registrar, g)
+            known[liver.geometry_id] = reg
+            index[key] = liver.geometry_id
+            if dataset is not None:  # kept as they come: a long population resumes
+                _keep(dataset, liver, index, records)
+        livers.append(liver)
+        if meshed:
+            meshed(i)
+    attach_shape_coefficients(livers, g["pca_components"], cache=cache, progress=progress,
+                              template=template, known=known, region=registrar.region)
+    return livers
+
+
+def _prepared(path, registrar: Registrar, g: dict):
+    """:func:`prepare`, a refusal naming the liver and the way to leave it out."""
+    from fem_sim.geometry.errors import GeometryError
+
+    try:
+        return prepare(path, registrar, g["mesh_size"], g.get("fixed_area_min"))
+    except GeometryError as exc:
+        raise GeometryError(f"{exc}; the population cannot use {Path(path).stem}: name it in "
+                            "geometry.exclude to leave it out") from None
+
+
+def _keep(dataset, liver: Geometry, index: dict, records: dict) -> None:
+    """A prepared liver's geometry file, the mesh index entry and the records, written."""
+    from data_spec import geometry_path, write_geometry
+    from fem_sim.geometry.source import _write_index
+
+    path = geometry_path(dataset, liver.geometry_id)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_geometry(path, liver)
+    _write_index(dataset, index)
+    write_records(Path(dataset) / "geometry" / "livers.json", list(records.values()))
+
+
+def _read_records(dataset) -> dict:
+    path = Path(dataset) / "geometry" / "livers.json" if dataset is not None else None
+    if path is None or not path.exists():
+        return {}
+    try:
+        return {r["name"]: LiverRecord(**r) for r in json.loads(path.read_text())}
+    except (OSError, ValueError, TypeError, KeyError):
+        return {}
