@@ -165,7 +165,7 @@ def _file_key(path, g: dict) -> str:
     import hashlib
 
     from fem_sim.geometry import repair, surfaces
-    from fem_sim.geometry.source import _phantom_code
+    from fem_sim.geometry.mesh_index import phantom_code
     from liverreg import cpd, morph, rigid
 
     h = hashlib.sha256(Path(path).read_bytes())
@@ -175,7 +175,7 @@ def _file_key(path, g: dict) -> str:
     return (f"file {Path(path).name} {h.hexdigest()[:16]}, mesh size {float(g['mesh_size'])!r}, "
             f"frame {g.get('frame', 'LPS')}, template {g.get('population_seed', 0)} "
             f"{g.get('variety', 'anatomical')}, area {g.get('fixed_area_min')}, "
-            f"{_phantom_code()}")
+            f"{phantom_code()}")
 
 
 def population_geometries(scene, cache=None, dataset=None, meshed=None, progress=None):
@@ -184,20 +184,21 @@ def population_geometries(scene, cache=None, dataset=None, meshed=None, progress
     index, and the records go to DATA/geometry/livers.json.
     """
     from data_spec.livers import members
+    from fem_sim.geometry.mesh_index import indexed, read_index
+    from fem_sim.geometry.phantom import make_phantom
     from fem_sim.geometry.population import attach_shape_coefficients
-    from fem_sim.geometry.source import _indexed, _read_index, scene_geometry
 
     g = scene["geometry"]
     template = template_of(g)
     registrar = Registrar(template, region_name(scene), g.get("frame", "LPS"))
-    index = _read_index(dataset)
+    index = read_index(dataset)
     records = _read_records(dataset)
     livers, known = [], {}
     for i, m in enumerate(members(g)):
         key = _file_key(m.path, g) if m.path else None
-        liver = _indexed(dataset, index.get(key)) if key else None
+        liver = indexed(dataset, index.get(key)) if key else None
         if m.path is None:
-            liver = scene_geometry(scene, i)
+            liver = make_phantom(m.seed, g["mesh_size"], g.get("variety", "anatomical"))
         elif liver is None:
             liver, reg, records[m.name] = _prepared(m.path, registrar, g)
             known[liver.geometry_id] = reg
@@ -226,12 +227,12 @@ def _prepared(path, registrar: Registrar, g: dict):
 def _keep(dataset, liver: Geometry, index: dict, records: dict) -> None:
     """A prepared liver's geometry file, the mesh index entry and the records, written."""
     from data_spec import geometry_path, write_geometry
-    from fem_sim.geometry.source import _write_index
+    from fem_sim.geometry.mesh_index import write_index
 
     path = geometry_path(dataset, liver.geometry_id)
     path.parent.mkdir(parents=True, exist_ok=True)
     write_geometry(path, liver)
-    _write_index(dataset, index)
+    write_index(dataset, index)
     write_records(Path(dataset) / "geometry" / "livers.json", list(records.values()))
 
 

@@ -6,17 +6,15 @@ Runs on one process (gmsh, meshio); the batch generator calls it on rank 0 befor
 
 from __future__ import annotations
 
-import functools
-import hashlib
-import json
 from pathlib import Path
 
 import numpy as np
 
-from data_spec import Geometry, Scene, geometry_path, read_geometry
+from data_spec import Geometry, Scene, read_geometry
 from data_spec.geometry import boundary_triangles, geometry_problems
 from data_spec.livers import members
 from fem_sim.geometry.errors import GeometryError
+from fem_sim.geometry.mesh_index import indexed, phantom_code, read_index, write_index
 from fem_sim.geometry.quality import mesh_problems, orient
 from fem_sim.geometry.regions import default_vena_cava
 
@@ -42,11 +40,11 @@ def scene_geometries(scene: Scene, cache=None, progress=None, dataset=None,
         from fem_sim.geometry.file_population import population_geometries
 
         return population_geometries(scene, cache, dataset, meshed, progress)
-    index = _read_index(dataset)
+    index = read_index(dataset)
     livers, new = [], {}
     for i in range(n_geometries(scene)):
         key = _mesh_key(scene, i)
-        liver = _indexed(dataset, index.get(key)) if key else None
+        liver = indexed(dataset, index.get(key)) if key else None
         if liver is None:
             liver = scene_geometry(scene, i)
             if key:
@@ -55,15 +53,12 @@ def scene_geometries(scene: Scene, cache=None, progress=None, dataset=None,
         if meshed:
             meshed(i)
     if new and dataset is not None:
-        _write_index(dataset, {**index, **new})
+        write_index(dataset, {**index, **new})
     if g["source"] == "population" and len(livers) > 1:
         from fem_sim.geometry.population import attach_shape_coefficients
 
         attach_shape_coefficients(livers, g["pca_components"], cache=cache, progress=progress)
     return livers
-
-
-MESH_INDEX = "meshes.json"
 
 
 def _mesh_key(scene: Scene, index: int) -> str | None:
@@ -75,61 +70,7 @@ def _mesh_key(scene: Scene, index: int) -> str | None:
         seed, variety = g["population_seed"] + index, g.get("variety", "anatomical")
     else:
         return None
-    return f"phantom {seed} {variety}, mesh size {float(g['mesh_size'])!r}, {_phantom_code()}"
-
-
-@functools.cache
-def _phantom_code() -> str:
-    """A digest of the code that meshes a phantom (its modules and gmsh's version)."""
-    import gmsh
-
-    from fem_sim.geometry import meshing, phantom
-
-    h = hashlib.sha256(gmsh.__version__.encode())
-    for module in (phantom, meshing):
-        h.update(Path(module.__file__).read_bytes())
-    return "code " + h.hexdigest()[:16]
-
-
-def _index_path(dataset) -> Path:
-    return Path(dataset) / "geometry" / MESH_INDEX
-
-
-def _read_index(dataset) -> dict:
-    path = _index_path(dataset) if dataset is not None else None
-    if path is None or not path.exists():
-        return {}
-    try:
-        index = json.loads(path.read_text())
-        return index if isinstance(index, dict) else {}
-    except (OSError, ValueError):  # unreadable: everything is meshed again and it is rewritten
-        return {}
-
-
-def _write_index(dataset, index: dict) -> None:
-    from data_spec.atomic import atomic_path
-
-    path = _index_path(dataset)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(index, indent=1, sort_keys=True) + "\n")
-
-
-def _indexed(dataset, geometry_id) -> Geometry | None:
-    """The geometry file the index names, if it holds that mesh (its coefficients dropped:
-    the caller attaches the scene's).
-    """
-    if dataset is None or not geometry_id:
-        return None
-    path = geometry_path(dataset, geometry_id)
-    try:
-        g = read_geometry(path) if path.exists() else None
-    except Exception:  # truncated or corrupt: meshed again, and the caller rewrites the file
-        return None
-    if g is None or g.geometry_id != geometry_id:
-        return None
-    g.shape_coefficients = None
-    return g
+    return f"phantom {seed} {variety}, mesh size {float(g['mesh_size'])!r}, {phantom_code()}"
 
 
 def scene_geometry(scene: Scene, index: int = 0) -> Geometry:
