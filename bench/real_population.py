@@ -35,12 +35,13 @@ def unseen_records(scene) -> list[dict]:
     path = RESULTS / "unseen.jsonl"
     done = {r["name"]: r for r in map(json.loads, path.read_text().splitlines())} \
         if path.exists() else {}
-    registrar = None
+    template, registrars = template_of(g), {}
     for f, frame in [(f, g["frame"]) for f in validation_files(g)] + [(SOFA, "auto")]:
         if Path(f).stem in done:
             continue
-        registrar = Registrar(template_of(g), region_name(scene), frame)
-        _, _, rec = prepare(f, registrar, g["mesh_size"], g.get("fixed_area_min"))
+        if frame not in registrars:  # the template meshed once, set up once per frame
+            registrars[frame] = Registrar(template, region_name(scene), frame)
+        _, _, rec = prepare(f, registrars[frame], g["mesh_size"], g.get("fixed_area_min"))
         done[rec.name] = asdict(rec)
         path.parent.mkdir(parents=True, exist_ok=True)
         with path.open("a") as fh:

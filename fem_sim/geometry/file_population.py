@@ -184,7 +184,7 @@ def population_geometries(scene, cache=None, dataset=None, meshed=None, progress
     index, and the records go to DATA/geometry/livers.json.
     """
     from data_spec.livers import members
-    from fem_sim.geometry.mesh_index import indexed, read_index
+    from fem_sim.geometry.mesh_index import indexed, phantom_key, read_index
     from fem_sim.geometry.phantom import make_phantom
     from fem_sim.geometry.population import attach_shape_coefficients
 
@@ -194,14 +194,16 @@ def population_geometries(scene, cache=None, dataset=None, meshed=None, progress
     index = read_index(dataset)
     records = _read_records(dataset)
     livers, known = [], {}
+    variety = g.get("variety", "anatomical")
     for i, m in enumerate(members(g)):
-        key = _file_key(m.path, g) if m.path else None
-        liver = indexed(dataset, index.get(key)) if key else None
-        if m.path is None:
-            liver = make_phantom(m.seed, g["mesh_size"], g.get("variety", "anatomical"))
-        elif liver is None:
-            liver, reg, records[m.name] = _prepared(m.path, registrar, g)
-            known[liver.geometry_id] = reg
+        key = _file_key(m.path, g) if m.path else phantom_key(m.seed, variety, g["mesh_size"])
+        liver = indexed(dataset, index.get(key))
+        if liver is None:
+            if m.path is None:
+                liver = make_phantom(m.seed, g["mesh_size"], variety)
+            else:
+                liver, reg, records[m.name] = _prepared(m.path, registrar, g)
+                known[liver.geometry_id] = reg
             index[key] = liver.geometry_id
             if dataset is not None:  # kept as they come: a long population resumes
                 _keep(dataset, liver, index, records)

@@ -14,6 +14,11 @@ from data_spec import Geometry, geometry_path, read_geometry
 MESH_INDEX = "meshes.json"
 
 
+def phantom_key(seed: int, variety: str, mesh_size: float) -> str:
+    """What a phantom's mesh depends on: its seed, variety and mesh size, and the code."""
+    return f"phantom {seed} {variety}, mesh size {float(mesh_size)!r}, {phantom_code()}"
+
+
 @functools.cache
 def phantom_code() -> str:
     """A digest of the code that meshes a phantom (its modules and gmsh's version)."""

@@ -14,7 +14,7 @@ from data_spec import Geometry, Scene, read_geometry
 from data_spec.geometry import boundary_triangles, geometry_problems
 from data_spec.livers import members
 from fem_sim.geometry.errors import GeometryError
-from fem_sim.geometry.mesh_index import indexed, phantom_code, read_index, write_index
+from fem_sim.geometry.mesh_index import indexed, phantom_key, read_index, write_index
 from fem_sim.geometry.quality import mesh_problems, orient
 from fem_sim.geometry.regions import default_vena_cava
 
@@ -70,7 +70,7 @@ def _mesh_key(scene: Scene, index: int) -> str | None:
         seed, variety = g["population_seed"] + index, g.get("variety", "anatomical")
     else:
         return None
-    return f"phantom {seed} {variety}, mesh size {float(g['mesh_size'])!r}, {phantom_code()}"
+    return phantom_key(seed, variety, g["mesh_size"])
 
 
 def scene_geometry(scene: Scene, index: int = 0) -> Geometry:
