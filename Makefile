@@ -14,6 +14,7 @@ SCENE ?= data_spec/scenes/demo_scene1.toml
 NP    ?= 2
 R     ?= 1
 OUT   ?= runs/data/$(basename $(notdir $(SCENE)))
+LIVERS := ../shared/data/livers/real
 DATA  ?= $(OUT)
 RUN   ?= runs/train/$(basename $(notdir $(SCENE)))
 TESTS ?=
@@ -35,7 +36,7 @@ MPIRUN := mpirun -n $(NP)
 .PHONY: help setup setup-system setup-solver setup-trainer demo test test-solver test-trainer \
         test-extremes extremes-doc \
         dataset train population table4 bench bench-solver bench-throughput bench-inference \
-        bench-population truth evaluate tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
+        bench-population truth evaluate patient tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
         bench-viewer docs-manipulator viewer \
         clean lock-trainer
 
@@ -50,6 +51,7 @@ help:
 	@echo "make bench    solver, throughput and inference benchmarks -> docs/ (about half an hour)"
 	@echo "make truth RUN=... LIVER=... SCENE=... OUT=...   FE truth of a liver a model never saw"
 	@echo "make evaluate RUN=... DATA=... [LIVER=...]   a model against a dataset it never saw"
+	@echo "make patient LIVER=... MODEL=... [K=40]   a new patient's own model (docs/patient.md)"
 	@echo "make tradeoff-fem   FEM speed/accuracy price list -> docs/tradeoff_fem.md (long, resumable)"
 	@echo "make tradeoff-surrogate   surrogate price list + error budget -> docs/ (long, resumable)"
 	@echo "make table4   the paper's Table 4, scenes 1-4 -> docs/table4.md (long, resumable)"
@@ -133,9 +135,23 @@ $(TEST_DATA4)/.done: data_spec/scenes/ci_scene4.toml | setup-solver
 	$(MPIRUN) $(SPY) -m fem_sim generate $< --out $(TEST_DATA4) --no-progress
 	@touch $@
 
-test-trainer: setup-trainer $(TEST_DATA)/.done $(TEST_DATA4)/.done
+# A tiny new patient end to end (make patient): a population model trained on ci_scene4, a real
+# liver with 20 FE simulations to adapt on and 6 held out; tests/surrogate/test_patient.py.
+TEST_PATIENT := runs/test-data/ci_patient
+$(TEST_PATIENT)/.done: $(TEST_DATA4)/.done | setup
+	rm -rf $(TEST_PATIENT)
+	$(TPY) -m surrogate train --data $(TEST_DATA4) --run $(TEST_PATIENT)/population \
+	    --config population_basis folds=2 evaluate_folds=1 epochs=40 hidden=[64,64] ensemble=1 \
+	    modes=16 > /dev/null
+	$(MAKE) --no-print-directory patient LIVER=$(LIVERS)/Amos-004.obj FRAME=population \
+	    MODEL=$(TEST_PATIENT)/population PSCENE=$(TEST_DATA4)/scene.toml K=20 HELD=6 \
+	    PATIENT=$(TEST_PATIENT)
+	@touch $@
+
+test-trainer: setup-trainer $(TEST_DATA)/.done $(TEST_DATA4)/.done $(TEST_PATIENT)/.done
 	$(TRAIN_VENV)/bin/ruff check .
 	LIVERFEM_TEST_DATASET=$(TEST_DATA) LIVERFEM_TEST_DATASET4=$(TEST_DATA4) \
+	    LIVERFEM_TEST_PATIENT=$(TEST_PATIENT) \
 	    bash scripts/run_pytest.sh $(TPY) tests/data_spec tests/liverviz tests/liverreg \
 	    tests/surrogate tests/reliability tests/common/test_environments.py -q $(TESTS)
 
@@ -165,6 +181,26 @@ truth: setup
 	    --out $(OUT)/scene.toml
 	$(MPIRUN) $(SPY) -m fem_sim generate $(OUT)/scene.toml --out $(OUT)/data
 	$(TPY) -m surrogate evaluate $(RUN) $(OUT)/data --liver $(LIVER) --out $(OUT)/evaluation.json
+
+# A new patient (docs/patient.md): the population model MODEL (a run) placed on the liver file
+# LIVER, K FE simulations on the patient's own mesh with the model's boundary condition (solver
+# environment, mpirun), the model corrected with them and distilled into the patient's own
+# model, $(PATIENT)/run/model (trainer environment). PSCENE: the population scene MODEL was
+# trained on (its loads, material, steps and solver). HELD more simulations are solved and kept
+# out of the adaptation (to measure the patient model on); FRAME: the liver file's frame.
+K ?= 40
+HELD ?= 0
+FRAME ?=
+MODEL ?=
+PSCENE ?= data_spec/scenes/scene4_livers.toml
+PATIENT ?= runs/patient/$(basename $(notdir $(LIVER)))
+patient: setup
+	@test -n "$(LIVER)" -a -n "$(MODEL)" || { echo "make patient: LIVER=file MODEL=run [K=40] [PSCENE=scene] [PATIENT=dir]"; exit 2; }
+	$(TPY) -m surrogate truth-scene $(MODEL) $(LIVER) --scene $(PSCENE) --sims $$(($(K) + $(HELD))) \
+	    $(if $(FRAME),--frame $(FRAME)) --out $(PATIENT)/scene.toml
+	$(MPIRUN) $(SPY) -m fem_sim generate $(PATIENT)/scene.toml --out $(PATIENT)/data
+	$(TPY) -m surrogate adapt $(MODEL) $(PATIENT)/data --liver $(LIVER) --run $(PATIENT)/run \
+	    --sims $(K) $(if $(FRAME),--frame $(FRAME))
 
 evaluate: setup-trainer
 	$(TPY) -m surrogate evaluate $(RUN) $(DATA) $(if $(LIVER),--liver $(LIVER)) \

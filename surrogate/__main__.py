@@ -4,11 +4,14 @@
     predict-liver RUN LIVER --force X Y Z FX FY FZ [--out DIR]
     truth-scene RUN LIVER --scene SCENE [--sims N] --out FILE
     evaluate RUN DATA [--liver LIVER] [--population DIR] [--out FILE]
+    adapt RUN DATA --liver LIVER --run OUT [--sims K] [--synthetic N]
 
 A killed training resumes when the same command is run again (``--fresh`` starts over).
 ``truth-scene`` writes the scene of a liver's FE truth with the model's boundary condition
 (``fem_sim generate`` solves it in the solver environment); ``evaluate`` compares a model with
-any dataset: one of its own liver, or that truth of a liver it never saw.
+any dataset: one of its own liver, or that truth of a liver it never saw. ``adapt`` turns a
+population model and a patient's FE simulations (that truth) into the patient's own model
+(:mod:`surrogate.patient`; ``make patient`` runs the three steps).
 """
 
 from __future__ import annotations
@@ -94,12 +97,27 @@ def _add_evaluate(sub) -> None:
     e.add_argument("--out", help="write the metrics here as JSON")
 
 
+def _add_adapt(sub) -> None:
+    a = sub.add_parser("adapt", help="a patient's own model: a population model corrected "
+                       "with FE simulations of the patient's liver, as a one-liver model")
+    a.add_argument("model", help="the population model's run directory")
+    a.add_argument("data", help="the patient's FE simulations (truth-scene, then fem_sim "
+                   "generate)")
+    a.add_argument("--liver", required=True, help="the liver file they were solved on")
+    a.add_argument("--run", required=True, help="the patient model's run directory to write")
+    a.add_argument("--sims", type=int, help="use the first K simulations (default: all)")
+    a.add_argument("--synthetic", type=int, default=300,
+                   help="loads drawn for the distillation (default 300)")
+    a.add_argument("--frame", choices=FRAMES, default=None, help="as predict-liver's")
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="liverfem-surrogate")
     sub = parser.add_subparsers(dest="command", required=True)
     _add_train(sub)
     _add_predict_liver(sub)
     _add_evaluate(sub)
+    _add_adapt(sub)
     return parser
 
 
@@ -219,6 +237,26 @@ def _evaluate(args) -> int:
     return 0
 
 
+def _adapt(args) -> int:
+    from surrogate.data import DataError
+    from surrogate.patient import adapt
+    from surrogate.viewer import model_dir
+
+    if args.sims is not None and args.sims < 0:
+        return _fail("adapt", f"--sims: expected an integer >= 0, got {args.sims}")
+    if args.synthetic < 1:
+        return _fail("adapt", f"--synthetic: expected an integer >= 1, got {args.synthetic}")
+    try:
+        info = adapt(model_dir(Path(args.model)), args.data, args.liver, args.run,
+                     sims=args.sims, frame=args.frame, synthetic=args.synthetic,
+                     log_fn=lambda m: print(m, file=sys.stderr, flush=True))
+    except (DataError, ValueError, OSError) as exc:
+        return _fail("adapt", str(exc))
+    print(f"patient model written to {Path(args.run) / 'model'} from "
+          f"{len(info['fe_simulations'])} FE simulations in {info['seconds']['total']:.0f} s")
+    return 0
+
+
 def wrong_environment(command: str) -> str | None:
     """Why ``command`` cannot run in this Python (None when it can): the solver environment
     has no JAX.
@@ -239,7 +277,7 @@ def main(argv=None) -> int:
         print(why, file=sys.stderr)
         return 2
     command = {"train": _train, "predict-liver": _predict_liver, "truth-scene": _truth_scene,
-               "evaluate": _evaluate}[args.command]
+               "evaluate": _evaluate, "adapt": _adapt}[args.command]
     return command(args)
 
 

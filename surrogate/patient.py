@@ -1,0 +1,308 @@
+"""A new patient's model: the population model placed on the patient's liver, corrected with a
+few FE simulations on the patient's own mesh, and distilled into a model of that one liver
+(the reduced basis, :mod:`surrogate.basis`) that ``load_predictor``, the viewer and the
+manipulator use as any other one-liver model.
+
+    python -m surrogate adapt MODEL DATA --liver FILE --run OUT [--sims K] [--frame F]
+
+``DATA``: the patient's FE simulations with the model's boundary condition (``truth-scene``
+then ``fem_sim generate``; ``make patient`` runs the three steps).
+
+The correction (:class:`Correction`) is the residual of the FE fields against the placed
+population model, regressed on the load by kernel ridge regression. The kernel is a Gaussian
+of the distance between the load points times a polynomial of the forces with no constant
+term, ``g(x, x') (f.f' + beta (f.f')^2)``: a residual that vanishes with the force and is
+nearly linear in it, as a hyperelastic liver's is for small loads, and that spreads from a
+loaded point to its neighbours. Its length scale, ridge and beta are chosen by
+cross-validation over the K simulations, grouped by simulation; with fewer than two, or when
+no setting beats the population model on the held-out simulations, the population model is
+kept unchanged. The distillation draws loads as the scene draws
+them (its eligible nodes, uniform directions, its magnitude and load steps), takes their
+fields from the corrected model and trains the reduced basis on them with the K FE fields.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from surrogate.data import Dataset
+
+LENGTHS = (10.0, 20.0, 40.0, 80.0, 160.0)   # mm: the kernel's length scales tried
+RIDGES = (1e-4, 1e-3, 1e-2, 1e-1)            # relative to the kernel's mean diagonal
+BETAS = (0.0, 1.0)                           # weight of the quadratic force term
+STUDENT = {"design": "basis", "ensemble": 1, "folds": 2}   # the distilled model's config
+
+
+def _kernel(a: tuple, b: tuple, length: float, beta: float, mix: float,
+            scales: tuple) -> np.ndarray:
+    """(na, nb) for cases a, b = (load points (n, 3) mm, forces (n, 3) N, population fields
+    (n, m) mm): (1 - mix) x Gaussian in the load points times f.f' + beta (f.f')^2, plus mix x
+    the population fields' inner product (``scales``: the force's and the fields' scales).
+    """
+    (xa, fa, ua), (xb, fb, ub) = a, b
+    d2 = ((xa[:, None, :] - xb[None, :, :]) ** 2).sum(-1)
+    ff = (fa @ fb.T) / scales[0] ** 2
+    k = (1.0 - mix) * np.exp(-d2 / (2.0 * length ** 2)) * (ff + beta * ff ** 2)
+    return k + mix * (ua @ ub.T) / scales[1] ** 2 if mix else k
+
+
+MIXES = (0.0, 0.5, 1.0)                      # weight of the population fields' product
+
+
+def _take(cases: tuple, idx) -> tuple:
+    return tuple(c[idx] for c in cases)
+
+
+@dataclasses.dataclass
+class Correction:
+    """Kernel ridge regression of residual fields on the load (one load per case) and the
+    population model's field for it.
+    """
+
+    cases: tuple            # the training cases: load points, forces, population fields
+    weights: np.ndarray     # (n, m): dual coefficients, m = output nodes x 3
+    setting: tuple          # (length mm, beta, mix, ridge)
+    scales: tuple           # the force's scale (N) and the fields' (mm)
+    cv_mee: float = float("nan")   # mm: the chosen setting's cross-validated residual MEE
+
+    def __call__(self, points, forces, fields) -> np.ndarray:
+        """(cases, m) residual at load points (cases, 3) mm with forces (cases, 3) N and the
+        population model's fields (cases, m) mm for them.
+        """
+        b = tuple(np.asarray(v, float).reshape(len(v), -1) for v in (points, forces, fields))
+        length, beta, mix, _ = self.setting
+        return _kernel(b, self.cases, length, beta, mix, self.scales) @ self.weights
+
+
+def _mee(residual: np.ndarray) -> float:
+    return float(np.linalg.norm(residual.reshape(residual.shape[0], -1, 3), axis=-1).mean())
+
+
+def _cv_scores(cases: tuple, r, groups, scales: tuple) -> dict:
+    """{(length, beta, mix, ridge): mean held-out MEE (mm)} over folds of whole simulations."""
+    sims = np.unique(groups)
+    folds = np.array_split(np.random.default_rng(0).permutation(sims), min(5, sims.size))
+    scores: dict = {}
+    for held in folds:
+        te = np.isin(groups, held)
+        tr_c, te_c = _take(cases, ~te), _take(cases, te)
+        for length, beta, mix in ((ln, b, m) for ln in LENGTHS for b in BETAS for m in MIXES):
+            k = _kernel(tr_c, tr_c, length, beta, mix, scales)
+            lam, q = np.linalg.eigh(k)
+            qr = q.T @ r[~te]
+            kt = _kernel(te_c, tr_c, length, beta, mix, scales) @ q
+            diag = max(float(np.mean(np.diag(k))), 1e-30)
+            for ridge in RIDGES:
+                pred = kt @ (qr / (np.maximum(lam, 0.0) + ridge * diag)[:, None])
+                key = (length, beta, mix, ridge)
+                scores[key] = scores.get(key, 0.0) + _mee(pred - r[te]) / len(folds)
+    return scores
+
+
+def fit_correction(x, f, u, r, groups) -> Correction | None:
+    """The correction of residuals ``r`` (n, m) for loads at ``x`` (n, 3) mm with forces ``f``
+    (n, 3) N whose population fields are ``u`` (n, m); ``groups``: each case's simulation (the
+    cross-validation holds out whole ones). None (no correction) with fewer than two
+    simulations, or when no setting's cross-validated error beats the residual itself.
+    """
+    cases = tuple(np.asarray(a, dtype=np.float64).reshape(len(a), -1) for a in (x, f, u))
+    r = np.asarray(r, dtype=np.float64)
+    if cases[0].shape[0] == 0:
+        return None
+    scales = (float(np.linalg.norm(cases[1], axis=1).max()) or 1.0,
+              float(np.linalg.norm(cases[2], axis=1).max()) or 1.0)
+    if np.unique(groups).size < 2:
+        return None   # nothing to check a setting on
+    scores = _cv_scores(cases, r, np.asarray(groups), scales)
+    setting, cv = min(scores.items(), key=lambda kv: kv[1])
+    if cv >= _mee(r):   # no setting beats the population model on held-out simulations
+        return None
+    k = _kernel(cases, cases, *setting[:3], scales)
+    diag = max(float(np.mean(np.diag(k))), 1e-30)
+    w = np.linalg.solve(k + setting[3] * diag * np.eye(k.shape[0]), r)
+    return Correction(cases, w, setting, scales, cv)
+
+
+class Teacher:
+    """The population model placed on the patient's liver, at the nodes of the patient's
+    mesh ``ds`` (its output nodes), plus the correction once fitted.
+    """
+
+    def __init__(self, pred, placement, ds: Dataset, shape: str | None = None):
+        from surrogate.predict_liver import PlacedModel
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            self.placed = PlacedModel(pred, nodes=ds.points[0], placement=placement,
+                                      shape=shape)
+        self.out = np.asarray(ds.out_nodes[0])
+        self.correction: Correction | None = None
+
+    def population(self, forces, points, chunk: int = 256) -> np.ndarray:
+        """(cases, n_out, 3) mm: the placed population model for one load per case, forces
+        (cases, 3) N at the load points (cases, 3) mm (the patient's frame).
+        """
+        forces, points = np.asarray(forces, float), np.asarray(points, float)
+        out = []
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            for s in range(0, forces.shape[0], chunk):
+                f, p = forces[s:s + chunk, None], points[s:s + chunk, None]
+                out.append(self.placed(f, self.placed.load_nodes(p))[:, self.out])
+        return np.concatenate(out) if out else np.zeros((0, self.out.size, 3))
+
+    def __call__(self, forces, points) -> np.ndarray:
+        """(cases, n_out, 3) mm: the population model plus the correction."""
+        u = self.population(forces, points)
+        if self.correction is not None and len(u):
+            u = u + self.correction(points, forces, u).reshape(u.shape)
+        return u
+
+
+def sample_fields(ds: Dataset, samples: np.ndarray) -> np.ndarray:
+    """(samples, n_out, 3) mm: the FE fields of the samples of a one-liver dataset."""
+    n_out = ds.out_nodes[0].size
+    return np.stack([np.asarray(ds.targets[ds.sample_offset[s]:ds.sample_offset[s] + n_out])
+                     for s in samples]).astype(np.float64)
+
+
+def sims_samples(ds: Dataset, sims) -> np.ndarray:
+    """The samples (converged load steps) of the simulations ``sims``."""
+    return np.flatnonzero(np.isin(ds.sample_sim, np.asarray(sims)))
+
+
+def fit_teacher(teacher: Teacher, ds: Dataset, sims) -> Teacher:
+    """The teacher's correction fitted on the FE simulations ``sims`` of the patient."""
+    smp = sims_samples(ds, sims)
+    f, x = ds.forces[smp, 0], ds.load_points[smp, 0]
+    u = teacher.population(f, x)
+    r = (sample_fields(ds, smp) - u).reshape(smp.size, -1)
+    teacher.correction = fit_correction(x, f, u, r, ds.sample_sim[smp])
+    return teacher
+
+
+def drawn_loads(ds: Dataset, n_sims: int, seed: int):
+    """(forces (S, 3) N, load nodes (S,), fractions (S,), simulation (S,)): ``n_sims`` loads
+    drawn as the patient's scene draws them (a node it may load, a uniform direction, its
+    magnitude), each at every load fraction of the FE simulations.
+    """
+    rng = np.random.default_rng(seed)
+    fractions = np.unique(np.round(ds.sample_fraction, 9))
+    magnitude = float(np.max(np.linalg.norm(ds.forces[:, 0], axis=-1)
+                             / np.maximum(ds.sample_fraction, 1e-12)))
+    nodes = rng.choice(np.asarray(ds.loadable[0]), size=n_sims)
+    d = rng.normal(size=(n_sims, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    rep = fractions.size
+    forces = np.repeat(magnitude * d, rep, axis=0) * np.tile(fractions, n_sims)[:, None]
+    return (forces, np.repeat(nodes, rep), np.tile(fractions, n_sims),
+            np.repeat(np.arange(n_sims), rep))
+
+
+def with_cases(ds: Dataset, keep: np.ndarray, forces, nodes, fractions, sims,
+               fields) -> Dataset:
+    """A one-liver dataset of the samples ``keep`` of ``ds`` and new cases (one load each;
+    ``fields`` (S, n_out, 3) mm) numbered after its simulations.
+    """
+    if ds.extra.shape[1]:
+        raise ValueError(f"{ds.directory}: the patient's scene varies its material or shape "
+                         "(extra inputs); a patient model is of one liver and one material")
+    n_out = ds.out_nodes[0].size
+    first = int(ds.sample_sim.max()) + 1
+    rows = np.concatenate([np.arange(ds.sample_offset[s], ds.sample_offset[s] + n_out)
+                           for s in keep]) if keep.size else np.zeros(0, int)
+    targets = np.concatenate([np.asarray(ds.targets[rows], np.float32),
+                              np.asarray(fields, np.float32).reshape(-1, 3)])
+    n = keep.size + len(sims)
+    return dataclasses.replace(
+        ds, sample_geo=np.zeros(n, ds.sample_geo.dtype),
+        sample_sim=np.concatenate([ds.sample_sim[keep], first + np.asarray(sims)]),
+        sample_fraction=np.concatenate([ds.sample_fraction[keep], fractions]),
+        forces=np.concatenate([ds.forces[keep], np.asarray(forces)[:, None]]),
+        load_points=np.concatenate([ds.load_points[keep],
+                                    ds.points[0][np.asarray(nodes)][:, None]]),
+        load_nodes=np.concatenate([ds.load_nodes[keep], np.asarray(nodes)[:, None]]),
+        extra=np.zeros((n, 0), ds.extra.dtype), targets=targets,
+        sample_offset=np.arange(n + 1) * n_out)
+
+
+def distilled(teacher: Teacher, ds: Dataset, sims, n_synthetic: int, cfg: dict,
+              seed: int = 0, log_fn=print):
+    """(model, dataset): the reduced basis trained on the FE simulations ``sims`` and
+    ``n_synthetic`` drawn loads with the teacher's fields.
+    """
+    from surrogate.train import fit_design
+
+    forces, nodes, fractions, sim = drawn_loads(ds, n_synthetic, seed)
+    fields = teacher(forces, ds.points[0][nodes])
+    aug = with_cases(ds, sims_samples(ds, sims), forces, nodes, fractions, sim, fields)
+    model, _ = fit_design(aug, np.arange(aug.n_samples), cfg, seed, "patient ", log_fn)
+    return model, aug
+
+
+def student_config(**overrides) -> dict:
+    """The distilled model's config: the reduced basis, one network, no cross-validation."""
+    from surrogate.config import get_config
+
+    return get_config("basis", **{**STUDENT, **overrides})
+
+
+def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | None = None,
+          synthetic: int = 300, seed: int = 0, log_fn=print, **overrides) -> dict:
+    """The patient model of ``liver`` in ``run/model``: the population model ``model_dir``
+    placed on it (as predict-liver places it), corrected with the first ``sims`` FE
+    simulations of ``data`` (None: all) and distilled. Writes and returns
+    ``run/adaptation.json`` (what was used, the correction's setting, seconds per step).
+    """
+    from surrogate.data import load_dataset
+    from surrogate.evaluate import place
+    from surrogate.export import export_model
+    from surrogate.predictor import load_predictor
+
+    t = [time.perf_counter()]
+    pred = load_predictor(model_dir)
+    if pred.shape_model is None:
+        raise ValueError(f"{model_dir}: not a population model (no shape model): a patient "
+                         "model adapts a model trained on a population of livers")
+    placement, found = place(pred, liver, frame)
+    ds = load_dataset(data)
+    used = np.unique(ds.sample_sim)[:sims]
+    t.append(time.perf_counter())
+    teacher = fit_teacher(Teacher(pred, placement, ds), ds, used)
+    t.append(time.perf_counter())
+    cfg = student_config(**overrides)
+    model, aug = distilled(teacher, ds, used, synthetic, cfg, seed, log_fn)
+    run = Path(run)
+    export_model(run / "model", model, cfg, aug)
+    t.append(time.perf_counter())
+    c = teacher.correction
+    info = {"population_model": str(Path(model_dir).resolve()), "liver": str(Path(liver).resolve()),
+            "data": str(Path(data).resolve()), "fe_simulations": used.tolist(),
+            "synthetic_simulations": synthetic, "placement_residual_mm": placement.residual,
+            "warnings": list(found),
+            "correction": None if c is None else {
+                **dict(zip(("length_mm", "beta", "mix", "ridge"), c.setting)),
+                "cv_mee_mm": c.cv_mee},
+            "seconds": {"place": t[1] - t[0], "correction": t[2] - t[1],
+                        "distillation": t[3] - t[2], "total": t[3] - t[0]}}
+    (run / "adaptation.json").write_text(json.dumps(info, indent=1))
+    return info
+
+
+def predictor_fields(pred, ds: Dataset, samples: np.ndarray) -> np.ndarray:
+    """(samples, n_out, 3) mm: a one-liver model's prediction of the samples' loads."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        u = pred(ds.forces[samples], ds.load_nodes[samples], nodes=np.asarray(ds.out_nodes[0]))
+    return np.asarray(u, dtype=np.float64)
+
+
+def field_mee(pred: np.ndarray, true: np.ndarray) -> float:
+    """Mean Euclidean error (mm) over every node of every case."""
+    return float(np.linalg.norm(pred - true, axis=-1).mean())

@@ -1,0 +1,91 @@
+"""A new patient (``make patient``, :mod:`surrogate.patient`): the correction of a population
+model by kernel ridge regression, checked on residuals whose law is known, and a tiny patient
+end to end (make test builds it: a population model of ci_scene4, a real liver with 20 FE
+simulations to adapt on and 6 held out): adapting must lower the patient's error."""
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from surrogate import load_predictor
+from surrogate.data import load_dataset
+from surrogate.patient import (
+    Teacher,
+    field_mee,
+    fit_correction,
+    predictor_fields,
+    sample_fields,
+    sims_samples,
+)
+from tests.surrogate.conftest import generated_dataset
+
+
+def _cases(n_sims: int, steps: int = 3, m: int = 60, seed: int = 0):
+    """Loads (points, forces), population fields u linear in the force through a smooth
+    position-dependent map, and each case's simulation."""
+    rng = np.random.default_rng(seed)
+    basis = rng.normal(size=(3, 3, m))
+    x = np.repeat(rng.uniform(-50, 50, size=(n_sims, 3)), steps, axis=0)
+    d = rng.normal(size=(n_sims, 3))
+    f = np.repeat(0.4 * d / np.linalg.norm(d, axis=1, keepdims=True), steps, axis=0)
+    f *= np.tile(np.arange(1, steps + 1) / steps, n_sims)[:, None]
+    u = np.einsum("ni,ijm,nj->nm", 1 + x / 100.0, basis, f) * 10.0
+    return x, f, u, np.repeat(np.arange(n_sims), steps)
+
+
+def test_a_patient_stiffer_than_the_population_is_corrected():
+    """FE fields 20 % smaller than the population model's everywhere (the population model too
+    soft, as on an unseen liver): the residual is -0.2 u, a law the kernel's population-field
+    part holds exactly, so the correction fitted on 20 simulations predicts 10 new ones'
+    residuals to a few per cent."""
+    x, f, u, g = _cases(30)
+    r = -0.2 * u
+    train = g < 20
+    c = fit_correction(x[train], f[train], u[train], r[train], g[train])
+    assert c is not None and c.setting[2] > 0  # the population fields' part is used
+    pred = c(x[~train], f[~train], u[~train])
+    assert field_mee(pred.reshape(-1, 20, 3), r[~train].reshape(-1, 20, 3)) \
+        < 0.05 * field_mee(0 * r[~train].reshape(-1, 20, 3), r[~train].reshape(-1, 20, 3))
+
+
+def test_a_residual_that_cannot_be_learnt_leaves_the_population_model_alone():
+    """Residuals of pure noise, unrelated to the loads: no setting beats zero on held-out
+    simulations, so there is no correction; nor with a single simulation."""
+    x, f, u, g = _cases(20)
+    noise = np.random.default_rng(1).normal(size=u.shape)
+    assert fit_correction(x, f, u, noise, g) is None
+    one = g == 0
+    assert fit_correction(x[one], f[one], u[one], -0.2 * u[one], g[one]) is None
+
+
+@pytest.mark.dataset
+def test_adapting_lowers_the_patients_error_and_exports_a_one_liver_model():
+    """make patient on a real liver (20 FE simulations, 6 more held out): the exported patient
+    model is a one-liver model load_predictor reads (its liver embedded, as the viewer and the
+    manipulator need), and on the held-out simulations it beats the placed population model
+    by at least 10 %."""
+    d = Path(generated_dataset("LIVERFEM_TEST_PATIENT"))
+    info = json.loads((d / "run" / "adaptation.json").read_text())
+    assert len(info["fe_simulations"]) == 20 and info["correction"] is not None
+    pred = load_predictor(d / "run" / "model")
+    meta = json.loads((d / "run" / "model" / "model.json").read_text())
+    assert meta["embedded_geometry"] and pred.shape_model is None
+    ds = load_dataset(d / "data")
+    held = np.setdiff1d(np.unique(ds.sample_sim), info["fe_simulations"])
+    assert held.size == 6
+    smp = sims_samples(ds, held)
+    true = sample_fields(ds, smp)
+    population = load_predictor(Path(info["population_model"]))
+    from surrogate.evaluate import place
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        placement, _ = place(population, info["liver"], "population")
+    before = field_mee(Teacher(population, placement, ds).population(
+        ds.forces[smp, 0], ds.load_points[smp, 0]), true)
+    after = field_mee(predictor_fields(pred, ds, smp), true)
+    print(f"held-out MEE: population {before:.3f} mm, patient model {after:.3f} mm")
+    assert after < 0.9 * before, (after, before)
