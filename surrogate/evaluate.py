@@ -260,3 +260,38 @@ def heldout_floor(data: Path, run: Path) -> dict:
            "held_out": float(np.mean([f[1] for f in floors]))}
     cache.write_text(json.dumps(out))
     return out
+
+
+def worst_case_picture(pred, data: Path, placement, png: Path, title: str = "",
+                       shape: str | None = None) -> dict:
+    """The simulation of ``data`` (a liver's FE truth) the placed model ``pred`` predicts
+    worst, drawn at its last load step on the liver's surface: the FE field, the prediction
+    and the error between them (a PNG). Returns that simulation's number and MEE (mm).
+    """
+    from liverviz.pictures import Panel, Surface, render_panels
+
+    shards = [sh for sh in map(read_shard, list_shards(data)) if sh.n_done]
+    g = read_geometry(geometry_path(data, shards[0].geometry_id))
+    errors = []
+    for sh in shards:
+        p, t, _ = _placed_fields(pred, placement, shape, g.points, [sh])
+        errors.append(float(np.linalg.norm(p - t, axis=1).mean()))
+    sh = shards[int(np.argmax(errors))]
+    p, t, _ = _placed_fields(pred, placement, shape, g.points, [sh])
+    n_out = sh.output_nodes.size
+    surface = Surface.from_mesh(g.points, g.surface_triangles, sh.fixed_nodes)
+    full = np.zeros((2, g.n_nodes, 3))
+    full[:, sh.output_nodes] = p[-n_out:], t[-n_out:]  # the last load step
+    nn, fe = full[0][surface.nodes], full[1][surface.nodes]
+    err = np.linalg.norm(nn - fe, axis=1)
+    top = float(max(np.linalg.norm(fe, axis=1).max(), np.linalg.norm(nn, axis=1).max()))
+    step = float(sh.load_fractions[sh.n_done - 1])
+    common = {"surface": surface, "forces": np.asarray(sh.forces) * step,
+              "load_nodes": np.asarray(sh.load_nodes), "clim": (0.0, top),
+              "f_ref": float(np.linalg.norm(sh.forces, axis=1).max())}
+    render_panels([Panel(u=fe, label=f"FE, simulation {sh.sim_index}", **common),
+                   Panel(u=nn, label="population model, placed", **common),
+                   Panel(**{**common, "clim": None}, u=nn, scalars=err, title="error (mm)",
+                         cmap="inferno", label=f"error: mean {err.mean():.2f} mm, max "
+                         f"{err.max():.2f} mm")], png, title=title)
+    return {"simulation": int(sh.sim_index), "mee_mm": max(errors), "png": str(png)}

@@ -306,3 +306,51 @@ def predictor_fields(pred, ds: Dataset, samples: np.ndarray) -> np.ndarray:
 def field_mee(pred: np.ndarray, true: np.ndarray) -> float:
     """Mean Euclidean error (mm) over every node of every case."""
     return float(np.linalg.norm(pred - true, axis=-1).mean())
+
+
+def scratch_model(ds: Dataset, sims, cfg: dict, seed: int = 0, log_fn=print):
+    """The reduced basis trained on the patient's FE simulations ``sims`` alone, without the
+    population model (the baseline a patient model must beat); its modes at most the samples'
+    count.
+    """
+    from surrogate.train import fit_design
+
+    n_out = ds.out_nodes[0].size
+    one = with_cases(ds, sims_samples(ds, sims), np.zeros((0, 3)), np.zeros(0, int),
+                     np.zeros(0), np.zeros(0, int), np.zeros((0, n_out, 3)))
+    cfg = {**cfg, "modes": min(cfg["modes"], one.n_samples - 1)}
+    model, _ = fit_design(one, np.arange(one.n_samples), cfg, seed, "scratch ", log_fn)
+    return model, cfg
+
+
+def held_out_errors(model_dir, pred, placement, ds: Dataset, train_sims, held_sims, *,
+                    run: Path, liver, frame: str | None = None, synthetic: int = 300,
+                    log_fn=print) -> dict:
+    """MEE (mm) on the patient's simulations ``held_sims`` of: the population model
+    ``model_dir`` (loaded: ``pred``) placed by ``placement``; the corrected one (the
+    teacher); the exported patient model (adapted on ``train_sims``, written to ``run``, the
+    liver file placed in ``frame``); the reduced basis trained on ``train_sims`` alone. With
+    the adaptation's seconds.
+    """
+    from surrogate.designs import DESIGNS
+    from surrogate.predictor import load_predictor
+
+    smp = sims_samples(ds, held_sims)
+    true = sample_fields(ds, smp)
+    f, x = ds.forces[smp, 0], ds.load_points[smp, 0]
+    teacher = Teacher(pred, placement, ds)
+    out = {"fe_simulations": len(train_sims), "held_out": len(held_sims),
+           "population": field_mee(teacher.population(f, x), true)}
+    if len(train_sims) == 0:
+        return out
+    out["corrected"] = field_mee(fit_teacher(teacher, ds, train_sims)(f, x), true)
+    info = adapt(model_dir, ds.directory, liver, run, sims=len(train_sims), frame=frame,
+                 synthetic=synthetic, log_fn=log_fn)
+    out["patient_model"] = field_mee(predictor_fields(load_predictor(run / "model"), ds, smp),
+                                     true)
+    out["adapt_seconds"] = info["seconds"]
+    out["correction"] = info["correction"]
+    model, cfg = scratch_model(ds, train_sims, student_config(), log_fn=log_fn)
+    p, t, _ = DESIGNS["basis"].predict_samples(ds, model, cfg, smp)
+    out["scratch"] = float(np.linalg.norm(np.asarray(p) - np.asarray(t), axis=-1).mean())
+    return out

@@ -1,0 +1,173 @@
+"""A new patient's model against K, the FE simulations on the patient's own mesh: docs/patient.md.
+
+    .venv-train/bin/python bench/patient.py [--model RUN] [--livers Amos-054 LiTS-100 LiTS-67]
+
+For each validation liver (never seen by the population model, its PCA or any design choice):
+its FE truth with the population model's boundary condition, K_MAX + HELD simulations
+(resumable, under bench/results/patient/); then for every K the MEE on the last HELD
+simulations of the placed population model alone, the corrected one, the exported patient
+model (``surrogate adapt`` on the first K, :mod:`surrogate.patient`) and the reduced basis
+trained on the same K simulations from scratch. Wall time on two cores is that of ``make
+patient``: measured once end to end at K = 40 on the first liver, and per K from its measured
+parts (meshing and placing, K simulations on two ranks, the adaptation).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from fem_sim.batch.chunked import generate_chunks
+from liverviz.report import ROOT, header
+
+SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
+RESULTS = ROOT / "bench" / "results" / "patient"
+MODEL = ROOT / "bench" / "results" / "scene4_real" / "run_population_basis"
+KS = (0, 5, 10, 20, 40, 80)
+HELD = 20
+
+
+def truth(pred, liver: Path, a) -> Path:
+    """The liver's FE truth with the model's boundary condition, K_MAX + HELD simulations."""
+    from surrogate.evaluate import truth_scene
+
+    d = RESULTS / liver.stem
+    d.mkdir(parents=True, exist_ok=True)
+    n = max(KS) + HELD
+    text = truth_scene(pred, SCENE, liver, n, None)
+    scene = d / "scene.toml"
+    if not scene.exists() or scene.read_text() != text:
+        shutil.rmtree(d / "data", ignore_errors=True)
+        (d / "generation.json").unlink(missing_ok=True)
+        scene.write_text(text)
+    generate_chunks(scene, d / "data", n, ranks=a.np, chunk=n)
+    return d / "data"
+
+
+def sim_seconds(data: Path) -> float:
+    """Median solver seconds per simulation on one rank, from the shards."""
+    from data_spec import list_shards, read_shard
+
+    return float(np.median([read_shard(p).stats.info["total_wall_time"]
+                            for p in list_shards(data)]))
+
+
+def curve(liver: Path, a) -> dict:
+    """Every K's errors on the liver's held-out simulations (kept in RESULTS/<liver>/k.json)."""
+    from surrogate.data import load_dataset
+    from surrogate.evaluate import place
+    from surrogate.patient import held_out_errors
+    from surrogate.predictor import load_predictor
+
+    model = Path(a.model) / "model"
+    pred = load_predictor(model)
+    data = truth(pred, liver, a)
+    t = time.perf_counter()
+    placement, _ = place(pred, liver, None)
+    place_s = time.perf_counter() - t
+    ds = load_dataset(data)
+    sims = np.unique(ds.sample_sim)
+    held = sims[-HELD:]
+    path = RESULTS / liver.stem / "k.json"
+    done = json.loads(path.read_text()) if path.exists() else {}
+    for k in KS:
+        if str(k) not in done:
+            done[str(k)] = held_out_errors(model, pred, placement, ds, sims[:k], held,
+                                           run=RESULTS / liver.stem / f"run_K{k}",
+                                           liver=liver, log_fn=lambda m: None)
+            path.write_text(json.dumps(done, indent=1))
+        print(f"[{liver.stem}] K={k}: {done[str(k)]}", flush=True)
+    return {"liver": liver.stem, "nodes": int(ds.points[0].shape[0]), "place_s": place_s,
+            "sim_s": sim_seconds(data), "points": done}
+
+
+def end_to_end(liver: Path, a, k: int = 40) -> float:
+    """Wall seconds of ``make patient`` (K simulations, two ranks), run once."""
+    out = RESULTS / "make_patient"
+    shutil.rmtree(out, ignore_errors=True)
+    t = time.perf_counter()
+    subprocess.run(["make", "--no-print-directory", "patient", f"LIVER={liver}",
+                    f"MODEL={a.model}", f"K={k}", f"PATIENT={out}"], cwd=ROOT, check=True,
+                   stdout=subprocess.DEVNULL)
+    return time.perf_counter() - t
+
+
+def wall_minutes(c: dict, k: int, mesh_s: float, ranks: int) -> float:
+    """make patient's wall minutes at K from its measured parts: meshing, placing twice
+    (truth-scene, adapt), K simulations on ``ranks`` ranks, the adaptation."""
+    p = c["points"][str(k)]
+    fe = np.ceil(k / ranks) * c["sim_s"]
+    adapt = p["adapt_seconds"]["total"] - p["adapt_seconds"]["place"] if k else 0.0
+    return (mesh_s + 2 * c["place_s"] + fe + adapt) / 60.0
+
+
+def report(curves: list[dict], e2e: float | None, mesh_s: float, a) -> str:
+    rows = []
+    for k in KS:
+        for c in curves:
+            p = c["points"][str(k)]
+            cells = [f"{p.get(key, float('nan')):.3f}" if key in p else "" for key in
+                     ("population", "corrected", "patient_model", "scratch")]
+            rows.append(f"| {k} | {c['liver']} | {' | '.join(cells)} | "
+                        f"{wall_minutes(c, k, mesh_s, a.np):.1f} |")
+    med = {k: np.median([c["points"][str(k)].get("patient_model",
+                                                 c["points"][str(k)]["population"])
+                         for c in curves]) for k in KS}
+    lines = [
+        f"Validation livers {', '.join(c['liver'] for c in curves)} (never seen by the "
+        f"population model `{Path(a.model).relative_to(ROOT)}`, its PCA or any design "
+        f"choice); FE truth on each liver's own mesh with the model's boundary condition "
+        f"(scene 4's settings: P2 at 16 mm, one random 0.4 N force, 10 load steps); MEE on "
+        f"its last {HELD} simulations, never used to adapt. Population: the model placed as "
+        "predict-liver places it. Corrected: plus the kernel ridge correction fitted on the "
+        "first K simulations. Patient model: that, distilled into the exported one-liver "
+        "model (`make patient`). Scratch: the reduced basis trained on the same K "
+        "simulations alone. Minutes: `make patient` on two cores from its measured parts "
+        "(meshing, placing, K simulations on two ranks, adaptation).", "",
+        "| K | liver | population MEE mm | corrected MEE mm | patient model MEE mm | "
+        "scratch MEE mm | wall minutes |", "|---|---|---|---|---|---|---|", *rows, "",
+        "Median over the livers (patient model; K = 0: the population model): "
+        + ", ".join(f"K = {k}: {med[k]:.3f} mm" for k in KS) + ".", ""]
+    if e2e is not None:
+        lines += [f"`make patient` run end to end at K = 40 on {curves[0]['liver']}: "
+                  f"{e2e / 60:.1f} min wall time on two cores.", ""]
+    return "\n".join(lines)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--model", default=str(MODEL), help="the population model's run")
+    ap.add_argument("--livers", nargs="+", default=["Amos-054", "LiTS-100", "LiTS-67"],
+                    help="validation livers of the scene")
+    ap.add_argument("--np", type=int, default=2, help="MPI ranks")
+    ap.add_argument("--mesh-seconds", type=float, default=8.4,
+                    help="median seconds to repair and mesh a liver (docs/real_population.md)")
+    ap.add_argument("--no-end-to-end", dest="e2e", action="store_false")
+    a = ap.parse_args()
+    from data_spec import load_scene
+    from data_spec.livers import validation_files
+
+    files = {f.stem: f for f in validation_files(load_scene(SCENE)["geometry"])}
+    unknown = [n for n in a.livers if n not in files]
+    if unknown:
+        ap.error(f"--livers: {unknown} are not validation livers of {SCENE.name}")
+    curves = [curve(files[n], a) for n in a.livers]
+    e2e = end_to_end(files[a.livers[0]], a) if a.e2e else None
+    md = ROOT / "docs" / "patient.md"
+    md.write_text(header("A new patient's model") + "\n" + report(curves, e2e,
+                                                                  a.mesh_seconds, a) + "\n")
+    md.with_suffix(".json").write_text(json.dumps({"curves": curves, "make_patient_s": e2e},
+                                                  indent=1) + "\n")
+    print(f"report written to {md}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
