@@ -135,16 +135,21 @@ $(TEST_DATA4)/.done: data_spec/scenes/ci_scene4.toml | setup-solver
 	$(MPIRUN) $(SPY) -m fem_sim generate $< --out $(TEST_DATA4) --no-progress
 	@touch $@
 
-# A tiny new patient end to end (make patient): a population model trained on ci_scene4, a real
-# liver with 20 FE simulations to adapt on and 6 held out; tests/surrogate/test_patient.py.
+# Three real livers as a file population (data_spec/scenes/ci_livers.toml, ../shared).
+TEST_LIVERS := runs/test-data/ci_livers
+$(TEST_LIVERS)/.done: data_spec/scenes/ci_livers.toml | setup-solver
+	$(MPIRUN) $(SPY) -m fem_sim generate $< --out $(TEST_LIVERS) --no-progress
+	@touch $@
+
+# A tiny new patient end to end: a population model trained on the three livers, make patient
+# on a fourth (20 FE simulations to adapt on, 6 held out); tests/surrogate/test_patient.py.
 TEST_PATIENT := runs/test-data/ci_patient
-$(TEST_PATIENT)/.done: $(TEST_DATA4)/.done | setup
+$(TEST_PATIENT)/.done: $(TEST_LIVERS)/.done | setup
 	rm -rf $(TEST_PATIENT)
-	$(TPY) -m surrogate train --data $(TEST_DATA4) --run $(TEST_PATIENT)/population \
-	    --config population_basis folds=2 evaluate_folds=1 epochs=40 hidden=[64,64] ensemble=1 \
-	    modes=16 > /dev/null
-	$(MAKE) --no-print-directory patient LIVER=$(LIVERS)/Amos-004.obj FRAME=population \
-	    MODEL=$(TEST_PATIENT)/population PSCENE=$(TEST_DATA4)/scene.toml K=20 HELD=6 \
+	$(TPY) -m surrogate train --data $(TEST_LIVERS) --run $(TEST_PATIENT)/population \
+	    folds=3 evaluate_folds=1 epochs=60 hidden=[64,64] ensemble=1 modes=16 > /dev/null
+	$(MAKE) --no-print-directory patient LIVER=$(LIVERS)/Amos-004.obj \
+	    MODEL=$(TEST_PATIENT)/population PSCENE=$(TEST_LIVERS)/scene.toml K=20 HELD=6 \
 	    PATIENT=$(TEST_PATIENT)
 	@touch $@
 

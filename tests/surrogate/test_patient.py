@@ -1,7 +1,8 @@
 """A new patient (``make patient``, :mod:`surrogate.patient`): the correction of a population
 model by kernel ridge regression, checked on residuals whose law is known, and a tiny patient
-end to end (make test builds it: a population model of ci_scene4, a real liver with 20 FE
-simulations to adapt on and 6 held out): adapting must lower the patient's error."""
+end to end (make test builds it: a population model of three real livers, ci_livers, and a
+fourth liver with 20 FE simulations to adapt on and 6 held out): adapting must lower the
+patient's error."""
 
 import json
 import warnings
@@ -83,9 +84,30 @@ def test_adapting_lowers_the_patients_error_and_exports_a_one_liver_model():
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        placement, _ = place(population, info["liver"], "population")
+        placement, _ = place(population, info["liver"], None)
     before = field_mee(Teacher(population, placement, ds).population(
         ds.forces[smp, 0], ds.load_points[smp, 0]), true)
     after = field_mee(predictor_fields(pred, ds, smp), true)
     print(f"held-out MEE: population {before:.3f} mm, patient model {after:.3f} mm")
     assert after < 0.9 * before, (after, before)
+
+
+@pytest.mark.dataset
+def test_a_model_of_three_real_livers_predicts_a_fourth(tmp_path):
+    """The population model of the three-liver file population (trained by make test) places
+    a liver outside it as a user would, in the population's frame by default, and writes
+    its prediction."""
+    from surrogate.__main__ import main
+
+    d = Path(generated_dataset("LIVERFEM_TEST_PATIENT"))
+    info = json.loads((d / "run" / "adaptation.json").read_text())
+    out = tmp_path / "pred"
+    assert main(["predict-liver", str(d / "population"), info["liver"], "--force", "0", "0",
+                 "0", "0", "0", "-0.4", "--out", str(out), "--no-picture"]) == 0
+    got = json.loads((out / "prediction.json").read_text())
+    how = got["into_population_frame"]["how"]
+    assert how.startswith("the population frame") and not got["into_population_frame"][
+        "mirrored"], how
+    assert got["registration_residual_mm"] < 4.0 and got["inverted_template_tetrahedra"] == 0
+    assert 0 < got["max_displacement_mm"] < 50
+    assert (out / "liver_deformed.vtu").exists()
