@@ -36,7 +36,7 @@ MPIRUN := mpirun -n $(NP)
 .PHONY: help setup setup-system setup-solver setup-trainer demo test test-solver test-trainer \
         test-extremes extremes-doc \
         dataset train population table4 bench bench-solver bench-throughput bench-inference \
-        bench-population truth evaluate patient tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
+        bench-population truth evaluate patient scene4-real bench-patient tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
         bench-viewer docs-manipulator viewer \
         clean lock-trainer
 
@@ -206,6 +206,15 @@ patient: setup
 	$(MPIRUN) $(SPY) -m fem_sim generate $(PATIENT)/scene.toml --out $(PATIENT)/data
 	$(TPY) -m surrogate adapt $(MODEL) $(PATIENT)/data --liver $(LIVER) --run $(PATIENT)/run \
 	    --sims $(K) $(if $(FRAME),--frame $(FRAME))
+
+# Scene 4 on real livers (long, resumable): both designs cross-validated by liver, the livers
+# never seen against FE -> docs/scene4_real.md (then make table4 T4=--report-only puts its
+# rows into docs/table4.md); a new patient against K with its model -> docs/patient.md.
+scene4-real: setup
+	$(TPY) bench/scene4_real.py --np $(NP)
+
+bench-patient: setup
+	$(TPY) bench/patient.py --np $(NP)
 
 evaluate: setup-trainer
 	$(TPY) -m surrogate evaluate $(RUN) $(DATA) $(if $(LIVER),--liver $(LIVER)) \

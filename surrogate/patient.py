@@ -39,20 +39,30 @@ BETAS = (0.0, 1.0)                           # weight of the quadratic force ter
 STUDENT = {"design": "basis", "ensemble": 1, "folds": 2}   # the distilled model's config
 
 
-def _kernel(a: tuple, b: tuple, length: float, beta: float, mix: float,
-            scales: tuple) -> np.ndarray:
-    """(na, nb) for cases a, b = (load points (n, 3) mm, forces (n, 3) N, population fields
-    (n, m) mm): (1 - mix) x Gaussian in the load points times f.f' + beta (f.f')^2, plus mix x
-    the population fields' inner product (``scales``: the force's and the fields' scales).
+def _products(a: tuple, b: tuple) -> tuple:
+    """What the kernel needs of cases a, b = (load points (n, 3) mm, forces (n, 3) N,
+    population fields (n, m) mm): squared distances, force and field inner products.
     """
     (xa, fa, ua), (xb, fb, ub) = a, b
-    d2 = ((xa[:, None, :] - xb[None, :, :]) ** 2).sum(-1)
-    ff = (fa @ fb.T) / scales[0] ** 2
-    k = (1.0 - mix) * np.exp(-d2 / (2.0 * length ** 2)) * (ff + beta * ff ** 2)
-    return k + mix * (ua @ ub.T) / scales[1] ** 2 if mix else k
+    return ((xa[:, None, :] - xb[None, :, :]) ** 2).sum(-1), fa @ fb.T, ua @ ub.T
+
+
+def _combined(p: tuple, length: float, beta: float, mix: float, scales: tuple) -> np.ndarray:
+    """(na, nb): (1 - mix) x Gaussian in the load points times f.f' + beta (f.f')^2, plus mix
+    x the population fields' inner product (``scales``: the force's and the fields' scales).
+    """
+    d2, ff, uu = p[0], p[1] / scales[0] ** 2, p[2] / scales[1] ** 2
+    return (1.0 - mix) * np.exp(-d2 / (2.0 * length ** 2)) * (ff + beta * ff ** 2) + mix * uu
+
+
+def _kernel(a: tuple, b: tuple, length: float, beta: float, mix: float,
+            scales: tuple) -> np.ndarray:
+    return _combined(_products(a, b), length, beta, mix, scales)
 
 
 MIXES = (0.0, 0.5, 1.0)                      # weight of the population fields' product
+CV_STEPS = 4                                 # load steps per simulation the setting is
+                                             # chosen on
 
 
 def _take(cases: tuple, idx) -> tuple:
@@ -84,44 +94,68 @@ def _mee(residual: np.ndarray) -> float:
     return float(np.linalg.norm(residual.reshape(residual.shape[0], -1, 3), axis=-1).mean())
 
 
-def _cv_scores(cases: tuple, r, groups, scales: tuple) -> dict:
-    """{(length, beta, mix, ridge): mean held-out MEE (mm)} over folds of whole simulations."""
+def _sq(pred, true) -> float:
+    return float(np.mean(np.sum((pred - true) ** 2, axis=1)))
+
+
+def _cv_scores(cases: tuple, r, groups, scales: tuple, score=_sq, grid=None) -> dict:
+    """{(length, beta, mix, ridge): mean held-out ``score``} over folds of whole simulations;
+    ``grid``: the (length, beta, mix) tried (default: every one) with every ridge.
+    """
     sims = np.unique(groups)
     folds = np.array_split(np.random.default_rng(0).permutation(sims), min(5, sims.size))
+    grid = grid or [(ln, b, m) for ln in LENGTHS for b in BETAS for m in MIXES]
+    products = _products(cases, cases)  # once: every fold's kernels are slices of it
     scores: dict = {}
     for held in folds:
         te = np.isin(groups, held)
-        tr_c, te_c = _take(cases, ~te), _take(cases, te)
-        for length, beta, mix in ((ln, b, m) for ln in LENGTHS for b in BETAS for m in MIXES):
-            k = _kernel(tr_c, tr_c, length, beta, mix, scales)
+        for length, beta, mix in grid:
+            full = _combined(products, length, beta, mix, scales)
+            k = full[np.ix_(~te, ~te)]
             lam, q = np.linalg.eigh(k)
             qr = q.T @ r[~te]
-            kt = _kernel(te_c, tr_c, length, beta, mix, scales) @ q
+            kt = full[np.ix_(te, ~te)] @ q
             diag = max(float(np.mean(np.diag(k))), 1e-30)
             for ridge in RIDGES:
                 pred = kt @ (qr / (np.maximum(lam, 0.0) + ridge * diag)[:, None])
                 key = (length, beta, mix, ridge)
-                scores[key] = scores.get(key, 0.0) + _mee(pred - r[te]) / len(folds)
+                scores[key] = scores.get(key, 0.0) + score(pred, r[te]) / len(folds)
     return scores
+
+
+def _spread_steps(groups: np.ndarray) -> np.ndarray:
+    """The cases the cross-validation uses: at most CV_STEPS of each simulation's, spread
+    over its steps and ending at its last.
+    """
+    out = []
+    for g in np.unique(groups):
+        idx = np.flatnonzero(groups == g)
+        out.append(idx[np.unique(np.linspace(idx.size - 1, 0, CV_STEPS).round().astype(int))])
+    return np.sort(np.concatenate(out))
 
 
 def fit_correction(x, f, u, r, groups) -> Correction | None:
     """The correction of residuals ``r`` (n, m) for loads at ``x`` (n, 3) mm with forces ``f``
     (n, 3) N whose population fields are ``u`` (n, m); ``groups``: each case's simulation (the
-    cross-validation holds out whole ones). None (no correction) with fewer than two
-    simulations, or when no setting's cross-validated error beats the residual itself.
+    cross-validation holds out whole ones). The setting is the one of least cross-validated
+    squared error, computed on at most CV_STEPS load steps of each simulation (the steps of
+    one load are nearly proportional) and on the residuals' singular coordinates (the same
+    sums, far fewer columns). None (no correction) with fewer than two simulations, or when
+    that setting's cross-validated MEE does not beat the residual itself.
     """
     cases = tuple(np.asarray(a, dtype=np.float64).reshape(len(a), -1) for a in (x, f, u))
     r = np.asarray(r, dtype=np.float64)
-    if cases[0].shape[0] == 0:
-        return None
-    scales = (float(np.linalg.norm(cases[1], axis=1).max()) or 1.0,
-              float(np.linalg.norm(cases[2], axis=1).max()) or 1.0)
     if np.unique(groups).size < 2:
         return None   # nothing to check a setting on
-    scores = _cv_scores(cases, r, np.asarray(groups), scales)
-    setting, cv = min(scores.items(), key=lambda kv: kv[1])
-    if cv >= _mee(r):   # no setting beats the population model on held-out simulations
+    scales = (float(np.linalg.norm(cases[1], axis=1).max()) or 1.0,
+              float(np.linalg.norm(cases[2], axis=1).max()) or 1.0)
+    sub = _spread_steps(np.asarray(groups))
+    cs, rs, gs = _take(cases, sub), r[sub], np.asarray(groups)[sub]
+    left, sv, _ = np.linalg.svd(rs, full_matrices=False)
+    scores = _cv_scores(cs, left * sv, gs, scales)
+    setting = min(scores, key=scores.get)
+    cv = _cv_scores(cs, rs, gs, scales, lambda p, t: _mee(p - t), [setting[:3]])[setting]
+    if cv >= _mee(rs):   # it does not beat the population model on held-out simulations
         return None
     k = _kernel(cases, cases, *setting[:3], scales)
     diag = max(float(np.mean(np.diag(k))), 1e-30)
