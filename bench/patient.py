@@ -31,7 +31,7 @@ SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
 RESULTS = ROOT / "bench" / "results" / "patient"
 MODEL = ROOT / "bench" / "results" / "scene4_real" / "run_population_basis"
 KS = (0, 5, 10, 20, 40, 80)
-HELD = 20
+HELD = 10
 
 
 def truth(pred, liver: Path, a) -> Path:
