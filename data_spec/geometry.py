@@ -84,6 +84,23 @@ def region_area(points: np.ndarray, triangles: np.ndarray, nodes: np.ndarray) ->
                                       axis=1).sum())
 
 
+def grown_region(points: np.ndarray, triangles: np.ndarray, nodes,
+                 area_min: float) -> tuple[np.ndarray, int]:
+    """(nodes, rings): surface ``nodes`` grown by rings of neighbours along ``triangles``
+    until their region's area (:func:`region_area`) reaches ``area_min`` mm^2 (at most 50
+    rings; with no node, from the first triangle's).
+    """
+    rings = 0
+    nodes = np.unique(np.asarray(nodes, dtype=np.int64))
+    while region_area(points, triangles, nodes) < area_min and rings < 50:
+        touching = triangles[np.isin(triangles, nodes).any(axis=1)]
+        if nodes.size == 0:
+            touching = triangles[:1]
+        nodes = np.union1d(nodes, touching.ravel())
+        rings += 1
+    return nodes, rings
+
+
 def geometry_problems(g: Geometry) -> list[str]:
     """Everything wrong with a geometry's arrays (empty list if it is usable): shapes, ids,
     finite points, unused nodes, and cells that are not positively oriented (a tangled or

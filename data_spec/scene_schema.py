@@ -202,6 +202,9 @@ _SCHEMA: dict[str, dict[str, Key]] = {
         "nodes": Key(_node_ids, OPTIONAL, "explicit node ids (kind = nodes)"),
         "points": Key(_points, OPTIONAL, "surface nodes within radius of any of these points, "
                       "mm (kind = points; e.g. a region mapped from another mesh)"),
+        "area_min": Key(_num(0.0), OPTIONAL, "grow the region by rings of surface neighbours "
+                        "until its area reaches this, mm^2 (as a file population fixes its "
+                        "livers)"),
     },
     "material": {
         "law": Key(_choice("ogden"), "ogden", "uncoupled first-order Ogden (FEBio convention)"),

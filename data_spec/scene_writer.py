@@ -41,12 +41,13 @@ def scene_toml(d: dict) -> str:
 
 
 def liver_scene(scene_file: str | Path, liver: str | Path, n: int, fixed=None,
-                seed: int = 44) -> str:
+                seed: int = 44, area_min: float | None = None) -> str:
     """The scene of a liver's FE truth: ``scene_file``'s loads, material, steps and solver on
     the liver file ``liver`` (its own mesh at the scene's mesh size), ``n`` simulations.
     ``fixed`` (k, 3) mm in the liver's frame: the surface nodes within half an element of
     these points are fixed (where a model's placement puts its fixed region); None: the
-    file's default region.
+    file's default region. ``area_min`` (mm^2): that region grown to it, as a file
+    population grows its livers'.
     """
     scene_file, liver = Path(scene_file), Path(liver)
     raw = tomllib.loads(scene_file.read_text())
@@ -58,6 +59,8 @@ def liver_scene(scene_file: str | Path, liver: str | Path, n: int, fixed=None,
     if fixed is not None:
         raw["fixed"] = {"kind": "points", "radius": 0.5 * raw["geometry"]["mesh_size"],
                         "points": [[round(float(v), 3) for v in p] for p in fixed]}
+        if area_min:
+            raw["fixed"]["area_min"] = round(float(area_min), 1)
     raw.pop("cases", None)
     raw["surrogate"] = {"config": "small"}
     return scene_toml(raw)

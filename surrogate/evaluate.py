@@ -62,11 +62,29 @@ def place(pred, liver: str | Path, frame: str = "LPS"):
 def truth_scene(pred, scene_file: str | Path, liver: str | Path, n: int,
                 frame: str = "LPS") -> str:
     """The scene text of a liver's FE truth with the population model's boundary condition:
-    fixed where its placement puts the template's fixed region.
+    fixed where its placement puts the template's fixed region, grown as the population's
+    livers were (:func:`fixed_area_min`).
     """
     placement, _ = place(pred, liver, frame)
     sm = pred.shape_model
-    return liver_scene(scene_file, liver, n, placement.to_liver(placement.points[sm.fixed_nodes]))
+    return liver_scene(scene_file, liver, n, placement.to_liver(placement.points[sm.fixed_nodes]),
+                       area_min=fixed_area_min(sm, scene_file))
+
+
+def fixed_area_min(sm, scene_file) -> float | None:
+    """The area (mm^2) a population of liver files grew each liver's fixed region to: the
+    scene's ``fixed_area_min``, or half the template's region. None for phantoms (each fixed
+    on its own region).
+    """
+    import tomllib
+
+    from data_spec.geometry import region_area
+
+    g = tomllib.loads(Path(scene_file).read_text())["geometry"]
+    if "livers" not in g:
+        return None
+    return g.get("fixed_area_min") or 0.5 * region_area(sm.template_points,
+                                                        sm.surface_triangles, sm.fixed_nodes)
 
 
 @functools.lru_cache(maxsize=4)

@@ -65,6 +65,10 @@ def fixed_nodes(scene: Scene, g: Geometry, source: str = "scene") -> np.ndarray:
     ids = np.unique(ids)
     if ids.size == 0:
         raise CaseError(f"{source}: the fixed region ({kind}) selects no node of the geometry")
+    if f.get("area_min"):  # grown as a file population grows its livers' regions
+        from data_spec.geometry import grown_region
+
+        ids = grown_region(g.points, g.surface_triangles, ids, f["area_min"])[0]
     return ids
 
 

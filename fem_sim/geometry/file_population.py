@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from data_spec import Geometry
-from data_spec.geometry import region_area
+from data_spec.geometry import grown_region, region_area
 from liverreg.cpd import register, surface_points, surface_samples
 from liverreg.morph import SurfaceMorph
 from liverreg.rigid import orient
@@ -98,16 +98,7 @@ def grown(liver: Geometry, nodes: np.ndarray, area_min: float) -> tuple[np.ndarr
     """(nodes, rings): ``nodes`` grown by rings of surface neighbours until their region's
     area reaches ``area_min`` (mm^2).
     """
-    tris = liver.surface_triangles
-    rings = 0
-    nodes = np.unique(nodes)
-    while region_area(liver.points, tris, nodes) < area_min and rings < 50:
-        touching = tris[np.isin(tris, nodes).any(axis=1)]
-        if nodes.size == 0:  # nothing landed: start at the surface node nearest the centre
-            touching = tris[:1]
-        nodes = np.union1d(nodes, touching.ravel())
-        rings += 1
-    return nodes, rings
+    return grown_region(liver.points, liver.surface_triangles, nodes, area_min)
 
 
 def prepare(path, registrar: Registrar, mesh_size: float, area_min: float | None = None):
