@@ -75,6 +75,13 @@ def test_adapting_lowers_the_patients_error_and_exports_a_one_liver_model():
     meta = json.loads((d / "run" / "model" / "model.json").read_text())
     assert meta["embedded_geometry"] and pred.shape_model is None
     ds = load_dataset(d / "data")
+    # the truth is clamped as the population's livers were: the placed region grown by rings
+    # to the population's area bound
+    from data_spec import load_scene
+    from data_spec.geometry import region_area
+
+    area_min = load_scene(d / "scene.toml")["fixed"]["area_min"]
+    assert area_min > 0 and region_area(ds.points[0], ds.triangles[0], ds.fixed[0]) >= area_min
     held = np.setdiff1d(np.unique(ds.sample_sim), info["fe_simulations"])
     assert held.size == 6
     smp = sims_samples(ds, held)
