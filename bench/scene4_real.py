@@ -175,7 +175,10 @@ def report(out: dict) -> str:
         f"force per simulation, {out['sims']:,} of the scene's {out['scene_sims']:,} "
         f"simulations ({out['sims'] / out['livers']:.0f} per liver; the paper: 10,200 on 102 "
         "livers; `make scene4-real` resumes the rest). Cross-validated by liver: the first "
-        "of 10 folds held out (its livers never trained on), both designs on the same folds. "
+        "of 10 folds held out (its livers never trained on), "
+        + ("both designs on the same folds. " if len(out["designs"]) > 1 else
+           "the population basis only (the node-wise network is not trained on them yet). ")
+        +
         "Skill = MEE_NN / MEE_naive (the naive model: the training livers' mean "
         "displacement); per liver: mean / median over the held-out livers.", "",
         "| design | sims | pooled skill | skill mean / median liver | MEE mm | MEE median "
