@@ -50,14 +50,6 @@ def truth(pred, liver: Path, a) -> Path:
     return d / "data"
 
 
-def sim_seconds(data: Path) -> float:
-    """Median solver seconds per simulation on one rank, from the shards."""
-    from data_spec import list_shards, read_shard
-
-    return float(np.median([read_shard(p).stats.info["total_wall_time"]
-                            for p in list_shards(data)]))
-
-
 def curve(liver: Path, a) -> dict:
     """Every K's errors on the liver's held-out simulations (kept in RESULTS/<liver>/k.json)."""
     from surrogate.data import load_dataset
@@ -68,9 +60,7 @@ def curve(liver: Path, a) -> dict:
     model = Path(a.model) / "model"
     pred = load_predictor(model)
     data = truth(pred, liver, a)
-    t = time.perf_counter()
     placement, _ = place(pred, liver, None)
-    place_s = time.perf_counter() - t
     ds = load_dataset(data)
     sims = np.unique(ds.sample_sim)
     held = sims[-HELD:]
@@ -83,8 +73,7 @@ def curve(liver: Path, a) -> dict:
                                            liver=liver, log_fn=lambda m: None)
             path.write_text(json.dumps(done, indent=1))
         print(f"[{liver.stem}] K={k}: {done[str(k)]}", flush=True)
-    return {"liver": liver.stem, "nodes": int(ds.points[0].shape[0]), "place_s": place_s,
-            "sim_s": sim_seconds(data), "points": done}
+    return {"liver": liver.stem, "nodes": int(ds.points[0].shape[0]), "points": done}
 
 
 def end_to_end(liver: Path, a, k: int = 40) -> float:

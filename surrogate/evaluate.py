@@ -290,12 +290,10 @@ def worst_case_picture(pred, data: Path, placement, png: Path, title: str = "",
 
     shards = [sh for sh in map(read_shard, list_shards(data)) if sh.n_done]
     g = read_geometry(geometry_path(data, shards[0].geometry_id))
-    errors = []
-    for sh in shards:
-        p, t, _ = _placed_fields(pred, placement, shape, g.points, [sh])
-        errors.append(float(np.linalg.norm(p - t, axis=1).mean()))
-    sh = shards[int(np.argmax(errors))]
-    p, t, _ = _placed_fields(pred, placement, shape, g.points, [sh])
+    fields = [_placed_fields(pred, placement, shape, g.points, [sh])[:2] for sh in shards]
+    errors = [float(np.linalg.norm(p - t, axis=1).mean()) for p, t in fields]
+    worst = int(np.argmax(errors))
+    sh, (p, t) = shards[worst], fields[worst]
     n_out = sh.output_nodes.size
     surface = Surface.from_mesh(g.points, g.surface_triangles, sh.fixed_nodes)
     full = np.zeros((2, g.n_nodes, 3))
