@@ -202,10 +202,11 @@ PATIENT ?= runs/patient/$(basename $(notdir $(LIVER)))
 patient: setup
 	@test -n "$(LIVER)" -a -n "$(MODEL)" || { echo "make patient: LIVER=file MODEL=run [K=40] [PSCENE=scene] [PATIENT=dir]"; exit 2; }
 	$(TPY) -m surrogate truth-scene $(MODEL) $(LIVER) --scene $(PSCENE) --sims $$(($(K) + $(HELD))) \
-	    $(if $(FRAME),--frame $(FRAME)) --out $(PATIENT)/scene.toml
+	    $(if $(FRAME),--frame $(FRAME)) --out $(PATIENT)/scene.toml \
+	    --placement $(PATIENT)/placement.npz
 	$(MPIRUN) $(SPY) -m fem_sim generate $(PATIENT)/scene.toml --out $(PATIENT)/data
 	$(TPY) -m surrogate adapt $(MODEL) $(PATIENT)/data --liver $(LIVER) --run $(PATIENT)/run \
-	    --sims $(K) $(if $(FRAME),--frame $(FRAME))
+	    --sims $(K) $(if $(FRAME),--frame $(FRAME)) --placement $(PATIENT)/placement.npz
 
 # Scene 4 on real livers (long, resumable): both designs cross-validated by liver, the livers
 # never seen against FE -> docs/scene4_real.md (then make table4 T4=--report-only puts its

@@ -68,9 +68,9 @@ def curve(liver: Path, a) -> dict:
     done = json.loads(path.read_text()) if path.exists() else {}
     for k in KS:
         if str(k) not in done:
-            done[str(k)] = held_out_errors(model, pred, placement, ds, sims[:k], held,
+            done[str(k)] = held_out_errors(pred, placement, ds, sims[:k], held,
                                            run=RESULTS / liver.stem / f"run_K{k}",
-                                           liver=liver, log_fn=lambda m: None)
+                                           log_fn=lambda m: None)
             path.write_text(json.dumps(done, indent=1))
         print(f"[{liver.stem}] K={k}: {done[str(k)]}", flush=True)
     return {"liver": liver.stem, "nodes": int(ds.points[0].shape[0]), "points": done}
@@ -94,7 +94,7 @@ def report(curves: list[dict], e2e: float | None, a) -> str:
             p = c["points"][str(k)]
             cells = [f"{p.get(key, float('nan')):.3f}" if key in p else "" for key in
                      ("population", "corrected", "patient_model", "scratch")]
-            adapt = p["adapt_seconds"]["total"] if "adapt_seconds" in p else float("nan")
+            adapt = sum(p["adapt_seconds"].values()) if "adapt_seconds" in p else float("nan")
             rows.append(f"| {k} | {c['liver']} | {' | '.join(cells)} | {adapt:.0f} |")
     med = {k: np.median([c["points"][str(k)].get("patient_model",
                                                  c["points"][str(k)]["population"])
@@ -108,8 +108,8 @@ def report(curves: list[dict], e2e: float | None, a) -> str:
         "predict-liver places it. Corrected: plus the kernel ridge correction fitted on the "
         "first K simulations. Patient model: that, distilled into the exported one-liver "
         "model (`make patient`). Scratch: the reduced basis trained on the same K "
-        "simulations alone. Adaptation: `surrogate adapt`'s seconds (placing, correcting, "
-        "distilling; the FE simulations not included).", "",
+        "simulations alone. Adaptation: the seconds of correcting and distilling (placing the "
+        "liver and the FE simulations not included).", "",
         "| K | liver | population MEE mm | corrected MEE mm | patient model MEE mm | "
         "scratch MEE mm | adaptation s |", "|---|---|---|---|---|---|---|", *rows, "",
         "Median over the livers (patient model; K = 0: the population model): "

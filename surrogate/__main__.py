@@ -2,9 +2,9 @@
 
     train --data DIR --run RUN [--config NAME] [--fresh] [key=value ...]
     predict-liver RUN LIVER --force X Y Z FX FY FZ [--out DIR]
-    truth-scene RUN LIVER --scene SCENE [--sims N] --out FILE
+    truth-scene RUN LIVER --scene SCENE [--sims N] --out FILE [--placement NPZ]
     evaluate RUN DATA [--liver LIVER] [--population DIR] [--out FILE]
-    adapt RUN DATA --liver LIVER --run OUT [--sims K] [--synthetic N]
+    adapt RUN DATA --liver LIVER --run OUT [--sims K] [--synthetic N] [--placement NPZ]
 
 A killed training resumes when the same command is run again (``--fresh`` starts over).
 ``truth-scene`` writes the scene of a liver's FE truth with the model's boundary condition
@@ -85,6 +85,8 @@ def _add_evaluate(sub) -> None:
     s.add_argument("--sims", type=int, default=60, help="simulations of the truth")
     s.add_argument("--frame", choices=FRAMES, default=None, help="as predict-liver's")
     s.add_argument("--out", required=True, help="the scene file to write")
+    s.add_argument("--placement", help="keep the liver's placement in this .npz file (adapt "
+                   "--placement reads it instead of placing the liver again)")
     e = sub.add_parser("evaluate", help="a trained model against a dataset it never trained "
                        "on: of its own liver, or the FE truth of a liver it never saw")
     e.add_argument("run", help="a run directory (or its model directory)")
@@ -109,6 +111,8 @@ def _add_adapt(sub) -> None:
     a.add_argument("--synthetic", type=int, default=300,
                    help="loads drawn for the distillation (default 300)")
     a.add_argument("--frame", choices=FRAMES, default=None, help="as predict-liver's")
+    a.add_argument("--placement", help="the placement file truth-scene --placement wrote "
+                   "(used when it holds this liver, frame and model; written otherwise)")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -197,7 +201,8 @@ def _truth_scene(args) -> int:
         if pred.shape_model is None:
             return _fail("truth-scene", f"{args.run}: its model was not trained on a "
                          "population (no shape model): evaluate it on a dataset of its liver")
-        text = truth_scene(pred, args.scene, args.liver, args.sims, args.frame)
+        text = truth_scene(pred, args.scene, args.liver, args.sims, args.frame,
+                           args.placement)
     except (ValueError, OSError) as exc:
         return _fail("truth-scene", str(exc))
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -249,7 +254,7 @@ def _adapt(args) -> int:
     try:
         info = adapt(model_dir(Path(args.model)), args.data, args.liver, args.run,
                      sims=args.sims, frame=args.frame, synthetic=args.synthetic,
-                     log_fn=lambda m: print(m, file=sys.stderr, flush=True))
+                     saved=args.placement, log_fn=lambda m: print(m, file=sys.stderr, flush=True))
     except (DataError, ValueError, OSError) as exc:
         return _fail("adapt", str(exc))
     print(f"patient model written to {Path(args.run) / 'model'} from "

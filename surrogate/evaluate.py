@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import json
 import warnings
 from pathlib import Path
 
@@ -41,31 +42,66 @@ def shape_model_digest(sm) -> str:
     return h.hexdigest()
 
 
-def place(pred, liver: str | Path, frame: str = "LPS"):
+def place(pred, liver: str | Path, frame: str = "LPS", saved: str | Path | None = None):
     """(placement, warnings): predict-liver's placement of the liver file by the loaded
     population model ``pred`` (``frame`` as its --frame). Registered once per liver, frame and
     shape model in a process: the designs and training seeds of one dataset share it.
+    ``saved``: a file that keeps it across processes (``make patient``'s steps), read when it
+    holds the placement of the same liver file, frame and shape model, written otherwise.
     """
     from surrogate.predict_liver import place_liver, read_liver_surface
 
     liver = Path(liver).resolve()
     key = (str(liver), liver.stat().st_mtime_ns, frame, shape_model_digest(pred.shape_model))
+    kept = read_placement(saved, key) if saved is not None and key not in _PLACED else None
+    if kept is not None:
+        _PLACED[key] = (kept, pred.shape_model.warnings(kept))
     if key not in _PLACED:
         points, tris = read_liver_surface(liver)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             _PLACED[key] = place_liver(pred, points, tris, frame=frame)
+        if saved is not None:
+            write_placement(saved, key, _PLACED[key][0])
     placement, found = _PLACED[key]
     return placement, list(found)
 
 
+_ARRAYS = ("points", "coefficients", "offset", "rotation")
+
+
+def write_placement(path: str | Path, key: tuple, placement) -> None:
+    """Keeps a placement in ``path`` (.npz) with the key it was made for."""
+    meta = {"key": [str(k) for k in key], "residual": float(placement.residual),
+            "iterations": [int(i) for i in placement.iterations],
+            "inverted": int(placement.inverted), "frame": placement.frame}
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "wb") as fh:
+        np.savez(fh, meta=json.dumps(meta), **{a: getattr(placement, a) for a in _ARRAYS})
+
+
+def read_placement(path: str | Path, key: tuple):
+    """The placement kept in ``path`` if it was made for ``key``, else None."""
+    from liverreg.shape_model import Placement
+
+    if not Path(path).is_file():
+        return None
+    with np.load(path) as z:
+        meta = json.loads(str(z["meta"]))
+        if meta["key"] != [str(k) for k in key]:
+            return None
+        arrays = {a: np.asarray(z[a]) for a in _ARRAYS}
+    return Placement(residual=meta["residual"], iterations=meta["iterations"],
+                     inverted=meta["inverted"], frame=meta["frame"], **arrays)
+
+
 def truth_scene(pred, scene_file: str | Path, liver: str | Path, n: int,
-                frame: str = "LPS") -> str:
+                frame: str = "LPS", saved: str | Path | None = None) -> str:
     """The scene text of a liver's FE truth with the population model's boundary condition:
     fixed where its placement puts the template's fixed region, grown as the population's
     livers were (:func:`fixed_area_min`).
     """
-    placement, _ = place(pred, liver, frame)
+    placement, _ = place(pred, liver, frame, saved)
     sm = pred.shape_model
     return liver_scene(scene_file, liver, n, placement.to_liver(placement.points[sm.fixed_nodes]),
                        area_min=fixed_area_min(sm, scene_file))

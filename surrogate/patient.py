@@ -13,8 +13,9 @@ population model, regressed on the load by kernel ridge regression. The kernel i
 of the distance between the load points times a polynomial of the forces with no constant
 term, ``g(x, x') (f.f' + beta (f.f')^2)``: a residual that vanishes with the force and is
 nearly linear in it, as a hyperelastic liver's is for small loads, and that spreads from a
-loaded point to its neighbours. Its length scale, ridge and beta are chosen by
-cross-validation over the K simulations, grouped by simulation; with fewer than two, or when
+loaded point to its neighbours (a Gaussian, or an exponential with its heavier tail). Its
+decay, length scale, ridge, beta and a weight on the population model's own field are chosen
+by cross-validation over the K simulations, grouped by simulation; with fewer than two, or when
 no setting beats the population model on the held-out simulations, the population model is
 kept unchanged. The distillation draws loads as the scene draws
 them (its eligible nodes, uniform directions, its magnitude and load steps), takes their
@@ -34,7 +35,9 @@ import numpy as np
 from surrogate.data import Dataset
 
 LENGTHS = (10.0, 20.0, 40.0, 80.0, 160.0)   # mm: the kernel's length scales tried
-RIDGES = (1e-4, 1e-3, 1e-2, 1e-1)            # relative to the kernel's mean diagonal
+DECAYS = ("gauss", "exp")                    # how it falls with the load points' distance d:
+                                             # exp(-d^2 / 2 l^2), or exp(-d / l)
+RIDGES = (1e-3, 1e-2, 0.1, 0.3, 1.0, 3.0, 10.0)   # relative to the kernel's mean diagonal
 BETAS = (0.0, 1.0)                           # weight of the quadratic force term
 STUDENT = {"design": "basis", "ensemble": 1, "folds": 2}   # the distilled model's config
 
@@ -47,20 +50,27 @@ def _products(a: tuple, b: tuple) -> tuple:
     return ((xa[:, None, :] - xb[None, :, :]) ** 2).sum(-1), fa @ fb.T, ua @ ub.T
 
 
-def _combined(p: tuple, length: float, beta: float, mix: float, scales: tuple) -> np.ndarray:
-    """(na, nb): (1 - mix) x Gaussian in the load points times f.f' + beta (f.f')^2, plus mix
-    x the population fields' inner product (``scales``: the force's and the fields' scales).
+def _combined(p: tuple, length: float, beta: float, mix: float, decay: str,
+              scales: tuple) -> np.ndarray:
+    """(na, nb): (1 - mix) x a decay in the load points' distance (``DECAYS``) times
+    f.f' + beta (f.f')^2, plus mix x the population fields' inner product (``scales``: the
+    force's and the fields' scales).
     """
     d2, ff, uu = p[0], p[1] / scales[0] ** 2, p[2] / scales[1] ** 2
-    return (1.0 - mix) * np.exp(-d2 / (2.0 * length ** 2)) * (ff + beta * ff ** 2) + mix * uu
+    near = np.exp(-d2 / (2.0 * length ** 2)) if decay == "gauss" else \
+        np.exp(-np.sqrt(np.maximum(d2, 0.0)) / length)
+    return (1.0 - mix) * near * (ff + beta * ff ** 2) + mix * uu
 
 
-def _kernel(a: tuple, b: tuple, length: float, beta: float, mix: float,
+def _kernel(a: tuple, b: tuple, length: float, beta: float, mix: float, decay: str,
             scales: tuple) -> np.ndarray:
-    return _combined(_products(a, b), length, beta, mix, scales)
+    return _combined(_products(a, b), length, beta, mix, decay, scales)
 
 
 MIXES = (0.0, 0.5, 1.0)                      # weight of the population fields' product
+MIN_GAIN = 0.01                              # a kept correction lowers the held-out
+                                             # MEE by at least this fraction (a heavily
+                                             # ridged fit of noise scrapes a few 1e-4)
 CV_STEPS = 4                                 # load steps per simulation the setting is
                                              # chosen on
 
@@ -77,7 +87,7 @@ class Correction:
 
     cases: tuple            # the training cases: load points, forces, population fields
     weights: np.ndarray     # (n, m): dual coefficients, m = output nodes x 3
-    setting: tuple          # (length mm, beta, mix, ridge)
+    setting: tuple          # (length mm, beta, mix, decay, ridge)
     scales: tuple           # the force's scale (N) and the fields' (mm)
     cv_mee: float = float("nan")   # mm: the chosen setting's cross-validated residual MEE
 
@@ -86,8 +96,7 @@ class Correction:
         population model's fields (cases, m) mm for them.
         """
         b = tuple(np.asarray(v, float).reshape(len(v), -1) for v in (points, forces, fields))
-        length, beta, mix, _ = self.setting
-        return _kernel(b, self.cases, length, beta, mix, self.scales) @ self.weights
+        return _kernel(b, self.cases, *self.setting[:4], self.scales) @ self.weights
 
 
 def _mee(residual: np.ndarray) -> float:
@@ -99,18 +108,20 @@ def _sq(pred, true) -> float:
 
 
 def _cv_scores(cases: tuple, r, groups, scales: tuple, score=_sq, grid=None) -> dict:
-    """{(length, beta, mix, ridge): mean held-out ``score``} over folds of whole simulations;
-    ``grid``: the (length, beta, mix) tried (default: every one) with every ridge.
+    """{(length, beta, mix, decay, ridge): mean held-out ``score``} over folds of whole
+    simulations; ``grid``: the (length, beta, mix, decay) tried (default: every one) with
+    every ridge.
     """
     sims = np.unique(groups)
     folds = np.array_split(np.random.default_rng(0).permutation(sims), min(5, sims.size))
-    grid = grid or [(ln, b, m) for ln in LENGTHS for b in BETAS for m in MIXES]
+    grid = grid or [(ln, b, m, d) for ln in LENGTHS for b in BETAS for m in MIXES
+                    for d in DECAYS]
     products = _products(cases, cases)  # once: every fold's kernels are slices of it
     scores: dict = {}
     for held in folds:
         te = np.isin(groups, held)
-        for length, beta, mix in grid:
-            full = _combined(products, length, beta, mix, scales)
+        for kernel in grid:
+            full = _combined(products, *kernel, scales)
             k = full[np.ix_(~te, ~te)]
             lam, q = np.linalg.eigh(k)
             qr = q.T @ r[~te]
@@ -118,7 +129,7 @@ def _cv_scores(cases: tuple, r, groups, scales: tuple, score=_sq, grid=None) -> 
             diag = max(float(np.mean(np.diag(k))), 1e-30)
             for ridge in RIDGES:
                 pred = kt @ (qr / (np.maximum(lam, 0.0) + ridge * diag)[:, None])
-                key = (length, beta, mix, ridge)
+                key = (*kernel, ridge)
                 scores[key] = scores.get(key, 0.0) + score(pred, r[te]) / len(folds)
     return scores
 
@@ -141,7 +152,7 @@ def fit_correction(x, f, u, r, groups) -> Correction | None:
     squared error, computed on at most CV_STEPS load steps of each simulation (the steps of
     one load are nearly proportional) and on the residuals' singular coordinates (the same
     sums, far fewer columns). None (no correction) with fewer than two simulations, or when
-    that setting's cross-validated MEE does not beat the residual itself.
+    that setting's cross-validated MEE is not MIN_GAIN below the residual's own.
     """
     cases = tuple(np.asarray(a, dtype=np.float64).reshape(len(a), -1) for a in (x, f, u))
     r = np.asarray(r, dtype=np.float64)
@@ -154,12 +165,13 @@ def fit_correction(x, f, u, r, groups) -> Correction | None:
     left, sv, _ = np.linalg.svd(rs, full_matrices=False)
     scores = _cv_scores(cs, left * sv, gs, scales)
     setting = min(scores, key=scores.get)
-    cv = _cv_scores(cs, rs, gs, scales, lambda p, t: _mee(p - t), [setting[:3]])[setting]
-    if cv >= _mee(rs):   # it does not beat the population model on held-out simulations
+    cv = _cv_scores(cs, rs, gs, scales, lambda p, t: _mee(p - t), [setting[:4]])[setting]
+    if cv >= (1.0 - MIN_GAIN) * _mee(rs):   # no better than the population model on
+        #                                     held-out simulations
         return None
-    k = _kernel(cases, cases, *setting[:3], scales)
+    k = _kernel(cases, cases, *setting[:4], scales)
     diag = max(float(np.mean(np.diag(k))), 1e-30)
-    w = np.linalg.solve(k + setting[3] * diag * np.eye(k.shape[0]), r)
+    w = np.linalg.solve(k + setting[-1] * diag * np.eye(k.shape[0]), r)
     return Correction(cases, w, setting, scales, cv)
 
 
@@ -288,45 +300,57 @@ def student_config(**overrides) -> dict:
 
 
 def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | None = None,
-          synthetic: int = 300, seed: int = 0, log_fn=print, **overrides) -> dict:
+          synthetic: int = 300, seed: int = 0, saved=None, log_fn=print, **overrides) -> dict:
     """The patient model of ``liver`` in ``run/model``: the population model ``model_dir``
-    placed on it (as predict-liver places it), corrected with the first ``sims`` FE
-    simulations of ``data`` (None: all) and distilled. Writes and returns
-    ``run/adaptation.json`` (what was used, the correction's setting, seconds per step).
+    placed on it (as predict-liver places it; ``saved``: a placement file truth-scene wrote),
+    corrected with the first ``sims`` FE simulations of ``data`` (None: all) and distilled.
+    Writes and returns ``run/adaptation.json`` (what was used, the correction's setting,
+    seconds per step).
     """
     from surrogate.data import load_dataset
     from surrogate.evaluate import place
-    from surrogate.export import export_model
     from surrogate.predictor import load_predictor
 
-    t = [time.perf_counter()]
+    t = time.perf_counter()
     pred = load_predictor(model_dir)
     if pred.shape_model is None:
         raise ValueError(f"{model_dir}: not a population model (no shape model): a patient "
                          "model adapts a model trained on a population of livers")
-    placement, found = place(pred, liver, frame)
+    placement, found = place(pred, liver, frame, saved)
     ds = load_dataset(data)
     used = np.unique(ds.sample_sim)[:sims]
-    t.append(time.perf_counter())
-    teacher = fit_teacher(Teacher(pred, placement, ds), ds, used)
-    t.append(time.perf_counter())
+    teacher = Teacher(pred, placement, ds)
+    placed = time.perf_counter()
+    fit_teacher(teacher, ds, used)
+    corrected = time.perf_counter()
+    info = {"population_model": str(Path(model_dir).resolve()),
+            "liver": str(Path(liver).resolve()), "data": str(Path(data).resolve()),
+            "placement_residual_mm": placement.residual, "warnings": list(found),
+            **adapted(teacher, ds, used, run, synthetic=synthetic, seed=seed, log_fn=log_fn,
+                      **overrides)}
+    info["seconds"] = {"place": placed - t, "correction": corrected - placed,
+                       **info["seconds"], "total": time.perf_counter() - t}
+    (Path(run) / "adaptation.json").write_text(json.dumps(info, indent=1))
+    return info
+
+
+def adapted(teacher: Teacher, ds: Dataset, used, run, *, synthetic: int = 300, seed: int = 0,
+            log_fn=print, **overrides) -> dict:
+    """The fitted ``teacher`` distilled on the FE simulations ``used`` of ``ds`` and ``synthetic``
+    drawn loads, exported to ``run/model``; what was used and the seconds it took.
+    """
+    from surrogate.export import export_model
+
+    t = time.perf_counter()
     cfg = student_config(**overrides)
     model, aug = distilled(teacher, ds, used, synthetic, cfg, seed, log_fn)
-    run = Path(run)
-    export_model(run / "model", model, cfg, aug)
-    t.append(time.perf_counter())
+    export_model(Path(run) / "model", model, cfg, aug)
     c = teacher.correction
-    info = {"population_model": str(Path(model_dir).resolve()), "liver": str(Path(liver).resolve()),
-            "data": str(Path(data).resolve()), "fe_simulations": used.tolist(),
-            "synthetic_simulations": synthetic, "placement_residual_mm": placement.residual,
-            "warnings": list(found),
+    return {"fe_simulations": np.asarray(used).tolist(), "synthetic_simulations": synthetic,
             "correction": None if c is None else {
-                **dict(zip(("length_mm", "beta", "mix", "ridge"), c.setting)),
+                **dict(zip(("length_mm", "beta", "mix", "decay", "ridge"), c.setting)),
                 "cv_mee_mm": c.cv_mee},
-            "seconds": {"place": t[1] - t[0], "correction": t[2] - t[1],
-                        "distillation": t[3] - t[2], "total": t[3] - t[0]}}
-    (run / "adaptation.json").write_text(json.dumps(info, indent=1))
-    return info
+            "seconds": {"distillation": time.perf_counter() - t}}
 
 
 def predictor_fields(pred, ds: Dataset, samples: np.ndarray) -> np.ndarray:
@@ -357,14 +381,12 @@ def scratch_model(ds: Dataset, sims, cfg: dict, seed: int = 0, log_fn=print):
     return model, cfg
 
 
-def held_out_errors(model_dir, pred, placement, ds: Dataset, train_sims, held_sims, *,
-                    run: Path, liver, frame: str | None = None, synthetic: int = 300,
-                    log_fn=print) -> dict:
-    """MEE (mm) on the patient's simulations ``held_sims`` of: the population model
-    ``model_dir`` (loaded: ``pred``) placed by ``placement``; the corrected one (the
-    teacher); the exported patient model (adapted on ``train_sims``, written to ``run``, the
-    liver file placed in ``frame``); the reduced basis trained on ``train_sims`` alone. With
-    the adaptation's seconds.
+def held_out_errors(pred, placement, ds: Dataset, train_sims, held_sims, *, run: Path,
+                    synthetic: int = 300, log_fn=print) -> dict:
+    """MEE (mm) on the patient's simulations ``held_sims`` of: the population model ``pred``
+    placed by ``placement``; the corrected one (the teacher, fitted on ``train_sims``); the
+    patient model distilled from it (exported to ``run``); the reduced basis trained on
+    ``train_sims`` alone. With the correction's and the distillation's seconds.
     """
     from surrogate.designs import DESIGNS
     from surrogate.predictor import load_predictor
@@ -377,12 +399,13 @@ def held_out_errors(model_dir, pred, placement, ds: Dataset, train_sims, held_si
            "population": field_mee(teacher.population(f, x), true)}
     if len(train_sims) == 0:
         return out
+    t = time.perf_counter()
     out["corrected"] = field_mee(fit_teacher(teacher, ds, train_sims)(f, x), true)
-    info = adapt(model_dir, ds.directory, liver, run, sims=len(train_sims), frame=frame,
-                 synthetic=synthetic, log_fn=log_fn)
+    fitted = time.perf_counter() - t
+    info = adapted(teacher, ds, train_sims, run, synthetic=synthetic, log_fn=log_fn)
     out["patient_model"] = field_mee(predictor_fields(load_predictor(run / "model"), ds, smp),
                                      true)
-    out["adapt_seconds"] = info["seconds"]
+    out["adapt_seconds"] = {"correction": fitted, **info["seconds"]}
     out["correction"] = info["correction"]
     model, cfg = scratch_model(ds, train_sims, student_config(), log_fn=log_fn)
     p, t, _ = DESIGNS["basis"].predict_samples(ds, model, cfg, smp)

@@ -71,6 +71,7 @@ def test_adapting_lowers_the_patients_error_and_exports_a_one_liver_model():
     d = Path(generated_dataset("LIVERFEM_TEST_PATIENT"))
     info = json.loads((d / "run" / "adaptation.json").read_text())
     assert len(info["fe_simulations"]) == 20 and info["correction"] is not None
+    assert (d / "placement.npz").is_file()   # placed once, by truth-scene; adapt read it
     pred = load_predictor(d / "run" / "model")
     meta = json.loads((d / "run" / "model" / "model.json").read_text())
     assert meta["embedded_geometry"] and pred.shape_model is None
@@ -118,3 +119,27 @@ def test_a_model_of_three_real_livers_predicts_a_fourth(tmp_path):
     assert got["registration_residual_mm"] < 4.0 and got["inverted_template_tetrahedra"] == 0
     assert 0 < got["max_displacement_mm"] < 50
     assert (out / "liver_deformed.vtu").exists()
+
+
+def test_a_kept_placement_is_read_back_only_for_its_own_liver_and_model(tmp_path):
+    """make patient places the liver once: truth-scene keeps the placement, adapt reads it
+    back, every array and number as written; a key that differs (another liver file, frame or
+    shape model) reads nothing, so adapt places the liver again."""
+    from liverreg.shape_model import Placement
+    from surrogate.evaluate import read_placement, write_placement
+
+    rng = np.random.default_rng(0)
+    turn, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    p = Placement(points=rng.normal(size=(7, 3)), coefficients=rng.normal(size=4),
+                  residual=1.25, iterations=[3, 5], offset=rng.normal(size=3), inverted=2,
+                  rotation=turn, frame="auto: turned")
+    key = ("/livers/a.obj", 123, "LPS", "digest")
+    path = tmp_path / "placement.npz"
+    write_placement(path, key, p)
+    q = read_placement(path, key)
+    for name in ("points", "coefficients", "offset", "rotation"):
+        np.testing.assert_array_equal(getattr(q, name), getattr(p, name))
+    assert (q.residual, q.iterations, q.inverted, q.frame) == (1.25, [3, 5], 2, "auto: turned")
+    assert read_placement(path, ("/livers/a.obj", 124, "LPS", "digest")) is None
+    assert read_placement(path, ("/livers/a.obj", 123, "RAS", "digest")) is None
+    assert read_placement(tmp_path / "missing.npz", key) is None
