@@ -168,13 +168,17 @@ def report(out: dict) -> str:
     un = out["unseen"]
     skills = [u["skill"] for u in un]
     secs = [u["file_to_predictor_s"] for u in un]
+    part = out["sims"] < out["scene_sims"]
     lines = [
         f"Scene 4 on real CT-segmented livers (`{SCENE.name}`: AMOS and LiTS, 15 validation "
         f"livers set aside before any training; {out['prepared']} livers prepared and in the "
-        f"PCA, {out['livers']} of them with simulations so far), P2 at 16 mm, one random 0.4 N "
-        f"force per simulation, {out['sims']:,} of the scene's {out['scene_sims']:,} "
-        f"simulations ({out['sims'] / out['livers']:.0f} per liver; the paper: 10,200 on 102 "
-        "livers; `make scene4-real` resumes the rest). Cross-validated by liver: the first "
+        f"PCA, {out['livers']} of them with simulations{' so far' if part else ''}), P2 at 16 "
+        f"mm, one random 0.4 N force per simulation, "
+        + (f"{out['sims']:,} of the scene's {out['scene_sims']:,}" if part else
+           f"the scene's {out['sims']:,}")
+        + f" simulations ({out['sims'] / out['livers']:.0f} per liver; the paper: 10,200 on "
+        "102 livers" + ("; `make scene4-real` resumes the rest" if part else "")
+        + "). Cross-validated by liver: the first "
         "of 10 folds held out (its livers never trained on), "
         + ("both designs on the same folds. " if len(out["designs"]) > 1 else
            "the population basis only (the node-wise network is not trained on them yet). ")
