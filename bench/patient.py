@@ -184,8 +184,7 @@ def main() -> int:
     e2e = end_to_end(files[a.livers[0]], a) if a.e2e else (
         json.loads(saved.read_text()).get("make_patient") if saved.exists() else None)
     md.write_text(header("A new patient's model") + "\n" + report(curves, e2e, a) + "\n")
-    md.with_suffix(".json").write_text(json.dumps({"curves": curves, "make_patient": e2e},
-                                                  indent=1) + "\n")
+    saved.write_text(json.dumps({"curves": curves, "make_patient": e2e}, indent=1) + "\n")
     print(f"report written to {md}", flush=True)
     return 0
 

@@ -53,16 +53,17 @@ def place(pred, liver: str | Path, frame: str = "LPS", saved: str | Path | None 
 
     liver = Path(liver).resolve()
     key = (str(liver), liver.stat().st_mtime_ns, frame, shape_model_digest(pred.shape_model))
-    kept = read_placement(saved, key) if saved is not None and key not in _PLACED else None
-    if kept is not None:
-        _PLACED[key] = (kept, pred.shape_model.warnings(kept))
     if key not in _PLACED:
-        points, tris = read_liver_surface(liver)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            _PLACED[key] = place_liver(pred, points, tris, frame=frame)
-        if saved is not None:
-            write_placement(saved, key, _PLACED[key][0])
+        kept = None if saved is None else read_placement(saved, key)
+        if kept is not None:
+            _PLACED[key] = (kept, pred.shape_model.warnings(kept))
+        else:
+            points, tris = read_liver_surface(liver)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                _PLACED[key] = place_liver(pred, points, tris, frame=frame)
+            if saved is not None:
+                write_placement(saved, key, _PLACED[key][0])
     placement, found = _PLACED[key]
     return placement, list(found)
 
@@ -70,9 +71,14 @@ def place(pred, liver: str | Path, frame: str = "LPS", saved: str | Path | None 
 _ARRAYS = ("points", "coefficients", "offset", "rotation")
 
 
+def _key_text(key: tuple) -> list[str]:
+    """A placement's key as kept in its file (liver path, mtime, frame, shape-model digest)."""
+    return [str(k) for k in key]
+
+
 def write_placement(path: str | Path, key: tuple, placement) -> None:
     """Keeps a placement in ``path`` (.npz) with the key it was made for."""
-    meta = {"key": [str(k) for k in key], "residual": float(placement.residual),
+    meta = {"key": _key_text(key), "residual": float(placement.residual),
             "iterations": [int(i) for i in placement.iterations],
             "inverted": int(placement.inverted), "frame": placement.frame}
     Path(path).parent.mkdir(parents=True, exist_ok=True)
@@ -88,7 +94,7 @@ def read_placement(path: str | Path, key: tuple):
         return None
     with np.load(path) as z:
         meta = json.loads(str(z["meta"]))
-        if meta["key"] != [str(k) for k in key]:
+        if meta["key"] != _key_text(key):
             return None
         arrays = {a: np.asarray(z[a]) for a in _ARRAYS}
     return Placement(residual=meta["residual"], iterations=meta["iterations"],

@@ -96,7 +96,7 @@ class Correction:
         population model's fields (cases, m) mm for them.
         """
         b = tuple(np.asarray(v, float).reshape(len(v), -1) for v in (points, forces, fields))
-        return _kernel(b, self.cases, *self.setting[:4], self.scales) @ self.weights
+        return _kernel(b, self.cases, *self.setting[:-1], self.scales) @ self.weights
 
 
 def _mee(residual: np.ndarray) -> float:
@@ -165,13 +165,14 @@ def fit_correction(x, f, u, r, groups) -> Correction | None:
     left, sv, _ = np.linalg.svd(rs, full_matrices=False)
     scores = _cv_scores(cs, left * sv, gs, scales)
     setting = min(scores, key=scores.get)
-    cv = _cv_scores(cs, rs, gs, scales, lambda p, t: _mee(p - t), [setting[:4]])[setting]
+    kernel, ridge = setting[:-1], setting[-1]
+    cv = _cv_scores(cs, rs, gs, scales, lambda p, t: _mee(p - t), [kernel])[setting]
     if cv >= (1.0 - MIN_GAIN) * _mee(rs):   # no better than the population model on
         #                                     held-out simulations
         return None
-    k = _kernel(cases, cases, *setting[:4], scales)
+    k = _kernel(cases, cases, *kernel, scales)
     diag = max(float(np.mean(np.diag(k))), 1e-30)
-    w = np.linalg.solve(k + setting[-1] * diag * np.eye(k.shape[0]), r)
+    w = np.linalg.solve(k + ridge * diag * np.eye(k.shape[0]), r)
     return Correction(cases, w, setting, scales, cv)
 
 
@@ -399,9 +400,9 @@ def held_out_errors(pred, placement, ds: Dataset, train_sims, held_sims, *, run:
            "population": field_mee(teacher.population(f, x), true)}
     if len(train_sims) == 0:
         return out
-    t = time.perf_counter()
+    start = time.perf_counter()
     out["corrected"] = field_mee(fit_teacher(teacher, ds, train_sims)(f, x), true)
-    fitted = time.perf_counter() - t
+    fitted = time.perf_counter() - start
     info = adapted(teacher, ds, train_sims, run, synthetic=synthetic, log_fn=log_fn)
     out["patient_model"] = field_mee(predictor_fields(load_predictor(run / "model"), ds, smp),
                                      true)
