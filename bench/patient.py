@@ -89,7 +89,19 @@ def curve(liver: Path, a) -> dict:
                                            log_fn=lambda m: None)
             path.write_text(json.dumps(done, indent=1))
         print(f"[{liver.stem}] K={k}: {done[str(k)]}", flush=True)
-    return {"liver": liver.stem, "nodes": int(ds.points[0].shape[0]), "points": done}
+    return {"liver": liver.stem, "nodes": int(ds.points[0].shape[0]), "points": done,
+            "fe_seconds": fe_seconds(data, a.np)}
+
+
+def fe_seconds(data: Path, ranks: int) -> dict:
+    """For each K, the first K simulations' own solve seconds (the shards' records) over
+    ``ranks`` ranks: what make patient's FE takes at that K, meshing and start-up aside.
+    """
+    from data_spec import list_shards, read_shard
+
+    t = [float(read_shard(p).stats.info.get("total_wall_time", np.nan))
+         for p in list_shards(data)]
+    return {str(k): sum(t[:k]) / ranks for k in KS if k}
 
 
 def made_by(model: Path) -> str:
@@ -149,9 +161,16 @@ def report(curves: list[dict], e2e: dict | None, a) -> str:
         + ", ".join(f"K = {k}: {med[k]:.3f} mm" for k in KS) + ".", ""]
     reached = {c["liver"]: next((k for k in KS if c["points"][str(k)].get(
         "patient_model", c["points"][str(k)]["population"]) <= GOAL_MM), None) for c in curves}
+    fe = {c["liver"]: c["fe_seconds"] for c in curves}
     lines += ["Least K at which the patient model is within the goal's "
-              f"{GOAL_MM} mm: " + ", ".join(f"{n}: {'not reached' if k is None else k}"
-                                            for n, k in reached.items()) + ".", ""]
+              f"{GOAL_MM} mm, with the FE seconds of those K simulations on two ranks (their "
+              "own solve seconds over the ranks; meshing, start-up and adapting aside): "
+              + ", ".join(f"{n}: not reached" if k is None else
+                          f"{n}: {k} ({fe[n][str(k)]:.0f} s)" for n, k in reached.items())
+              + ".", "", "FE seconds on two ranks against K (the same records): "
+              + "; ".join(f"{n}: " + ", ".join(f"{v:.0f}" for v in s.values())
+                          for n, s in fe.items()) + f" (K = {', '.join(map(str, KS[1:]))}).",
+              ""]
     if e2e is not None:
         lines += [f"`make patient` run end to end at K = {e2e['k']} on {curves[0]['liver']}, "
                   f"each step a process of its own: {e2e['total'] / 60:.1f} min wall time on "

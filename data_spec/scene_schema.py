@@ -175,7 +175,8 @@ _SCHEMA: dict[str, dict[str, Key]] = {
         "exclude": Key(_names, [], "population: livers of the folder left out (named with "
                        "the reason in a comment, e.g. refused by the repair)"),
         "phantoms": Key(_int(0), 0, "population with livers: this many phantoms as well "
-                        "(seeds population_seed onward)"),
+                        "(seeds population_seed onward), augmentation: trained on, never "
+                        "held out"),
         "frame": Key(_choice("population", "LPS", "RAS", "auto"), "LPS",
                      "population with livers: the files' frame (refined by a rigid fit onto "
                      "the template), or auto: the best of 48 axis maps"),

@@ -43,6 +43,8 @@ BASE = {
     "evaluate_folds": 0,       # train and evaluate only the first n folds (0: all): with
                                # folds = 8 and 1, a hold-out of 1/8 of the simulations/livers
     "final_fit": True,         # train the exported model on all simulations after CV
+    "phantoms_in_training": True,  # phantoms mixed into liver files (geometry.phantoms) are
+                               # trained on in every fold; false leaves them out (to measure)
     "seed": 0,
     "dtype": "float32",
     "stream": "auto",          # targets memory-mapped from disk: True, False, or "auto" (when
@@ -112,6 +114,7 @@ CHECKS = {
     "folds": (lambda v: is_int(v) and v >= 2, "an integer >= 2 (k-fold cross-validation)"),
     "evaluate_folds": (lambda v: is_int(v) and v >= 0, "an integer >= 0 (0: every fold)"),
     "final_fit": (lambda v: isinstance(v, bool), "true or false"),
+    "phantoms_in_training": (lambda v: isinstance(v, bool), "true or false"),
     "seed": (lambda v: is_int(v) and v >= 0, "an integer >= 0"),
     "dtype": (lambda v: v == "float32", "'float32' (the only training precision)"),
     "stream": (lambda v: v in (True, False, "auto"), "true, false or 'auto'"),

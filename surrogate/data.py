@@ -54,6 +54,9 @@ class Dataset:
     loadable: list | None = None
     directory: Path | None = None   # the dataset directory it was read from
     missing_sims: tuple = ()        # simulations of the scene without a shard
+    # phantoms mixed into a population of liver files (geometry.phantoms): augmentation,
+    # trained on and never held out
+    augmenting: frozenset = frozenset()
 
     @property
     def n_samples(self) -> int:
@@ -213,7 +216,20 @@ def load_dataset(directory: str | Path, stream: bool | str = "auto",
                         f"step ({reader.failed} failed): nothing to train on")
     ds = reader.dataset(final)
     ds.missing_sims = missing
+    ds.augmenting = augmenting_geometries(directory, scene)
     return ds
+
+
+def augmenting_geometries(directory: Path, scene) -> frozenset:
+    """The geometry ids of the phantoms a population of liver files mixes in: the first
+    ``phantoms`` livers of its DATA/geometry/population.npz (data_spec.livers' order).
+    """
+    g = scene["geometry"]
+    path = Path(directory) / "geometry" / "population.npz"
+    if "livers" not in g or not g.get("phantoms") or not path.exists():
+        return frozenset()
+    with np.load(path, allow_pickle=False) as z:
+        return frozenset(str(i) for i in z["geometry_ids"][:g["phantoms"]])
 
 
 def restrict_nodes(ds: Dataset, keep: list[np.ndarray]) -> Dataset:
@@ -237,9 +253,13 @@ def restrict_nodes(ds: Dataset, keep: list[np.ndarray]) -> Dataset:
 
 
 def kfold_groups(ds: Dataset, k: int, seed: int) -> list[np.ndarray]:
-    """Split simulations (livers, when the geometry varies) into k folds of sample indices."""
+    """Split simulations (livers, when the geometry varies) into k folds of sample indices.
+    Phantoms mixed into liver files (``ds.augmenting``) are in no fold: always trained on.
+    """
     key = ds.sample_geo if ds.spec.geometry_dim else ds.sample_sim
     units = np.unique(key)
+    if ds.augmenting and ds.spec.geometry_dim:
+        units = units[[ds.geo_ids[u] not in ds.augmenting for u in units]]
     if units.size < k:
         raise ValueError(f"{k}-fold cross-validation needs at least {k} "
                          f"{'livers' if ds.spec.geometry_dim else 'simulations'}, "
@@ -247,3 +267,14 @@ def kfold_groups(ds: Dataset, k: int, seed: int) -> list[np.ndarray]:
     perm = np.random.default_rng(seed).permutation(units)
     folds = np.array_split(perm, k)
     return [np.flatnonzero(np.isin(key, f)) for f in folds]
+
+
+def training_samples(ds: Dataset, held: np.ndarray, cfg: dict) -> np.ndarray:
+    """The samples a fold trains on: all but ``held``, less the mixed-in phantoms' when
+    ``cfg["phantoms_in_training"]`` is false (to measure what they bring).
+    """
+    train = np.setdiff1d(np.arange(ds.n_samples), held)
+    if ds.augmenting and not cfg.get("phantoms_in_training", True):
+        phantom = np.array([i in ds.augmenting for i in ds.geo_ids])
+        train = train[~phantom[ds.sample_geo[train]]]
+    return train

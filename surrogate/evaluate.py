@@ -299,7 +299,7 @@ def heldout_floor(data: Path, run: Path) -> dict:
     import json
 
     from surrogate.basis import compute_modes, projection_mee
-    from surrogate.data import kfold_groups, load_dataset
+    from surrogate.data import kfold_groups, load_dataset, training_samples
     from surrogate.population_basis import TemplateFields
 
     cache, shards = Path(run) / "floor.json", shard_count(data)
@@ -312,7 +312,7 @@ def heldout_floor(data: Path, run: Path) -> dict:
     maps = TemplateFields(ds)
     floors = []
     for held in kfold_groups(ds, cfg["folds"], cfg["seed"])[:cfg.get("evaluate_folds") or None]:
-        U = maps.fields(ds, np.setdiff1d(np.arange(ds.n_samples), held))
+        U = maps.fields(ds, training_samples(ds, held, cfg))
         modes = compute_modes(U, cfg["modes"], cfg["seed"])
         floors.append((projection_mee(U, modes), projection_mee(maps.fields(ds, held), modes)))
     out = {"shards": shards, "modes": cfg["modes"],

@@ -21,7 +21,7 @@ import numpy as np
 
 from data_spec.atomic import atomic_path, check_writable
 from surrogate import engine
-from surrogate.data import Dataset, kfold_groups, load_dataset
+from surrogate.data import Dataset, kfold_groups, load_dataset, training_samples
 from surrogate.designs import DESIGNS
 from surrogate.export import export_model
 from surrogate.metrics import displacement_metrics, metrics_table
@@ -172,7 +172,7 @@ def _cross_validate(ds: Dataset, cfg: dict, ckpt: Path, identity: str, say) -> d
             p, y, s, mean_disp, hist = saved
             say(f"fold {k + 1}/{len(folds)} done before (from {done})")
         else:
-            train_samples = np.setdiff1d(np.arange(ds.n_samples), held)
+            train_samples = training_samples(ds, held, cfg)
             model, hist = fit_design(ds, train_samples, cfg, cfg["seed"] + 1 + k,
                                      f"fold {k + 1}/{len(folds)} ", say,
                                      engine.Checkpoint(ckpt / f"fold{k}", identity))
@@ -209,14 +209,17 @@ def _result(ds: Dataset, cfg: dict, cv: dict) -> dict:
               "training_examples_per_s": cv["examples"] / seconds if seconds else 0.0}
     if ds.spec.geometry_dim or len(ds.geo_ids) > 1:
         result["per_liver_mee"] = per_liver(pred, true, nv, ds.sample_geo[smp])
+        result["per_liver_mee"]["geometry_ids"] = [ds.geo_ids[g]
+                                                   for g in np.unique(ds.sample_geo[smp])]
     return result
 
 
 def _final_fit(ds: Dataset, cfg: dict, run: Path, ckpt: Path, identity: str, say) -> list:
     """The exported model, trained on every simulation; its history."""
-    model, hist = fit_design(ds, np.arange(ds.n_samples), cfg, cfg["seed"], "final ", say,
+    every = training_samples(ds, np.zeros(0, int), cfg)
+    model, hist = fit_design(ds, every, cfg, cfg["seed"], "final ", say,
                              engine.Checkpoint(ckpt / "final", identity))
-    _, held, _ = early_stopping_split(ds, np.arange(ds.n_samples), cfg, cfg["seed"])
+    _, held, _ = early_stopping_split(ds, every, cfg, cfg["seed"])
     export_model(run / "model", model, cfg, ds, np.unique(ds.sample_sim[held]))
     say(f"model exported to {run / 'model'}")
     return hist

@@ -116,6 +116,8 @@ def attach_shape_coefficients(livers: list[Geometry], n_components: int, cache=N
         raise ValueError(f"pca_components = {n_components} needs at least {n_components + 1} "
                          f"livers, the population has {len(livers)}")
     ids = np.array([g.geometry_id for g in livers])
+    known = dict(known or {})
+    M = livers[template] if isinstance(template, int) else template
     if cache is not None and Path(cache).exists():
         with np.load(cache, allow_pickle=False) as z:
             if np.array_equal(z["geometry_ids"], ids) and z["coefficients"].shape[1] >= \
@@ -123,11 +125,49 @@ def attach_shape_coefficients(livers: list[Geometry], n_components: int, cache=N
                 for g, c in zip(livers, z["coefficients"]):
                     g.shape_coefficients = c[:n_components].copy()
                 return None
+            known = {**cached_registrations(z, M, n_points), **known}
     pop = build_population(livers, template, n_points, progress=progress, known=known)
     set_coefficients(livers, pop, n_components)
     if cache is not None:
-        save_population(cache, livers, pop, region)
+        save_population(cache, livers, pop, region, registration_key(M, n_points))
     return pop
+
+
+def registration_key(template: Geometry, n_points: int) -> str:
+    """What a liver's registration depends on besides the liver: the template's mesh, the
+    samples and the registration code (liverreg's cpd and morph).
+    """
+    import hashlib
+    from pathlib import Path
+
+    from liverreg import cpd, morph
+
+    h = hashlib.sha256(template.content_hash.encode() + str(n_points).encode())
+    for module in (cpd, morph):
+        h.update(Path(module.__file__).read_bytes())
+    return h.hexdigest()[:16]
+
+
+def cached_registrations(z, template: Geometry, n_points: int) -> dict:
+    """The registrations an earlier population of the same template, samples and code holds
+    (an open population.npz), by geometry id: a population that grows registers only its
+    new livers. Only the template surface is kept there, which is what the PCA reads.
+    """
+    from liverreg.cpd import Registration
+
+    if "registration_key" not in z.files or \
+            str(z["registration_key"]) != registration_key(template, n_points):
+        return {}
+    D = z["mean"] + z["coefficients"] @ z["components"]
+    jac = z["min_jacobian"] if "min_jacobian" in z.files else np.ones(len(D))
+    out = {}
+    for gid, d, err, inv, j in zip(z["geometry_ids"], D, z["registration_error"],
+                                   z["inverted"], jac):
+        points = template.points.copy()
+        points[template.surface_nodes] += d.reshape(-1, 3)
+        out[str(gid)] = Registration(points=points, residual=float(err), inverted=int(inv),
+                                     iterations=[], min_jacobian=float(j))
+    return out
 
 
 def set_coefficients(livers: list[Geometry], pop: Population, n_components: int) -> None:
@@ -137,7 +177,7 @@ def set_coefficients(livers: list[Geometry], pop: Population, n_components: int)
 
 
 def save_population(path, livers: list[Geometry], pop: Population,
-                    region: str = "vena_cava") -> None:
+                    region: str = "vena_cava", key: str = "") -> None:
     """The PCA (and the geometry ids it belongs to) as an .npz, written atomically; with a
     template that is not one of the livers, the template's mesh and fixed region (``region``).
     """
@@ -151,6 +191,8 @@ def save_population(path, livers: list[Geometry], pop: Population,
                  "template_fixed": T.regions[region]}
     if pop.min_jacobian is not None:
         extra["min_jacobian"] = pop.min_jacobian
+    if key:  # the registrations' key (registration_key): reused by a grown population
+        extra["registration_key"] = np.array(key)
     with atomic_path(path) as tmp, open(tmp, "wb") as f:  # a file object: no ".npz" appended
         np.savez(f, geometry_ids=np.array([g.geometry_id for g in livers]),
                  coefficients=pop.coefficients, mean=pop.mean, components=pop.components,

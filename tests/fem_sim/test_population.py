@@ -112,6 +112,26 @@ def test_scene_population_gets_cached_coefficients(tmp_path, population):
         attach_shape_coefficients(livers, 5)
 
 
+def test_a_grown_population_registers_only_its_new_livers(tmp_path, population, monkeypatch):
+    """The cache of 4 livers serves the registrations of those 4 in a population of 5 (the
+    PCA is new), exactly as registering them again would; another sample count reuses none.
+    """
+    import liverreg.cpd as cpd
+
+    livers, pop = population
+    cache = tmp_path / "population.npz"
+    attach_shape_coefficients(livers[:4], 2, cache=cache, n_points=300)
+    calls, register = [], cpd.register
+    monkeypatch.setattr(cpd, "register", lambda *a, **k: calls.append(1) or register(*a, **k))
+    grown = attach_shape_coefficients(livers, 3, cache=cache, n_points=300)
+    assert len(calls) == 1
+    np.testing.assert_allclose(grown.displacements, pop.displacements, atol=1e-8)
+    np.testing.assert_allclose(grown.registration_error, pop.registration_error)
+    calls.clear()
+    attach_shape_coefficients(livers[:4], 2, cache=cache, n_points=250)
+    assert len(calls) == 4
+
+
 def test_surface_points_sample_the_triangles(phantom):
     pts = surface_points(phantom)
     assert pts.shape[0] > 5 * phantom.surface_nodes.size
