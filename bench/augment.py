@@ -20,7 +20,6 @@ docs/augment.md and docs/augment.json.
 from __future__ import annotations
 
 import argparse
-import json
 import shutil
 import sys
 import time
@@ -30,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from fem_sim.batch.chunked import generate_chunks
-from liverviz.report import ROOT, commit, header
+from liverviz.report import ROOT, commit, write_report
 
 SHIPPED = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
 REAL = ROOT / "runs" / "data" / "scene4_livers"
@@ -60,15 +59,14 @@ def write_scene(path: Path, phantoms: int, per_liver: int) -> Path:
 
 
 def reuse_prepared(data: Path) -> None:
-    """The real livers' prepared meshes and their index, copied from the shipped scene's
-    dataset (the index is keyed by file content and settings, so nothing stale is reused)."""
+    """The real livers' prepared meshes, their index and their registrations, copied from the
+    shipped scene's dataset (the index and population.npz's registrations are keyed by file
+    content, settings and code, so nothing stale is reused).
+    """
     src, dst = REAL / "geometry", data / "geometry"
     if dst.exists() or not (src / "meshes.json").exists():
         return
-    dst.mkdir(parents=True)
-    for f in src.iterdir():
-        if f.name != "population.npz":
-            shutil.copy2(f, dst / f.name)
+    shutil.copytree(src, dst)
 
 
 def trained(data: Path, folds: int, evaluate: int) -> dict:
@@ -152,10 +150,8 @@ def main() -> int:
            "evaluate": a.evaluate_folds, "sims": gen["sims"], "runs": runs,
            "real": len(training_files(scene["geometry"])), "paired": paired(runs),
            "generation_hours": gen["seconds"] / 3600, "commit": commit()}
-    md = ROOT / "docs" / "augment.md"
-    md.write_text(header("Phantoms mixed into the real livers") + "\n" + report(out) + "\n")
-    md.with_suffix(".json").write_text(json.dumps(out, indent=1, default=float) + "\n")
-    print(f"report written to {md}", flush=True)
+    write_report(ROOT / "docs" / "augment.md", "Phantoms mixed into the real livers",
+                 report(out), out)
     return 0
 
 

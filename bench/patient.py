@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from fem_sim.batch.chunked import generate_chunks
-from liverviz.report import ROOT, header
+from liverviz.report import ROOT, write_report
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
 RESULTS = ROOT / "bench" / "results" / "patient"
@@ -202,9 +202,8 @@ def main() -> int:
     saved = md.with_suffix(".json")
     e2e = end_to_end(files[a.livers[0]], a) if a.e2e else (
         json.loads(saved.read_text()).get("make_patient") if saved.exists() else None)
-    md.write_text(header("A new patient's model") + "\n" + report(curves, e2e, a) + "\n")
-    saved.write_text(json.dumps({"curves": curves, "make_patient": e2e}, indent=1) + "\n")
-    print(f"report written to {md}", flush=True)
+    write_report(md, "A new patient's model", report(curves, e2e, a),
+                 {"curves": curves, "make_patient": e2e})
     return 0
 
 

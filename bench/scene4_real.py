@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from fem_sim.batch.chunked import generate_chunks
-from liverviz.report import ROOT, commit, header
+from liverviz.report import ROOT, commit, write_report
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
 SOFA = ROOT.parent / "shared" / "data" / "livers" / "sofa_liver.vtk"
@@ -257,9 +257,7 @@ def main() -> int:
                                                                     time.gmtime())}
     out["livers"] = len(shards_by_liver(data))  # the livers with simulations
     out["prepared"] = len(json.loads((data / "geometry" / "livers.json").read_text()))
-    md.write_text(header("Scene 4 on real livers") + "\n" + report(out) + "\n")
-    md.with_suffix(".json").write_text(json.dumps(out, indent=1, default=float) + "\n")
-    print(f"report written to {md}", flush=True)
+    write_report(md, "Scene 4 on real livers", report(out), out)
     return 0
 
 

@@ -83,6 +83,18 @@ def header(title: str, argv: list[str] | None = None) -> str:
             f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', '-')}\n\n")
 
 
+def write_report(md: str | Path, title: str, body: str, data) -> None:
+    """A bench's report: ``md`` with the header and ``body``, and ``data`` (what it was
+    written from) as JSON beside it, so that it can be rewritten without the results.
+    """
+    import json
+
+    md = Path(md)
+    md.write_text(header(title) + "\n" + body + "\n")
+    md.with_suffix(".json").write_text(json.dumps(data, indent=1, default=float) + "\n")
+    print(f"report written to {md}", flush=True)
+
+
 _SECTION = re.compile(r"<!-- begin (\S+) -->\n.*?<!-- end \1 -->\n", re.S)
 
 
