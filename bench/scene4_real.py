@@ -161,6 +161,18 @@ def _unseen_line(u: dict) -> str:
             f"{u['best_scale']:.2f} | {floor} | {u['file_to_predictor_s']:.1f} |")
 
 
+def _stopped(un: list[dict]) -> list[str]:
+    """The unseen livers' simulations that stopped part-way, from their truths' shards."""
+    from data_spec import list_shards, read_shard
+    from surrogate.evaluate import stopped_simulations
+
+    stops = [f"{u['liver']} simulation {s['sim']} ({s['steps']} of {s['of']} load steps; "
+             f"{s['reason']})" for u in un for s in stopped_simulations(
+                 map(read_shard, list_shards(RESULTS / "unseen" / u["liver"] / "data")))]
+    return ["Simulations of a truth that stopped part-way count with their converged load "
+            "steps: " + "; ".join(stops) + ".", ""] if stops else []
+
+
 def report(out: dict) -> str:
     """docs/scene4_real.md's body after the header."""
     pb = out["designs"][0]
@@ -209,7 +221,7 @@ def report(out: dict) -> str:
         "| liver | frame | nodes | sims | residual mm | shape coefficients out of range | "
         "MEE mm | naive MEE mm | skill | % EE < 3 mm | best scale | floor mm | file to "
         "predictor s |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
-        *[_unseen_line(u) for u in un], "",
+        *[_unseen_line(u) for u in un], "", *_stopped(un),
         f"Median skill on the unseen livers {np.median(skills):.3f} (mean "
         f"{np.mean(skills):.3f}, worst {max(skills):.3f}) against the cross-validation's "
         f"{cv_skill:.3f} (mean held-out liver): a ratio of "

@@ -231,12 +231,21 @@ def evaluate_liver(pred, data: Path, placement, found: list = (), *, population_
                                                    true_all.shape), true_all)
     floor = ({"modes_floor_mm": modes_floor(pred, placement, placed.interpolation, shards)}
              if pred.modes is not None else {})
-    return {"sims": len(shards), "nodes": g.n_nodes, "network": m_nn, "naive": m_naive,
+    return {"sims": len(shards), "stopped": stopped_simulations(shards), "nodes": g.n_nodes,
+            "network": m_nn, "naive": m_naive,
             "skill": m_nn["mee"] / m_naive["mee"],
             "naive_from": str(population_data or data),
             **_placement_facts(pred, placement, shape, population_data),
             "fixed_nodes": int(shards[0].fixed_nodes.size), "warnings": list(found), **floor,
             **_scale_fit(pred_all, true_all)}
+
+
+def stopped_simulations(shards) -> list[dict]:
+    """The simulations that stopped part-way (they count with their converged steps): each
+    one's number, steps reached, steps asked and reason.
+    """
+    return [{"sim": sh.sim_index, "steps": sh.n_done, "of": len(sh.load_fractions),
+             "reason": sh.failure_reason} for sh in shards if sh.status != "ok"]
 
 
 def evaluate_own(pred, data: Path) -> dict:

@@ -64,3 +64,17 @@ def test_bad_requests_are_refused_before_any_work(trained, tmp_path, capsys):
                  str(held / "scene.toml"), "--out", str(tmp_path / "t.toml")]) == 2
     assert "not trained on a population" in capsys.readouterr().err
     assert not (tmp_path / "t.toml").exists()
+
+
+def test_a_simulation_that_stopped_part_way_is_named_with_its_steps_and_reason():
+    from types import SimpleNamespace
+
+    from surrogate.evaluate import stopped_simulations
+
+    ok = SimpleNamespace(sim_index=0, n_done=10, load_fractions=np.linspace(0.1, 1, 10),
+                         status="ok", failure_reason="")
+    stopped = SimpleNamespace(sim_index=3, n_done=2, load_fractions=np.linspace(0.1, 1, 10),
+                              status="failed", failure_reason="Newton is not converging")
+    assert stopped_simulations([ok]) == []
+    assert stopped_simulations([ok, stopped]) == [
+        {"sim": 3, "steps": 2, "of": 10, "reason": "Newton is not converging"}]
