@@ -92,6 +92,11 @@ class SolverSettings:
                                 "nodes with the largest residuals", lo=0)
     relax_max_nodes: int = _setting(1000, "local relaxation: skipped when the hot spot has "
                                     "more nodes", lo=1)
+    stall_iterations: int = _setting(10, "an increment attempt whose |R| is still above "
+                                     "1e-3 of its start after this many Newton iterations is "
+                                     "given up (retried or cut back as a failed one) instead "
+                                     "of going on to max_iterations (0: never; measured in "
+                                     "docs/solver_stalls.md)", lo=0)
     first_increment: float = _setting(0.25, "the first increment as a fraction of the first "
                                       "output step or of a tenth of the load, whichever is "
                                       "smaller (the stiffening start is taken in "

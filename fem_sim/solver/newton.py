@@ -28,6 +28,19 @@ from fem_sim.solver.linear import LinearSolver
 from fem_sim.solver.results import NewtonCounts, StepFailure
 from fem_sim.solver.settings import SolverSettings
 
+# An attempt that has not brought |R| below this fraction of its start in
+# ``stall_iterations`` Newton steps is in Newton's slow phase (an indefinite tangent near a
+# point load: the steps wander while the line search keeps them going); a converging one is
+# many orders of magnitude below by then.
+STALL_FRACTION = 1e-3
+
+
+def is_stalled(iterations: int, r: float, r_start: float, limit: int) -> bool:
+    """An attempt to give up: ``limit`` Newton iterations done (0: never) and |R| still above
+    ``STALL_FRACTION`` of its start.
+    """
+    return limit > 0 and iterations == limit and r > STALL_FRACTION * r_start
+
 
 @dataclass
 class _Attempt:
@@ -97,6 +110,11 @@ class NewtonSolver:
                 break
             if self._newton_step(a, first_order_start):
                 return a.it
+            if is_stalled(a.it, a.r, self.start_residual, s.stall_iterations):
+                self.attempt_iterations = a.it
+                raise StepFailure(f"Newton stalled at load {lam:.4g} (|R| = {a.r:.3e} after "
+                                  f"{a.it} iterations, {self.start_residual:.3e} at the "
+                                  "start)")
         raise StepFailure(f"Newton did not converge in {s.max_iterations} iterations at load "
                           f"{lam:.4g} (|R| = {a.r:.3e}, tolerance {a.tol:.1e})")
 

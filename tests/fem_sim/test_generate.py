@@ -178,8 +178,8 @@ def test_failing_case_is_recorded_and_batch_finishes(tmp_path):
     strict = generate(scene, tmp_path / "d", n=2, extra=("--retry-failed",))
     assert strict.returncode == 3, strict.stderr
     assert f"{n} of {n} simulations failed, more than --max-failure-rate 0.5" in strict.stderr
-    assert re.search(r" x (Newton (did not converge in #|is not converging)|line search failed "
-                     r"at load #)", strict.stderr), \
+    assert re.search(r" x (Newton (did not converge in #|is not converging|stalled at load #)"
+                     r"|line search failed at load #)", strict.stderr), \
         strict.stderr
 
 

@@ -81,3 +81,36 @@ def test_force_next_to_the_fixed_region_at_high_bulk_ratio(liver):
     v0 = _volume(liver.points, liver.cells)
     dv = _volume(liver.points + u, liver.cells) - v0
     assert abs(dv) / v0 < 1e-5, dv / v0  # measured 1.4e-6; K/mu = 10 gives 4.2e-5
+
+
+
+def test_an_attempt_that_stalls_is_given_up_at_stall_iterations(monkeypatch):
+    """Newton steps that only halve |R| (the slow phase): with stall_iterations = 5 the
+    attempt ends at the 5th step with a StepFailure that says so; with 0 it goes on to
+    max_iterations; one that has fallen below 1e-3 of its start by then goes on."""
+    from fem_sim.solver.newton import STALL_FRACTION, NewtonSolver, _Attempt, is_stalled
+    from fem_sim.solver.results import StepFailure
+    from fem_sim.solver.settings import SolverSettings
+
+    def newton(rate):
+        def step(self, a, first_order_start):
+            a.it, a.r = a.it + 1, a.r * rate
+            return False
+        return step
+
+    def attempt(self, lam, history):
+        self.start_residual = 1.0
+        return _Attempt(lam=lam, r=1.0, gap=0.0, tol=0.0, scale=1.0, gap_tol=1.0,
+                        history=history)
+
+    monkeypatch.setattr(NewtonSolver, "_start", attempt)
+    for limit, rate, expected in ((5, 0.5, "stalled"), (0, 0.5, "did not converge in 25"),
+                                  (5, 0.1, "did not converge in 25")):
+        monkeypatch.setattr(NewtonSolver, "_newton_step", newton(rate))
+        solver = NewtonSolver.__new__(NewtonSolver)
+        solver.settings = SolverSettings(stall_iterations=limit, chord_contraction=0.0)
+        with pytest.raises(StepFailure, match=expected):
+            solver.solve(0.5, [], False)
+        assert solver.attempt_iterations == (5 if expected == "stalled" else 25)
+    assert not is_stalled(5, 1.0, 1.0, 0) and not is_stalled(4, 1.0, 1.0, 5)
+    assert is_stalled(5, 2 * STALL_FRACTION, 1.0, 5)
