@@ -36,8 +36,8 @@ def chosen(data: Path, worst: int, typical: int) -> list[int]:
     """The shards' indices: the ``worst`` by factorisations, and ``typical`` median ones."""
     from data_spec import list_shards, read_shard
 
-    f = {read_shard(p).sim_index: int(read_shard(p).stats.info["factorizations"])
-         for p in list_shards(data)}
+    f = {sh.sim_index: int(sh.stats.info["factorizations"])
+         for sh in map(read_shard, list_shards(data))}
     order = sorted(f, key=lambda i: (f[i], i))
     mid = len(order) // 2
     return sorted(order[::-1][:worst]) + order[mid:mid + typical]

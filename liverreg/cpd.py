@@ -201,6 +201,13 @@ def register(morph: SurfaceMorph, Y: np.ndarray, triangles: np.ndarray, X: np.nd
                         min_jacobian=morph.min_jacobian(moved), unfold_rounds=rounds)
 
 
+def surface_displacements(z) -> np.ndarray:
+    """(R, 3 s) each liver's template-surface displacement from an open population.npz: the
+    mean and every component (exact, not a truncation to fewer components).
+    """
+    return z["mean"] + z["coefficients"] @ z["components"]
+
+
 def project(displacements: np.ndarray, mean: np.ndarray, components: np.ndarray) -> np.ndarray:
     """Shape coefficients of flattened template-surface displacements (..., 3 n_surface):
     their projections, less the population mean, on the orthonormal rows of ``components``.

@@ -224,8 +224,10 @@ def augmenting_geometries(directory: Path, scene) -> frozenset:
     """The geometry ids of the phantoms a population of liver files mixes in: the first
     ``phantoms`` livers of its DATA/geometry/population.npz (data_spec.livers' order).
     """
+    from surrogate.population import population_file
+
     g = scene["geometry"]
-    path = Path(directory) / "geometry" / "population.npz"
+    path = population_file(directory)
     if "livers" not in g or not g.get("phantoms") or not path.exists():
         return frozenset()
     with np.load(path, allow_pickle=False) as z:

@@ -15,6 +15,7 @@ from data_spec import read_geometry
 from data_spec.eligible_loads import eligible_load_nodes
 from data_spec.scene import load_scene
 from data_spec.shards import geometry_path
+from liverreg.cpd import surface_displacements
 from liverreg.morph import SurfaceMorph
 from liverreg.shape_model import ShapeModel
 
@@ -61,13 +62,6 @@ def population_shape_model(ds):
                     else "")
     sm.population_fixed_area = sm.fixed_areas(D)
     return sm
-
-
-def surface_displacements(z) -> np.ndarray:
-    """(R, 3 s) each liver's template-surface displacement from an open population.npz: the
-    mean and every component (exact, not the model's truncation).
-    """
-    return z["mean"] + z["coefficients"] @ z["components"]
 
 
 def template_geometry(directory):

@@ -118,6 +118,7 @@ def attach_shape_coefficients(livers: list[Geometry], n_components: int, cache=N
     ids = np.array([g.geometry_id for g in livers])
     known = dict(known or {})
     M = livers[template] if isinstance(template, int) else template
+    key = registration_key(M, n_points)
     if cache is not None and Path(cache).exists():
         with np.load(cache, allow_pickle=False) as z:
             if np.array_equal(z["geometry_ids"], ids) and z["coefficients"].shape[1] >= \
@@ -125,11 +126,11 @@ def attach_shape_coefficients(livers: list[Geometry], n_components: int, cache=N
                 for g, c in zip(livers, z["coefficients"]):
                     g.shape_coefficients = c[:n_components].copy()
                 return None
-            known = {**cached_registrations(z, M, n_points), **known}
+            known = {**cached_registrations(z, M, key), **known}
     pop = build_population(livers, template, n_points, progress=progress, known=known)
     set_coefficients(livers, pop, n_components)
     if cache is not None:
-        save_population(cache, livers, pop, region, registration_key(M, n_points))
+        save_population(cache, livers, pop, region, key)
     return pop
 
 
@@ -148,17 +149,17 @@ def registration_key(template: Geometry, n_points: int) -> str:
     return h.hexdigest()[:16]
 
 
-def cached_registrations(z, template: Geometry, n_points: int) -> dict:
-    """The registrations an earlier population of the same template, samples and code holds
-    (an open population.npz), by geometry id: a population that grows registers only its
-    new livers. Only the template surface is kept there, which is what the PCA reads.
+def cached_registrations(z, template: Geometry, key: str) -> dict:
+    """The registrations an earlier population holds (an open population.npz) when they were
+    made with ``key`` (:func:`registration_key`: the same template, samples and code), by
+    geometry id: a population that grows registers only its new livers. Only the template
+    surface is kept there, which is what the PCA reads.
     """
-    from liverreg.cpd import Registration
+    from liverreg.cpd import Registration, surface_displacements
 
-    if "registration_key" not in z.files or \
-            str(z["registration_key"]) != registration_key(template, n_points):
+    if "registration_key" not in z.files or str(z["registration_key"]) != key:
         return {}
-    D = z["mean"] + z["coefficients"] @ z["components"]
+    D = surface_displacements(z)
     jac = z["min_jacobian"] if "min_jacobian" in z.files else np.ones(len(D))
     out = {}
     for gid, d, err, inv, j in zip(z["geometry_ids"], D, z["registration_error"],
