@@ -258,6 +258,10 @@ class BasisProblem(Problem):
         if cfg.get("shape_noise") is not None and shapes:
             noise[-shapes:] = float(cfg["shape_noise"])
         self.noise = jnp.asarray(noise) if noise.any() else None
+        self.loss_kind = cfg.get("loss", "mse")
+        if self.loss_kind == "mee":  # the modes as (k, n, 3), to decode the error per node
+            k = self.modes.shape[0]
+            self.node_modes = jnp.asarray(self.modes.reshape(k, -1, 3))
         self.tr, self.va = tr, va
         self.B = min(cfg["batch_size"], tr.size)
         self.steps_per_epoch = tr.size // self.B
@@ -281,7 +285,16 @@ class BasisProblem(Problem):
         if train and self.noise is not None:  # on the normalised features, not the forces
             x = x + self.noise * jax.random.normal(key, x.shape)
         pred = self.net.apply({"params": params}, x, data["f"][idx])
-        return jnp.mean(jnp.sum((pred - data["target"][idx]) ** 2, axis=-1))
+        err = pred - data["target"][idx]
+        if self.loss_kind == "mee":  # the metric itself on the basis' nodes, x sqrt(n) so
+            # that it weighs against the weight decay as the rms loss does
+            node = jnp.einsum("bk,knj->bnj", err, self.node_modes)
+            per = jnp.sqrt(jnp.sum(node ** 2, axis=-1) + 1e-12)
+            return jnp.mean(per) * np.sqrt(per.shape[-1])
+        sq = jnp.sum(err ** 2, axis=-1)
+        # rms: each field's root-mean-square error, so the largest displacements do not
+        # outweigh the rest as their squares do (the metric, MEE, is linear in the error)
+        return jnp.mean(jnp.sqrt(sq + 1e-12) if self.loss_kind == "rms" else sq)
 
 
 def coefficients(model: BasisModel, forces, load_points, extra, *, apply, xp=np,
@@ -333,7 +346,7 @@ class Basis:
     needs_liver = True  # its modes live on the liver it is exported with
     on_template = False
     node_sampled = False  # trains on whole fields
-    takes = frozenset({"modes", "ensemble", "shared_loads"})
+    takes = frozenset({"modes", "ensemble", "shared_loads", "loss"})
 
     def scene_problem(self, varies_geometry: bool) -> str | None:
         """Why a scene cannot take the design (None when it can)."""

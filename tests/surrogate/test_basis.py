@@ -277,3 +277,36 @@ def test_with_one_load_the_shared_network_is_the_network_per_load():
     with pytest.raises(ValueError, match="shared_loads: the nodewise design does not take "
                        "it, only basis and population_basis"):
         get_config("small", shared_loads=True)
+
+
+def test_each_loss_is_what_it_says_on_the_decoded_fields(ds):
+    """loss = mse: the mean over fields of the squared coefficient error (the squared field
+    error in the modes' span); rms: the mean of its square roots; mee: the mean Euclidean node
+    error of the decoded error field times sqrt(nodes). Each recomputed here in numpy from the
+    network's coefficients and the modes; an unknown loss is refused."""
+    import jax
+
+    from surrogate.basis import BasisProblem
+
+    tr, va = np.arange(ds.n_samples - 4), np.arange(ds.n_samples - 4, ds.n_samples)
+    probs = {k: BasisProblem(ds, tr, va, get_config("basis", modes=8, hidden=[16], loss=k), 0)
+             for k in ("mse", "rms", "mee")}
+    p = probs["mse"]
+    params = p.init(jax.random.PRNGKey(0))
+    idx, key = p.batch(tr[:8]), jax.random.PRNGKey(1)
+    pred = np.asarray(p.net.apply({"params": params}, p.data["x"][idx], p.data["f"][idx]),
+                      dtype=np.float64)
+    err = pred - np.asarray(p.data["target"][idx], dtype=np.float64)
+    sq = (err ** 2).sum(axis=1)
+    node = (err @ p.modes.astype(np.float64)).reshape(len(err), -1, 3)
+    expected = {"mse": sq.mean(), "rms": np.sqrt(sq).mean(),
+                "mee": np.linalg.norm(node, axis=2).mean() * np.sqrt(node.shape[1])}
+    for k, prob in probs.items():
+        assert float(prob.loss(params, prob.data, idx, key, False)) == pytest.approx(
+            expected[k], rel=1e-4), k
+    # the three differ on this batch (the test tells them apart)
+    assert len({round(v, 6) for v in expected.values()}) == 3
+    with pytest.raises(ValueError, match="loss: expected 'mse', 'rms' or 'mee'"):
+        get_config("basis", loss="mae")
+    with pytest.raises(ValueError, match="loss: the nodewise design does not take it"):
+        get_config("small", loss="rms")

@@ -1,0 +1,138 @@
+"""The population basis's knobs on real livers: scene 4's shipped dataset (145 CT livers, 7
+simulations each), every knob trained on the same folds by liver.
+
+    .venv-train/bin/python bench/real_knobs.py [--folds 10] [--evaluate-folds 5]
+
+The knobs were chosen on phantoms (docs/population_basis.md, docs/livers_or_loads.md); this
+measures them again where the product is used. Each variant is the ``population_basis``
+config with its overrides, cross-validated on the first ``--evaluate-folds`` of ``--folds``
+folds (the validation livers are not in the dataset: no variant sees them). Per held-out
+liver, paired with the first row (the loss the config had before: the mean squared field
+error). Resumable: a finished variant is reused (bench/results/real_knobs/run_*). Writes
+docs/real_knobs.md and docs/real_knobs.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from liverviz.report import ROOT, commit, write_report
+
+DATA = ROOT / "runs" / "data" / "scene4_livers"
+RESULTS = ROOT / "bench" / "results" / "real_knobs"
+CONFIG = "population_basis"
+
+# (slug, label, overrides): the first is the reference every other is paired with
+VARIANTS = [
+    ("mse", "mean squared field error (the loss before)", {"loss": "mse"}),
+    ("rms", "each field's RMS error (shipped)", {"loss": "rms"}),
+    ("mse_shape10", "mean squared error, first 10 shape coefficients",
+     {"loss": "mse", "shape_inputs": 10}),
+    ("mse_noshape", "mean squared error, no shape coefficient",
+     {"loss": "mse", "shape_inputs": 0}),
+    ("rms_l2_3e-3", "RMS, weight decay 3e-3", {"loss": "rms", "l2": 0.003}),
+    ("rms_l2_3e-2", "RMS, weight decay 3e-2", {"loss": "rms", "l2": 0.03}),
+    ("rms_512", "RMS, 512 x 512 network", {"loss": "rms", "hidden": [512, 512]}),
+    ("mee", "the mean Euclidean node error of the decoded fields", {"loss": "mee"}),
+    ("rms_inner5", "RMS, 5 % of the livers for early stopping (not 10 %)",
+     {"loss": "rms", "inner_val_fraction": 0.05}),
+]
+
+
+def trained(folds: int, evaluate: int, only: set | None) -> dict:
+    """Every variant's metrics (trained, or reused when finished before)."""
+    from surrogate.train import train_or_reuse
+
+    out = {}
+    for slug, _label, over in VARIANTS:
+        if only and slug not in only:
+            continue
+        t = time.perf_counter()
+        out[slug] = train_or_reuse(DATA, RESULTS / f"run_{slug}", CONFIG,
+                                   {"folds": folds, "evaluate_folds": evaluate,
+                                    "final_fit": False, **over})
+        print(f"[{slug}] skill {out[slug]['skill']:.3f} ({time.perf_counter() - t:.0f} s)",
+              flush=True)
+    return out
+
+
+def paired(ref: dict, m: dict) -> tuple[int, int, int, int]:
+    """(livers with a lower MEE than the reference, livers, folds with a lower MEE, folds)."""
+    a = dict(zip(m["per_liver_mee"]["geometry_ids"], m["per_liver_mee"]["values"]))
+    b = dict(zip(ref["per_liver_mee"]["geometry_ids"], ref["per_liver_mee"]["values"]))
+    common = sorted(set(a) & set(b))
+    folds = sum(x["mee"] < y["mee"] for x, y in zip(m["per_fold"], ref["per_fold"]))
+    return (sum(a[g] < b[g] for g in common), len(common), folds,
+            min(len(m["per_fold"]), len(ref["per_fold"])))
+
+
+def report(runs: dict, folds: int, evaluate: int) -> str:
+    ref = runs[VARIANTS[0][0]]
+    lines = [
+        f"The population basis (`{CONFIG}`) on scene 4's real livers "
+        f"(`runs/data/scene4_livers`: {ref['n_simulations']:,} simulations on the 145 training "
+        f"livers), the first {evaluate} of {folds} folds by liver held out in turn "
+        f"({len(ref['per_liver_mee']['values'])} held-out livers). One training seed per "
+        "variant (each an ensemble of five networks): differences of a few per cent are "
+        "noise; the paired columns say whether a difference holds liver by liver and fold "
+        "by fold. Training: the cross-validation's own minutes, with two or three trainings "
+        "sharing the two cores.", "",
+        "| variant | config overrides | pooled skill | skill mean / median liver | MEE mm "
+        "| % EE < 3 mm | livers lower than the first row | folds lower | training |",
+        "|---|---|---|---|---|---|---|---|---|"]
+    for slug, label, over in VARIANTS:
+        if slug not in runs:
+            continue
+        m = runs[slug]
+        pl = m["per_liver_mee"]
+        lower = "" if m is ref else "{} of {} | {} of {}".format(*paired(ref, m))
+        lines.append(f"| {label} | `{over}` | {m['skill']:.3f} | {pl['skill_mean']:.3f} / "
+                     f"{pl['skill_median']:.3f} | {m['network']['mee']:.3f} | "
+                     f"{m['network']['pct_ee_lt_3mm']:.2f} | {lower or ' | '} | "
+                     f"{m['training_seconds'] / 60:.0f} min |")
+    lines += ["", "The RMS loss is shipped: a lower MEE than the squared error on "
+              "{} of {} held-out livers and on {} of {} folds. The knobs were compared on these "
+              "same folds (none set aside for the choice); fold 1 is also docs/scene4_real.md's "
+              "held-out fold, so its row carries a little of that choice. The validation livers "
+              "are in no fold.".format(*paired(ref, runs["rms"]))] if "rms" in runs else []
+    return "\n".join(lines)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--folds", type=int, default=10)
+    ap.add_argument("--evaluate-folds", type=int, default=5)
+    ap.add_argument("--only", nargs="*", help="train only these variants (slugs)")
+    a = ap.parse_args()
+    if not DATA.exists():
+        print(f"{DATA}: missing; `make scene4-real` generates it", file=sys.stderr)
+        return 1
+    runs = trained(a.folds, a.evaluate_folds, set(a.only or ()))
+    out = {"folds": a.folds, "evaluate": a.evaluate_folds, "commit": commit(),
+           "runs": {s: {k: runs[s][k] for k in ("skill", "per_liver_mee", "per_fold",
+                                                "network", "training_seconds")}
+                    for s in runs},
+           "variants": {s: over for s, _, over in VARIANTS}}
+    text = report(runs, a.folds, a.evaluate_folds)
+    text += "\n\n" + NOTES
+    write_report(ROOT / "docs" / "real_knobs.md", "The population basis's knobs on real livers",
+                 text, out)
+    return 0
+
+
+NOTES = """\
+Measured and rejected by hand on the same folds (not a command of this bench; their code is not
+kept): two more load contexts, each with the RMS loss: the liver's outward normal and its depth
+below the load (pooled skill 0.372 against the RMS row's 0.367), and the linear-elastic unit
+response of the registered template under the load (linear tetrahedra, log compliance along the
+force, its mean displacement: 0.365, per-liver median 0.346 against 0.358, 4 of 5 folds lower).
+That response correlates with the FE field's size (Spearman 0.85 with the mean displacement,
+against 0.64 for the distance to the fixed region), yet the network learns little from it: it
+already knows the field's size from the shape and the load's place. The held-out error is not
+in the amplitude: the best scale per held-out simulation takes the MEE down by a fifth only."""
+
+
+if __name__ == "__main__":
+    sys.exit(main())
