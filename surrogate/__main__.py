@@ -21,6 +21,8 @@ import json
 import sys
 from pathlib import Path
 
+from surrogate.patient import SYNTHETIC
+
 FRAMES = ("LPS", "RAS", "population", "auto")
 
 
@@ -108,8 +110,8 @@ def _add_adapt(sub) -> None:
     a.add_argument("--liver", required=True, help="the liver file they were solved on")
     a.add_argument("--run", required=True, help="the patient model's run directory to write")
     a.add_argument("--sims", type=int, help="use the first K simulations (default: all)")
-    a.add_argument("--synthetic", type=int, default=300,
-                   help="loads drawn for the distillation (default 300)")
+    a.add_argument("--synthetic", type=int, default=SYNTHETIC,
+                   help=f"loads drawn for the distillation (default {SYNTHETIC})")
     a.add_argument("--frame", choices=FRAMES, default=None, help="as predict-liver's")
     a.add_argument("--placement", help="the placement file truth-scene --placement wrote "
                    "(used when it holds this liver, frame and model; written otherwise)")

@@ -39,7 +39,11 @@ DECAYS = ("gauss", "exp")                    # how it falls with the load points
                                              # exp(-d^2 / 2 l^2), or exp(-d / l)
 RIDGES = (1e-3, 1e-2, 0.1, 0.3, 1.0, 3.0, 10.0)   # relative to the kernel's mean diagonal
 BETAS = (0.0, 1.0)                           # weight of the quadratic force term
-STUDENT = {"design": "basis", "ensemble": 1, "folds": 2}   # the distilled model's config
+# the distilled model's config (its RMS loss as the population basis's: docs/real_knobs.md),
+# and the drawn loads it learns the corrected model from beside the K FE simulations
+# (docs/patient.md: the student's settings, measured on training livers)
+STUDENT = {"design": "basis", "ensemble": 1, "folds": 2, "loss": "rms"}
+SYNTHETIC = 600
 
 
 def _products(a: tuple, b: tuple) -> tuple:
@@ -301,7 +305,8 @@ def student_config(**overrides) -> dict:
 
 
 def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | None = None,
-          synthetic: int = 300, seed: int = 0, saved=None, log_fn=print, **overrides) -> dict:
+          synthetic: int = SYNTHETIC, seed: int = 0, saved=None, log_fn=print,
+          **overrides) -> dict:
     """The patient model of ``liver`` in ``run/model``: the population model ``model_dir``
     placed on it (as predict-liver places it; ``saved``: a placement file truth-scene wrote),
     corrected with the first ``sims`` FE simulations of ``data`` (None: all) and distilled.
@@ -335,8 +340,8 @@ def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | 
     return info
 
 
-def adapted(teacher: Teacher, ds: Dataset, used, run, *, synthetic: int = 300, seed: int = 0,
-            log_fn=print, **overrides) -> dict:
+def adapted(teacher: Teacher, ds: Dataset, used, run, *, synthetic: int = SYNTHETIC,
+            seed: int = 0, log_fn=print, **overrides) -> dict:
     """The fitted ``teacher`` distilled on the FE simulations ``used`` of ``ds`` and ``synthetic``
     drawn loads, exported to ``run/model``; what was used and the seconds it took.
     """
@@ -383,7 +388,7 @@ def scratch_model(ds: Dataset, sims, cfg: dict, seed: int = 0, log_fn=print):
 
 
 def held_out_errors(pred, placement, ds: Dataset, train_sims, held_sims, *, run: Path,
-                    synthetic: int = 300, log_fn=print) -> dict:
+                    synthetic: int = SYNTHETIC, log_fn=print) -> dict:
     """MEE (mm) on the patient's simulations ``held_sims`` of: the population model ``pred``
     placed by ``placement``; the corrected one (the teacher, fitted on ``train_sims``); the
     patient model distilled from it (exported to ``run``); the reduced basis trained on
