@@ -21,8 +21,6 @@ import json
 import sys
 from pathlib import Path
 
-from surrogate.patient import SYNTHETIC
-
 FRAMES = ("LPS", "RAS", "population", "auto")
 
 
@@ -110,8 +108,11 @@ def _add_adapt(sub) -> None:
     a.add_argument("--liver", required=True, help="the liver file they were solved on")
     a.add_argument("--run", required=True, help="the patient model's run directory to write")
     a.add_argument("--sims", type=int, help="use the first K simulations (default: all)")
-    a.add_argument("--synthetic", type=int, default=SYNTHETIC,
-                   help=f"loads drawn for the distillation (default {SYNTHETIC})")
+    # the default is surrogate.patient.SYNTHETIC, read when the command runs: building the
+    # parser of every command does not import the trainer
+    a.add_argument("--synthetic", type=int, default=None,
+                   help="loads drawn for the distillation (default: surrogate.patient's "
+                   "SYNTHETIC)")
     a.add_argument("--frame", choices=FRAMES, default=None, help="as predict-liver's")
     a.add_argument("--placement", help="the placement file truth-scene --placement wrote "
                    "(used when it holds this liver, frame and model; written otherwise)")
@@ -246,9 +247,11 @@ def _evaluate(args) -> int:
 
 def _adapt(args) -> int:
     from surrogate.data import DataError
-    from surrogate.patient import adapt
+    from surrogate.patient import SYNTHETIC, adapt
     from surrogate.viewer import model_dir
 
+    if args.synthetic is None:
+        args.synthetic = SYNTHETIC
     if args.sims is not None and args.sims < 0:
         return _fail("adapt", f"--sims: expected an integer >= 0, got {args.sims}")
     if args.synthetic < 1:
