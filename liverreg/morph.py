@@ -22,6 +22,9 @@ import numpy as np
 
 from data_spec.geometry import signed_volumes
 
+# SuperLU's column ordering for the pseudo-elastic move's symmetric systems
+ORDERING = "MMD_AT_PLUS_A"
+
 
 class SurfaceMorph:
     """The template mesh's graph Laplacian, factorised once for many placements."""
@@ -74,24 +77,32 @@ class SurfaceMorph:
         moved = self.move(boundary_points)
         if self.inverted(moved) == 0 or self.inner.size == 0:
             return moved
-        elastic = stiffened_move(self.points, self.cells, self.boundary, boundary_points)
+        elastic = stiffened_move(self.points, self.cells, self.boundary, boundary_points,
+                                 assembly=self._assembly)
         return elastic if self.inverted(elastic) < self.inverted(moved) else moved
 
-    def unfold(self, boundary_points: np.ndarray, rounds: int = 150,
-               relax: float = 0.5) -> tuple[np.ndarray, int]:
+    def unfold(self, boundary_points: np.ndarray, rounds: int = 150, relax: float = 0.5,
+               patience: int = 10) -> tuple[np.ndarray, int]:
         """(all nodes, rounds used): :meth:`place` of the boundary at ``boundary_points``,
         with the displacement of every surface node of a folded cell (and of its neighbours)
         relaxed by ``relax`` toward its neighbours' mean, round by round, until no cell is
-        folded (or ``rounds`` ran out: the caller counts what is left).
+        folded, or ``rounds`` ran out, or a widened patch (every 50 rounds) brought no fewer
+        folded cells within ``patience`` rounds (a fold the relaxation keeps: the caller
+        counts what is left and tries a smoother registration).
         """
         d = np.asarray(boundary_points, dtype=np.float64) - self.points[self.boundary]
         A, degree = self._boundary_graph
         local = np.full(self.points.shape[0], -1)
         local[self.boundary] = np.arange(self.boundary.size)
+        fewest, fewest_at = np.inf, 0
         for k in range(rounds + 1):
             moved = self.place(self.points[self.boundary] + d)
             bad = signed_volumes(moved, self.cells) <= 0
-            if not bad.any() or k == rounds:
+            if bad.sum() < fewest:
+                fewest, fewest_at = bad.sum(), k
+            widened = 50 * (k // 50)
+            if not bad.any() or k == rounds or (widened and fewest_at < widened
+                                                   and k >= widened + patience):
                 return moved, k
             ids = local[self.cells[bad]]
             near = np.zeros(self.boundary.size, dtype=bool)
@@ -101,6 +112,10 @@ class SurfaceMorph:
             mean = (A @ d) / degree[:, None]
             d[near] = (1.0 - relax) * d[near] + relax * mean[near]
         return moved, rounds
+
+    @functools.cached_property
+    def _assembly(self) -> ElasticAssembly:
+        return ElasticAssembly(self.points.shape[0], self.cells, self.boundary)
 
     @functools.cached_property
     def _boundary_graph(self):
@@ -119,49 +134,115 @@ class SurfaceMorph:
         return A, np.maximum(np.asarray(A.sum(axis=1)).ravel(), 1.0)
 
 
+def element_stiffness(points: np.ndarray, cells: np.ndarray, young: np.ndarray,
+                      poisson: float = 0.3) -> np.ndarray:
+    """(c, 12, 12) the stiffness V B^T D B of each linear tetrahedron (small-strain
+    elasticity, Young's modulus per cell): B the (6, 12) strain-displacement matrix of the
+    shape functions' gradients g_a (Voigt order xx, yy, zz, yz, xz, xy; shear as engineering
+    strain), D the isotropic elasticity (lam + 2 mu on the normal diagonal, lam off it, mu on
+    the shear); rows and columns node by node, (x, y, z) within a node.
+    """
+    X = points[cells]
+    r = X[:, 1:] - X[:, :1]  # the edges from node 0
+    # the gradient of barycentric coordinate k + 1: column k of the edge matrix's inverse,
+    # the cross product of the other two edges over the determinant
+    grad = np.stack([np.cross(r[:, 1], r[:, 2]), np.cross(r[:, 2], r[:, 0]),
+                     np.cross(r[:, 0], r[:, 1])], axis=1)
+    det = np.einsum("ci,ci->c", r[:, 0], grad[:, 0])
+    grad /= det[:, None, None]
+    V = np.abs(det) / 6.0
+    g = np.concatenate([-grad.sum(axis=1, keepdims=True), grad], axis=1)  # (c, 4 a, 3 i)
+    c = len(cells)
+    B = np.zeros((c, 6, 4, 3))
+    for i in range(3):
+        B[:, i, :, i] = g[:, :, i]
+    for k, (i, j) in enumerate(((1, 2), (0, 2), (0, 1))):
+        B[:, 3 + k, :, i] = g[:, :, j]
+        B[:, 3 + k, :, j] = g[:, :, i]
+    lam = young * poisson / ((1 + poisson) * (1 - 2 * poisson)) * V
+    mu = young / (2 * (1 + poisson)) * V
+    Dm = np.zeros((c, 6, 6))
+    Dm[:, :3, :3] = lam[:, None, None]
+    Dm[:, np.arange(6), np.arange(6)] += np.repeat([2.0, 1.0], 3) * mu[:, None]
+    B = B.reshape(c, 6, 12)
+    return np.matmul(B.transpose(0, 2, 1), np.matmul(Dm, B))
+
+
 def elastic_stiffness(points: np.ndarray, cells: np.ndarray, young: np.ndarray,
                       poisson: float = 0.3):
-    """The (3n, 3n) stiffness of linear tetrahedra (small-strain elasticity), Young's modulus
-    per cell: K_e = V B^T D B, written out as V (lam g_a g_b^T + mu g_b g_a^T + mu g_a.g_b I)
-    for the node pair (a, b), g the shape functions' gradients.
+    """The whole (3n, 3n) stiffness (:func:`element_stiffness` summed by scipy's COO format),
+    the plain assembly :class:`ElasticAssembly` is checked against.
     """
     from scipy.sparse import coo_matrix
 
-    X = points[cells]
-    D = X[:, 1:] - X[:, :1]
-    V = np.abs(np.linalg.det(D)) / 6.0
-    inv = np.linalg.inv(D)
-    G = np.concatenate([-inv.sum(axis=2, keepdims=True), inv], axis=2)  # (c, 3, 4)
-    lam = young * poisson / ((1 + poisson) * (1 - 2 * poisson)) * V
-    mu = young / (2 * (1 + poisson)) * V
-    gg = np.einsum("cia,cib->cab", G, G)
-    Ke = (lam[:, None, None, None, None] * np.einsum("cia,cjb->caibj", G, G)
-          + mu[:, None, None, None, None] * np.einsum("cja,cib->caibj", G, G)
-          + mu[:, None, None, None, None] * np.einsum("cab,ij->caibj", gg, np.eye(3)))
-    dof = (3 * cells[:, :, None] + np.arange(3)).reshape(len(cells), 12)
     n = 3 * points.shape[0]
-    return coo_matrix((Ke.reshape(len(cells), 144).ravel(),
-                       (np.repeat(dof, 12, axis=1).ravel(), np.tile(dof, (1, 12)).ravel())),
-                      shape=(n, n)).tocsr()
+    return coo_matrix((element_stiffness(points, cells, young, poisson).ravel(),
+                       _entries(cells)), shape=(n, n)).tocsr()
 
 
-def stiffened_move(points, cells, boundary, boundary_points, steps: int = 10) -> np.ndarray:
+def _entries(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, columns) of every entry of :func:`element_stiffness`'s matrices, flattened."""
+    dof = (3 * np.asarray(cells)[:, :, None] + np.arange(3)).reshape(len(cells), 12)
+    return np.repeat(dof, 12, axis=1).ravel(), np.tile(dof, (1, 12)).ravel()
+
+
+class ElasticAssembly:
+    """The stiffness of a tetrahedral mesh (:func:`element_stiffness`) split into free and
+    fixed degrees of freedom, its sparsity worked out once: a pseudo-elastic move assembles
+    the same connectivity many times, on moved points and with new moduli.
+    """
+
+    def __init__(self, n_points: int, cells: np.ndarray, fixed_nodes: np.ndarray):
+        self.cells = np.asarray(cells, dtype=np.int64)
+        rows, cols = _entries(self.cells)
+        self.fixed = (3 * np.asarray(fixed_nodes, dtype=np.int64)[:, None]
+                      + np.arange(3)).ravel()  # in the order of the fixed nodes
+        fixed = np.zeros(3 * n_points, dtype=bool)
+        fixed[self.fixed] = True
+        self.free = np.flatnonzero(~fixed)
+        local = np.empty(fixed.size, dtype=np.int64)
+        local[self.free] = np.arange(self.free.size)
+        local[self.fixed] = np.arange(self.fixed.size)
+        n = self.free.size
+        ff = ~fixed[rows] & ~fixed[cols]
+        key = local[cols[ff]] * n + local[rows[ff]]  # column by column: a CSC matrix's order
+        entries, self._slot = np.unique(key, return_inverse=True)
+        self._ff = np.flatnonzero(ff)
+        self._indices = entries % n
+        self._indptr = np.searchsorted(entries // n, np.arange(n + 1))
+        fx = ~fixed[rows] & fixed[cols]
+        self._fx, self._fx_row, self._fx_col = np.flatnonzero(fx), local[rows[fx]], local[cols[fx]]
+
+    def matrices(self, points: np.ndarray, young: np.ndarray):
+        """(K_ff as CSC, K_fx as a function of the fixed displacements to the free forces)."""
+        from scipy.sparse import csc_matrix
+
+        Ke = element_stiffness(points, self.cells, young).ravel()
+        n = self.free.size
+        data = np.bincount(self._slot, weights=Ke[self._ff], minlength=self._indices.size)
+        K = csc_matrix((data, self._indices, self._indptr), shape=(n, n))
+        vals = Ke[self._fx]
+        return K, lambda u: np.bincount(self._fx_row, weights=vals * u[self._fx_col], minlength=n)
+
+
+def stiffened_move(points, cells, boundary, boundary_points, steps: int = 10,
+                   assembly: ElasticAssembly | None = None) -> np.ndarray:
     """The interior moved with the boundary in ``steps`` pseudo-elastic increments, each on
     the current mesh with cells stiffened as they are compressed (E = (V0 / V)^2).
+    ``assembly``: the mesh's, with ``boundary`` fixed, when the caller keeps one.
     """
     from scipy.sparse.linalg import splu
 
     P = np.asarray(points, dtype=np.float64).copy()
-    bd = (3 * np.asarray(boundary)[:, None] + np.arange(3)).ravel()
-    inner = np.setdiff1d(np.arange(P.size), bd)
+    asm = assembly or ElasticAssembly(P.shape[0], cells, boundary)
     du = (np.asarray(boundary_points, dtype=np.float64) - P[boundary]).ravel() / steps
     V0 = signed_volumes(P, cells)
     for _ in range(steps):
         V = np.maximum(signed_volumes(P, cells), 1e-3 * V0)
-        K = elastic_stiffness(P, cells, (V0 / V) ** 2)
+        K, coupling = asm.matrices(P, (V0 / V) ** 2)
         u = np.zeros(P.size)
-        u[bd] = du
-        u[inner] = splu(K[inner][:, inner].tocsc()).solve(-(K[inner][:, bd] @ du))
+        u[asm.fixed] = du
+        u[asm.free] = splu(K, permc_spec=ORDERING).solve(-coupling(du))
         P += u.reshape(-1, 3)
     return P
 
