@@ -86,3 +86,30 @@ def test_the_assembly_with_fixed_nodes_is_the_plain_assembly_and_passes_the_patc
     A = np.array([[0.02, -0.01, 0.005], [0.01, 0.03, 0.0], [-0.004, 0.002, -0.01]])
     moved = stiffened_move(P, cells, fixed, P[fixed] @ (np.eye(3) + A).T, steps=1)
     np.testing.assert_allclose(moved, P @ (np.eye(3) + A).T, atol=1e-10)
+
+
+def test_the_unfolding_gives_a_stage_up_when_a_widened_patch_brings_no_fewer_folds(monkeypatch):
+    """The relaxation's rounds against a scripted count of folded cells: it stops when none
+    is left; it gives up 10 rounds after a widening of the patch (every 50 rounds) that brought
+    no new fewest count, and goes on while a widening brings one; otherwise ``rounds`` end it."""
+    from liverreg import morph
+
+    P, cells, outer = box_mesh()
+    m = morph.SurfaceMorph(P, cells, np.flatnonzero(outer))
+    m.place = lambda boundary_points: m.points  # the counts below stand for the moves
+
+    def rounds(script, **kw):
+        counts = iter(script)
+
+        def volumes(points, c):
+            v = np.ones(len(c))
+            v[:next(counts)] = -1.0
+            return v
+
+        monkeypatch.setattr(morph, "signed_volumes", volumes)
+        return m.unfold(m.points[m.boundary], **kw)[1]
+
+    assert rounds([3] * 5 + [0]) == 5
+    assert rounds([3] * 5 + [2] * 200) == 60     # fewest at round 5: the widening at 50 fails
+    assert rounds([3] * 55 + [2] * 200) == 110   # the widening at 50 helped; the one at 100 not
+    assert rounds([3] * 200, patience=10**6) == 150
