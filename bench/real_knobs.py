@@ -38,6 +38,10 @@ VARIANTS = [
     ("mee", "the mean Euclidean node error of the decoded fields", {"loss": "mee"}),
     ("rms_inner5", "RMS, 5 % of the livers for early stopping (not 10 %)",
      {"loss": "rms", "inner_val_fraction": 0.05}),
+    ("rms_shape_noise_0.3", "RMS, noise 0.3 on the shape coefficients (0.1 on the loads')",
+     {"loss": "rms", "shape_noise": 0.3}),
+    ("rms_shape_noise_0.6", "RMS, noise 0.6 on the shape coefficients (0.1 on the loads')",
+     {"loss": "rms", "shape_noise": 0.6}),
 ]
 
 
