@@ -219,9 +219,10 @@ def report(move: dict, livers: list[dict], sofa: dict | None) -> str:
         f"inverted tetrahedra: {total('previous', 'inverted')} previous, "
         f"{total('shipped', 'inverted')} shipped.",
         "",
-        "The patience was chosen on these livers' relaxations: a stage that succeeds does so "
-        "within about 10 rounds of a widening of the relaxed patch (every 50 rounds) or not at "
-        "all; with 5 rounds three of them would have been given up too early.",
+        "The patience was chosen by hand on these livers' counts of folded cells round by "
+        "round (not recorded by this bench): a stage that succeeds does so within about 10 "
+        "rounds of a widening of the relaxed patch (every 50 rounds) or not at all; a "
+        "patience of 5 rounds would have given three of them up too early.",
     ]
     if sofa:
         lines += ["", "## The SOFA liver, file to a ready predictor (`--frame auto`)", "",
