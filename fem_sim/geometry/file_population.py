@@ -14,6 +14,7 @@ registration figure are kept per liver (:class:`LiverRecord`).
 from __future__ import annotations
 
 import json
+import logging
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -24,6 +25,8 @@ from data_spec.geometry import grown_region, region_area
 from liverreg.cpd import register, surface_points, surface_samples
 from liverreg.morph import SurfaceMorph
 from liverreg.rigid import orient
+
+log = logging.getLogger(__name__)
 
 N_POINTS = 600  # CPD samples per surface (liverreg.cpd.build_population's)
 # What a prepared liver depends on besides the modules its key digests: change this text when
@@ -186,8 +189,11 @@ def population_geometries(scene, cache=None, dataset=None, meshed=None, progress
     records = _read_records(dataset)
     livers, known = [], {}
     variety = g.get("variety", "anatomical")
-    for i, m in enumerate(members(g)):
-        key = _file_key(m.path, g) if m.path else phantom_key(m.seed, variety, g["mesh_size"])
+    mem = list(members(g))
+    keys = [_file_key(m.path, g) if m.path else phantom_key(m.seed, variety, g["mesh_size"])
+            for m in mem]
+    _warn_stale(dataset, index, mem, keys)
+    for i, (m, key) in enumerate(zip(mem, keys)):
         liver = indexed(dataset, index.get(key))
         if liver is None:
             if m.path is None:
@@ -204,6 +210,21 @@ def population_geometries(scene, cache=None, dataset=None, meshed=None, progress
     attach_shape_coefficients(livers, g["pca_components"], cache=cache, progress=progress,
                               template=template, known=known, region=registrar.region)
     return livers
+
+
+def _warn_stale(dataset, index: dict, members: list, keys: list[str]) -> None:
+    """A warning when ``dataset`` holds meshes of these liver files that other code or
+    settings prepared: they are prepared again, and gmsh's tetrahedra of a real liver (HXT)
+    differ from one meshing to the next, so their simulations are run again too.
+    """
+    had = {k.split(" ", 2)[1] for k in index if k.startswith("file ")}
+    stale = [m.name for m, k in zip(members, keys)
+             if m.path and Path(m.path).name in had and k not in index]
+    if stale:
+        log.warning("%s: %d of the %d livers were prepared by other code or settings (%s%s): "
+                    "they are meshed and registered again, and their new meshes take new "
+                    "simulations", dataset, len(stale), len(members), ", ".join(stale[:3]),
+                    ", ..." if len(stale) > 3 else "")
 
 
 def _prepared(path, registrar: Registrar, g: dict):

@@ -121,3 +121,21 @@ degree = 1
     again = generate()
     assert again.returncode == 0 and "6 skipped" in again.stdout, again.stderr[-2000:]
     assert (out / "geometry" / "meshes.json").read_text() == before
+
+
+def test_livers_prepared_by_other_code_are_announced(caplog):
+    """A dataset whose index holds a liver file's mesh under another key (other code or
+    settings) warns that the liver is prepared, hence simulated, again; a liver the dataset
+    never held, a phantom and a liver whose key matches say nothing."""
+    from types import SimpleNamespace as NS
+
+    from fem_sim.geometry.file_population import _warn_stale
+
+    members = [NS(name="A", path=Path("/x/A.obj")), NS(name="B", path=Path("/x/B.obj")),
+               NS(name="phantom 3", path=None)]
+    keys = ["file A.obj 11, code new", "file B.obj 22, code new", "phantom 3"]
+    _warn_stale("DATA", {"file A.obj 11, code old": "g1", keys[1]: "g2"}, members, keys)
+    assert "DATA: 1 of the 3 livers were prepared by other code or settings (A)" in caplog.text
+    caplog.clear()
+    _warn_stale("DATA", {keys[1]: "g2", "phantom 3 old": "g3"}, members, keys)
+    assert caplog.text == ""
