@@ -67,7 +67,8 @@ def ways():
 
         def unfold(self, boundary_points, **kw):
             self.stages += 1
-            return super().unfold(boundary_points, patience=10**9 if self.previous else 10)
+            previous = {"patience": 10**9} if self.previous else {}  # else the shipped default
+            return super().unfold(boundary_points, **previous)
 
         @functools.cached_property
         def _assembly(self):

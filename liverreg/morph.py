@@ -24,6 +24,8 @@ from data_spec.geometry import signed_volumes
 
 # SuperLU's column ordering for the pseudo-elastic move's symmetric systems
 ORDERING = "MMD_AT_PLUS_A"
+# rounds of the unfolding's relaxation between two widenings of the relaxed patch
+WIDEN_EVERY = 50
 
 
 class SurfaceMorph:
@@ -86,9 +88,10 @@ class SurfaceMorph:
         """(all nodes, rounds used): :meth:`place` of the boundary at ``boundary_points``,
         with the displacement of every surface node of a folded cell (and of its neighbours)
         relaxed by ``relax`` toward its neighbours' mean, round by round, until no cell is
-        folded, or ``rounds`` ran out, or a widened patch (every 50 rounds) brought no fewer
-        folded cells within ``patience`` rounds (a fold the relaxation keeps: the caller
-        counts what is left and tries a smoother registration).
+        folded, or ``rounds`` ran out, or a widened patch (every :data:`WIDEN_EVERY` rounds
+        it grows by a ring of neighbours) brought no fewer folded cells within ``patience``
+        rounds (a fold the relaxation keeps: the caller counts what is left and tries a
+        smoother registration).
         """
         d = np.asarray(boundary_points, dtype=np.float64) - self.points[self.boundary]
         A, degree = self._boundary_graph
@@ -100,14 +103,14 @@ class SurfaceMorph:
             bad = signed_volumes(moved, self.cells) <= 0
             if bad.sum() < fewest:
                 fewest, fewest_at = bad.sum(), k
-            widened = 50 * (k // 50)
+            widened = WIDEN_EVERY * (k // WIDEN_EVERY)  # the round of the last widening
             if not bad.any() or k == rounds or (widened and fewest_at < widened
                                                    and k >= widened + patience):
                 return moved, k
             ids = local[self.cells[bad]]
             near = np.zeros(self.boundary.size, dtype=bool)
             near[ids[ids >= 0]] = True
-            for _ in range(1 + k // 50):  # a fold that outlasts 50 rounds: a wider patch
+            for _ in range(1 + k // WIDEN_EVERY):  # a fold that outlasts them: a wider patch
                 near |= (A @ near) > 0
             mean = (A @ d) / degree[:, None]
             d[near] = (1.0 - relax) * d[near] + relax * mean[near]

@@ -217,9 +217,9 @@ def _warn_stale(dataset, index: dict, members: list, keys: list[str]) -> None:
     settings prepared: they are prepared again, and gmsh's tetrahedra of a real liver (HXT)
     differ from one meshing to the next, so their simulations are run again too.
     """
-    had = {k.split(" ", 2)[1] for k in index if k.startswith("file ")}
-    stale = [m.name for m, k in zip(members, keys)
-             if m.path and Path(m.path).name in had and k not in index]
+    held = [k for k in index if k.startswith("file ")]
+    stale = [m.name for m, k in zip(members, keys) if m.path and k not in index
+             and any(h.startswith(f"file {Path(m.path).name} ") for h in held)]
     if stale:
         log.warning("%s: %d of the %d livers were prepared by other code or settings (%s%s): "
                     "they are meshed and registered again, and their new meshes take new "
