@@ -89,18 +89,34 @@ def _geometry_file_ok(path: Path, g: Geometry) -> bool:
     a, b = old.shape_coefficients, g.shape_coefficients  # a population's may come later
     same = (a is None and b is None) or (a is not None and b is not None and
                                          np.array_equal(a, b))
-    return old.content_hash == g.content_hash and same
+    # a liver file prepared again may keep its mesh (the same id) and fix other nodes
+    regions = old.regions.keys() == g.regions.keys() and all(
+        np.array_equal(old.regions[k], g.regions[k]) for k in g.regions)
+    return old.content_hash == g.content_hash and same and regions
 
 
-def _shard_is_done(path: Path, scene_hash: str, retry_failed: bool) -> bool:
+def _shard_is_done(path: Path, scene_hash: str, retry_failed: bool, geometry_id: str,
+                   fixed: np.ndarray) -> bool:
+    """Whether the shard at ``path`` is a valid simulation of this scene on this liver: its
+    mesh (``geometry_id``) and its fixed nodes; a shard of another mesh of the liver (a liver
+    file prepared again by other code) or of another fixed region is run again.
+    """
     if not path.exists() or shard_problems(path):
         return False
     import h5py
 
     with h5py.File(path, "r") as f:
-        if str(f.attrs["scene_hash"]) != scene_hash:
+        if (str(f.attrs["scene_hash"]) != scene_hash
+                or str(f.attrs["geometry_id"]) != geometry_id
+                or not np.array_equal(f["fixed_nodes"][()], fixed)):
             return False
         return not (retry_failed and str(f.attrs["status"]) == "failed")
+
+
+def geometry_of(scene: Scene, index: int, n_geometries: int) -> int:
+    """The liver (its index in the scene's geometries) of simulation ``index``."""
+    return index % n_geometries if not scene.cases else (
+        scene.cases[index].get("geometry_index", 0))
 
 
 _LOCK: DirectoryLock | None = None  # held by world rank 0 for the whole run
@@ -156,11 +172,12 @@ def _scene_livers(scene: Scene, out: Path, progress: bool) -> list[Geometry]:
             bar.close()
 
 
-def _write_livers(scene: Scene, scene_file: str, livers: list[Geometry], out: Path) -> list:
+def _write_livers(scene: Scene, scene_file: str, livers: list[Geometry],
+                  out: Path) -> tuple[list, list]:
     """Every liver checked against the scene (mesh, fixed region, eligible load nodes) and
-    written once; their geometry ids.
+    written once; their geometry ids and fixed nodes.
     """
-    ids = []
+    ids, fixed_sets = [], []
     for gi, g in enumerate(livers):
         scene.check_mesh(g.n_nodes)
         fixed = cs.fixed_nodes(scene, g, scene_file)
@@ -178,7 +195,8 @@ def _write_livers(scene: Scene, scene_file: str, livers: list[Geometry], out: Pa
         if not _geometry_file_ok(path, g):  # missing, truncated or another mesh: rewrite
             write_geometry(path, g)
         ids.append(g.geometry_id)
-    return ids
+        fixed_sets.append(fixed)
+    return ids, fixed_sets
 
 
 def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool,
@@ -193,14 +211,16 @@ def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool,
         if found:  # the scene allows it on some rank count, not on this one
             raise SceneError(scene_file, found)
         _check_directory(scene, out)
-        ids = _write_livers(scene, scene_file, _scene_livers(scene, out, progress), out)
+        ids, fixed = _write_livers(scene, scene_file, _scene_livers(scene, out, progress),
+                                   out)
         # Everything checked: record the scene (a directory without shards takes a new one).
         copy = out / "scene.toml"
         if not (copy.exists() and load_scene(copy).hash == scene.hash):
             with atomic_path(copy) as tmp:
                 tmp.write_text(dataset_copy_text(scene_file), encoding="utf-8")
-        tasks = [i for i in todo if not _shard_is_done(shard_path(out, i), scene.hash,
-                                                       retry_failed)]
+        of = [geometry_of(scene, i, len(ids)) for i in todo]
+        tasks = [i for i, gi in zip(todo, of) if not _shard_is_done(
+            shard_path(out, i), scene.hash, retry_failed, ids[gi], fixed[gi])]
         tasks.sort(key=lambda i: (i % len(ids), i))  # cases of one liver together
         return Plan(tasks=tasks, skipped=len(todo) - len(tasks), geometry_ids=ids), scene
     except (SceneError, GeometryError, cs.CaseError, LockedError, ValueError, OSError) as exc:
@@ -312,9 +332,7 @@ class _Liver:
         self.current = None
 
     def of(self, index: int) -> int:
-        scene = self.scene
-        return index % len(self.plan.geometry_ids) if not scene.cases else (
-            scene.cases[index].get("geometry_index", 0))
+        return geometry_of(self.scene, index, len(self.plan.geometry_ids))
 
     def load(self, gi: int) -> None:
         """Collective on the group when the liver changes."""

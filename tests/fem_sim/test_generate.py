@@ -122,6 +122,51 @@ def test_rerun_skips_valid_and_redoes_corrupt(reference, tmp_path):
         np.testing.assert_allclose(b[k], a[k], rtol=0, atol=1e-10 * np.abs(a[k]).max())
 
 
+def test_a_shard_of_another_mesh_or_fixed_region_is_run_again(reference, tmp_path):
+    """A resumed batch keeps a shard only if it is of the liver the scene now gives that
+    simulation: its mesh (a liver file prepared again may mesh otherwise) and its fixed nodes
+    (a registration may fix others on the same mesh). Two valid shards (checksums right),
+    one of a jiggled copy of the mesh and one with a fixed node fewer, are run again; the
+    dataset ends as the reference."""
+    import dataclasses
+
+    from data_spec import geometry_path, read_geometry, write_geometry, write_shard
+
+    d = tmp_path / "d"
+    shutil.copytree(reference, d)
+    a, b = list_shards(d)[1], list_shards(d)[2]
+    sa, sb = read_shard(a), read_shard(b)
+    g = read_geometry(geometry_path(d, sa.geometry_id))
+    other = dataclasses.replace(g, points=g.points + 1e-3)
+    write_geometry(geometry_path(d, other.geometry_id), other)
+    a.unlink()
+    b.unlink()
+    write_shard(d, dataclasses.replace(sa, geometry_id=other.geometry_id))
+    write_shard(d, dataclasses.replace(sb, fixed_nodes=sb.fixed_nodes[1:]))
+    assert validate_dataset(d) == []  # valid shards, of another liver than the scene's
+    res = generate(TINY, d, n=1)
+    assert res.returncode == 0, res.stderr
+    assert "2 simulated (0 failed), 2 skipped" in res.stdout, res.stdout
+    ref, now = displacements(reference), displacements(d)
+    for k in ref:
+        np.testing.assert_allclose(now[k], ref[k], rtol=0, atol=1e-10 * np.abs(ref[k]).max())
+
+
+def test_a_geometry_file_with_another_fixed_region_is_written_again(reference):
+    """The same mesh with another region (a liver registered again) is not the file's."""
+    import dataclasses
+
+    from data_spec import read_geometry
+    from fem_sim.batch.generate import _geometry_file_ok
+
+    path = next((reference / "geometry").glob("*.h5"))
+    g = read_geometry(path)
+    assert _geometry_file_ok(path, g)
+    name = next(iter(g.regions), "vena_cava")
+    moved = dataclasses.replace(g, regions={**g.regions, name: np.arange(3)})
+    assert not _geometry_file_ok(path, moved)
+
+
 @pytest.mark.slow
 def test_sigkill_midway_then_resume(reference, tmp_path):
     scene = tmp_path / "many.toml"
