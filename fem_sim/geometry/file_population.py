@@ -214,17 +214,17 @@ def population_geometries(scene, cache=None, dataset=None, meshed=None, progress
 
 def _warn_stale(dataset, index: dict, members: list, keys: list[str]) -> None:
     """A warning when ``dataset`` holds meshes of these liver files that other code or
-    settings prepared: they are prepared again, and gmsh's tetrahedra of a real liver (HXT)
-    differ from one meshing to the next, so their simulations are run again too.
+    settings prepared: they are prepared again, and the simulations of a liver whose mesh or
+    fixed region comes out otherwise are run again.
     """
     held = [k for k in index if k.startswith("file ")]
     stale = [m.name for m, k in zip(members, keys) if m.path and k not in index
              and any(h.startswith(f"file {Path(m.path).name} ") for h in held)]
     if stale:
         log.warning("%s: %d of the %d livers were prepared by other code or settings (%s%s): "
-                    "they are meshed and registered again, and their new meshes take new "
-                    "simulations", dataset, len(stale), len(members), ", ".join(stale[:3]),
-                    ", ..." if len(stale) > 3 else "")
+                    "they are meshed and registered again, and a liver whose mesh or fixed "
+                    "region comes out otherwise is simulated again", dataset, len(stale),
+                    len(members), ", ".join(stale[:3]), ", ..." if len(stale) > 3 else "")
 
 
 def _prepared(path, registrar: Registrar, g: dict):

@@ -51,11 +51,19 @@ def check_mesh_size(volume: float, mesh_size: float, where: str,
     return int(estimate)
 
 
+# gmsh's 3D algorithm: Delaunay (1), which gives the same tetrahedra for the same surface
+# every time. HXT (10) leaves fewer slivers along a kept surface but is not reproducible: gmsh
+# hands it the surface's nodes in the order of their addresses in memory (a std::set of
+# pointers), so one surface meshes differently from one call, or one process, to the next
+# (docs/real_livers.md), and a dataset of real livers could not be made again.
+ALGORITHM_3D = 1
+
+
 def discrete_surface_solid(points, tris, mesh_size: float, description: str, *,
-                           reparametrise: bool, algorithm: int) -> Geometry:
+                           reparametrise: bool) -> Geometry:
     """Gmsh's tetrahedra inside a closed triangle surface: remeshed at the mesh size after
     reparametrising the surface (``reparametrise``: patches split at 45 degrees) or with the
-    surface's triangles kept; ``algorithm`` is gmsh's 3D one (1 Delaunay, 10 HXT).
+    surface's triangles kept. The same surface gives the same mesh (:data:`ALGORITHM_3D`).
     """
     import gmsh
 
@@ -79,7 +87,7 @@ def discrete_surface_solid(points, tris, mesh_size: float, description: str, *,
         gmsh.option.setNumber("Mesh.MeshSizeMin", 0.5 * mesh_size)
         gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size)
         gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
-        gmsh.option.setNumber("Mesh.Algorithm3D", algorithm)
+        gmsh.option.setNumber("Mesh.Algorithm3D", ALGORITHM_3D)
         gmsh.option.setNumber("Mesh.Optimize", 1)
         try:
             gmsh.model.mesh.generate(3)

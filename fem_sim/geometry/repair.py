@@ -12,7 +12,7 @@ specks and self-intersections. The route, each step reported (:class:`RepairRepo
    along three axes, two of three deciding, so that a hole cannot leak), an opening and a
    closing by one voxel, marching cubes, Taubin smoothing; then decimated to the mesh size
    (``fast-simplification``), repaired by MeshFix (``pymeshfix``: a decimation may fold a
-   triangle over another) and meshed inside by gmsh (HXT), which keeps that surface;
+   triangle over another) and meshed inside by gmsh, which keeps that surface;
 4. measured: the volume before (the input with its holes closed by flat patches) and after
    (the tetrahedra), the largest and mean distance from the input's vertices to the meshed
    surface, the mesh's smallest dihedral angle and mean ratio. A liver moved beyond
@@ -267,13 +267,11 @@ def _repaired(points, tris, report: RepairReport) -> tuple[np.ndarray, np.ndarra
 
 def mesh_inside(points, tris, mesh_size: float, description: str) -> Geometry:
     """Tetrahedra of the solid inside a closed surface whose triangles gmsh keeps as they are
-    (no reparametrisation; HXT, which leaves fewer slivers along a kept surface): the last
-    step of the decimated routes.
+    (no reparametrisation): the last step of the decimated routes.
     """
     from fem_sim.geometry.meshing import discrete_surface_solid
 
-    return discrete_surface_solid(points, tris, mesh_size, description, reparametrise=False,
-                                  algorithm=10)
+    return discrete_surface_solid(points, tris, mesh_size, description, reparametrise=False)
 
 
 def _mesh(points, tris, mesh_size: float, report: RepairReport) -> Geometry:

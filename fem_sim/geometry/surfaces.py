@@ -148,8 +148,7 @@ def mesh_closed_surface(points, tris, mesh_size: float, description: str = "") -
     from fem_sim.geometry.meshing import discrete_surface_solid
 
     check_mesh_size(abs(enclosed_volume(points, tris)), mesh_size, description or "surface")
-    return discrete_surface_solid(points, tris, mesh_size, description, reparametrise=True,
-                                  algorithm=1)
+    return discrete_surface_solid(points, tris, mesh_size, description, reparametrise=True)
 
 
 def read_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
