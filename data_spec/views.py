@@ -17,6 +17,26 @@ def shard_count(data: str | Path) -> int:
     return len(list((Path(data) / "sims").glob("sim_*.h5")))
 
 
+def dataset_fingerprint(data: str | Path) -> str:
+    """A digest of which simulations a dataset directory holds: each shard's name and the
+    checksum it carries (a dataset made again, with the same count of shards on other meshes,
+    has another fingerprint).
+    """
+    import hashlib
+
+    import h5py
+
+    h = hashlib.sha256()
+    for shard in sorted((Path(data) / "sims").glob("sim_*.h5")):
+        try:
+            with h5py.File(shard, "r") as f:
+                mark = str(f.attrs.get("checksum", ""))
+        except OSError:  # not a readable shard: what it is on disk
+            mark = f"unreadable {shard.stat().st_size}"
+        h.update(f"{shard.name} {mark}\n".encode())
+    return h.hexdigest()[:16]
+
+
 def link_shards(data: Path, view: Path, n: int) -> None:
     """Symbolic links in ``view/sims`` to the first ``n`` shards of ``data`` with their XDMF
     files (a shard without its XDMF is not a valid one).

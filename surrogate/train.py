@@ -274,28 +274,30 @@ def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
 def train_or_reuse(data_dir: str | Path, run_dir: str | Path, name: str,
                    overrides: dict | None = None) -> dict:
     """The metrics of config ``name`` (with ``overrides``) trained on a dataset: a finished run
-    in ``run_dir`` is reused when it holds the same config and as many simulations as the
-    dataset now holds (RUN/trained_on.json), else it is trained (again). What a study that
-    grows its dataset, or is run again, needs.
+    in ``run_dir`` is reused when it holds the same config and was trained on the simulations
+    the dataset now holds (RUN/trained_on.json: their count and the dataset's fingerprint, a
+    run recorded without one by its count alone), else it is trained (again). What a study
+    that grows its dataset, or is run again, needs.
     """
-    from data_spec.views import shard_count
+    from data_spec.views import dataset_fingerprint, shard_count
     from surrogate.config import BASE, get_config
 
     run = Path(run_dir)
     metrics, seen = run / "metrics.json", run / "trained_on.json"
     cfg = get_config(name, **(overrides or {}))
-    shards = shard_count(data_dir)
+    now = {"shards": shard_count(data_dir), "fingerprint": dataset_fingerprint(data_dir)}
     if metrics.exists() and (run / "config.json").exists():
         # keys added to the trainer since that run take the base default
         same = {**BASE, **json.loads((run / "config.json").read_text())} == cfg
         m = json.loads(metrics.read_text())
-        trained_on = json.loads(seen.read_text())["shards"] if seen.exists() \
-            else m["n_simulations"]
-        if same and trained_on == shards:
+        was = json.loads(seen.read_text()) if seen.exists() else \
+            {"shards": m["n_simulations"]}
+        if same and all(was[k] == now[k] for k in was if k in now):
             return m
-        print(f"[{run}] trained on {trained_on} simulations with "
-              f"{'the same' if same else 'another'} config; the dataset holds {shards}: "
-              "training again", file=sys.stderr, flush=True)
+        other = was.get("fingerprint", now["fingerprint"]) != now["fingerprint"]
+        print(f"[{run}] trained on {was['shards']} simulations with "
+              f"{'the same' if same else 'another'} config; the dataset holds {now['shards']}"
+              f"{', other ones' if other else ''}: training again", file=sys.stderr, flush=True)
     train_and_evaluate(data_dir, run, cfg)
-    seen.write_text(json.dumps({"shards": shards}))
+    seen.write_text(json.dumps(now))
     return json.loads(metrics.read_text())

@@ -1,10 +1,12 @@
 """A dataset generated in chunks under a wall-time budget, from any interpreter.
 
 ``generate_chunks`` runs ``mpirun -n NP SOLVER_PYTHON -m fem_sim generate SCENE --only 0..k``
-for growing k until the dataset holds ``n`` simulations or the budget is spent; the wall seconds
+for growing k until the dataset holds ``n`` simulations or the budget is spent; each run checks
+the shards already there (it skips the valid ones and runs again those of another mesh or fixed
+region of their liver), and a dataset already complete is checked once. The wall seconds
 accumulate in ``DATA/../generation.json`` so that a study run again (or in another session)
 goes on where it stopped. It imports no solver: the trainer's environment drives the solver's
-this way (``fem_sim generate`` itself skips the shards that exist).
+this way.
 """
 
 from __future__ import annotations
@@ -33,24 +35,36 @@ def generate_chunks(scene: str | Path, data: str | Path, n: int, *, ranks: int =
     state_path = data.parent / "generation.json"
     state = json.loads(state_path.read_text()) if state_path.exists() else {"seconds": 0.0}
     have = shard_count(data)
-    # one BLAS thread per MPI rank (the ranks take the cores); Open MPI refuses root unless
-    # told (the caller's environment may say otherwise)
+    checked = have == 0  # each run checks the shards before the new ones (--only 0..k)
     env = {"OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
            **os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
-    while have < n and state["seconds"] < budget_s:
-        upto = min(n, have + chunk)
+
+    def run(upto: int) -> None:
+        # one BLAS thread per MPI rank (the ranks take the cores); Open MPI refuses root
+        # unless told (the caller's environment may say otherwise)
         cmd = ["mpirun", "-n", str(ranks), str(solver_python), "-m", "fem_sim", "generate",
                str(scene), "--out", str(data), "--only", f"0..{upto}"]
-        print(f"[{scene.stem}] generating simulations {have}..{upto} of {n}", file=sys.stderr,
-              flush=True)
         t = time.perf_counter()
         subprocess.run(cmd, check=True, cwd=ROOT, env=env)
         state["seconds"] += time.perf_counter() - t
         data.parent.mkdir(parents=True, exist_ok=True)
         state_path.write_text(json.dumps(state))
+
+    while have < n and state["seconds"] < budget_s:
+        upto = min(n, have + chunk)
+        print(f"[{scene.stem}] generating simulations {have}..{upto} of {n}", file=sys.stderr,
+              flush=True)
+        run(upto)
+        checked = True
         if shard_count(data) <= have:
             raise RuntimeError(f"{data}: generate made no new shard")
         have = shard_count(data)
+    if not checked and state["seconds"] < budget_s:
+        # shards made by an earlier call may be of other meshes or fixed regions of the
+        # livers (a liver file prepared again): generate checks each and runs those again
+        print(f"[{scene.stem}] checking the {n} simulations against the scene's livers",
+              file=sys.stderr, flush=True)
+        run(n)
     state["sims"] = have
     data.parent.mkdir(parents=True, exist_ok=True)
     state_path.write_text(json.dumps(state))

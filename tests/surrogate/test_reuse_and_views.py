@@ -1,8 +1,10 @@
-"""What a resumable study reuses: a finished run only for the same config and as many
-simulations as the dataset holds now (surrogate.train.train_or_reuse); dataset views that link
+"""What a resumable study reuses: a finished run only for the same config and the
+simulations the dataset holds now (surrogate.train.train_or_reuse); dataset views that link
 another's shards (data_spec.views); a liver placed once per shape model (surrogate.evaluate)."""
 
 import json
+
+import h5py
 
 import surrogate.train
 from data_spec import views
@@ -25,9 +27,12 @@ def test_a_run_is_trained_again_when_the_dataset_grows_or_the_config_changes(tmp
 
     monkeypatch.setattr(surrogate.train, "train_and_evaluate", fake_train)
 
-    def shards(n):
+    def shards(n, checksum="a"):
         for i in range(n):
-            (data / "sims" / f"sim_{i:06d}.h5").touch()
+            path = data / "sims" / f"sim_{i:06d}.h5"
+            if not path.exists() or checksum != "a":
+                with h5py.File(path, "w") as f:
+                    f.attrs["checksum"] = f"{checksum}{i}"
 
     shards(4)
     assert train_or_reuse(data, run, "small", {"folds": 2})["calls"] == 1
@@ -42,6 +47,9 @@ def test_a_run_is_trained_again_when_the_dataset_grows_or_the_config_changes(tmp
     assert train_or_reuse(data, run, "small", {"folds": 3})["calls"] == 3
     shards(7)
     assert train_or_reuse(data, run, "small", {"folds": 3})["calls"] == 4
+    shards(7, checksum="b")  # made again: as many simulations, other ones
+    assert train_or_reuse(data, run, "small", {"folds": 3})["calls"] == 5
+    assert train_or_reuse(data, run, "small", {"folds": 3})["calls"] == 5
 
 
 def test_the_point_past_the_budget_starts_from_the_rows_dataset_without_touching_it(tmp_path):
