@@ -86,9 +86,9 @@ def curve(liver: Path, a) -> dict:
     sims = np.unique(ds.sample_sim)
     held = sims[-HELD:]
     path = RESULTS / liver.stem / "k.json"
-    key = made_by(model)
+    key = made_by(model, data)
     done = json.loads(path.read_text()) if path.exists() else {}
-    if done.get("made_by") != key:   # another population model or adaptation code
+    if done.get("made_by") != key:   # another population model, adaptation or truth
         done = {"made_by": key}
     for k in KS:
         if str(k) not in done:
@@ -112,11 +112,13 @@ def fe_seconds(data: Path, ranks: int) -> dict:
     return {str(k): sum(t[:k]) / ranks for k in KS if k}
 
 
-def made_by(model: Path) -> str:
-    """A digest of what a K's errors depend on besides the truth: the population model's
-    files and the adaptation's code.
+def made_by(model: Path, data: Path) -> str:
+    """A digest of what a K's errors depend on: the population model's files, the
+    adaptation's code and the truth's simulations.
     """
-    h = hashlib.sha256()
+    from data_spec.views import dataset_fingerprint
+
+    h = hashlib.sha256(dataset_fingerprint(data).encode())
     for f in [*sorted(model.glob("*")), ROOT / "surrogate" / "patient.py"]:
         h.update(f.read_bytes())
     return h.hexdigest()[:16]
