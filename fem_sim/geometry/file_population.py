@@ -158,12 +158,12 @@ def _file_key(path, g: dict) -> str:
     """What a liver file's prepared mesh depends on: the file, the settings and the code."""
     import hashlib
 
-    from fem_sim.geometry import repair, surfaces
+    from fem_sim.geometry import meshing, repair, surfaces
     from fem_sim.geometry.mesh_index import phantom_code
     from liverreg import cpd, morph, rigid
 
     h = hashlib.sha256(Path(path).read_bytes())
-    for module in (repair, surfaces, cpd, morph, rigid):
+    for module in (repair, surfaces, meshing, cpd, morph, rigid):
         h.update(Path(module.__file__).read_bytes())
     h.update(RULES.encode())
     return (f"file {Path(path).name} {h.hexdigest()[:16]}, mesh size {float(g['mesh_size'])!r}, "
