@@ -375,6 +375,16 @@ def _one_thread_per_rank(world) -> None:
         pardiso.threads(1)
 
 
+def quiet_wait(world, poll_s: float = 0.05) -> None:
+    """Collective: returns on every rank once all have called it; a rank waiting for rank 0
+    (which prepares the livers, or compiles the forms) sleeps between polls instead of spinning
+    a core as a blocking MPI call does.
+    """
+    request = world.Ibarrier()
+    while not request.Test():
+        time.sleep(poll_s)
+
+
 def _plan(world, scene_file, out, only, retry_failed, progress, ranks_per_sim):
     """(plan, scene) on every rank; rank 0 decides (collective)."""
     plan, scene = Plan(), None
@@ -385,6 +395,7 @@ def _plan(world, scene_file, out, only, retry_failed, progress, ranks_per_sim):
         else:
             plan, scene = make_plan(scene_file, out, only, retry_failed, progress,
                                     ranks_per_sim)
+    quiet_wait(world)  # collective: a population's livers take minutes on rank 0
     plan = world.bcast(plan, root=0)  # collective
     if plan.error:
         return plan, None
@@ -452,7 +463,7 @@ def generate(scene_file: str, out: str | Path, ranks_per_sim: int = 1, only: str
         return 2
     if world.rank == 0:
         _warm_jit_cache(scene["solver"]["degree"], scene["solver"]["quadrature_degree"])
-    world.Barrier()
+    quiet_wait(world)  # collective
     group = world.Split(world.rank // ranks_per_sim, world.rank)  # collective
     counter = _Counter(world)
     bar = None
@@ -463,7 +474,7 @@ def generate(scene_file: str, out: str | Path, ranks_per_sim: int = 1, only: str
                    dynamic_ncols=True)
     liver = _Liver(scene, plan, out, group, prefix=f"g{world.rank // ranks_per_sim}_")
     _work(world, group, counter, plan, liver, bar)
-    world.Barrier()  # collective: every shard is written
+    quiet_wait(world)  # collective: every shard is written (a group done early sleeps)
     totals = counter.read() if world.rank == 0 else None
     counter.free()
     if world.rank != 0:

@@ -167,6 +167,27 @@ def test_a_geometry_file_with_another_fixed_region_is_written_again(reference):
     assert not _geometry_file_ok(path, moved)
 
 
+def test_ranks_waiting_for_rank_0_sleep_instead_of_spinning():
+    """While rank 0 prepares a population's livers (minutes), the other ranks wait in
+    generate.quiet_wait: rank 0 busy for 2 s, rank 1's CPU time over its wait stays a small
+    part of it (a blocking MPI barrier spins: about 2 s)."""
+    code = ("import time\n"
+            "from mpi4py import MPI\n"
+            "from fem_sim.batch.generate import quiet_wait\n"
+            "w = MPI.COMM_WORLD\n"
+            "t = time.process_time()\n"
+            "if w.rank == 0:\n"
+            "    time.sleep(2.0)\n"
+            "quiet_wait(w)\n"
+            "if w.rank == 1:\n"
+            "    print('cpu', time.process_time() - t, flush=True)\n")
+    res = subprocess.run(["mpirun", "-n", "2", sys.executable, "-c", code], env=ENV,
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    cpu = float(re.search(r"cpu ([\d.e-]+)", res.stdout).group(1))
+    assert cpu < 0.5, cpu
+
+
 @pytest.mark.slow
 def test_sigkill_midway_then_resume(reference, tmp_path):
     scene = tmp_path / "many.toml"
