@@ -29,24 +29,33 @@ RESULTS = ROOT / "bench" / "results" / "real_population"
 def unseen_records(scene) -> list[dict]:
     """The validation livers and the SOFA liver through the population's preparation."""
     from data_spec.livers import validation_files
-    from fem_sim.geometry.file_population import Registrar, prepare, region_name, template_of
+    from fem_sim.geometry.file_population import (
+        Registrar,
+        prepare,
+        prepared_key,
+        region_name,
+        template_of,
+    )
 
     g = scene["geometry"]
     path = RESULTS / "unseen.jsonl"
-    done = {r["name"]: r for r in map(json.loads, path.read_text().splitlines())} \
+    # kept under what the preparation depends on (file, settings, code): a liver prepared
+    # otherwise since is prepared again
+    done = {r.get("key"): r for r in map(json.loads, path.read_text().splitlines())} \
         if path.exists() else {}
-    template, registrars = template_of(g), {}
+    template, registrars, out = template_of(g), {}, []
     for f, frame in [(f, g["frame"]) for f in validation_files(g)] + [(SOFA, "auto")]:
-        if Path(f).stem in done:
-            continue
-        if frame not in registrars:  # the template meshed once, set up once per frame
-            registrars[frame] = Registrar(template, region_name(scene), frame)
-        _, _, rec = prepare(f, registrars[frame], g["mesh_size"], g.get("fixed_area_min"))
-        done[rec.name] = asdict(rec)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with path.open("a") as fh:
-            fh.write(json.dumps(done[rec.name]) + "\n")
-    return list(done.values())
+        key = prepared_key(f, {**g, "frame": frame})
+        if key not in done:
+            if frame not in registrars:  # the template meshed once, set up once per frame
+                registrars[frame] = Registrar(template, region_name(scene), frame)
+            _, _, rec = prepare(f, registrars[frame], g["mesh_size"], g.get("fixed_area_min"))
+            done[key] = {**asdict(rec), "key": key}
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with path.open("a") as fh:
+                fh.write(json.dumps(done[key]) + "\n")
+        out.append(done[key])
+    return out
 
 
 def summary_row(label: str, recs: list[dict]) -> str:

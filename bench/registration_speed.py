@@ -98,12 +98,13 @@ def training_livers(limit: int | None) -> list[tuple[str, str]]:
 
 
 def register_both(name: str, gid: str, setup) -> dict:
-    """One liver registered the previous way and the shipped way (kept in RESULTS)."""
+    """One liver registered the previous way and the shipped way (kept in RESULTS under the
+    liver's name and mesh: a liver meshed otherwise is registered again)."""
     from data_spec import read_geometry
     from data_spec.shards import geometry_path
     from liverreg.cpd import register, surface_points, surface_samples
 
-    path = RESULTS / f"{name}.json"
+    path = RESULTS / f"{name}.{gid}.json"
     if path.exists():
         return json.loads(path.read_text())
     (T, n_points, schedule), Counted = setup

@@ -154,7 +154,7 @@ def region_name(scene) -> str:
     return f["name"] if f["kind"] == "region" else "vena_cava"
 
 
-def _file_key(path, g: dict) -> str:
+def prepared_key(path, g: dict) -> str:
     """What a liver file's prepared mesh depends on: the file, the settings and the code."""
     import hashlib
 
@@ -190,7 +190,7 @@ def population_geometries(scene, cache=None, dataset=None, meshed=None, progress
     livers, known = [], {}
     variety = g.get("variety", "anatomical")
     mem = list(members(g))
-    keys = [_file_key(m.path, g) if m.path else phantom_key(m.seed, variety, g["mesh_size"])
+    keys = [prepared_key(m.path, g) if m.path else phantom_key(m.seed, variety, g["mesh_size"])
             for m in mem]
     _warn_stale(dataset, index, mem, keys)
     for i, (m, key) in enumerate(zip(mem, keys)):
