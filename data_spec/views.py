@@ -26,8 +26,10 @@ def dataset_fingerprint(data: str | Path) -> str:
 
     import h5py
 
+    from data_spec.shards import list_shards
+
     h = hashlib.sha256()
-    for shard in sorted((Path(data) / "sims").glob("sim_*.h5")):
+    for shard in list_shards(data):
         try:
             with h5py.File(shard, "r") as f:
                 mark = str(f.attrs.get("checksum", ""))

@@ -154,6 +154,11 @@ def region_name(scene) -> str:
     return f["name"] if f["kind"] == "region" else "vena_cava"
 
 
+def _file_prefix(path) -> str:
+    """The start of every prepared-liver key of a liver file, whatever its code or settings."""
+    return f"file {Path(path).name} "
+
+
 def prepared_key(path, g: dict) -> str:
     """What a liver file's prepared mesh depends on: the file, the settings and the code."""
     import hashlib
@@ -166,7 +171,7 @@ def prepared_key(path, g: dict) -> str:
     for module in (repair, surfaces, meshing, cpd, morph, rigid):
         h.update(Path(module.__file__).read_bytes())
     h.update(RULES.encode())
-    return (f"file {Path(path).name} {h.hexdigest()[:16]}, mesh size {float(g['mesh_size'])!r}, "
+    return (f"{_file_prefix(path)}{h.hexdigest()[:16]}, mesh size {float(g['mesh_size'])!r}, "
             f"frame {g.get('frame', 'LPS')}, template {g.get('population_seed', 0)} "
             f"{g.get('variety', 'anatomical')}, area {g.get('fixed_area_min')}, "
             f"{phantom_code()}")
@@ -219,7 +224,7 @@ def _warn_stale(dataset, index: dict, members: list, keys: list[str]) -> None:
     """
     held = [k for k in index if k.startswith("file ")]
     stale = [m.name for m, k in zip(members, keys) if m.path and k not in index
-             and any(h.startswith(f"file {Path(m.path).name} ") for h in held)]
+             and any(h.startswith(_file_prefix(m.path)) for h in held)]
     if stale:
         log.warning("%s: %d of the %d livers were prepared by other code or settings (%s%s): "
                     "they are meshed and registered again, and a liver whose mesh or fixed "
