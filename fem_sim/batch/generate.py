@@ -6,8 +6,10 @@ atomic counter (an MPI window on world rank 0), so a slow or failing case never 
 
 Before any MPI work: world rank 0 validates the scene, builds and checks every geometry, writes
 the geometry files and decides which shards are missing or corrupt; the verdict is broadcast, so
-a bad scene ends every rank with its message instead of hanging. The forms are compiled once on
-rank 0 before the split (FFCx waits only 10 s for another process compiling the same form).
+a bad scene ends every rank with its message instead of hanging. The liver files of a population
+are meshed and registered by every rank, each its share, once the scene is checked. The forms
+are compiled once on rank 0 before the split (FFCx waits only 10 s for another process
+compiling the same form).
 """
 
 from __future__ import annotations
@@ -55,6 +57,7 @@ class Plan:
     tasks: list[int] | None = None
     skipped: int = 0
     geometry_ids: list[str] | None = None
+    prepared: list[int] | None = None  # liver files each rank meshed and registered
 
 
 def solver_settings(scene: Scene) -> dict:
@@ -199,18 +202,29 @@ def _write_livers(scene: Scene, scene_file: str, livers: list[Geometry],
     return ids, fixed_sets
 
 
-def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool,
-              progress: bool = False, ranks_per_sim: int = 1) -> tuple[Plan, Scene | None]:
-    """Rank 0 only: validate everything, lock the directory and decide the work. Any error
-    goes into Plan.error (so it is broadcast, and no rank waits for a plan that never comes).
+def check_run(scene_file: str, out: Path, only: str | None,
+              ranks_per_sim: int = 1) -> tuple[Plan, Scene | None]:
+    """Rank 0 only, before anything is prepared: the scene, ``--only`` and the solver
+    settings checked, ``out`` locked for this run and proved writable.
     """
-    try:
+    def check():
         scene = load_scene(scene_file)
-        todo = parse_range(only, scene.n_simulations)  # a bad --only writes nothing
+        parse_range(only, scene.n_simulations)  # a bad --only writes nothing
         found = solver_rules.scene_problems(scene["solver"], ranks=ranks_per_sim)
         if found:  # the scene allows it on some rank count, not on this one
             raise SceneError(scene_file, found)
         _check_directory(scene, out)
+        return Plan(), scene
+    return _guarded(check)
+
+
+def make_plan(scene: Scene, scene_file: str, out: Path, only: str | None, retry_failed: bool,
+              progress: bool = False) -> Plan:
+    """Rank 0 only, after :func:`check_run`: every liver built and checked, the scene
+    recorded, and the work decided.
+    """
+    def plan():
+        todo = parse_range(only, scene.n_simulations)
         ids, fixed = _write_livers(scene, scene_file, _scene_livers(scene, out, progress),
                                    out)
         # Everything checked: record the scene (a directory without shards takes a new one).
@@ -223,6 +237,15 @@ def make_plan(scene_file: str, out: Path, only: str | None, retry_failed: bool,
             shard_path(out, i), scene.hash, retry_failed, ids[gi], fixed[gi])]
         tasks.sort(key=lambda i: (i % len(ids), i))  # cases of one liver together
         return Plan(tasks=tasks, skipped=len(todo) - len(tasks), geometry_ids=ids), scene
+    return _guarded(plan)[0]
+
+
+def _guarded(step) -> tuple[Plan, Scene | None]:
+    """``step()``, with any error as Plan.error (so it is broadcast, and no rank waits for a
+    plan that never comes).
+    """
+    try:
+        return step()
     except (SceneError, GeometryError, cs.CaseError, LockedError, ValueError, OSError) as exc:
         return Plan(error=str(exc)), None
     except Exception as exc:  # unexpected: still a message on every rank, never a hang
@@ -386,20 +409,44 @@ def quiet_wait(world, poll_s: float = 0.05) -> None:
 
 
 def _plan(world, scene_file, out, only, retry_failed, progress, ranks_per_sim):
-    """(plan, scene) on every rank; rank 0 decides (collective)."""
+    """(plan, scene) on every rank; rank 0 checks and decides, every rank prepares its share
+    of a file population's livers in between (collective).
+    """
     plan, scene = Plan(), None
     if world.rank == 0:
         if world.size % ranks_per_sim:  # checked before anything is written
             plan = Plan(error=f"--ranks-per-sim {ranks_per_sim} does not divide the "
                               f"{world.size} MPI ranks")
         else:
-            plan, scene = make_plan(scene_file, out, only, retry_failed, progress,
-                                    ranks_per_sim)
-    quiet_wait(world)  # collective: a population's livers take minutes on rank 0
-    plan = world.bcast(plan, root=0)  # collective
+            plan, scene = check_run(scene_file, out, only, ranks_per_sim)
+    plan, scene = world.bcast((plan, scene), root=0)  # collective
     if plan.error:
         return plan, None
-    return plan, world.bcast(scene, root=0)
+    shares = _prepare_share(world, scene, out, progress) if world.size > 1 else None
+    if world.rank == 0:
+        plan = make_plan(scene, scene_file, out, only, retry_failed, progress)
+        plan.prepared = shares
+    quiet_wait(world)  # collective: a population's livers take minutes on rank 0
+    plan = world.bcast(plan, root=0)  # collective
+    return plan, (None if plan.error else scene)
+
+
+def _prepare_share(world, scene: Scene, out: Path, progress: bool) -> list[int] | None:
+    """Every rank meshes and registers its share of the liver files the dataset lacks
+    (:func:`fem_sim.geometry.file_population.prepare_share`); rank 0 then reads them back.
+    Collective; a rank that fails here leaves its livers to rank 0. Rank 0 gets how many
+    each rank prepared.
+    """
+    from fem_sim.geometry.file_population import prepare_share
+
+    staged = 0
+    try:
+        staged = prepare_share(scene, out, world.rank, world.size,
+                               progress=progress and world.rank == 0)
+    except Exception:  # noqa: BLE001 (never a hang: rank 0 prepares what is missing)
+        log.exception("rank %d: preparing livers failed; rank 0 prepares them", world.rank)
+    quiet_wait(world)  # collective: a population's livers take minutes
+    return world.gather(staged, root=0)  # collective
 
 
 def _work(world, group, counter, plan: Plan, liver: _Liver, bar) -> None:
@@ -432,7 +479,9 @@ def _report(world, scene, plan, out, totals, elapsed, ranks_per_sim, max_failure
     print(f"fem_sim generate {scene.name}: {done} simulated ({failed} failed), "
           f"{plan.skipped} skipped (already valid), {elapsed:.1f} s, "
           f"{rate:.0f} simulations/hour on {world.size} rank(s), "
-          f"{world.size // ranks_per_sim} group(s) of {ranks_per_sim}", flush=True)
+          f"{world.size // ranks_per_sim} group(s) of {ranks_per_sim}"
+          + (f"; liver files prepared per rank: {plan.prepared}" if any(plan.prepared or [])
+             else ""), flush=True)
     if done and failed / done > max_failure_rate:
         print(f"fem_sim generate: error: {failed} of {done} simulations failed, more than "
               f"--max-failure-rate {max_failure_rate:g}: a broken set-up rather than hard "

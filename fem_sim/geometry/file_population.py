@@ -204,7 +204,8 @@ def population_geometries(scene, cache=None, dataset=None, meshed=None, progress
             if m.path is None:
                 liver = make_phantom(m.seed, g["mesh_size"], variety)
             else:
-                liver, reg, records[m.name] = _prepared(m.path, registrar, g)
+                liver, reg, records[m.name] = (read_staged(dataset, key)
+                                               or _prepared(m.path, registrar, g))
                 known[liver.geometry_id] = reg
             index[key] = liver.geometry_id
             if dataset is not None:  # kept as they come: a long population resumes
@@ -212,6 +213,10 @@ def population_geometries(scene, cache=None, dataset=None, meshed=None, progress
         livers.append(liver)
         if meshed:
             meshed(i)
+    if dataset is not None:  # every staged liver is kept now (or of other code: not used)
+        import shutil
+
+        shutil.rmtree(staging_dir(dataset), ignore_errors=True)
     attach_shape_coefficients(livers, g["pca_components"], cache=cache, progress=progress,
                               template=template, known=known, region=registrar.region)
     return livers
@@ -263,3 +268,105 @@ def _read_records(dataset) -> dict:
         return {r["name"]: LiverRecord(**r) for r in json.loads(path.read_text())}
     except (OSError, ValueError, TypeError, KeyError):
         return {}
+
+
+# Livers prepared by every rank before rank 0 plans (fem_sim generate under MPI): each rank
+# prepares its share of the livers the dataset does not hold and stages them here, under their
+# prepared-liver key; rank 0 reads them back in the population's order instead of preparing
+# them. Preparation is deterministic (the same file gives the same mesh and registration in
+# any process), so the dataset is the one a single rank makes.
+
+def staging_dir(dataset) -> Path:
+    return Path(dataset) / "geometry" / "staged"
+
+
+def _staged_path(dataset, key: str) -> Path:
+    import hashlib
+
+    return staging_dir(dataset) / hashlib.sha256(key.encode()).hexdigest()[:24]
+
+
+def unprepared(scene, dataset) -> list:
+    """(member, key) of every liver file of a file population that ``dataset`` does not hold
+    prepared under its key (all of them for a new dataset); [] for other scenes.
+    """
+    from data_spec.livers import members
+    from fem_sim.geometry.mesh_index import indexed, read_index
+
+    g = scene["geometry"]
+    if g["source"] != "population" or "livers" not in g:
+        return []
+    index = read_index(dataset)
+    keyed = [(m, prepared_key(m.path, g)) for m in members(g) if m.path is not None]
+    return [(m, k) for m, k in keyed if indexed(dataset, index.get(k)) is None]
+
+
+def prepare_share(scene, dataset, rank: int, size: int, progress: bool = False) -> int:
+    """Rank ``rank`` of ``size`` prepares every ``size``-th liver the dataset lacks and
+    stages it for rank 0 (:func:`read_staged`); returns how many it staged. A liver that
+    fails is left to rank 0, which prepares it again and names the reason.
+    """
+    g = scene["geometry"]
+    share = [(m, k) for m, k in unprepared(scene, dataset)[rank::size]
+             if not _staged_path(dataset, k).with_suffix(".npz").exists()]
+    if not share:
+        return 0
+    registrar = Registrar(template_of(g), region_name(scene), g.get("frame", "LPS"))
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(share), unit="liver", desc=f"livers prepared ({size} ranks)")
+    staged = 0
+    for m, key in share:
+        try:
+            stage(dataset, key, *prepare(m.path, registrar, g["mesh_size"],
+                                         g.get("fixed_area_min")))
+            staged += 1
+        except Exception as exc:  # noqa: BLE001 (rank 0 meets it again and says why)
+            log.info("%s: left to rank 0 (%s)", m.name, exc)
+        if bar is not None:
+            bar.update()
+    if bar is not None:
+        bar.close()
+    return staged
+
+
+def stage(dataset, key: str, liver: Geometry, reg, record: LiverRecord) -> None:
+    """A prepared liver, its registration and its record under ``key``: the geometry file
+    first, then the .npz that says it is complete (both written atomically).
+    """
+    from data_spec import write_geometry
+    from data_spec.atomic import atomic_path
+
+    base = _staged_path(dataset, key)
+    base.parent.mkdir(parents=True, exist_ok=True)
+    write_geometry(base.with_suffix(".h5"), liver)
+    scalars = {"residual": reg.residual, "inverted": reg.inverted,
+               "iterations": reg.iterations, "min_jacobian": reg.min_jacobian,
+               "unfold_rounds": reg.unfold_rounds}
+    with atomic_path(base.with_suffix(".npz")) as tmp, open(tmp, "wb") as f:
+        np.savez(f, points=reg.points, key=np.array(key),
+                 registration=np.array(json.dumps(scalars)),
+                 record=np.array(json.dumps(asdict(record))))
+
+
+def read_staged(dataset, key: str):
+    """(liver, registration, record) staged under ``key``, or None (none staged, or
+    unreadable: then it is prepared again).
+    """
+    from data_spec import read_geometry
+    from liverreg.cpd import Registration
+
+    if dataset is None:
+        return None
+    base = _staged_path(dataset, key)
+    try:
+        with np.load(base.with_suffix(".npz"), allow_pickle=False) as z:
+            if str(z["key"]) != key:
+                return None
+            reg = Registration(points=z["points"], **json.loads(str(z["registration"])))
+            record = LiverRecord(**json.loads(str(z["record"])))
+        return read_geometry(base.with_suffix(".h5")), reg, record
+    except (OSError, ValueError, KeyError, TypeError):
+        return None

@@ -2,6 +2,7 @@
 tetrahedron, fixed where the template's vena-cava region lands, and a three-liver population
 generated end to end (../shared/data/livers/real)."""
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -9,6 +10,8 @@ import pytest
 
 from data_spec.geometry import region_area, signed_volumes
 
+MPI_ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
+           "OMPI_MCA_rmaps_base_oversubscribe": "1", "OPENBLAS_NUM_THREADS": "1"}
 REAL = Path(__file__).parents[3] / "shared" / "data" / "livers" / "real"
 needs_livers = pytest.mark.skipif(not REAL.exists(), reason="shared/data/livers/real not present")
 
@@ -66,10 +69,12 @@ def test_unfolding_undoes_a_fold_made_by_hand(registrar):
 
 
 @needs_livers
+@pytest.mark.mpi
 def test_a_three_liver_file_population_generates_end_to_end(tmp_path):
-    """Three real livers (a fourth set aside for validation): meshed, registered, fixed,
-    their shape coefficients from the PCA with the phantom template kept apart, simulated;
-    a second run reuses everything."""
+    """Three real livers (a fourth set aside for validation): meshed and registered by two
+    ranks, each its share, fixed, their shape coefficients from the PCA with the phantom
+    template kept apart, simulated; a second run reuses everything; one rank alone makes the
+    same meshes, registrations and shape coefficients."""
     import json
     import subprocess
     import sys
@@ -101,12 +106,15 @@ degree = 1
 ''')
     out = tmp_path / "data"
 
-    def generate():  # a process per run: a run holds its directory's lock while it lives
-        return subprocess.run([sys.executable, "-m", "fem_sim", "generate", str(scene), "--out",
-                               str(out), "--no-progress"], capture_output=True, text=True)
+    def generate(ranks=1, to=out):  # a process per run: a run holds its directory's lock
+        return subprocess.run(["mpirun", "-n", str(ranks), sys.executable, "-m", "fem_sim",
+                               "generate", str(scene), "--out", str(to), "--no-progress"],
+                              capture_output=True, text=True, env=MPI_ENV)
 
-    first = generate()
+    first = generate(ranks=2)  # each rank meshes and registers its share of the livers
     assert first.returncode == 0, first.stderr[-2000:]
+    assert "liver files prepared per rank: [2, 1]" in first.stdout, first.stdout
+    assert not (out / "geometry" / "staged").exists()
     records = json.loads((out / "geometry" / "livers.json").read_text())
     names = [p.stem for p in sorted(REAL.glob("LiTS-1*.obj")) if p.stem != "LiTS-10"][:3]
     assert [r["name"] for r in records] == names
@@ -121,6 +129,14 @@ degree = 1
     again = generate()
     assert again.returncode == 0 and "6 skipped" in again.stdout, again.stderr[-2000:]
     assert (out / "geometry" / "meshes.json").read_text() == before
+    one = generate(ranks=1, to=tmp_path / "one_rank")  # the livers all prepared on rank 0
+    assert one.returncode == 0 and "prepared per rank" not in one.stdout, one.stderr[-2000:]
+    assert (tmp_path / "one_rank" / "geometry" / "meshes.json").read_text() == before
+    assert json.loads((tmp_path / "one_rank" / "geometry" / "livers.json").read_text())[0][
+        "residual"] == pytest.approx(records[0]["residual"], rel=1e-9)
+    with np.load(out / "geometry" / "population.npz") as a, \
+            np.load(tmp_path / "one_rank" / "geometry" / "population.npz") as b:
+        assert np.allclose(a["coefficients"], b["coefficients"], atol=1e-6)
 
 
 def test_livers_prepared_by_other_code_are_announced(caplog):
@@ -139,3 +155,47 @@ def test_livers_prepared_by_other_code_are_announced(caplog):
     caplog.clear()
     _warn_stale("DATA", {keys[1]: "g2", "phantom 3 old": "g3"}, members, keys)
     assert caplog.text == ""
+
+
+@needs_livers
+@pytest.mark.mpi
+def test_a_broken_liver_file_in_another_ranks_share_is_named_and_no_rank_hangs(tmp_path):
+    """A population whose second file is not a liver: rank 1, whose share it is, leaves it
+    to rank 0, which names the file and the way to leave it out; every rank ends, nothing is
+    simulated."""
+    import shutil
+    import subprocess
+    import sys
+
+    livers = tmp_path / "livers"
+    livers.mkdir()
+    shutil.copy(REAL / "LiTS-1.obj", livers / "a.obj")
+    (livers / "b.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")  # one triangle
+    shutil.copy(REAL / "LiTS-11.obj", livers / "c.obj")
+    scene = tmp_path / "s.toml"
+    scene.write_text(f'''schema_version = 1
+[scene]
+name = "broken"
+n_simulations = 3
+seed = 1
+[geometry]
+source = "population"
+livers = "{livers}/*.obj"
+population_size = 3
+frame = "population"
+pca_components = 1
+mesh_size = 20.0
+[loads]
+magnitude = 0.4
+min_distance_to_fixed = 20.0
+[steps]
+n = 1
+[solver]
+degree = 1
+''')
+    res = subprocess.run(["mpirun", "-n", "2", sys.executable, "-m", "fem_sim", "generate",
+                          str(scene), "--out", str(tmp_path / "d"), "--no-progress"],
+                         capture_output=True, text=True, env=MPI_ENV, timeout=300)
+    assert res.returncode == 2, res.stderr[-2000:]
+    assert "b.obj" in res.stderr and "geometry.exclude" in res.stderr, res.stderr[-2000:]
+    assert not list((tmp_path / "d").glob("sims/sim_*.h5"))
