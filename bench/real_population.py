@@ -5,6 +5,8 @@ the 15 validation livers and the SOFA liver (registered here, never part of the 
 
     .venv-solver/bin/python bench/real_population.py [--data runs/data/scene4_livers]
 
+and the preparation's wall time on 1 and 2 ranks (``--prep-livers``, ``--prep-repeats``).
+
 Reads the population that ``fem_sim generate data_spec/scenes/scene4_livers.toml`` prepares
 (DATA/geometry/livers.json, population.npz); the unseen livers' records are appended to
 bench/results/real_population/unseen.jsonl as they come and skipped when there.
@@ -58,6 +60,68 @@ def unseen_records(scene) -> list[dict]:
     return out
 
 
+def preparation_runs(n_livers: int, repeats: int) -> list[dict]:
+    """``fem_sim generate --only 0..1`` of the first ``n_livers`` livers of scene 4 into a
+    new directory, on 1 and on 2 ranks in turn, ``repeats`` times each: wall seconds (the
+    livers meshed and registered, their PCA, one simulation). Kept in preparation.jsonl by
+    commit, and skipped when there.
+    """
+    import os
+    import subprocess
+    import sys
+    import tempfile
+    import time
+
+    from liverviz.report import commit
+
+    path, tag = RESULTS / "preparation.jsonl", commit()
+    done = [r for r in map(json.loads, path.read_text().splitlines())
+            if r["commit"] == tag and r["livers"] == n_livers] if path.exists() else []
+    text = SCENE.read_text().replace('"../../../shared/data/livers/real"',
+                                     f'"{(ROOT.parent / "shared/data/livers/real").resolve()}"')
+    text = text.replace("pca_components = 27", f"pca_components = {n_livers - 1}\n"
+                        f"population_size = {n_livers}")
+    env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
+           "OMPI_MCA_rmaps_base_oversubscribe": "1", "OPENBLAS_NUM_THREADS": "1"}
+    for rep in range(repeats):
+        for ranks in (1, 2):
+            if any(r["ranks"] == ranks and r["repeat"] == rep for r in done):
+                continue
+            with tempfile.TemporaryDirectory() as tmp:
+                scene = Path(tmp) / "prep.toml"
+                scene.write_text(text)
+                t0 = time.perf_counter()
+                res = subprocess.run(["mpirun", "-n", str(ranks), sys.executable, "-m",
+                                      "fem_sim", "generate", str(scene), "--out",
+                                      f"{tmp}/d", "--only", "0..1", "--no-progress"],
+                                     env=env, capture_output=True, text=True)
+                seconds = time.perf_counter() - t0
+            if res.returncode:
+                raise SystemExit(f"generate failed on {ranks} rank(s):\n{res.stderr[-2000:]}")
+            done.append({"commit": tag, "livers": n_livers, "ranks": ranks, "repeat": rep,
+                         "seconds": seconds, "line": res.stdout.strip().splitlines()[-1]})
+            with path.open("a") as fh:
+                fh.write(json.dumps(done[-1]) + "\n")
+            print(f"[preparation] {ranks} rank(s), run {rep + 1}: {seconds:.0f} s", flush=True)
+    return done
+
+
+def preparation_lines(runs: list[dict]) -> list[str]:
+    """The preparation's wall time on 1 and 2 ranks, as report lines."""
+    med = {k: float(np.median([r["seconds"] for r in runs if r["ranks"] == k])) for k in (1, 2)}
+    n = runs[0]["livers"]
+    return ["## Preparing the livers on every rank", "",
+            f"`fem_sim generate` meshes and registers a population's liver files on every rank, "
+            f"each its share (rank 0 reads them back in order). Wall time of `fem_sim generate "
+            f"--only 0..1` on the first {n} livers of scene 4 into a new directory (the livers "
+            f"prepared, their PCA, one simulation), median of {len(runs) // 2} runs each, "
+            "1 and 2 ranks in turn:", "",
+            "| ranks | wall s | ratio to 1 rank |", "|---|---|---|",
+            f"| 1 | {med[1]:.0f} | 1.00 |", f"| 2 | {med[2]:.0f} | {med[2] / med[1]:.2f} |", "",
+            f"Its batch line on 2 ranks: `{next(r for r in runs if r['ranks'] == 2)['line']}`",
+            ""]
+
+
 def summary_row(label: str, recs: list[dict]) -> str:
     def q(key, fn):
         return fn([r[key] for r in recs])
@@ -99,6 +163,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=str(ROOT / "runs" / "data" / "scene4_livers"))
     ap.add_argument("--md", default=str(ROOT / "docs" / "real_population.md"))
+    ap.add_argument("--prep-livers", type=int, default=16,
+                    help="livers of the preparation timing (0: no timing)")
+    ap.add_argument("--prep-repeats", type=int, default=3)
     a = ap.parse_args(argv)
     scene = load_scene(SCENE)
     recs = json.loads((Path(a.data) / "geometry" / "livers.json").read_text())
@@ -131,6 +198,8 @@ def main(argv=None) -> int:
              f"{np.median([float(r['frame'].split('by ')[1].split(' ')[0]) for r in recs]):.0f}"
              " degrees (the phantom template is not a real liver's shape).", "",
              f"![registration]({png.name})", ""]
+    if a.prep_livers:
+        lines += preparation_lines(preparation_runs(a.prep_livers, a.prep_repeats))
     Path(a.md).write_text("\n".join(lines))
     print(f"wrote {a.md}")
     return 0
