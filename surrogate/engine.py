@@ -205,7 +205,9 @@ def _start(problem: Problem, cfg: dict, seed: int, rng, checkpoint, log_fn, labe
         state, meta = loaded
         rng.bit_generator.state = meta["rng"]
         log_fn(f"{label}resumed after epoch {meta['epoch']} from {checkpoint.dir}")
-        return state, meta["history"], meta["epoch"], meta["last_val"]
+        # epochs another process trained: a run's cost counts them beside its own wall time
+        history = [{**h, "earlier": True} for h in meta["history"]]
+        return state, history, meta["epoch"], meta["last_val"]
     if problem.validation() is not None:
         return state, [], 0, validate(params)  # the plateau rule's first value
     # nothing held out: the first training batch's loss

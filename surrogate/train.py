@@ -164,12 +164,13 @@ def _cross_validate(ds: Dataset, cfg: dict, ckpt: Path, identity: str, say) -> d
     """
     folds = kfold_groups(ds, cfg["folds"], cfg["seed"])[:cfg.get("evaluate_folds") or None]
     cv = {"pred": [], "true": [], "smp": [], "naive": [], "history": {}, "seconds": 0.0,
-          "examples": 0.0, "n_folds": len(folds)}
+          "examples": 0.0, "n_folds": len(folds), "earlier": 0.0}
     for k, held in enumerate(folds):
         done = ckpt / f"fold{k}" / f"result-{identity}.npz"
         saved = _load_fold(done)
         if saved is not None:
             p, y, s, mean_disp, hist = saved
+            hist = [{**h, "earlier": True} for h in hist]  # trained by another process
             say(f"fold {k + 1}/{len(folds)} done before (from {done})")
         else:
             train_samples = training_samples(ds, held, cfg)
@@ -182,11 +183,17 @@ def _cross_validate(ds: Dataset, cfg: dict, ckpt: Path, identity: str, say) -> d
         # from the epochs' own records, so a resumed run reports the whole training
         cv["examples"] += sum(h["examples_per_s"] * h["seconds"] for h in hist)
         cv["seconds"] += sum(h["seconds"] for h in hist)
+        cv["earlier"] += earlier_seconds(hist)
         cv["history"][f"fold{k}"] = hist
         for key, value in (("pred", p), ("true", y), ("smp", s),
                            ("naive", np.broadcast_to(mean_disp, y.shape))):
             cv[key].append(value)
     return cv
+
+
+def earlier_seconds(history: list[dict]) -> float:
+    """The seconds of the epochs another process trained (a resumed run's earlier part)."""
+    return sum(h["seconds"] for h in history if h.get("earlier"))
 
 
 def _result(ds: Dataset, cfg: dict, cv: dict) -> dict:
@@ -260,7 +267,9 @@ def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
     error_plots(run, np.concatenate(cv["pred"]), np.concatenate(cv["true"]), result)
     if cfg["final_fit"]:
         cv["history"]["final"] = _final_fit(ds, cfg, run, ckpt, identity, say)
-    result["total_seconds"] = time.perf_counter() - t0
+    # this process's wall time and the epochs earlier processes trained (a resumed run)
+    result["total_seconds"] = (time.perf_counter() - t0 + cv["earlier"]
+                               + earlier_seconds(cv["history"].get("final", [])))
     (run / "metrics.json").write_text(json.dumps(result, indent=1))
     (run / "metrics.md").write_text(md)
     (run / "history.json").write_text(json.dumps(cv["history"], indent=1))

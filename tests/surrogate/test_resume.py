@@ -53,6 +53,8 @@ def test_killed_fit_resumes_and_ends_where_an_uninterrupted_fit_ends(synth_dir, 
     resumed, hist2 = fit_design(ds, train, cfg, 3, "", said.append, ck)
     assert said[0].startswith("resumed after epoch 2"), said[0]
     assert [h["epoch"] for h in hist2] == [h["epoch"] for h in hist]
+    # the first two epochs were another process's: a run's cost counts them
+    assert [bool(h.get("earlier")) for h in hist2] == [True, True] + [False] * (len(hist) - 2)
     np.testing.assert_allclose([h["val_loss"] for h in hist2], [h["val_loss"] for h in hist],
                                rtol=1e-4)
     _assert_same_params(resumed[0] if design == "small" else resumed.params,
@@ -196,3 +198,8 @@ def test_a_training_killed_by_sigkill_resumes_from_the_command_line(synth_dir, t
     assert fresh.returncode == 0, fresh.stderr[-2000:]
     clean = json.loads((tmp_path / "clean" / "metrics.json").read_text())
     assert resumed["network"]["mee"] == pytest.approx(clean["network"]["mee"], rel=1e-3)
+    # the run's cost counts the epochs the killed process trained (fold 1, part of fold 2)
+    history = json.loads((run / "history.json").read_text())
+    earlier = sum(h["seconds"] for f in history.values() for h in f if h.get("earlier"))
+    assert earlier >= sum(h["seconds"] for h in history["fold0"]) > 0
+    assert resumed["total_seconds"] >= resumed["training_seconds"] > earlier
