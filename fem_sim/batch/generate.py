@@ -99,12 +99,13 @@ def _geometry_file_ok(path: Path, g: Geometry) -> bool:
 
 
 def _shard_is_done(path: Path, scene_hash: str, retry_failed: bool, geometry_id: str,
-                   fixed: np.ndarray) -> bool:
+                   fixed: np.ndarray, geometry_cache: dict | None = None) -> bool:
     """Whether the shard at ``path`` is a valid simulation of this scene on this liver: its
     mesh (``geometry_id``) and its fixed nodes; a shard of another mesh of the liver (a liver
     file prepared again by other code) or of another fixed region is run again.
+    ``geometry_cache``: :func:`data_spec.validate.shard_problems`'s (each liver read once).
     """
-    if not path.exists() or shard_problems(path):
+    if not path.exists() or shard_problems(path, geometry_cache):
         return False
     import h5py
 
@@ -232,9 +233,9 @@ def make_plan(scene: Scene, scene_file: str, out: Path, only: str | None, retry_
         if not (copy.exists() and load_scene(copy).hash == scene.hash):
             with atomic_path(copy) as tmp:
                 tmp.write_text(dataset_copy_text(scene_file), encoding="utf-8")
-        of = [geometry_of(scene, i, len(ids)) for i in todo]
+        of, livers_read = [geometry_of(scene, i, len(ids)) for i in todo], {}
         tasks = [i for i, gi in zip(todo, of) if not _shard_is_done(
-            shard_path(out, i), scene.hash, retry_failed, ids[gi], fixed[gi])]
+            shard_path(out, i), scene.hash, retry_failed, ids[gi], fixed[gi], livers_read)]
         tasks.sort(key=lambda i: (i % len(ids), i))  # cases of one liver together
         return Plan(tasks=tasks, skipped=len(todo) - len(tasks), geometry_ids=ids), scene
     return _guarded(plan)[0]
