@@ -16,6 +16,33 @@ REAL = Path(__file__).parents[3] / "shared" / "data" / "livers" / "real"
 needs_livers = pytest.mark.skipif(not REAL.exists(), reason="shared/data/livers/real not present")
 
 
+def population_scene(path: Path, livers: str, sims: int, steps: int, pca: int,
+                     extra: str = "") -> Path:
+    """A three-liver file population at 20 mm, P1, written to ``path``."""
+    path.write_text(f'''schema_version = 1
+[scene]
+name = "{path.stem}"
+n_simulations = {sims}
+seed = 4
+[geometry]
+source = "population"
+livers = "{livers}"
+population_size = 3
+{extra}
+frame = "population"
+pca_components = {pca}
+mesh_size = 20.0
+[loads]
+magnitude = 0.4
+min_distance_to_fixed = 20.0
+[steps]
+n = {steps}
+[solver]
+degree = 1
+''')
+    return path
+
+
 @pytest.fixture(scope="module")
 def registrar():
     from fem_sim.geometry.file_population import Registrar
@@ -82,28 +109,8 @@ def test_a_three_liver_file_population_generates_end_to_end(tmp_path):
     from data_spec import read_geometry
     from data_spec.validate import validate_dataset
 
-    scene = tmp_path / "real3.toml"
-    scene.write_text(f'''schema_version = 1
-[scene]
-name = "real3"
-n_simulations = 6
-seed = 4
-[geometry]
-source = "population"
-livers = "{REAL}/LiTS-1*.obj"
-population_size = 3
-validation = ["LiTS-10"]
-frame = "population"
-pca_components = 2
-mesh_size = 20.0
-[loads]
-magnitude = 0.4
-min_distance_to_fixed = 20.0
-[steps]
-n = 2
-[solver]
-degree = 1
-''')
+    scene = population_scene(tmp_path / "real3.toml", f"{REAL}/LiTS-1*.obj", sims=6, steps=2,
+                             pca=2, extra='validation = ["LiTS-10"]')
     out = tmp_path / "data"
 
     def generate(ranks=1, to=out):  # a process per run: a run holds its directory's lock
@@ -172,27 +179,7 @@ def test_a_broken_liver_file_in_another_ranks_share_is_named_and_no_rank_hangs(t
     shutil.copy(REAL / "LiTS-1.obj", livers / "a.obj")
     (livers / "b.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")  # one triangle
     shutil.copy(REAL / "LiTS-11.obj", livers / "c.obj")
-    scene = tmp_path / "s.toml"
-    scene.write_text(f'''schema_version = 1
-[scene]
-name = "broken"
-n_simulations = 3
-seed = 1
-[geometry]
-source = "population"
-livers = "{livers}/*.obj"
-population_size = 3
-frame = "population"
-pca_components = 1
-mesh_size = 20.0
-[loads]
-magnitude = 0.4
-min_distance_to_fixed = 20.0
-[steps]
-n = 1
-[solver]
-degree = 1
-''')
+    scene = population_scene(tmp_path / "s.toml", f"{livers}/*.obj", sims=3, steps=1, pca=1)
     res = subprocess.run(["mpirun", "-n", "2", sys.executable, "-m", "fem_sim", "generate",
                           str(scene), "--out", str(tmp_path / "d"), "--no-progress"],
                          capture_output=True, text=True, env=MPI_ENV, timeout=300)
