@@ -90,10 +90,16 @@ def template():
 
 
 def training_livers(limit: int | None) -> list[tuple[str, str]]:
-    """(name, geometry id) of the dataset's livers, by name."""
+    """(name, geometry id) of the dataset's livers (its population's), by name; the mesh
+    index also keeps the keys of livers prepared by earlier code, so it names them only.
+    """
+    import numpy as np
+
     index = json.loads((DATA / "geometry" / "meshes.json").read_text())
-    items = sorted((key.split()[1].rsplit(".", 1)[0], gid) for key, gid in index.items()
-                   if key.startswith("file "))
+    with np.load(DATA / "geometry" / "population.npz") as z:
+        current = set(map(str, z["geometry_ids"]))
+    items = sorted({(key.split()[1].rsplit(".", 1)[0], gid) for key, gid in index.items()
+                    if key.startswith("file ") and gid in current})
     return items[:limit]
 
 
