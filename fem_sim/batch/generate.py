@@ -400,9 +400,10 @@ def _one_thread_per_rank(world) -> None:
 
 
 def quiet_wait(world, poll_s: float = 0.05) -> None:
-    """Collective: returns on every rank once all have called it; a rank waiting for rank 0
-    (which prepares the livers, or compiles the forms) sleeps between polls instead of spinning
-    a core as a blocking MPI call does.
+    """Collective: returns on every rank once all have called it; a rank waiting for another
+    (rank 0 building the livers' files and their PCA or compiling the forms, a rank finishing
+    its share of the livers) sleeps between polls instead of spinning a core as a blocking MPI
+    call does.
     """
     request = world.Ibarrier()
     while not request.Test():
