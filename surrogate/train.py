@@ -164,7 +164,7 @@ def _cross_validate(ds: Dataset, cfg: dict, ckpt: Path, identity: str, say) -> d
     """
     folds = kfold_groups(ds, cfg["folds"], cfg["seed"])[:cfg.get("evaluate_folds") or None]
     cv = {"pred": [], "true": [], "smp": [], "naive": [], "history": {}, "seconds": 0.0,
-          "examples": 0.0, "n_folds": len(folds), "earlier": 0.0}
+          "examples": 0.0, "n_folds": len(folds)}
     for k, held in enumerate(folds):
         done = ckpt / f"fold{k}" / f"result-{identity}.npz"
         saved = _load_fold(done)
@@ -183,7 +183,6 @@ def _cross_validate(ds: Dataset, cfg: dict, ckpt: Path, identity: str, say) -> d
         # from the epochs' own records, so a resumed run reports the whole training
         cv["examples"] += sum(h["examples_per_s"] * h["seconds"] for h in hist)
         cv["seconds"] += sum(h["seconds"] for h in hist)
-        cv["earlier"] += earlier_seconds(hist)
         cv["history"][f"fold{k}"] = hist
         for key, value in (("pred", p), ("true", y), ("smp", s),
                            ("naive", np.broadcast_to(mean_disp, y.shape))):
@@ -268,8 +267,8 @@ def train_and_evaluate(data_dir: str | Path, run_dir: str | Path, cfg: dict,
     if cfg["final_fit"]:
         cv["history"]["final"] = _final_fit(ds, cfg, run, ckpt, identity, say)
     # this process's wall time and the epochs earlier processes trained (a resumed run)
-    result["total_seconds"] = (time.perf_counter() - t0 + cv["earlier"]
-                               + earlier_seconds(cv["history"].get("final", [])))
+    result["total_seconds"] = time.perf_counter() - t0 + sum(
+        earlier_seconds(h) for h in cv["history"].values())
     (run / "metrics.json").write_text(json.dumps(result, indent=1))
     (run / "metrics.md").write_text(md)
     (run / "history.json").write_text(json.dumps(cv["history"], indent=1))

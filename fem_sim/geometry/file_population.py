@@ -149,6 +149,12 @@ def template_of(g: dict) -> Geometry:
                         g.get("variety", "anatomical"))
 
 
+def registrar_of(scene) -> Registrar:
+    """The registrar of a file population: its template, fixed region and frame."""
+    g = scene["geometry"]
+    return Registrar(template_of(g), region_name(scene), g.get("frame", "LPS"))
+
+
 def region_name(scene) -> str:
     f = scene["fixed"]
     return f["name"] if f["kind"] == "region" else "vena_cava"
@@ -188,8 +194,8 @@ def population_geometries(scene, cache=None, dataset=None, meshed=None, progress
     from fem_sim.geometry.population import attach_shape_coefficients
 
     g = scene["geometry"]
-    template = template_of(g)
-    registrar = Registrar(template, region_name(scene), g.get("frame", "LPS"))
+    registrar = registrar_of(scene)
+    template = registrar.template
     index = read_index(dataset)
     records = _read_records(dataset)
     livers, known = [], {}
@@ -311,7 +317,7 @@ def prepare_share(scene, dataset, rank: int, size: int, progress: bool = False) 
              if not _staged_path(dataset, k).with_suffix(".npz").exists()]
     if not share:
         return 0
-    registrar = Registrar(template_of(g), region_name(scene), g.get("frame", "LPS"))
+    registrar = registrar_of(scene)
     bar = None
     if progress:
         from tqdm import tqdm
@@ -320,8 +326,7 @@ def prepare_share(scene, dataset, rank: int, size: int, progress: bool = False) 
     staged = 0
     for m, key in share:
         try:
-            stage(dataset, key, *prepare(m.path, registrar, g["mesh_size"],
-                                         g.get("fixed_area_min")))
+            stage(dataset, key, *_prepared(m.path, registrar, g))
             staged += 1
         except Exception as exc:  # noqa: BLE001 (rank 0 meets it again and says why)
             log.info("%s: left to rank 0 (%s)", m.name, exc)
@@ -342,9 +347,7 @@ def stage(dataset, key: str, liver: Geometry, reg, record: LiverRecord) -> None:
     base = _staged_path(dataset, key)
     base.parent.mkdir(parents=True, exist_ok=True)
     write_geometry(base.with_suffix(".h5"), liver)
-    scalars = {"residual": reg.residual, "inverted": reg.inverted,
-               "iterations": reg.iterations, "min_jacobian": reg.min_jacobian,
-               "unfold_rounds": reg.unfold_rounds}
+    scalars = {k: v for k, v in asdict(reg).items() if k != "points"}
     with atomic_path(base.with_suffix(".npz")) as tmp, open(tmp, "wb") as f:
         np.savez(f, points=reg.points, key=np.array(key),
                  registration=np.array(json.dumps(scalars)),
