@@ -8,7 +8,6 @@ scene-1 variant: simulations per hour (median of --runs), and the ratio n2 / n1.
 from __future__ import annotations
 
 import argparse
-import os
 import re
 import subprocess
 import sys
@@ -17,12 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
+from fem_sim.batch.chunked import mpirun_env
 from liverviz.report import capture
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "data_spec" / "scenes" / "demo_scene1.toml"
-ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
-       "OPENBLAS_NUM_THREADS": "1"}
+ENV = mpirun_env(oversubscribe=False)
 
 
 def run(n: int, sims: int) -> float:

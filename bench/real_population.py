@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fem_sim.batch.chunked import mpirun_env
 from liverviz.report import ROOT, header
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
@@ -66,7 +67,6 @@ def preparation_runs(n_livers: int, repeats: int) -> list[dict]:
     livers meshed and registered, their PCA, one simulation). Kept in preparation.jsonl by
     commit, and skipped when there.
     """
-    import os
     import subprocess
     import sys
     import tempfile
@@ -81,8 +81,7 @@ def preparation_runs(n_livers: int, repeats: int) -> list[dict]:
                                      f'"{(ROOT.parent / "shared/data/livers/real").resolve()}"')
     text = text.replace("pca_components = 27", f"pca_components = {n_livers - 1}\n"
                         f"population_size = {n_livers}")
-    env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
-           "OMPI_MCA_rmaps_base_oversubscribe": "1", "OPENBLAS_NUM_THREADS": "1"}
+    env = mpirun_env()
     for rep in range(repeats):
         for ranks in (1, 2):
             if any(r["ranks"] == ranks and r["repeat"] == rep for r in done):

@@ -43,6 +43,7 @@ from pathlib import Path
 import budget_fem as bf  # a sibling driver (no dolfinx at import): the budget's cases, meshes
 import numpy as np
 
+from fem_sim.batch.chunked import mpirun_env
 from liverviz.report import ROOT, header
 
 RESULTS = ROOT / "bench" / "results" / "tradeoff_surrogate"
@@ -109,9 +110,7 @@ def complete(scene: Path, out: Path) -> bool:
 
 def generate(nranks: int) -> None:
     """Generate (or finish) every dataset with ``mpirun -n nranks fem_sim generate``."""
-    env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
-           "OMPI_MCA_rmaps_base_oversubscribe": "1", "OPENBLAS_NUM_THREADS": "1",
-           "OMP_NUM_THREADS": "1"}
+    env = mpirun_env()
     for name, (scene, out) in datasets().items():
         print(f"== dataset {name}: {out}", file=sys.stderr, flush=True)
         subprocess.run(["mpirun", "-n", str(nranks), str(SPY), "-m", "fem_sim", "generate",

@@ -80,7 +80,7 @@ def _read(path: Path) -> tuple[list[str], dict | None, dict]:
         if not checksum_ok(f, values):
             p.append(f"{path}: {CHECKSUM_MISMATCH}")
         attrs = {k: str(f.attrs[k]) for k in ("status", "failure_reason", "geometry_file",
-                                              "geometry_id")}
+                                              "geometry_id", "scene_hash")}
         return p, {e.path: values[e.path] for e in DATASETS}, attrs
 
 
@@ -131,17 +131,26 @@ def _liver_problems(path: Path, arr: dict, geo_rel: str, geo_id: str, cache: dic
 
 def shard_problems(path: str | Path, geometry_cache: dict | None = None) -> list[str]:
     """Everything wrong with one shard file."""
+    return checked_shard(path, geometry_cache)[0]
+
+
+def checked_shard(path: str | Path, geometry_cache: dict | None = None
+                  ) -> tuple[list[str], dict | None, dict]:
+    """(everything wrong with one shard file, its arrays by path (None when it cannot be
+    read), its attributes status, failure_reason, geometry_file, geometry_id and
+    scene_hash), the file opened once.
+    """
     path = Path(path)
     geometry_cache = {} if geometry_cache is None else geometry_cache
     p, arr, attrs = _read(path)
     if arr is None:
-        return p
+        return p, None, attrs
     p += _content_problems(path, arr, attrs["status"], attrs["failure_reason"])
     p += _liver_problems(path, arr, attrs["geometry_file"], attrs["geometry_id"],
                          geometry_cache)
     if not path.with_suffix(".xdmf").exists():
         p.append(f"{path}: its XDMF file {path.with_suffix('.xdmf').name} is missing")
-    return p
+    return p, arr, attrs
 
 
 def _missing_problems(directory: Path, shards: list[Path]) -> list[str]:

@@ -23,6 +23,17 @@ from data_spec.views import shard_count
 ROOT = Path(__file__).resolve().parents[2]
 
 
+def mpirun_env(oversubscribe: bool = True, **extra: str) -> dict:
+    """The environment of an ``mpirun`` child: this process's, one BLAS and OpenMP thread
+    per rank (the ranks take the cores), Open MPI allowed to run as root (a container's
+    user), and with ``oversubscribe`` more ranks than cores allowed (a test on one core);
+    ``extra`` variables on top.
+    """
+    return {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
+            **({"OMPI_MCA_rmaps_base_oversubscribe": "1"} if oversubscribe else {}),
+            "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", **extra}
+
+
 def generate_chunks(scene: str | Path, data: str | Path, n: int, *, ranks: int = 2,
                     solver_python: str | Path | None = None, chunk: int = 100,
                     budget_s: float = float("inf")) -> dict:
@@ -36,12 +47,9 @@ def generate_chunks(scene: str | Path, data: str | Path, n: int, *, ranks: int =
     state = json.loads(state_path.read_text()) if state_path.exists() else {"seconds": 0.0}
     have = shard_count(data)
     checked = have == 0  # each run checks the shards before the new ones (--only 0..k)
-    env = {"OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
-           **os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    env = mpirun_env(oversubscribe=False)
 
     def run(upto: int) -> None:
-        # one BLAS thread per MPI rank (the ranks take the cores); Open MPI refuses root
-        # unless told (the caller's environment may say otherwise)
         cmd = ["mpirun", "-n", str(ranks), str(solver_python), "-m", "fem_sim", "generate",
                str(scene), "--out", str(data), "--only", f"0..{upto}"]
         t = time.perf_counter()

@@ -33,13 +33,13 @@ from data_spec import (
     load_scene,
     read_geometry,
     shard_path,
-    shard_problems,
     solver_rules,
     write_geometry,
     write_shard,
 )
 from data_spec.atomic import atomic_path, check_writable, leftover_temporaries
 from data_spec.scene import dataset_copy_text
+from data_spec.validate import checked_shard
 from fem_sim.batch import cases as cs
 from fem_sim.batch.lock import DirectoryLock, LockedError
 from fem_sim.geometry.quality import mesh_problems
@@ -103,18 +103,15 @@ def _shard_is_done(path: Path, scene_hash: str, retry_failed: bool, geometry_id:
     """Whether the shard at ``path`` is a valid simulation of this scene on this liver: its
     mesh (``geometry_id``) and its fixed nodes; a shard of another mesh of the liver (a liver
     file prepared again by other code) or of another fixed region is run again.
-    ``geometry_cache``: :func:`data_spec.validate.shard_problems`'s (each liver read once).
+    ``geometry_cache``: :func:`data_spec.validate.checked_shard`'s (each liver read once).
     """
-    if not path.exists() or shard_problems(path, geometry_cache):
+    if not path.exists():
         return False
-    import h5py
-
-    with h5py.File(path, "r") as f:
-        if (str(f.attrs["scene_hash"]) != scene_hash
-                or str(f.attrs["geometry_id"]) != geometry_id
-                or not np.array_equal(f["fixed_nodes"][()], fixed)):
-            return False
-        return not (retry_failed and str(f.attrs["status"]) == "failed")
+    problems, arr, attrs = checked_shard(path, geometry_cache)
+    if (problems or attrs["scene_hash"] != scene_hash or attrs["geometry_id"] != geometry_id
+            or not np.array_equal(arr["/fixed_nodes"], fixed)):
+        return False
+    return not (retry_failed and attrs["status"] == "failed")
 
 
 def geometry_of(scene: Scene, index: int, n_geometries: int) -> int:
@@ -436,14 +433,21 @@ def _plan(world, scene_file, out, only, retry_failed, progress, ranks_per_sim):
 def _prepare_share(world, scene: Scene, out: Path, progress: bool) -> list[int] | None:
     """Every rank meshes and registers its share of the liver files the dataset lacks
     (:func:`fem_sim.geometry.file_population.prepare_share`); rank 0 then reads them back.
-    Collective; a rank that fails here leaves its livers to rank 0. Rank 0 gets how many
-    each rank prepared.
+    Rank 0 lists the livers the dataset lacks, once for all. Collective; a rank that fails
+    here leaves its livers to rank 0. Rank 0 gets how many each rank prepared.
     """
-    from fem_sim.geometry.file_population import prepare_share
+    from fem_sim.geometry.file_population import prepare_share, unprepared
 
+    todo = []
+    if world.rank == 0:
+        try:
+            todo = unprepared(scene, out)
+        except Exception:  # noqa: BLE001 (rank 0 meets it again in make_plan and says why)
+            log.exception("listing the livers to prepare failed; rank 0 prepares them")
+    todo = world.bcast(todo, root=0)  # collective
     staged = 0
     try:
-        staged = prepare_share(scene, out, world.rank, world.size,
+        staged = prepare_share(scene, out, todo[world.rank::world.size], world.size,
                                progress=progress and world.rank == 0)
     except Exception:  # noqa: BLE001 (never a hang: rank 0 prepares what is missing)
         log.exception("rank %d: preparing livers failed; rank 0 prepares them", world.rank)

@@ -13,6 +13,7 @@ registration figure are kept per liver (:class:`LiverRecord`).
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 from dataclasses import asdict, dataclass
@@ -165,18 +166,29 @@ def _file_prefix(path) -> str:
     return f"file {Path(path).name} "
 
 
+@functools.lru_cache(maxsize=1)
+def _code_digest() -> bytes:
+    """The preparing code's digest (its modules and the rules), read once per process."""
+    import hashlib
+
+    from fem_sim.geometry import meshing, repair, surfaces
+    from liverreg import cpd, morph, rigid
+
+    h = hashlib.sha256()
+    for module in (repair, surfaces, meshing, cpd, morph, rigid):
+        h.update(Path(module.__file__).read_bytes())
+    h.update(RULES.encode())
+    return h.digest()
+
+
 def prepared_key(path, g: dict) -> str:
     """What a liver file's prepared mesh depends on: the file, the settings and the code."""
     import hashlib
 
-    from fem_sim.geometry import meshing, repair, surfaces
     from fem_sim.geometry.mesh_index import phantom_code
-    from liverreg import cpd, morph, rigid
 
     h = hashlib.sha256(Path(path).read_bytes())
-    for module in (repair, surfaces, meshing, cpd, morph, rigid):
-        h.update(Path(module.__file__).read_bytes())
-    h.update(RULES.encode())
+    h.update(_code_digest())
     return (f"{_file_prefix(path)}{h.hexdigest()[:16]}, mesh size {float(g['mesh_size'])!r}, "
             f"frame {g.get('frame', 'LPS')}, template {g.get('population_seed', 0)} "
             f"{g.get('variety', 'anatomical')}, area {g.get('fixed_area_min')}, "
@@ -307,13 +319,14 @@ def unprepared(scene, dataset) -> list:
     return [(m, k) for m, k in keyed if indexed(dataset, index.get(k)) is None]
 
 
-def prepare_share(scene, dataset, rank: int, size: int, progress: bool = False) -> int:
-    """Rank ``rank`` of ``size`` prepares every ``size``-th liver the dataset lacks and
-    stages it for rank 0 (:func:`read_staged`); returns how many it staged. A liver that
-    fails is left to rank 0, which prepares it again and names the reason.
+def prepare_share(scene, dataset, share: list, ranks: int = 1, progress: bool = False) -> int:
+    """Prepares a rank's ``share`` of the livers the dataset lacks (``(member, key)`` as
+    :func:`unprepared` gives them; ``ranks`` ranks share them) and stages each for rank 0
+    (:func:`read_staged`); returns how many it staged. A liver that fails is left to rank 0,
+    which prepares it again and names the reason.
     """
     g = scene["geometry"]
-    share = [(m, k) for m, k in unprepared(scene, dataset)[rank::size]
+    share = [(m, k) for m, k in share
              if not _staged_path(dataset, k).with_suffix(".npz").exists()]
     if not share:
         return 0
@@ -322,7 +335,7 @@ def prepare_share(scene, dataset, rank: int, size: int, progress: bool = False) 
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(share), unit="liver", desc=f"livers prepared ({size} ranks)")
+        bar = tqdm(total=len(share), unit="liver", desc=f"livers prepared ({ranks} ranks)")
     staged = 0
     for m, key in share:
         try:

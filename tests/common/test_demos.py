@@ -2,7 +2,6 @@
 ``mpirun -n 2`` (the dolfinx demos' habit), so the manual cannot rot: both runs succeed and
 give the same displacement."""
 
-import os
 import re
 import subprocess
 import sys
@@ -10,9 +9,10 @@ from pathlib import Path
 
 import pytest
 
+from fem_sim.batch.chunked import mpirun_env
+
 ROOT = Path(__file__).parents[2]
-ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
-       "OMPI_MCA_rmaps_base_oversubscribe": "1", "OPENBLAS_NUM_THREADS": "1"}
+ENV = mpirun_env()
 
 
 def run(*prefix) -> str:

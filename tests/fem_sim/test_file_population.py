@@ -2,16 +2,15 @@
 tetrahedron, fixed where the template's vena-cava region lands, and a three-liver population
 generated end to end (../shared/data/livers/real)."""
 
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from data_spec.geometry import region_area, signed_volumes
+from fem_sim.batch.chunked import mpirun_env
 
-MPI_ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
-           "OMPI_MCA_rmaps_base_oversubscribe": "1", "OPENBLAS_NUM_THREADS": "1"}
+MPI_ENV = mpirun_env()
 REAL = Path(__file__).parents[3] / "shared" / "data" / "livers" / "real"
 needs_livers = pytest.mark.skipif(not REAL.exists(), reason="shared/data/livers/real not present")
 

@@ -16,14 +16,13 @@ import pytest
 
 from data_spec import list_shards, read_shard, validate_dataset
 from data_spec.atomic import leftover_temporaries
+from fem_sim.batch.chunked import mpirun_env
 
 pytestmark = pytest.mark.mpi  # every test here spawns mpirun
 
 ROOT = Path(__file__).parents[2]
 TINY = ROOT / "data_spec" / "scenes" / "tiny_scene1.toml"
-ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
-       "OMPI_MCA_rmaps_base_oversubscribe": "1", "OPENBLAS_NUM_THREADS": "1",
-       "PYTHONPATH": str(ROOT)}
+ENV = mpirun_env(PYTHONPATH=str(ROOT))
 
 
 def generate(scene, out, n=1, r=1, extra=(), timeout=600, **kw):
