@@ -167,18 +167,15 @@ def _file_prefix(path) -> str:
 
 
 @functools.lru_cache(maxsize=1)
-def _code_digest() -> bytes:
-    """The preparing code's digest (its modules and the rules), read once per process."""
-    import hashlib
-
+def _code_bytes() -> bytes:
+    """The preparing code (its modules and the rules) as the key hashes it, read once per
+    process.
+    """
     from fem_sim.geometry import meshing, repair, surfaces
     from liverreg import cpd, morph, rigid
 
-    h = hashlib.sha256()
-    for module in (repair, surfaces, meshing, cpd, morph, rigid):
-        h.update(Path(module.__file__).read_bytes())
-    h.update(RULES.encode())
-    return h.digest()
+    return b"".join([*(Path(m.__file__).read_bytes()
+                       for m in (repair, surfaces, meshing, cpd, morph, rigid)), RULES.encode()])
 
 
 def prepared_key(path, g: dict) -> str:
@@ -188,7 +185,7 @@ def prepared_key(path, g: dict) -> str:
     from fem_sim.geometry.mesh_index import phantom_code
 
     h = hashlib.sha256(Path(path).read_bytes())
-    h.update(_code_digest())
+    h.update(_code_bytes())
     return (f"{_file_prefix(path)}{h.hexdigest()[:16]}, mesh size {float(g['mesh_size'])!r}, "
             f"frame {g.get('frame', 'LPS')}, template {g.get('population_seed', 0)} "
             f"{g.get('variety', 'anatomical')}, area {g.get('fixed_area_min')}, "
