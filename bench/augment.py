@@ -2,7 +2,7 @@
 ``phantoms = N`` anatomical phantoms mixed in (data_spec/scenes/scene4_livers.toml's
 ``[geometry] phantoms``).
 
-    .venv-train/bin/python bench/augment.py [--phantoms 60] [--per-liver 2] [--np 2]
+    .venv-train/bin/python bench/augment.py [--phantoms 60] [--per-liver 2] [--np 2] [--jobs 2]
 
 1. One dataset: the shipped scene's 145 training livers and N phantoms (seeds
    ``population_seed`` onward), ``--per-liver`` random loads each, generated where missing
@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import shutil
 import sys
-import time
 import tomllib
 from pathlib import Path
 
@@ -69,19 +68,15 @@ def reuse_prepared(data: Path) -> None:
     shutil.copytree(src, dst)
 
 
-def trained(data: Path, folds: int, evaluate: int) -> dict:
-    """The population basis on the same folds with and without the phantoms' simulations."""
-    from surrogate.train import train_or_reuse
+def trained(data: Path, folds: int, evaluate: int, jobs: int) -> dict:
+    """The population basis on the same folds with and without the phantoms' simulations
+    (``jobs`` trainings at a time)."""
+    from surrogate.train import train_all
 
-    out = {}
-    for label, keep in (("with", True), ("without", False)):
-        t = time.perf_counter()
-        out[label] = train_or_reuse(data, RESULTS / f"run_{label}", CONFIG,
-                                    {"folds": folds, "evaluate_folds": evaluate,
-                                     "final_fit": False, "phantoms_in_training": keep})
-        print(f"[{label} phantoms] skill {out[label]['skill']:.3f} "
-              f"({time.perf_counter() - t:.0f} s)", flush=True)
-    return out
+    common = {"folds": folds, "evaluate_folds": evaluate, "final_fit": False}
+    return train_all(data, {label: (RESULTS / f"run_{label}", CONFIG,
+                                    {**common, "phantoms_in_training": keep})
+                            for label, keep in (("with", True), ("without", False))}, jobs)
 
 
 def paired(runs: dict) -> dict:
@@ -136,6 +131,7 @@ def main() -> int:
     ap.add_argument("--folds", type=int, default=5)
     ap.add_argument("--evaluate-folds", type=int, default=5)
     ap.add_argument("--np", type=int, default=2, help="MPI ranks for generation")
+    ap.add_argument("--jobs", type=int, default=2, help="trainings at a time (one core each)")
     ap.add_argument("--generate-only", action="store_true")
     a = ap.parse_args()
     from data_spec import load_scene
@@ -149,7 +145,7 @@ def main() -> int:
                           chunk=100)
     if a.generate_only:
         return 0
-    runs = trained(data, a.folds, a.evaluate_folds)
+    runs = trained(data, a.folds, a.evaluate_folds, a.jobs)
     out = {"phantoms": a.phantoms, "per_liver": a.per_liver, "folds": a.folds,
            "evaluate": a.evaluate_folds, "sims": gen["sims"], "runs": runs,
            "real": len(training_files(scene["geometry"])), "paired": paired(runs),

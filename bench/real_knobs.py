@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 
 from liverviz.report import ROOT, commit, write_report
 
@@ -47,30 +46,14 @@ VARIANTS = [
 ]
 
 
-def _train(slug: str, over: dict, folds: int, evaluate: int) -> dict:
-    """One variant's metrics (trained, or reused when finished before)."""
-    from surrogate.train import train_or_reuse
-
-    t = time.perf_counter()
-    m = train_or_reuse(DATA, RESULTS / f"run_{slug}", CONFIG,
-                       {"folds": folds, "evaluate_folds": evaluate, "final_fit": False, **over})
-    print(f"[{slug}] skill {m['skill']:.3f} ({time.perf_counter() - t:.0f} s)", flush=True)
-    return m
-
-
 def trained(folds: int, evaluate: int, only: set | None, jobs: int = 1) -> dict:
-    """Every variant's metrics, ``jobs`` variants trained at a time (each in a process of its
-    own: one training takes one core).
-    """
-    todo = [(slug, over) for slug, _label, over in VARIANTS if not only or slug in only]
-    if jobs <= 1:
-        return {slug: _train(slug, over, folds, evaluate) for slug, over in todo}
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
+    """Every variant's metrics (trained, or reused when finished before), ``jobs`` at a time."""
+    from surrogate.train import train_all
 
-    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as ex:
-        futures = {slug: ex.submit(_train, slug, over, folds, evaluate) for slug, over in todo}
-        return {slug: f.result() for slug, f in futures.items()}
+    common = {"folds": folds, "evaluate_folds": evaluate, "final_fit": False}
+    return train_all(DATA, {slug: (RESULTS / f"run_{slug}", CONFIG, {**common, **over})
+                            for slug, _label, over in VARIANTS if not only or slug in only},
+                     jobs)
 
 
 def paired(ref: dict, m: dict) -> tuple[int, int, int, int]:

@@ -309,3 +309,28 @@ def train_or_reuse(data_dir: str | Path, run_dir: str | Path, name: str,
     train_and_evaluate(data_dir, run, cfg)
     seen.write_text(json.dumps(now))
     return json.loads(metrics.read_text())
+
+
+def _reuse_timed(label: str, data_dir, run_dir, name: str, overrides: dict) -> dict:
+    """:func:`train_or_reuse`, its skill and seconds printed under ``label``."""
+    t = time.perf_counter()
+    m = train_or_reuse(data_dir, run_dir, name, overrides)
+    print(f"[{label}] skill {m['skill']:.3f} ({time.perf_counter() - t:.0f} s)", flush=True)
+    return m
+
+
+def train_all(data_dir: str | Path, runs: dict, jobs: int = 1) -> dict:
+    """The metrics of every run of ``runs`` (label: (run_dir, config name, overrides)), trained
+    or reused as :func:`train_or_reuse` does, ``jobs`` at a time, each in a spawned process of
+    its own (a training takes one core; XLA's thread pool is not fork-safe). In the order
+    given: put the slow ones last, so that a study cut short has the most runs.
+    """
+    args = {label: (label, data_dir, *run) for label, run in runs.items()}
+    if jobs <= 1:
+        return {label: _reuse_timed(*a) for label, a in args.items()}
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as ex:
+        futures = {label: ex.submit(_reuse_timed, *a) for label, a in args.items()}
+        return {label: f.result() for label, f in futures.items()}

@@ -9,7 +9,7 @@ import h5py
 import surrogate.train
 from data_spec import views
 from surrogate import evaluate
-from surrogate.train import train_or_reuse
+from surrogate.train import train_all, train_or_reuse
 
 
 def test_a_run_is_trained_again_when_the_dataset_grows_or_the_config_changes(tmp_path,
@@ -50,6 +50,28 @@ def test_a_run_is_trained_again_when_the_dataset_grows_or_the_config_changes(tmp
     shards(7, checksum="b")  # made again: as many simulations, other ones
     assert train_or_reuse(data, run, "small", {"folds": 3})["calls"] == 5
     assert train_or_reuse(data, run, "small", {"folds": 3})["calls"] == 5
+
+
+def test_runs_trained_two_at_a_time_are_each_its_own_and_reused(tmp_path, monkeypatch):
+    data = tmp_path / "data"
+    (data / "sims").mkdir(parents=True)
+    for i in range(3):
+        with h5py.File(data / "sims" / f"sim_{i:06d}.h5", "w") as f:
+            f.attrs["checksum"] = f"a{i}"
+
+    def fake_train(d, r, cfg):
+        r.mkdir(exist_ok=True)
+        (r / "config.json").write_text(json.dumps(cfg))
+        (r / "metrics.json").write_text(json.dumps({"n_simulations": 3, "skill": cfg["folds"],
+                                                    "run": r.name}))
+
+    monkeypatch.setattr(surrogate.train, "train_and_evaluate", fake_train)
+    runs = {f"k{k}": (tmp_path / f"run{k}", "small", {"folds": k}) for k in (2, 3, 4)}
+    first = train_all(data, runs, jobs=1)
+    assert [(m["run"], m["skill"]) for m in first.values()] == [("run2", 2), ("run3", 3),
+                                                                ("run4", 4)]
+    # spawned processes do not see the fake: they can only reuse the finished runs, each its own
+    assert train_all(data, runs, jobs=2) == first
 
 
 def test_the_point_past_the_budget_starts_from_the_rows_dataset_without_touching_it(tmp_path):
