@@ -20,7 +20,6 @@ def phantom_key(seed: int, variety: str, mesh_size: float) -> str:
 
 
 @functools.cache
-@functools.lru_cache(maxsize=1)
 def phantom_code() -> str:
     """A digest of the code that meshes a phantom (its modules and gmsh's version), read once
     per process (every liver's key holds it).
