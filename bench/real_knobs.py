@@ -17,6 +17,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+import numpy as np
+
 from liverviz.report import ROOT, commit, write_report
 
 DATA = ROOT / "runs" / "data" / "scene4_livers"
@@ -41,6 +43,15 @@ VARIANTS = [
      {"loss": "rms", "shape_noise": 0.3}),
     ("rms_shape_noise_0.6", "RMS, noise 0.6 on the shape coefficients (0.1 on the loads')",
      {"loss": "rms", "shape_noise": 0.6}),
+    # how much data: fewer livers against fewer simulations per liver, on the same folds
+    ("rms_livers_half", "RMS, half of each fold's training livers (7 simulations each)",
+     {"loss": "rms", "train_fraction": 0.5}),
+    ("rms_livers_quarter", "RMS, a quarter of each fold's training livers",
+     {"loss": "rms", "train_fraction": 0.25}),
+    ("rms_sims_4", "RMS, each training liver's first 4 simulations (of 7)",
+     {"loss": "rms", "simulations_per_liver": 4}),
+    ("rms_sims_2", "RMS, each training liver's first 2 simulations (of 7)",
+     {"loss": "rms", "simulations_per_liver": 2}),
     ("rms_512", "RMS, 512 x 512 network", {"loss": "rms", "hidden": [512, 512]}),
     ("mee", "the mean Euclidean node error of the decoded fields", {"loss": "mee"}),
     ("rms_ens10", "RMS, ten networks averaged (not five)", {"loss": "rms", "ensemble": 10}),
@@ -108,7 +119,55 @@ def report(runs: dict, folds: int, evaluate: int, jobs: int) -> str:
                   "little of that choice. The validation livers are in no fold."]
     if shipped is not None and "rms_ens10" in runs:
         lines += ["", ensemble_verdict(shipped, runs["rms_ens10"])]
+    if shipped is not None:
+        lines += ["", data_verdict(shipped, runs)]
     return "\n".join(lines)
+
+
+# (fewer livers, fewer simulations per liver) of about the same share of the simulations
+DATA_PAIRS = [("rms_livers_half", "rms_sims_4"), ("rms_livers_quarter", "rms_sims_2")]
+
+
+def trained_on(m: dict) -> tuple[float, float]:
+    """(livers, simulations) of a fold's training set, mean over the evaluated folds; for a
+    run recorded before the trainer wrote them (every liver, every simulation): the
+    dataset's less the held-out livers' share."""
+    if "train_livers" in m:
+        return m["train_livers"], m["train_simulations"]
+    from surrogate.population import population_file
+
+    with np.load(population_file(DATA), allow_pickle=False) as z:
+        livers = len(z["geometry_ids"])
+    held = len(m["per_liver_mee"]["values"]) / len(m["per_fold"])
+    return livers - held, m["n_simulations"] * (1 - held / livers)
+
+
+def data_verdict(full: dict, runs: dict) -> str:
+    """More livers or more simulations per liver: the two thinned trainings of about the same
+    size paired liver by liver, and the skill's slope against the number of training livers
+    (a power law through the livers' points) extrapolated to twice the livers."""
+    out = []
+    for livers, sims in DATA_PAIRS:
+        if livers in runs and sims in runs:
+            (la, sa), (lb, sb) = trained_on(runs[livers]), trained_on(runs[sims])
+            won, n, folds_won, n_folds = paired(runs[sims], runs[livers])
+            out.append(f"{la:.0f} livers with {sa:.0f} simulations: pooled skill "
+                       f"{runs[livers]['skill']:.3f}; {lb:.0f} livers with {sb:.0f} "
+                       f"simulations: {runs[sims]['skill']:.3f} (fewer livers lower on {won} "
+                       f"of {n} held-out livers, {folds_won} of {n_folds} folds).")
+    pts = [(trained_on(runs[s])[0], runs[s]["skill"]) for s in
+           ("rms_livers_quarter", "rms_livers_half") if s in runs]
+    if len(pts) == 2:
+        pts.append((trained_on(full)[0], full["skill"]))
+        x, y = np.log([p[0] for p in pts]), np.log([p[1] for p in pts])
+        slope = np.polyfit(x, y, 1)[0]
+        out.append(f"Against the training livers ({', '.join(f'{n:.0f}' for n, _ in pts)} per "
+                   f"fold, 7 simulations each) the pooled skill goes as livers^{slope:.2f}; "
+                   f"if that held, twice the livers would give {full['skill'] * 2 ** slope:.3f} "
+                   "(an extrapolation, not a measurement).")
+    if not out:
+        return ""
+    return "More livers or more loads, on the same held-out livers: " + " ".join(out)
 
 
 def ensemble_verdict(five: dict, ten: dict) -> str:

@@ -49,6 +49,9 @@ BASE = {
     "final_fit": True,         # train the exported model on all simulations after CV
     "phantoms_in_training": True,  # phantoms mixed into liver files (geometry.phantoms) are
                                # trained on in every fold; false leaves them out (to measure)
+    "train_fraction": 1.0,     # learning curves, on the same held-out folds: this fraction of
+                               # each fold's training livers (simulations, for one liver)
+    "simulations_per_liver": 0,  # and each training liver's first n simulations (0: all)
     "seed": 0,
     "dtype": "float32",
     "stream": "auto",          # targets memory-mapped from disk: True, False, or "auto" (when
@@ -123,6 +126,8 @@ CHECKS = {
     "evaluate_folds": (lambda v: is_int(v) and v >= 0, "an integer >= 0 (0: every fold)"),
     "final_fit": (lambda v: isinstance(v, bool), "true or false"),
     "phantoms_in_training": (lambda v: isinstance(v, bool), "true or false"),
+    "train_fraction": (lambda v: is_num(v) and 0 < v <= 1, "a number in (0, 1]"),
+    "simulations_per_liver": (lambda v: is_int(v) and v >= 0, "an integer >= 0 (0: all)"),
     "seed": (lambda v: is_int(v) and v >= 0, "an integer >= 0"),
     "dtype": (lambda v: v == "float32", "'float32' (the only training precision)"),
     "stream": (lambda v: v in (True, False, "auto"), "true, false or 'auto'"),

@@ -273,10 +273,40 @@ def kfold_groups(ds: Dataset, k: int, seed: int) -> list[np.ndarray]:
 
 def training_samples(ds: Dataset, held: np.ndarray, cfg: dict) -> np.ndarray:
     """The samples a fold trains on: all but ``held``, less the mixed-in phantoms' when
-    ``cfg["phantoms_in_training"]`` is false (to measure what they bring).
+    ``cfg["phantoms_in_training"]`` is false (to measure what they bring), thinned as
+    :func:`thinned` says.
     """
     train = np.setdiff1d(np.arange(ds.n_samples), held)
     if ds.augmenting and not cfg.get("phantoms_in_training", True):
         phantom = np.array([i in ds.augmenting for i in ds.geo_ids])
         train = train[~phantom[ds.sample_geo[train]]]
-    return train
+    return thinned(ds, train, cfg)
+
+
+def thinned(ds: Dataset, train: np.ndarray, cfg: dict) -> np.ndarray:
+    """The learning-curve knobs on a fold's training samples ``train``, its held-out ones
+    untouched: ``cfg["train_fraction"]`` of its livers (of its simulations, for one liver),
+    drawn with ``cfg["seed"]`` so that a smaller fraction's livers are among a larger one's;
+    then each liver's first ``cfg["simulations_per_liver"]`` simulations (0: all). Mixed-in
+    phantoms are left as they are (``phantoms_in_training`` says whether they train).
+    """
+    fraction, per = cfg.get("train_fraction", 1.0), cfg.get("simulations_per_liver", 0)
+    if per and not ds.spec.geometry_dim:
+        raise ValueError("trainer config: simulations_per_liver needs a scene whose liver "
+                         f"varies (a population); got {per} on one liver")
+    key = ds.sample_geo if ds.spec.geometry_dim else ds.sample_sim
+    phantom = np.zeros(len(ds.geo_ids), bool)
+    if ds.augmenting and ds.spec.geometry_dim:
+        phantom = np.array([i in ds.augmenting for i in ds.geo_ids])
+    thin = ~phantom[ds.sample_geo[train]]  # samples the knobs act on
+    keep = np.ones(len(train), bool)
+    if fraction < 1:
+        units = np.unique(key[train][thin])
+        drawn = np.random.default_rng(cfg["seed"]).permutation(units)
+        keep &= np.isin(key[train], drawn[:max(1, round(fraction * len(units)))]) | ~thin
+    if per:
+        for g in np.unique(ds.sample_geo[train][thin]):
+            mine = ds.sample_geo[train] == g
+            sims = np.unique(ds.sample_sim[train][mine])
+            keep[mine & ~np.isin(ds.sample_sim[train], sims[:per])] = False
+    return train[keep]

@@ -164,16 +164,18 @@ def _cross_validate(ds: Dataset, cfg: dict, ckpt: Path, identity: str, say) -> d
     """
     folds = kfold_groups(ds, cfg["folds"], cfg["seed"])[:cfg.get("evaluate_folds") or None]
     cv = {"pred": [], "true": [], "smp": [], "naive": [], "history": {}, "seconds": 0.0,
-          "examples": 0.0, "n_folds": len(folds)}
+          "examples": 0.0, "n_folds": len(folds), "trained_on": []}
     for k, held in enumerate(folds):
         done = ckpt / f"fold{k}" / f"result-{identity}.npz"
         saved = _load_fold(done)
+        train_samples = training_samples(ds, held, cfg)
+        cv["trained_on"].append((np.unique(ds.sample_geo[train_samples]).size,
+                                 np.unique(ds.sample_sim[train_samples]).size))
         if saved is not None:
             p, y, s, mean_disp, hist = saved
             hist = [{**h, "earlier": True} for h in hist]  # trained by another process
             say(f"fold {k + 1}/{len(folds)} done before (from {done})")
         else:
-            train_samples = training_samples(ds, held, cfg)
             model, hist = fit_design(ds, train_samples, cfg, cfg["seed"] + 1 + k,
                                      f"fold {k + 1}/{len(folds)} ", say,
                                      engine.Checkpoint(ckpt / f"fold{k}", identity))
@@ -206,6 +208,9 @@ def _result(ds: Dataset, cfg: dict, cv: dict) -> dict:
               "network": m_nn, "naive": m_naive, "skill": m_nn["mee"] / m_naive["mee"],
               "n_simulations": int(np.unique(ds.sample_sim).size),
               "n_samples": int(ds.n_samples), "n_examples": int(ds.targets.shape[0]),
+              # a fold's training set (its early-stopping share included), mean over folds
+              "train_livers": float(np.mean([n for n, _ in cv["trained_on"]])),
+              "train_simulations": float(np.mean([n for _, n in cv["trained_on"]])),
               # each evaluated fold's own MEE and skill (the spread of the held-out sets)
               "per_fold": [{"mee": float(np.linalg.norm(p - y, axis=1).mean()),
                             "skill": float(np.linalg.norm(p - y, axis=1).mean()

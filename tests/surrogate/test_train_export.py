@@ -405,3 +405,18 @@ def test_evaluating_one_fold_is_a_hold_out(synth_dir, tmp_path):
     assert "the first 1 of 4 folds held out" in (tmp_path / "metrics.md").read_text()
     with pytest.raises(ValueError, match="evaluate_folds: expected an integer >= 0"):
         get_config("small", evaluate_folds=-1)
+
+
+def test_the_trainer_thins_a_folds_training_set_and_says_how_much_it_trained_on(synth_dir,
+                                                                                 tmp_path):
+    """train_fraction = 0.5 on one liver: half of the 30 training simulations of a fold of
+    four (40 simulations); the held-out quarter is the same, so the metrics compare."""
+    common = {"folds": 4, "evaluate_folds": 1, "epochs": 2, "hidden": [16], "final_fit": False}
+    full = train_and_evaluate(synth_dir, tmp_path / "full", get_config("small", **common),
+                              log_fn=lambda m: None)
+    half = train_and_evaluate(synth_dir, tmp_path / "half",
+                              get_config("small", train_fraction=0.5, **common),
+                              log_fn=lambda m: None)
+    assert (full["train_livers"], full["train_simulations"]) == (1, 30)
+    assert (half["train_livers"], half["train_simulations"]) == (1, 15)
+    assert half["n_simulations"] == full["n_simulations"] == 40
