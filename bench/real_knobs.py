@@ -144,18 +144,11 @@ def trained_on(m: dict) -> tuple[float, float]:
 
 
 def data_verdict(full: dict, runs: dict) -> str:
-    """More livers or more simulations per liver: the two thinned trainings of about the same
-    size paired liver by liver, then each curve (livers, loads per liver) as a power law of
-    the training simulations, extrapolated (and said to be)."""
-    out = []
-    for livers, sims in DATA_PAIRS:
-        if livers in runs and sims in runs:
-            (la, sa), (lb, sb) = trained_on(runs[livers]), trained_on(runs[sims])
-            won, n, folds_won, n_folds = paired(runs[sims], runs[livers])
-            out.append(f"{la:.0f} livers with {sa:.0f} simulations: pooled skill "
-                       f"{runs[livers]['skill']:.3f}; {lb:.0f} livers with {sb:.0f} "
-                       f"simulations: {runs[sims]['skill']:.3f} (fewer livers lower on {won} "
-                       f"of {n} held-out livers, {folds_won} of {n_folds} folds).")
+    """More livers or more simulations per liver: each curve (livers, loads per liver) as a
+    power law of the training simulations, extrapolated (and said to be); then the two
+    thinned trainings of about the same size paired liver by liver, the fewer livers' skill
+    also brought to the other's count of simulations by its curve."""
+    out, slopes, gaps = [], {}, []
     curves = {"livers (7 simulations each)": ("rms_livers_quarter", "rms_livers_half"),
               "simulations per liver (every liver)": ("rms_sims_2", "rms_sims_4")}
     for what, slugs in curves.items():
@@ -163,12 +156,31 @@ def data_verdict(full: dict, runs: dict) -> str:
             pts = [(trained_on(runs[s])[1], runs[s]["skill"]) for s in slugs]
             pts.append((trained_on(full)[1], full["skill"]))
             slope = np.polyfit(np.log([p[0] for p in pts]), np.log([p[1] for p in pts]), 1)[0]
+            slopes[slugs[0]] = slope
             need = (PAPER_MEAN / full["per_liver_mee"]["skill_mean"]) ** (1 / slope)
             out.append(f"More {what}: the pooled skill goes as simulations^{slope:.2f} "
                        f"({', '.join(f'{s:.0f}: {k:.3f}' for s, k in pts)}); if that held, "
                        f"twice as many would give {full['skill'] * 2 ** slope:.3f}, and the "
                        f"paper's mean liver skill {PAPER_MEAN} would take {need:.1f} times the "
                        "training simulations (extrapolations, not measurements).")
+    for livers, sims in DATA_PAIRS:
+        if livers in runs and sims in runs:
+            (la, sa), (lb, sb) = trained_on(runs[livers]), trained_on(runs[sims])
+            won, n, folds_won, n_folds = paired(runs[sims], runs[livers])
+            text = (f"{la:.0f} livers with {sa:.0f} simulations: pooled skill "
+                    f"{runs[livers]['skill']:.3f}; {lb:.0f} livers with {sb:.0f} simulations: "
+                    f"{runs[sims]['skill']:.3f} (fewer livers lower on {won} of {n} held-out "
+                    f"livers, {folds_won} of {n_folds} folds)")
+            if "rms_livers_quarter" in slopes:
+                at = runs[livers]["skill"] * (sb / sa) ** slopes["rms_livers_quarter"]
+                text += f"; at {sb:.0f} simulations the livers' curve says {at:.3f}"
+                gaps.append(abs(at / runs[sims]["skill"] - 1))
+            out.append(text + ".")
+    if gaps and max(gaps) < 0.03:
+        out.append(f"At the same count of simulations the two ways are within "
+                   f"{100 * max(gaps):.0f} %: on these livers one more simulation is worth "
+                   "about as much on a new liver as on a liver already there, so with every "
+                   "CT liver of the folder in use, more loads per liver is the lever left.")
     if not out:
         return ""
     return "More livers or more loads, on the same held-out livers: " + " ".join(out)

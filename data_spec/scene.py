@@ -101,7 +101,15 @@ class Scene:
     @property
     def hash(self) -> str:
         """sha256 of the canonical JSON of the normalised scene (source path excluded)."""
-        text = json.dumps(self.data, sort_keys=True, separators=(",", ":"))
+        return self.hash_at(self.n_simulations)
+
+    def hash_at(self, n_simulations: int) -> str:
+        """The hash of this scene with ``n_simulations`` simulations: a simulation's draws
+        depend on the seed and its index only, so the shards of the same scene at another
+        size (a dataset grown by raising ``n_simulations``) carry this hash.
+        """
+        data = {**self.data, "scene": {**self.data["scene"], "n_simulations": n_simulations}}
+        text = json.dumps(data, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode()).hexdigest()
 
     def to_json(self) -> str:

@@ -38,6 +38,7 @@ from data_spec import (
     write_shard,
 )
 from data_spec.atomic import atomic_path, check_writable, leftover_temporaries
+from data_spec.grown import accepted_hashes, record_size, same_but_size
 from data_spec.scene import dataset_copy_text
 from data_spec.validate import checked_shard
 from fem_sim.batch import cases as cs
@@ -98,17 +99,18 @@ def _geometry_file_ok(path: Path, g: Geometry) -> bool:
     return old.content_hash == g.content_hash and same and regions
 
 
-def _shard_is_done(path: Path, scene_hash: str, retry_failed: bool, geometry_id: str,
+def _shard_is_done(path: Path, hashes: set[str], retry_failed: bool, geometry_id: str,
                    fixed: np.ndarray, geometry_cache: dict | None = None) -> bool:
-    """Whether the shard at ``path`` is a valid simulation of this scene on this liver: its
-    mesh (``geometry_id``) and its fixed nodes; a shard of another mesh of the liver (a liver
+    """Whether the shard at ``path`` is a valid simulation of this scene (its scene hash one
+    of ``hashes``: :func:`data_spec.grown.accepted_hashes`) on this liver: its mesh
+    (``geometry_id``) and its fixed nodes; a shard of another mesh of the liver (a liver
     file prepared again by other code) or of another fixed region is run again.
     ``geometry_cache``: :func:`data_spec.validate.checked_shard`'s (each liver read once).
     """
     if not path.exists():
         return False
     problems, arr, attrs = checked_shard(path, geometry_cache)
-    if (problems or attrs["scene_hash"] != scene_hash or attrs["geometry_id"] != geometry_id
+    if (problems or attrs["scene_hash"] not in hashes or attrs["geometry_id"] != geometry_id
             or not np.array_equal(arr["/fixed_nodes"], fixed)):
         return False
     return not (retry_failed and attrs["status"] == "failed")
@@ -138,7 +140,7 @@ def _check_directory(scene: Scene, out: Path) -> None:
             old = load_scene(copy)
         except SceneError:
             old = None
-        if old is None or old.hash != scene.hash:
+        if old is None or not same_but_size(scene, old):
             raise SceneError(str(out), [f"{out} holds a dataset of another scene "
                                         f"({copy}); use a new --out directory"])
     for d in (out, out / "sims", out / "geometry"):  # fail now, not at the first write
@@ -227,12 +229,16 @@ def make_plan(scene: Scene, scene_file: str, out: Path, only: str | None, retry_
                                    out)
         # Everything checked: record the scene (a directory without shards takes a new one).
         copy = out / "scene.toml"
-        if not (copy.exists() and load_scene(copy).hash == scene.hash):
+        old = load_scene(copy) if copy.exists() else None
+        if old is None or old.hash != scene.hash:
+            if old is not None and any((out / "sims").glob("sim_*.h5")):
+                record_size(out, old.n_simulations)  # its shards stay the scene's
             with atomic_path(copy) as tmp:
                 tmp.write_text(dataset_copy_text(scene_file), encoding="utf-8")
         of, livers_read = [geometry_of(scene, i, len(ids)) for i in todo], {}
+        hashes = accepted_hashes(scene, out)
         tasks = [i for i, gi in zip(todo, of) if not _shard_is_done(
-            shard_path(out, i), scene.hash, retry_failed, ids[gi], fixed[gi], livers_read)]
+            shard_path(out, i), hashes, retry_failed, ids[gi], fixed[gi], livers_read)]
         tasks.sort(key=lambda i: (i % len(ids), i))  # cases of one liver together
         return Plan(tasks=tasks, skipped=len(todo) - len(tasks), geometry_ids=ids), scene
     return _guarded(plan)[0]

@@ -190,6 +190,32 @@ def test_leftover_temporary_is_reported(dataset):
     assert len(problems) == 1 and "leftover temporary file" in problems[0]
 
 
+def test_a_dataset_grown_by_its_scenes_size_alone_stays_valid(dataset):
+    """n_simulations raised from 3 to 5: the three shards (hashed at size 3) are the grown
+    scene's once the dataset records its earlier size; any other edit is another scene."""
+    import re
+
+    from data_spec.grown import earlier_sizes, record_size
+    from data_spec.scene import load_scene
+
+    copy = dataset / "scene.toml"
+    text = copy.read_text()
+    copy.write_text(re.sub(r"(?m)^n_simulations = 3$", "n_simulations = 5", text))
+    problems = validate_dataset(dataset, complete=False)
+    assert len(problems) == 1 and "only n_simulations may change" in problems[0]
+    record_size(dataset, 3)
+    assert earlier_sizes(dataset) == [3]
+    assert validate_dataset(dataset, complete=False) == []
+    missing = validate_dataset(dataset)  # complete: simulations 3 and 4 have no shard yet
+    assert len(missing) == 1 and "2 of the scene's 5 simulations have no shard" in missing[0]
+    grown = load_scene(copy)
+    assert grown.hash != grown.hash_at(3) and grown.hash_at(5) == grown.hash
+    copy.write_text(re.sub(r"(?m)^n_simulations = 3$", "n_simulations = 5", text)
+                    .replace("seed = 1", "seed = 2"))
+    problems = validate_dataset(dataset, complete=False)
+    assert len(problems) == 1 and "the scene was edited after the dataset was made" in problems[0]
+
+
 def test_scene_file_must_be_there_and_unchanged(dataset):
     (dataset / "scene.toml").write_text((dataset / "scene.toml").read_text().replace(
         "seed = 1", "seed = 2"))

@@ -268,6 +268,24 @@ def test_directory_of_another_scene_is_refused(reference, tmp_path):
     assert res.returncode == 2 and "holds a dataset of another scene" in res.stderr
 
 
+def test_raising_n_simulations_grows_the_dataset_and_keeps_its_shards(reference, tmp_path):
+    """The same scene with 6 simulations instead of 4: generate makes simulations 4 and 5
+    only, the dataset validates; back at 4 nothing runs (data_spec/grown.py)."""
+    d = tmp_path / "d"
+    shutil.copytree(reference, d)
+    before = {p.name: p.stat().st_mtime_ns for p in list_shards(d)}
+    grown = tmp_path / "grown.toml"
+    grown.write_text(TINY.read_text().replace("n_simulations = 4", "n_simulations = 6"))
+    res = generate(grown, d, n=1)
+    assert res.returncode == 0, res.stderr
+    assert "2 simulated (0 failed), 4 skipped" in res.stdout
+    assert validate_dataset(d) == []
+    assert {p.name: p.stat().st_mtime_ns for p in list_shards(d)[:4]} == before
+    res = generate(TINY, d, n=1)
+    assert "0 simulated (0 failed), 4 skipped" in res.stdout
+    assert validate_dataset(d, complete=False) == []
+
+
 def test_mesh_with_a_floating_piece_is_refused_before_any_work(tmp_path):
     """A volume mesh with a piece that touches no fixed node would make every simulation
     singular: generate refuses it on every rank, names the file and the reason, and writes
