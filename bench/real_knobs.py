@@ -2,13 +2,18 @@
 simulations each), every knob trained on the same folds by liver.
 
     .venv-train/bin/python bench/real_knobs.py [--folds 10] [--evaluate-folds 5] [--jobs 2]
+        [--grow 2030 [--np 2]]
 
 The knobs were chosen on phantoms (docs/population_basis.md, docs/livers_or_loads.md); this
 measures them again where the product is used. Each variant is the ``population_basis``
 config with its overrides, cross-validated on the first ``--evaluate-folds`` of ``--folds``
 folds (the validation livers are not in the dataset: no variant sees them). Per held-out
 liver, paired with the first row (the loss the config had before: the mean squared field
-error). Resumable: a finished variant is reused (bench/results/real_knobs/run_*). Writes
+error). ``--grow N``: also the shipped config on the scene grown to N simulations (more
+loads per liver: simulation i is on liver i mod 145), generated where missing in
+runs/grown/ (its first shards are the shipped dataset's, linked: nothing is copied or made
+again); a point past the data curve's end. Resumable: a finished variant is reused
+(bench/results/real_knobs/run_*), the growth goes on from its shards. Writes
 docs/real_knobs.md and docs/real_knobs.json.
 """
 
@@ -16,12 +21,16 @@ from __future__ import annotations
 
 import argparse
 import sys
+import tomllib
+from pathlib import Path
 
 import numpy as np
 
 from liverviz.report import ROOT, commit, write_report
 
+SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
 DATA = ROOT / "runs" / "data" / "scene4_livers"
+GROWN = ROOT / "runs" / "grown"
 RESULTS = ROOT / "bench" / "results" / "real_knobs"
 CONFIG = "population_basis"
 SHIPPED = "rms"  # the variant that is population_basis as shipped
@@ -69,6 +78,49 @@ def trained(folds: int, evaluate: int, only: set | None, jobs: int = 1) -> dict:
                      jobs)
 
 
+def grown_data(n: int, ranks: int) -> Path:
+    """The shipped scene grown to ``n`` simulations in runs/grown/, its first shards the
+    shipped dataset's (linked), the rest generated where missing (resumable)."""
+    from data_spec.scene_writer import scene_toml
+    from data_spec.views import extension, shard_count
+    from fem_sim.batch.chunked import generate_chunks
+
+    base = GROWN / f"scene4_livers_{n}"
+    data = extension(DATA, shard_count(DATA), base / "data")
+    d = tomllib.loads(SCENE.read_text())
+    d["geometry"]["livers"] = str((SCENE.parent / d["geometry"]["livers"]).resolve())
+    d["scene"]["n_simulations"] = n
+    (base / "scene.toml").write_text(scene_toml(d))
+    generate_chunks(base / "scene.toml", data, n, ranks=ranks, chunk=100)
+    return data
+
+
+def grown(n: int, ranks: int, folds: int, evaluate: int) -> tuple[str, str, dict] | None:
+    """(slug, label, metrics) of the shipped config on the grown scene, the same folds; None
+    while its generation is not finished."""
+    from data_spec.views import shard_count
+    from surrogate.train import train_all
+
+    data = grown_data(n, ranks)
+    if shard_count(data) < n:
+        print(f"{data}: {shard_count(data)} of {n} simulations; run again to go on",
+              file=sys.stderr)
+        return None
+    slug = f"rms_grown_{n}"
+    over = {"folds": folds, "evaluate_folds": evaluate, "final_fit": False, "loss": "rms"}
+    m = train_all(data, {slug: (RESULTS / f"run_{slug}", CONFIG, over)})[slug]
+    return slug, (f"RMS, the scene grown to {n:,} simulations ({n / n_livers():.0f} per "
+                  "liver)"), m
+
+
+def n_livers() -> int:
+    """The livers of the shipped dataset's population."""
+    from surrogate.population import population_file
+
+    with np.load(population_file(DATA), allow_pickle=False) as z:
+        return len(z["geometry_ids"])
+
+
 def paired(ref: dict, m: dict) -> tuple[int, int, int, int]:
     """(livers with a lower MEE than the reference, livers, folds with a lower MEE, folds)."""
     a = dict(zip(m["per_liver_mee"]["geometry_ids"], m["per_liver_mee"]["values"]))
@@ -79,8 +131,8 @@ def paired(ref: dict, m: dict) -> tuple[int, int, int, int]:
             min(len(m["per_fold"]), len(ref["per_fold"])))
 
 
-def report(runs: dict, folds: int, evaluate: int, jobs: int) -> str:
-    ref, shipped = runs[VARIANTS[0][0]], runs.get(SHIPPED)
+def report(runs: dict, variants: list, folds: int, evaluate: int, jobs: int) -> str:
+    ref, shipped = runs[variants[0][0]], runs.get(SHIPPED)
     lines = [
         f"The population basis (`{CONFIG}`) on scene 4's real livers "
         f"(`runs/data/scene4_livers`: {ref['n_simulations']:,} simulations on the 145 training "
@@ -95,7 +147,7 @@ def report(runs: dict, folds: int, evaluate: int, jobs: int) -> str:
         "| % EE < 3 mm | livers lower than the first row | folds lower | livers lower than "
         "the shipped row | folds lower | training |",
         "|---|---|---|---|---|---|---|---|---|---|---|"]
-    for slug, label, over in VARIANTS:
+    for slug, label, over in variants:
         if slug not in runs:
             continue
         m = runs[slug]
@@ -106,7 +158,7 @@ def report(runs: dict, folds: int, evaluate: int, jobs: int) -> str:
                      f"{pl['skill_median']:.3f} | {m['network']['mee']:.3f} | "
                      f"{m['network']['pct_ee_lt_3mm']:.2f} | {lower} | "
                      f"{m['training_seconds'] / 60:.0f} min |")
-    missing = [label for slug, label, _ in VARIANTS if slug not in runs]
+    missing = [label for slug, label, _ in variants if slug not in runs]
     if missing:
         lines += ["", "Not trained in the run that wrote this report (`--only`, or cut short): "
                   + "; ".join(missing) + "."]
@@ -135,10 +187,7 @@ def trained_on(m: dict) -> tuple[float, float]:
     dataset's less the held-out livers' share."""
     if "train_livers" in m:
         return m["train_livers"], m["train_simulations"]
-    from surrogate.population import population_file
-
-    with np.load(population_file(DATA), allow_pickle=False) as z:
-        livers = len(z["geometry_ids"])
+    livers = n_livers()
     held = len(m["per_liver_mee"]["values"]) / len(m["per_fold"])
     return livers - held, m["n_simulations"] * (1 - held / livers)
 
@@ -163,6 +212,19 @@ def data_verdict(full: dict, runs: dict) -> str:
                        f"twice as many would give {full['skill'] * 2 ** slope:.3f}, and the "
                        f"paper's mean liver skill {PAPER_MEAN} would take {need:.1f} times the "
                        "training simulations (extrapolations, not measurements).")
+    for slug in sorted(s for s in runs if s.startswith("rms_grown_")):
+        g, (_, sims) = runs[slug], trained_on(runs[slug])
+        won, n, folds_won, n_folds = paired(full, g)
+        text = (f"Measured past the end of the curves, the scene grown to "
+                f"{g['n_simulations']:,} simulations ({sims:.0f} training simulations a "
+                f"fold): pooled skill {g['skill']:.3f}, mean / median liver "
+                f"{g['per_liver_mee']['skill_mean']:.3f} / "
+                f"{g['per_liver_mee']['skill_median']:.3f}")
+        if "rms_sims_2" in slopes:
+            at = full["skill"] * (sims / trained_on(full)[1]) ** slopes["rms_sims_2"]
+            text += f" (the loads' curve said {at:.3f})"
+        out.append(text + f"; lower than the shipped row on {won} of {n} held-out livers, "
+                   f"{folds_won} of {n_folds} folds.")
     for livers, sims in DATA_PAIRS:
         if livers in runs and sims in runs:
             (la, sa), (lb, sb) = trained_on(runs[livers]), trained_on(runs[sims])
@@ -203,17 +265,24 @@ def main() -> int:
     ap.add_argument("--evaluate-folds", type=int, default=5)
     ap.add_argument("--only", nargs="*", help="train only these variants (slugs)")
     ap.add_argument("--jobs", type=int, default=2, help="variants trained at a time")
+    ap.add_argument("--grow", type=int, default=0,
+                    help="also the scene grown to this many simulations (0: not)")
+    ap.add_argument("--np", type=int, default=2, help="MPI ranks for the growth")
     a = ap.parse_args()
     if not DATA.exists():
         print(f"{DATA}: missing; `make scene4-real` generates it", file=sys.stderr)
         return 1
-    runs = trained(a.folds, a.evaluate_folds, set(a.only or ()), a.jobs)
+    runs, variants = trained(a.folds, a.evaluate_folds, set(a.only or ()), a.jobs), VARIANTS
+    more = grown(a.grow, a.np, a.folds, a.evaluate_folds) if a.grow else None
+    if more is not None:
+        runs[more[0]] = more[2]
+        variants = VARIANTS + [(more[0], more[1], {"loss": "rms"})]
     out = {"folds": a.folds, "evaluate": a.evaluate_folds, "commit": commit(),
-           "runs": {s: {k: runs[s][k] for k in ("skill", "per_liver_mee", "per_fold",
-                                                "network", "training_seconds")}
-                    for s in runs},
-           "variants": {s: over for s, _, over in VARIANTS}}
-    text = report(runs, a.folds, a.evaluate_folds, a.jobs)
+           "runs": {s: {k: runs[s].get(k) for k in (
+               "skill", "per_liver_mee", "per_fold", "network", "training_seconds",
+               "n_simulations", "train_livers", "train_simulations")} for s in runs},
+           "variants": {s: over for s, _, over in variants}}
+    text = report(runs, variants, a.folds, a.evaluate_folds, a.jobs)
     text += "\n\n" + NOTES
     write_report(ROOT / "docs" / "real_knobs.md", "The population basis's knobs on real livers",
                  text, out)
