@@ -1,11 +1,11 @@
-"""A dataset grown (or shrunk) by editing its scene's ``n_simulations`` and nothing else.
+"""A dataset grown by raising its scene's ``n_simulations`` and editing nothing else.
 
 A simulation's draws depend on the scene's seed and its own index only, so the shards of the
-same scene at another size are still its simulations: ``generate`` keeps them and makes only
-the new ones. They carry the hash of the scene at the size they were made at
-(:meth:`data_spec.scene.Scene.hash_at`); the dataset directory records those sizes
-(``scene_sizes.json``) so that the generator and the validator accept their shards, and only
-theirs: a scene edited in any other way is another scene.
+same scene at a smaller size are still its simulations: ``generate`` keeps them and makes
+only the new ones (it refuses to shrink a dataset). They carry the hash of the scene at the
+size they were made at (:meth:`data_spec.scene.Scene.hash_at`); the dataset directory records
+those sizes (``scene_sizes.json``) so that the generator and the validator accept their
+shards, and only theirs: a scene edited in any other way is another scene.
 """
 
 from __future__ import annotations

@@ -143,6 +143,11 @@ def _check_directory(scene: Scene, out: Path) -> None:
         if old is None or not same_but_size(scene, old):
             raise SceneError(str(out), [f"{out} holds a dataset of another scene "
                                         f"({copy}); use a new --out directory"])
+        if old.n_simulations > scene.n_simulations:  # a dataset grows, it never shrinks
+            raise SceneError(str(out), [
+                f"{out} holds this scene at n_simulations = {old.n_simulations}: "
+                f"{scene.n_simulations} would leave shards past its end; keep or raise it, "
+                "or use a new --out directory"])
     for d in (out, out / "sims", out / "geometry"):  # fail now, not at the first write
         check_writable(d)
 

@@ -270,7 +270,7 @@ def test_directory_of_another_scene_is_refused(reference, tmp_path):
 
 def test_raising_n_simulations_grows_the_dataset_and_keeps_its_shards(reference, tmp_path):
     """The same scene with 6 simulations instead of 4: generate makes simulations 4 and 5
-    only, the dataset validates; back at 4 nothing runs (data_spec/grown.py)."""
+    only, the dataset validates; back at 4 it is refused (data_spec/grown.py)."""
     d = tmp_path / "d"
     shutil.copytree(reference, d)
     before = {p.name: p.stat().st_mtime_ns for p in list_shards(d)}
@@ -281,9 +281,9 @@ def test_raising_n_simulations_grows_the_dataset_and_keeps_its_shards(reference,
     assert "2 simulated (0 failed), 4 skipped" in res.stdout
     assert validate_dataset(d) == []
     assert {p.name: p.stat().st_mtime_ns for p in list_shards(d)[:4]} == before
-    res = generate(TINY, d, n=1)
-    assert "0 simulated (0 failed), 4 skipped" in res.stdout
-    assert validate_dataset(d, complete=False) == []
+    res = generate(TINY, d, n=1)  # back at 4: it would leave shards 4 and 5 past the end
+    assert res.returncode == 2 and "would leave shards past its end" in res.stderr
+    assert validate_dataset(d) == []
 
 
 def test_mesh_with_a_floating_piece_is_refused_before_any_work(tmp_path):
