@@ -240,9 +240,12 @@ def data_verdict(full: dict, runs: dict) -> str:
             out.append(text + ".")
     if gaps and max(gaps) < 0.03:
         out.append(f"At the same count of simulations the two ways are within "
-                   f"{100 * max(gaps):.0f} %: on these livers one more simulation is worth "
+                   f"{100 * max(gaps):.0f} %: up to 7 per liver, one more simulation is worth "
                    "about as much on a new liver as on a liver already there, so with every "
-                   "CT liver of the folder in use, more loads per liver is the lever left.")
+                   "CT liver of the folder in use, more loads per liver is the lever left. "
+                   "How far it goes is open: on phantoms, from 8 to 16 simulations per liver, "
+                   "docs/livers_or_loads.md measured the MEE 3-4 % lower only (twice the livers: "
+                   "9-11 %), so the loads' curve may flatten past 7; `--grow` measures it.")
     if not out:
         return ""
     return "More livers or more loads, on the same held-out livers: " + " ".join(out)
