@@ -254,14 +254,21 @@ def restrict_nodes(ds: Dataset, keep: list[np.ndarray]) -> Dataset:
         sample_offset=np.concatenate([[0], np.cumsum(counts[ds.sample_geo])]))
 
 
+def phantom_livers(ds: Dataset) -> np.ndarray:
+    """(n_geometries,) bool: the phantoms mixed into liver files (``ds.augmenting``)."""
+    if not (ds.augmenting and ds.spec.geometry_dim):
+        return np.zeros(len(ds.geo_ids), bool)
+    return np.array([i in ds.augmenting for i in ds.geo_ids])
+
+
 def kfold_groups(ds: Dataset, k: int, seed: int) -> list[np.ndarray]:
     """Split simulations (livers, when the geometry varies) into k folds of sample indices.
     Phantoms mixed into liver files (``ds.augmenting``) are in no fold: always trained on.
     """
     key = ds.sample_geo if ds.spec.geometry_dim else ds.sample_sim
     units = np.unique(key)
-    if ds.augmenting and ds.spec.geometry_dim:
-        units = units[[ds.geo_ids[u] not in ds.augmenting for u in units]]
+    if ds.spec.geometry_dim:
+        units = units[~phantom_livers(ds)[units]]
     if units.size < k:
         raise ValueError(f"{k}-fold cross-validation needs at least {k} "
                          f"{'livers' if ds.spec.geometry_dim else 'simulations'}, "
@@ -277,9 +284,8 @@ def training_samples(ds: Dataset, held: np.ndarray, cfg: dict) -> np.ndarray:
     :func:`thinned` says.
     """
     train = np.setdiff1d(np.arange(ds.n_samples), held)
-    if ds.augmenting and not cfg.get("phantoms_in_training", True):
-        phantom = np.array([i in ds.augmenting for i in ds.geo_ids])
-        train = train[~phantom[ds.sample_geo[train]]]
+    if not cfg.get("phantoms_in_training", True):
+        train = train[~phantom_livers(ds)[ds.sample_geo[train]]]
     return thinned(ds, train, cfg)
 
 
@@ -294,19 +300,16 @@ def thinned(ds: Dataset, train: np.ndarray, cfg: dict) -> np.ndarray:
     if per and not ds.spec.geometry_dim:
         raise ValueError("trainer config: simulations_per_liver needs a scene whose liver "
                          f"varies (a population); got {per} on one liver")
-    key = ds.sample_geo if ds.spec.geometry_dim else ds.sample_sim
-    phantom = np.zeros(len(ds.geo_ids), bool)
-    if ds.augmenting and ds.spec.geometry_dim:
-        phantom = np.array([i in ds.augmenting for i in ds.geo_ids])
-    thin = ~phantom[ds.sample_geo[train]]  # samples the knobs act on
+    geo, sim = ds.sample_geo[train], ds.sample_sim[train]
+    key = geo if ds.spec.geometry_dim else sim
+    thin = ~phantom_livers(ds)[geo]  # samples the knobs act on
     keep = np.ones(len(train), bool)
     if fraction < 1:
-        units = np.unique(key[train][thin])
+        units = np.unique(key[thin])
         drawn = np.random.default_rng(cfg["seed"]).permutation(units)
-        keep &= np.isin(key[train], drawn[:max(1, round(fraction * len(units)))]) | ~thin
+        keep &= np.isin(key, drawn[:max(1, round(fraction * len(units)))]) | ~thin
     if per:
-        for g in np.unique(ds.sample_geo[train][thin]):
-            mine = ds.sample_geo[train] == g
-            sims = np.unique(ds.sample_sim[train][mine])
-            keep[mine & ~np.isin(ds.sample_sim[train], sims[:per])] = False
+        for g in np.unique(geo[thin]):
+            mine = geo == g
+            keep[mine & ~np.isin(sim, np.unique(sim[mine])[:per])] = False
     return train[keep]
