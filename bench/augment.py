@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import shutil
 import sys
-import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -40,11 +39,10 @@ def write_scene(path: Path, phantoms: int, per_liver: int) -> Path:
     """The shipped real scene with ``phantoms`` phantoms in front of its livers and
     ``per_liver`` simulations per liver, its liver folder made absolute."""
     from data_spec.livers import training_files
-    from data_spec.scene_writer import scene_toml
+    from data_spec.scene_writer import relocated_scene, scene_toml
 
-    d = tomllib.loads(SHIPPED.read_text())
+    d = relocated_scene(SHIPPED)
     g = d["geometry"]
-    g["livers"] = str((SHIPPED.parent / g["livers"]).resolve())
     g["phantoms"] = phantoms
     n = (phantoms + len(training_files(g))) * per_liver
     d["scene"].update(name="scene4_augment", n_simulations=n,

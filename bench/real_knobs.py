@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -81,14 +80,13 @@ def trained(folds: int, evaluate: int, only: set | None, jobs: int = 1) -> dict:
 def grown_data(n: int, ranks: int) -> Path:
     """The shipped scene grown to ``n`` simulations in runs/grown/, its first shards the
     shipped dataset's (linked), the rest generated where missing (resumable)."""
-    from data_spec.scene_writer import scene_toml
+    from data_spec.scene_writer import relocated_scene, scene_toml
     from data_spec.views import extension, shard_count
     from fem_sim.batch.chunked import generate_chunks
 
     base = GROWN / f"scene4_livers_{n}"
     data = extension(DATA, shard_count(DATA), base / "data")
-    d = tomllib.loads(SCENE.read_text())
-    d["geometry"]["livers"] = str((SCENE.parent / d["geometry"]["livers"]).resolve())
+    d = relocated_scene(SCENE)
     d["scene"]["n_simulations"] = n
     (base / "scene.toml").write_text(scene_toml(d))
     generate_chunks(base / "scene.toml", data, n, ranks=ranks, chunk=100)

@@ -1,8 +1,11 @@
-"""Scene files written from Python: a scene dict as TOML, and a scene's settings on one liver.
+"""Scene files written from Python: a scene dict as TOML, a scene moved elsewhere, and a
+scene's settings on one liver.
 
 ``scene_toml(d)`` writes the tables of scalars and lists a scene has (:mod:`data_spec.scene`
-reads it back); ``liver_scene`` makes the scene of a liver's FE truth: a population scene's
-loads, material, steps and solver on one liver file, fixed where a model puts its fixed region.
+reads it back); ``relocated_scene`` is a scene file's dict with its liver folder (or file)
+absolute, to be changed and written anywhere; ``liver_scene`` makes the scene of a liver's FE
+truth: a population scene's loads, material, steps and solver on one liver file, fixed where a
+model puts its fixed region.
 """
 
 from __future__ import annotations
@@ -38,6 +41,20 @@ def scene_toml(d: dict) -> str:
         if isinstance(v, dict):
             lines += _table(k, v)
     return "\n".join(lines) + "\n"
+
+
+def relocated_scene(scene_file: str | Path) -> dict:
+    """Scene file ``scene_file`` as a dict whose ``geometry.livers`` (a population's folder)
+    or ``geometry.path`` (a liver file), when relative, is made absolute: the dict stays the
+    same scene wherever :func:`scene_toml` writes it (a study changes its size or phantoms).
+    """
+    scene_file = Path(scene_file)
+    d = tomllib.loads(scene_file.read_text())
+    g = d.get("geometry", {})
+    for key in ("livers", "path"):
+        if isinstance(g.get(key), str) and not Path(g[key]).is_absolute():
+            g[key] = str((scene_file.parent / g[key]).resolve())
+    return d
 
 
 def liver_scene(scene_file: str | Path, liver: str | Path, n: int, fixed=None,

@@ -220,6 +220,23 @@ def test_the_datasets_copy_of_a_scene_with_a_relative_mesh_path_reads_the_same_s
     assert "# relative" in kept.read_text()  # the rest of the file is kept as written
 
 
+def test_a_relocated_scene_written_elsewhere_is_the_same_scene_at_its_new_size(tmp_path):
+    """A study's copy of the shipped real-liver scene (another directory, another size) reads
+    the same livers: only n_simulations differs, which the dataset's growth accepts."""
+    from data_spec.scene_writer import relocated_scene, scene_toml
+
+    shipped = SCENES[0].parent / "scene4_livers.toml"
+    d = relocated_scene(shipped)
+    assert Path(d["geometry"]["livers"]).is_absolute()
+    d["scene"]["n_simulations"] = 2030
+    moved = tmp_path / "elsewhere" / "scene.toml"
+    moved.parent.mkdir()
+    moved.write_text(scene_toml(d))
+    a, b = load_scene(shipped), load_scene(moved)
+    assert b.n_simulations == 2030 and a.hash != b.hash
+    assert b.hash_at(a.n_simulations) == a.hash
+
+
 def test_solver_combinations_come_from_one_table():
     """The scene check and the solver ask data_spec.solver_rules: every unsupported
     combination is refused naming its keys; 'mumps' says its new name."""
