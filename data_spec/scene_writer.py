@@ -11,6 +11,7 @@ model puts its fixed region.
 from __future__ import annotations
 
 import json
+import os
 import tomllib
 from pathlib import Path
 
@@ -53,7 +54,9 @@ def relocated_scene(scene_file: str | Path) -> dict:
     g = d.get("geometry", {})
     for key in ("livers", "path"):
         if isinstance(g.get(key), str) and not Path(g[key]).is_absolute():
-            g[key] = str((scene_file.parent / g[key]).resolve())
+            # as load_scene makes it absolute (a linked ../shared is kept, not followed): the
+            # scene's hash holds this path
+            g[key] = os.path.normpath(scene_file.parent.resolve() / g[key])
     return d
 
 
