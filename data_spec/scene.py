@@ -366,7 +366,7 @@ def parse_scene(raw: dict, source: str = "<dict>", base_dir: Path | None = None)
     if geom.get("source") == "file" and isinstance(geom.get("path"), str):
         path = Path(geom["path"])
         if not path.is_absolute() and base_dir is not None:
-            path = (base_dir / path).resolve()
+            path = Path(absolute_path(base_dir, path))
         geom["path"] = str(path)
         if not path.exists():
             problems.append(f"geometry.path: file {str(path)!r} does not exist")
@@ -385,13 +385,22 @@ def parse_scene(raw: dict, source: str = "<dict>", base_dir: Path | None = None)
     return Scene(source, data)
 
 
+def absolute_path(base_dir: str | Path, rel: str | Path) -> str:
+    """A scene's relative ``geometry.path`` or ``geometry.livers`` made absolute: the scene's
+    directory resolved, the rest normalised without following links (a linked ``../shared``
+    stays as written). The one rule for every place that makes it absolute (loading, the
+    dataset's copy, a relocated scene): the scene's hash holds this path.
+    """
+    return os.path.normpath(Path(base_dir).resolve() / rel)
+
+
 def _population_files(geom: dict, base_dir: Path | None) -> list[str]:
     """A file population's folder made absolute, its files and its size checked."""
     from data_spec.livers import file_problems, members
 
     path = Path(geom["livers"])
     if not path.is_absolute() and base_dir is not None:
-        geom["livers"] = os.path.normpath(Path(base_dir).resolve() / path)
+        geom["livers"] = absolute_path(base_dir, path)
     found = file_problems(geom)
     if found:
         return found
@@ -433,7 +442,7 @@ def dataset_copy_text(path: str | Path) -> str:
     rel = geom.get(key) if key else None
     if not isinstance(rel, str) or Path(rel).is_absolute():
         return text
-    absolute = os.path.normpath(path.parent.resolve() / rel)
+    absolute = absolute_path(path.parent, rel)
     lines = text.splitlines(keepends=True)
     section, done = None, False
     assign = re.compile(rf"""^(\s*{key}\s*=\s*)("[^"]*"|'[^']*')""")

@@ -11,7 +11,6 @@ model puts its fixed region.
 from __future__ import annotations
 
 import json
-import os
 import tomllib
 from pathlib import Path
 
@@ -49,14 +48,14 @@ def relocated_scene(scene_file: str | Path) -> dict:
     or ``geometry.path`` (a liver file), when relative, is made absolute: the dict stays the
     same scene wherever :func:`scene_toml` writes it (a study changes its size or phantoms).
     """
+    from data_spec.scene import absolute_path
+
     scene_file = Path(scene_file)
     d = tomllib.loads(scene_file.read_text())
     g = d.get("geometry", {})
     for key in ("livers", "path"):
         if isinstance(g.get(key), str) and not Path(g[key]).is_absolute():
-            # as load_scene makes it absolute (a linked ../shared is kept, not followed): the
-            # scene's hash holds this path
-            g[key] = os.path.normpath(scene_file.parent.resolve() / g[key])
+            g[key] = absolute_path(scene_file.parent, g[key])
     return d
 
 

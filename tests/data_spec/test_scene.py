@@ -220,6 +220,32 @@ def test_the_datasets_copy_of_a_scene_with_a_relative_mesh_path_reads_the_same_s
     assert "# relative" in kept.read_text()  # the rest of the file is kept as written
 
 
+def test_a_mesh_path_through_a_linked_folder_is_made_absolute_one_way(tmp_path):
+    """The scene, its dataset copy and a relocated copy make a relative path absolute by one
+    rule (a linked folder kept as written, as CI links ../shared): the same hash all three."""
+    from data_spec.scene import absolute_path, dataset_copy_text
+    from data_spec.scene_writer import relocated_scene, scene_toml
+
+    (tmp_path / "real").mkdir()
+    (tmp_path / "real" / "liver.vtk").write_text("not read: only its existence is checked")
+    (tmp_path / "project").mkdir()
+    (tmp_path / "project" / "shared").symlink_to(tmp_path / "real")
+    scene = tmp_path / "project" / "s.toml"
+    scene.write_text('schema_version = 1\n[scene]\nname = "s"\nn_simulations = 2\n'
+                     '[geometry]\nsource = "file"\npath = "shared/liver.vtk"\n'
+                     'mesh_size = 9.0\n[fixed]\nkind = "sphere"\ncenter = [0, 0, 0]\n'
+                     'radius = 5.0\n[loads]\nmagnitude = 0.4\n')
+    original = load_scene(scene)
+    linked = str(tmp_path.resolve() / "project" / "shared" / "liver.vtk")
+    assert original["geometry"]["path"] == linked == absolute_path(scene.parent,
+                                                                   "shared/liver.vtk")
+    (tmp_path / "copy").mkdir()
+    (tmp_path / "copy" / "scene.toml").write_text(dataset_copy_text(scene))
+    (tmp_path / "moved.toml").write_text(scene_toml(relocated_scene(scene)))
+    for other in (tmp_path / "copy" / "scene.toml", tmp_path / "moved.toml"):
+        assert load_scene(other).hash == original.hash
+
+
 def test_a_relocated_scene_written_elsewhere_is_the_same_scene_at_its_new_size(tmp_path):
     """A study's copy of the shipped real-liver scene (another directory, another size) reads
     the same livers: only n_simulations differs, which the dataset's growth accepts."""
