@@ -246,11 +246,11 @@ def data_verdict(full: dict, runs: dict) -> str:
             text += f" (the loads' curve said {at:.3f})"
         past = np.log(g["skill"] / full["skill"]) / np.log(sims / trained_on(full)[1])
         text += (f": from the shipped size to this one the skill goes as "
-                 f"simulations^{past:.2f}")
-        text += (f"; lower than the shipped row on {won} of {n} held-out livers, "
-                 f"{folds_won} of {n_folds} folds.")
+                 f"simulations^{past:.2f}; lower than the shipped row on {won} of {n} held-out "
+                 f"livers, {folds_won} of {n_folds} folds.")
         if "rms_sims_2" in slopes and past > slopes["rms_sims_2"] / 2:
-            text += (f" Past 7 per liver the loads' curve flattens: twice the FE time buys "
+            text += (f" Past 7 per liver the loads' curve flattens: "
+                     f"{g['n_simulations'] / full['n_simulations']:.0f} times the FE time buys "
                      f"{100 * (1 - g['skill'] / full['skill']):.0f} % of pooled skill, so the "
                      "shipped scene keeps 7 per liver, and more loads on these livers is not "
                      "the way to the paper's skill.")
