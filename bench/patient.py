@@ -6,8 +6,9 @@ For each validation liver (never seen by the population model, its PCA or any de
 its FE truth with the population model's boundary condition, K_MAX + HELD simulations
 (resumable, under bench/results/patient/); then for every K the MEE on the last HELD
 simulations of the placed population model alone, the corrected one, the exported patient
-model (``surrogate adapt`` on the first K, :mod:`surrogate.patient`) and the reduced basis
-trained on the same K simulations from scratch, with the adaptation's seconds; and the wall
+model (``surrogate adapt`` on the first K, :mod:`surrogate.patient`), the reduced basis
+trained on the same K simulations from scratch, with the adaptation's seconds, and the
+population network fine-tuned on them (``--tune``), alone and corrected; and the wall
 time of ``make patient`` end to end at K = 40 on the first liver, on two cores.
 """
 
@@ -119,7 +120,8 @@ def made_by(model: Path, data: Path) -> str:
     from data_spec.views import dataset_fingerprint
 
     h = hashlib.sha256(dataset_fingerprint(data).encode())
-    for f in [*sorted(model.glob("*")), ROOT / "surrogate" / "patient.py"]:
+    code = [ROOT / "surrogate" / n for n in ("patient.py", "tuning.py")]
+    for f in [*sorted(model.glob("*")), *code]:
         h.update(f.read_bytes())
     return h.hexdigest()[:16]
 
@@ -148,9 +150,15 @@ def report(curves: list[dict], e2e: dict | None, a) -> str:
         for c in curves:
             p = c["points"][str(k)]
             cells = [f"{p.get(key, float('nan')):.3f}" if key in p else "" for key in
-                     ("population", "corrected", "patient_model", "scratch")]
+                     ("population", "corrected", "patient_model", "scratch", "tuned",
+                      "tuned_corrected")]
             adapt = f"{sum(p['adapt_seconds'].values()):.0f}" if "adapt_seconds" in p else ""
-            rows.append(f"| {k} | {c['liver']} | {' | '.join(cells)} | {adapt} |")
+            tuned = p.get("tuning") or {}
+            if tuned.get("steps"):
+                cells[4] += f" ({tuned['steps']} steps)"
+            cells.append(f"{tuned['seconds']:.0f}" if "seconds" in tuned else "")
+            rows.append(f"| {k} | {c['liver']} | {' | '.join(cells[:4])} | {adapt} | "
+                        f"{' | '.join(cells[4:])} |")
     med = {k: np.median([c["points"][str(k)].get("patient_model",
                                                  c["points"][str(k)]["population"])
                          for c in curves]) for k in KS}
@@ -164,11 +172,27 @@ def report(curves: list[dict], e2e: dict | None, a) -> str:
         "first K simulations. Patient model: that, distilled into the exported one-liver "
         "model (`make patient`). Scratch: the reduced basis trained on the same K "
         "simulations alone. Adaptation: the seconds of correcting and distilling (placing the "
-        "liver and the FE simulations not included).", "",
+        "liver and the FE simulations not included). Tuned (`surrogate adapt --tune`, not "
+        "the default): the population network fine-tuned on the K simulations "
+        "(surrogate.tuning; how many Adam steps, chosen by cross-validation over them, in "
+        "brackets); tuned + corrected: the correction fitted on the tuned network's "
+        "out-of-fold residuals; tuning s: the seconds of both.", "",
         "| K | liver | population MEE mm | corrected MEE mm | patient model MEE mm | "
-        "scratch MEE mm | adaptation s |", "|---|---|---|---|---|---|---|", *rows, "",
+        "scratch MEE mm | adaptation s | tuned MEE mm | tuned + corrected MEE mm | tuning s |",
+        "|---|---|---|---|---|---|---|---|---|---|", *rows, "",
         "Median over the livers (patient model; K = 0: the population model): "
         + ", ".join(f"K = {k}: {med[k]:.3f} mm" for k in KS) + ".", ""]
+    tuned = {k: [np.median([c["points"][str(k)][key] for c in curves])
+                 for key in ("corrected", "tuned", "tuned_corrected")] for k in KS if k}
+    lower = {k: sum(c["points"][str(k)]["tuned_corrected"] < c["points"][str(k)]["corrected"]
+                    for c in curves) for k in KS if k}
+    lines += ["Fine-tuning the population network (`--tune`), median over the livers, "
+              "corrected / tuned / tuned + corrected: "
+              + "; ".join(f"K = {k}: {a:.3f} / {b:.3f} / {c:.3f} mm" for k, (a, b, c)
+                          in tuned.items())
+              + ". Tuned + corrected below corrected on "
+              + ", ".join(f"{n} of {len(curves)} livers at K = {k}" for k, n in lower.items())
+              + ".", ""]
     reached = {c["liver"]: next((k for k in KS if c["points"][str(k)].get(
         "patient_model", c["points"][str(k)]["population"]) <= GOAL_MM), None) for c in curves}
     fe = {c["liver"]: c["fe_seconds"] for c in curves}

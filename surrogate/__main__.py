@@ -4,7 +4,7 @@
     predict-liver RUN LIVER --force X Y Z FX FY FZ [--out DIR]
     truth-scene RUN LIVER --scene SCENE [--sims N] --out FILE [--placement NPZ]
     evaluate RUN DATA [--liver LIVER] [--population DIR] [--out FILE]
-    adapt RUN DATA --liver LIVER --run OUT [--sims K] [--synthetic N] [--placement NPZ]
+    adapt RUN DATA --liver LIVER --run OUT [--sims K] [--synthetic N] [--placement NPZ] [--tune]
 
 A killed training resumes when the same command is run again (``--fresh`` starts over).
 ``truth-scene`` writes the scene of a liver's FE truth with the model's boundary condition
@@ -116,6 +116,9 @@ def _add_adapt(sub) -> None:
     a.add_argument("--frame", choices=FRAMES, default=None, help="as predict-liver's")
     a.add_argument("--placement", help="the placement file truth-scene --placement wrote "
                    "(used when it holds this liver, frame and model; written otherwise)")
+    a.add_argument("--tune", action="store_true",
+                   help="fine-tune the population network on the simulations before the "
+                   "correction (docs/patient.md measures it)")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -259,7 +262,8 @@ def _adapt(args) -> int:
     try:
         info = adapt(model_dir(Path(args.model)), args.data, args.liver, args.run,
                      sims=args.sims, frame=args.frame, synthetic=args.synthetic,
-                     saved=args.placement, log_fn=lambda m: print(m, file=sys.stderr, flush=True))
+                     saved=args.placement, tune=args.tune,
+                     log_fn=lambda m: print(m, file=sys.stderr, flush=True))
     except (DataError, ValueError, OSError) as exc:
         return _fail("adapt", str(exc))
     print(f"patient model written to {Path(args.run) / 'model'} from "

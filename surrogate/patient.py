@@ -3,23 +3,25 @@ few FE simulations on the patient's own mesh, and distilled into a model of that
 (the reduced basis, :mod:`surrogate.basis`) that ``load_predictor``, the viewer and the
 manipulator use as any other one-liver model.
 
-    python -m surrogate adapt MODEL DATA --liver FILE --run OUT [--sims K] [--frame F]
+    python -m surrogate adapt MODEL DATA --liver FILE --run OUT [--sims K] [--frame F] [--tune]
 
 ``DATA``: the patient's FE simulations with the model's boundary condition (``truth-scene``
 then ``fem_sim generate``; ``make patient`` runs the three steps).
 
 The correction (:class:`Correction`) is the residual of the FE fields against the placed
-population model, regressed on the load by kernel ridge regression. The kernel is a Gaussian
-of the distance between the load points times a polynomial of the forces with no constant
-term, ``g(x, x') (f.f' + beta (f.f')^2)``: a residual that vanishes with the force and is
-nearly linear in it, as a hyperelastic liver's is for small loads, and that spreads from a
-loaded point to its neighbours (a Gaussian, or an exponential with its heavier tail). Its
-decay, length scale, ridge, beta and a weight on the population model's own field are chosen
-by cross-validation over the K simulations, grouped by simulation; with fewer than two, or when
-no setting beats the population model on the held-out simulations, the population model is
-kept unchanged. The distillation draws loads as the scene draws
-them (its eligible nodes, uniform directions, its magnitude and load steps), takes their
-fields from the corrected model and trains the reduced basis on them with the K FE fields.
+population model, regressed on the load by kernel ridge regression (with ``tune``: against
+that model with its network first fine-tuned on the K simulations, :mod:`surrogate.tuning`,
+on the tuned network's out-of-fold residuals; docs/patient.md measures both). The kernel is a
+Gaussian of the distance between the load points times a polynomial of the forces with no
+constant term, ``g(x, x') (f.f' + beta (f.f')^2)``: a residual that vanishes with the force
+and is nearly linear in it, as a hyperelastic liver's is for small loads, and that spreads
+from a loaded point to its neighbours (a Gaussian, or an exponential with its heavier tail).
+Its decay, length scale, ridge, beta and a weight on the population model's own field are
+chosen by cross-validation over the K simulations, grouped by simulation; with fewer than
+two, or when no setting beats the model on the held-out simulations, the model is kept
+unchanged. The distillation draws loads as the scene draws them (its eligible nodes, uniform
+directions, its magnitude and load steps), takes their fields from the corrected model and
+trains the reduced basis on them with the K FE fields.
 """
 
 from __future__ import annotations
@@ -194,6 +196,24 @@ class Teacher:
                                       shape=shape)
         self.out = np.asarray(ds.out_nodes[0])
         self.correction: Correction | None = None
+        self.tuning: dict | None = None
+        self.out_of_fold: np.ndarray | None = None   # (samples, n_out, 3) mm, once tuned
+
+    def tune(self, ds: Dataset, samples: np.ndarray, fields: np.ndarray) -> None:
+        """The placed network fine-tuned on the FE ``fields`` of the patient's ``samples``
+        (:mod:`surrogate.tuning`; how far chosen by cross-validation over simulations).
+        """
+        from surrogate.tuning import fine_tuned, placed_cases, placed_modes
+
+        groups = ds.sample_sim[samples]
+        cases = placed_cases(self.placed, ds.forces[samples, 0], ds.load_points[samples, 0],
+                             fields, groups)
+        rows = placed_modes(self.placed, self.out)
+        placement = self.placed.placement
+        self.placed, self.tuning, oof = fine_tuned(self.placed, rows, cases,
+                                                   cases.take(_spread_steps(groups)))
+        self.out_of_fold = None if oof is None else \
+            placement.vectors_to_liver(oof.reshape(fields.shape))
 
     def population(self, forces, points, chunk: int = 256) -> np.ndarray:
         """(cases, n_out, 3) mm: the placed population model for one load per case, forces
@@ -228,12 +248,19 @@ def sims_samples(ds: Dataset, sims) -> np.ndarray:
     return np.flatnonzero(np.isin(ds.sample_sim, np.asarray(sims)))
 
 
-def fit_teacher(teacher: Teacher, ds: Dataset, sims) -> Teacher:
-    """The teacher's correction fitted on the FE simulations ``sims`` of the patient."""
+def fit_teacher(teacher: Teacher, ds: Dataset, sims, tune: bool = False) -> Teacher:
+    """The teacher fitted on the FE simulations ``sims`` of the patient: its network
+    fine-tuned on them (``tune``), then the correction of what is left, fitted on the tuned
+    network's out-of-fold residuals.
+    """
     smp = sims_samples(ds, sims)
     f, x = ds.forces[smp, 0], ds.load_points[smp, 0]
-    u = teacher.population(f, x)
-    r = (sample_fields(ds, smp) - u).reshape(smp.size, -1)
+    fields = sample_fields(ds, smp)
+    if tune:
+        teacher.tune(ds, smp, fields)
+    # the correction learns the residual of a load the network was not tuned on: out of fold
+    u = teacher.out_of_fold if teacher.out_of_fold is not None else teacher.population(f, x)
+    r = (fields - u).reshape(smp.size, -1)
     teacher.correction = fit_correction(x, f, u, r, ds.sample_sim[smp])
     return teacher
 
@@ -305,11 +332,12 @@ def student_config(**overrides) -> dict:
 
 
 def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | None = None,
-          synthetic: int = SYNTHETIC, seed: int = 0, saved=None, log_fn=print,
-          **overrides) -> dict:
+          synthetic: int = SYNTHETIC, seed: int = 0, saved=None, tune: bool = False,
+          log_fn=print, **overrides) -> dict:
     """The patient model of ``liver`` in ``run/model``: the population model ``model_dir``
     placed on it (as predict-liver places it; ``saved``: a placement file truth-scene wrote),
-    corrected with the first ``sims`` FE simulations of ``data`` (None: all) and distilled.
+    corrected (its network first fine-tuned with ``tune``) with the first ``sims`` FE
+    simulations of ``data`` (None: all) and distilled.
     Writes and returns ``run/adaptation.json`` (what was used, the correction's setting,
     seconds per step).
     """
@@ -327,14 +355,15 @@ def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | 
     used = np.unique(ds.sample_sim)[:sims]
     teacher = Teacher(pred, placement, ds)
     placed = time.perf_counter()
-    fit_teacher(teacher, ds, used)
+    fit_teacher(teacher, ds, used, tune)
     corrected = time.perf_counter()
     info = {"population_model": str(Path(model_dir).resolve()),
             "liver": str(Path(liver).resolve()), "data": str(Path(data).resolve()),
             "placement_residual_mm": placement.residual, "warnings": list(found),
+            "tuning": teacher.tuning,
             **adapted(teacher, ds, used, run, synthetic=synthetic, seed=seed, log_fn=log_fn,
                       **overrides)}
-    info["seconds"] = {"place": placed - t, "correction": corrected - placed,
+    info["seconds"] = {"place": placed - t, "tuning_and_correction": corrected - placed,
                        **info["seconds"], "total": time.perf_counter() - t}
     (Path(run) / "adaptation.json").write_text(json.dumps(info, indent=1))
     return info
@@ -390,9 +419,10 @@ def scratch_model(ds: Dataset, sims, cfg: dict, seed: int = 0, log_fn=print):
 def held_out_errors(pred, placement, ds: Dataset, train_sims, held_sims, *, run: Path,
                     synthetic: int = SYNTHETIC, log_fn=print) -> dict:
     """MEE (mm) on the patient's simulations ``held_sims`` of: the population model ``pred``
-    placed by ``placement``; the corrected one (the teacher, fitted on ``train_sims``); the
-    patient model distilled from it (exported to ``run``); the reduced basis trained on
-    ``train_sims`` alone. With the correction's and the distillation's seconds.
+    placed by ``placement``; it corrected with ``train_sims`` (``corrected``: the teacher);
+    the patient model distilled from it (exported to ``run``); the population network
+    fine-tuned on ``train_sims`` (``tuned``), and that corrected (``tuned_corrected``); the
+    reduced basis trained on ``train_sims`` alone. With the seconds of each step.
     """
     from surrogate.designs import DESIGNS
     from surrogate.predictor import load_predictor
@@ -413,6 +443,11 @@ def held_out_errors(pred, placement, ds: Dataset, train_sims, held_sims, *, run:
                                      true)
     out["adapt_seconds"] = {"correction": fitted, **info["seconds"]}
     out["correction"] = info["correction"]
+    start = time.perf_counter()
+    tuned = fit_teacher(Teacher(pred, placement, ds), ds, train_sims, tune=True)
+    out["tuned"] = field_mee(tuned.population(f, x), true)
+    out["tuned_corrected"] = field_mee(tuned(f, x), true)
+    out["tuning"] = {**tuned.tuning, "seconds": time.perf_counter() - start}
     model, cfg = scratch_model(ds, train_sims, student_config(), log_fn=log_fn)
     p, t, _ = DESIGNS["basis"].predict_samples(ds, model, cfg, smp)
     out["scratch"] = float(np.linalg.norm(np.asarray(p) - np.asarray(t), axis=-1).mean())

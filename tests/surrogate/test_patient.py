@@ -101,6 +101,34 @@ def test_adapting_lowers_the_patients_error_and_exports_a_one_liver_model():
 
 
 @pytest.mark.dataset
+def test_fine_tuning_the_population_network_lowers_the_patients_error():
+    """The same patient and population model: the network fine-tuned on the 20 simulations
+    (adapt --tune) predicts the 6 held-out ones better than the placed population network,
+    and the correction then fitted on its out-of-fold residuals keeps or lowers that."""
+    from surrogate.evaluate import place
+    from surrogate.patient import fit_teacher
+
+    d = Path(generated_dataset("LIVERFEM_TEST_PATIENT"))
+    info = json.loads((d / "run" / "adaptation.json").read_text())
+    ds = load_dataset(d / "data")
+    population = load_predictor(Path(info["population_model"]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        placement, _ = place(population, info["liver"], None)
+    held = sims_samples(ds, np.setdiff1d(np.unique(ds.sample_sim), info["fe_simulations"]))
+    f, x, true = ds.forces[held, 0], ds.load_points[held, 0], sample_fields(ds, held)
+    before = field_mee(Teacher(population, placement, ds).population(f, x), true)
+    tuned = fit_teacher(Teacher(population, placement, ds), ds, info["fe_simulations"],
+                        tune=True)
+    assert tuned.tuning["steps"] > 0 and tuned.out_of_fold.shape == (
+        sims_samples(ds, info["fe_simulations"]).size, ds.out_nodes[0].size, 3)
+    after, corrected = field_mee(tuned.population(f, x), true), field_mee(tuned(f, x), true)
+    print(f"held-out MEE: population {before:.3f}, tuned {after:.3f}, tuned + corrected "
+          f"{corrected:.3f} mm")
+    assert after < 0.95 * before and corrected < 1.02 * after, (before, after, corrected)
+
+
+@pytest.mark.dataset
 def test_a_model_of_three_real_livers_predicts_a_fourth(tmp_path):
     """The population model of the three-liver file population (trained by make test) places
     a liver outside it as a user would, in the population's frame by default, and writes
@@ -143,3 +171,77 @@ def test_a_kept_placement_is_read_back_only_for_its_own_liver_and_model(tmp_path
     assert read_placement(path, ("/livers/a.obj", 124, "LPS", "digest")) is None
     assert read_placement(path, ("/livers/a.obj", 123, "RAS", "digest")) is None
     assert read_placement(tmp_path / "missing.npz", key) is None
+
+
+class _LinearRuntime:
+    """A stand-in for a placed population basis's network: mode coefficients linear in the
+    force, ``c = f W`` (what :mod:`surrogate.tuning` calls: ``params`` and ``_batched``)."""
+
+    def __init__(self, w):
+        import jax.numpy as jnp
+
+        self.params = {"w": jnp.asarray(w, dtype=jnp.float32)}
+
+    @staticmethod
+    def _batched(params, rows, forces, load_points, extra, context):
+        return (forces[:, 0] @ params["w"]) @ rows
+
+
+def _tuning_cases(w, rows, n_sims: int, steps: int = 4, noise: float = 0.0):
+    from surrogate.tuning import Cases
+
+    rng = np.random.default_rng(3)
+    f = rng.normal(size=(n_sims * steps, 1, 3)).astype(np.float32)
+    targets = np.asarray(_LinearRuntime._batched({"w": w}, rows, f, None, None, None))
+    targets = targets + noise * rng.normal(size=targets.shape)
+    z = np.zeros((len(f), 1, 0), np.float32)
+    return Cases(f, z, z[:, 0], z, targets.astype(np.float32),
+                 np.repeat(np.arange(n_sims), steps))
+
+
+def test_fine_tuning_moves_the_network_towards_the_patient_and_leaves_noise_alone():
+    """A population network whose weights are off by 30 % for this patient: the fields the
+    true weights give lie in the modes' span, so fine-tuning on 12 simulations must bring
+    the error on 6 others to under half the untuned one, and the cross-validation must choose
+    to tune. The population's own fields plus noise: no number of steps beats its weights
+    on held-out simulations by 1 %, so none is taken and the placed model is returned
+    unchanged."""
+    from types import SimpleNamespace
+
+    from surrogate.tuning import choose, fine_tuned
+
+    rng = np.random.default_rng(0)
+    rows = np.linalg.qr(rng.normal(size=(60, 5)))[0].T.astype(np.float32)   # 5 modes
+    from surrogate.tuning import RATES, STEPS
+
+    reach = RATES[-1] * max(STEPS)    # about how far Adam moves a weight in the steps tried
+    w_true = rng.normal(size=(3, 5)).astype(np.float32) * 2.0 * reach
+    w_pop = w_true * (1.0 + 0.3 * rng.normal(size=w_true.shape)).astype(np.float32)
+    placed = SimpleNamespace(predictor=SimpleNamespace(runtime=_LinearRuntime(w_pop)))
+    cases = _tuning_cases(w_true, rows, 18)
+    train, held = cases.take(cases.groups < 12), cases.take(cases.groups >= 12)
+    tuned, info, oof = fine_tuned(placed, rows, train, train)
+    assert oof.shape == train.targets.shape
+    assert info["steps"] > 0 and tuned is not placed
+    assert placed.predictor.runtime.params["w"] is not tuned.predictor.runtime.params["w"]
+
+    def mee(runtime):
+        d = np.asarray(runtime._batched(runtime.params, rows, held.forces, None, None, None))
+        return float(np.linalg.norm((d - held.targets).reshape(len(d), -1, 3), axis=-1).mean())
+
+    assert mee(tuned.predictor.runtime) < 0.5 * mee(placed.predictor.runtime)
+    # each training case's out-of-fold field comes from a network tuned on the other folds:
+    # tuned towards the truth, so nearer to it than the population's network
+    untuned = np.asarray(placed.predictor.runtime._batched(
+        placed.predictor.runtime.params, rows, train.forces, None, None, None))
+
+    def to(u):
+        return float(np.linalg.norm((u.reshape(len(u), -1) - train.targets).reshape(
+            len(u), -1, 3), axis=-1).mean())
+
+    assert to(oof) < 0.7 * to(untuned)
+    noise = _tuning_cases(w_pop, rows, 12, noise=10.0 * reach)
+    rate, steps, _ = choose(placed.predictor.runtime, rows, noise)
+    assert steps == 0
+    same, info, oof = fine_tuned(placed, rows, noise, noise)
+    assert same is placed and info["steps"] == 0 and oof is None
