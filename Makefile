@@ -192,10 +192,12 @@ truth: setup
 # environment, mpirun), the model corrected with them and distilled into the patient's own
 # model, $(PATIENT)/run/model (trainer environment). PSCENE: the population scene MODEL was
 # trained on (its loads, material, steps and solver). HELD more simulations are solved and kept
-# out of the adaptation (to measure the patient model on); FRAME: the liver file's frame.
+# out of the adaptation (to measure the patient model on); FRAME: the liver file's frame;
+# ADAPT: more options of surrogate adapt (ADAPT=--tune fine-tunes the population network).
 K ?= 40
 HELD ?= 0
 FRAME ?=
+ADAPT ?=
 MODEL ?=
 PSCENE ?= data_spec/scenes/scene4_livers.toml
 PATIENT ?= runs/patient/$(basename $(notdir $(LIVER)))
@@ -206,7 +208,7 @@ patient: setup
 	    --placement $(PATIENT)/placement.npz
 	$(MPIRUN) $(SPY) -m fem_sim generate $(PATIENT)/scene.toml --out $(PATIENT)/data
 	$(TPY) -m surrogate adapt $(MODEL) $(PATIENT)/data --liver $(LIVER) --run $(PATIENT)/run \
-	    --sims $(K) $(if $(FRAME),--frame $(FRAME)) --placement $(PATIENT)/placement.npz
+	    --sims $(K) $(if $(FRAME),--frame $(FRAME)) --placement $(PATIENT)/placement.npz $(ADAPT)
 
 # Scene 4 on real livers (long, resumable): both designs cross-validated by liver, the livers
 # never seen against FE -> docs/scene4_real.md (then make table4 T4=--report-only puts its
