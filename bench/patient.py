@@ -192,7 +192,9 @@ def report(curves: list[dict], e2e: dict | None, a) -> str:
                           in tuned.items())
               + ". Tuned + corrected below corrected on "
               + ", ".join(f"{n} of {len(curves)} livers at K = {k}" for k, n in lower.items())
-              + ".", ""]
+              + f" ({sum(lower.values())} of {len(curves) * len(lower)} points): `make "
+              "patient` corrects the population network as it is unless told `ADAPT=--tune`.",
+              ""]
     reached = {c["liver"]: next((k for k in KS if c["points"][str(k)].get(
         "patient_model", c["points"][str(k)]["population"]) <= GOAL_MM), None) for c in curves}
     fe = {c["liver"]: c["fe_seconds"] for c in curves}
