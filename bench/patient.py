@@ -153,10 +153,10 @@ def report(curves: list[dict], e2e: dict | None, a) -> str:
                      ("population", "corrected", "patient_model", "scratch", "tuned",
                       "tuned_corrected")]
             adapt = f"{sum(p['adapt_seconds'].values()):.0f}" if "adapt_seconds" in p else ""
-            tuned = p.get("tuning") or {}
-            if tuned.get("steps"):
-                cells[4] += f" ({tuned['steps']} steps)"
-            cells.append(f"{tuned['seconds']:.0f}" if "seconds" in tuned else "")
+            tuning = p.get("tuning") or {}
+            if tuning.get("steps"):
+                cells[4] += f" ({tuning['steps']} steps)"
+            cells.append(f"{tuning['seconds']:.0f}" if "seconds" in tuning else "")
             rows.append(f"| {k} | {c['liver']} | {' | '.join(cells[:4])} | {adapt} | "
                         f"{' | '.join(cells[4:])} |")
     med = {k: np.median([c["points"][str(k)].get("patient_model",

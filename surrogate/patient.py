@@ -113,13 +113,20 @@ def _sq(pred, true) -> float:
     return float(np.mean(np.sum((pred - true) ** 2, axis=1)))
 
 
+def simulation_folds(groups, n: int) -> list[np.ndarray]:
+    """``n`` folds of the simulations in ``groups`` (fewer with fewer simulations), each a
+    set of whole simulations, always the same for the same simulations.
+    """
+    sims = np.unique(groups)
+    return np.array_split(np.random.default_rng(0).permutation(sims), min(n, sims.size))
+
+
 def _cv_scores(cases: tuple, r, groups, scales: tuple, score=_sq, grid=None) -> dict:
     """{(length, beta, mix, decay, ridge): mean held-out ``score``} over folds of whole
     simulations; ``grid``: the (length, beta, mix, decay) tried (default: every one) with
     every ridge.
     """
-    sims = np.unique(groups)
-    folds = np.array_split(np.random.default_rng(0).permutation(sims), min(5, sims.size))
+    folds = simulation_folds(groups, 5)
     grid = grid or [(ln, b, m, d) for ln in LENGTHS for b in BETAS for m in MIXES
                     for d in DECAYS]
     products = _products(cases, cases)  # once: every fold's kernels are slices of it

@@ -20,8 +20,12 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
+
+from surrogate.patient import simulation_folds
 
 RATES = (1e-4,)                           # Adam's learning rates tried
 STEPS = (0, 10, 20, 40, 80, 160)          # steps tried (0: the population's weights)
@@ -74,9 +78,19 @@ def placed_modes(placed, out_nodes) -> np.ndarray:
     return np.stack([w @ m for m in modes]).reshape(len(modes), -1).astype(np.float32)
 
 
-def _trainer(runtime, rows):
-    """(init, step, mee, arrays, fields) of Adam on the RMS field loss of ``runtime``'s network,
-    its step compiled once for every rate and set of cases of one shape. The loss is
+class Trainer(NamedTuple):
+    """What tuning a placed network takes, built once per network and modes (:func:`_trainer`)."""
+
+    init: Callable     # params -> Adam's state
+    step: Callable     # (params, state, arrays, rate) -> (params, state), jitted
+    mee: Callable      # (params, Cases) -> MEE mm of the cases
+    arrays: Callable   # Cases -> what step takes
+    fields: Callable   # (params, Cases) -> (n, 3 n_out) mm
+
+
+def _trainer(runtime, rows) -> Trainer:
+    """Adam on the RMS field loss of ``runtime``'s network, its step compiled once for every
+    rate and set of cases of one shape. The loss is
     computed from the mode coefficients: with the modes' Gram matrix G = R R^T and a case's
     projections b = R t, its squared error is c G c - 2 c.b + t.t, whatever the nodes'
     count (``arrays(cases)``: what the step takes).
@@ -120,38 +134,34 @@ def _trainer(runtime, rows):
         return (c.forces, c.load_points, c.extra, c.context,
                 (t @ rows.T).astype(np.float32), np.sum(t * t, axis=1).astype(np.float32))
 
-    return adam.init, step, mee, arrays, fields
+    return Trainer(adam.init, step, mee, arrays, fields)
 
 
-def _tuned(trainer, params, c: Cases, rate: float, steps: int, held: Cases | None = None):
+def _tuned(trainer: Trainer, params, c: Cases, rate: float, steps: int,
+           held: Cases | None = None):
     """(``params`` after ``steps`` Adam steps on ``c``, {steps of STEPS: MEE on ``held``}:
-    with ``held``, every step of STEPS is run and scored).
+    with ``held``, the steps run to the last of STEPS, scored at each of them).
     """
-    init, step, mee, arrays, _ = trainer
-    c, state, scores = arrays(c), init(params), {}
-    for s in range(max(STEPS) + 1 if held is not None else steps):
+    last = max(STEPS) if held is not None else steps
+    c, state, scores = trainer.arrays(c), trainer.init(params), {}
+    for s in range(last + 1):
         if held is not None and s in STEPS:
-            scores[s] = mee(params, held)
-        params, state = step(params, state, c, rate)
+            scores[s] = trainer.mee(params, held)
+        if s < last:
+            params, state = trainer.step(params, state, c, rate)
     return params, scores
 
 
-def _folds(groups) -> list[np.ndarray]:
-    """FOLDS folds of whole simulations (fewer with fewer simulations), always the same."""
-    sims = np.unique(groups)
-    return np.array_split(np.random.default_rng(0).permutation(sims), min(FOLDS, sims.size))
-
-
-def out_of_fold(trainer, params, c: Cases, rate: float, steps: int) -> np.ndarray:
+def out_of_fold(trainer: Trainer, params, c: Cases, rate: float, steps: int) -> np.ndarray:
     """(n, 3 n_out) mm: each case's field from the network tuned (``rate``, ``steps``)
     without its simulation's fold: residuals as large as a new load's, for the correction
     fitted after tuning (on the tuned model's own training cases its residuals are too small).
     """
     out = np.zeros(c.targets.shape, dtype=np.float64)
-    for held in _folds(c.groups):
+    for held in simulation_folds(c.groups, FOLDS):
         te = np.isin(c.groups, held)
         tuned, _ = _tuned(trainer, params, c.take(~te), rate, steps)
-        out[te] = trainer[4](tuned, c.take(te))
+        out[te] = trainer.fields(tuned, c.take(te))
     return out
 
 
@@ -160,13 +170,14 @@ def choose(runtime, rows, c: Cases, trainer=None) -> tuple[float, int, float]:
     simulations; steps 0 (no tuning) unless tuning lowers it by ``MIN_GAIN``.
     """
     trainer = trainer or _trainer(runtime, rows)
+    folds = simulation_folds(c.groups, FOLDS)
     total: dict = {}
-    for held in _folds(c.groups):
+    for held in folds:
         te = np.isin(c.groups, held)
         for rate in RATES:
             _, scores = _tuned(trainer, runtime.params, c.take(~te), rate, 0, c.take(te))
             for s, v in scores.items():
-                total[(rate, s)] = total.get((rate, s), 0.0) + v / FOLDS
+                total[(rate, s)] = total.get((rate, s), 0.0) + v / len(folds)
     best = min(total, key=lambda k: (total[k], k[1]))
     untuned = total[(RATES[0], 0)]
     if total[best] >= (1.0 - MIN_GAIN) * untuned:   # not clearly better on held-out ones
