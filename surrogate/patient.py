@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from surrogate.data import Dataset
+from surrogate.tuning import fine_tuned, placed_cases, placed_modes, simulation_folds
 
 LENGTHS = (10.0, 20.0, 40.0, 80.0, 160.0)   # mm: the kernel's length scales tried
 DECAYS = ("gauss", "exp")                    # how it falls with the load points' distance d:
@@ -111,14 +112,6 @@ def _mee(residual: np.ndarray) -> float:
 
 def _sq(pred, true) -> float:
     return float(np.mean(np.sum((pred - true) ** 2, axis=1)))
-
-
-def simulation_folds(groups, n: int) -> list[np.ndarray]:
-    """``n`` folds of the simulations in ``groups`` (fewer with fewer simulations), each a
-    set of whole simulations, always the same for the same simulations.
-    """
-    sims = np.unique(groups)
-    return np.array_split(np.random.default_rng(0).permutation(sims), min(n, sims.size))
 
 
 def _cv_scores(cases: tuple, r, groups, scales: tuple, score=_sq, grid=None) -> dict:
@@ -210,8 +203,6 @@ class Teacher:
         """The placed network fine-tuned on the FE ``fields`` of the patient's ``samples``
         (:mod:`surrogate.tuning`; how far chosen by cross-validation over simulations).
         """
-        from surrogate.tuning import fine_tuned, placed_cases, placed_modes
-
         groups = ds.sample_sim[samples]
         cases = placed_cases(self.placed, ds.forces[samples, 0], ds.load_points[samples, 0],
                              fields, groups)

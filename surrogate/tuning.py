@@ -25,13 +25,19 @@ from typing import NamedTuple
 
 import numpy as np
 
-from surrogate.patient import simulation_folds
-
 RATES = (1e-4,)                           # Adam's learning rates tried
 STEPS = (0, 10, 20, 40, 80, 160)          # steps tried (0: the population's weights)
 FOLDS = 3                                 # folds of whole simulations for the choice
 MIN_GAIN = 0.01                           # tuning kept when it lowers the held-out MEE
                                           # by at least this fraction
+
+
+def simulation_folds(groups, n: int) -> list[np.ndarray]:
+    """``n`` folds of the simulations in ``groups`` (fewer with fewer simulations), each a
+    set of whole simulations, always the same for the same simulations.
+    """
+    sims = np.unique(groups)
+    return np.array_split(np.random.default_rng(0).permutation(sims), min(n, sims.size))
 
 
 @dataclasses.dataclass
