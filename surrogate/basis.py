@@ -506,6 +506,13 @@ class BasisRuntime:
         return self._batched(self.params, rows, forces, load_points, extra,
                              self.context(pred, load_nodes, liver))
 
+    def fields_with(self, params, rows, forces, load_points, extra, context):
+        """(n_cases, nodes, 3) the fields of cases whose network inputs are given (``extra``:
+        the predictor's ``varied_inputs``, ``context``: this runtime's ``context``), with the
+        network weights ``params``: what fine-tuning differentiates (:mod:`surrogate.tuning`).
+        """
+        return self._batched(params, rows, forces, load_points, extra, context)
+
     def on_nodes(self, params, n_nodes: int, rng) -> BasisModel:
         """The trained model to export on another cloud of ``n_nodes`` nodes (timing):
         the same network with orthonormal random modes of that size.

@@ -361,7 +361,8 @@ def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | 
             "tuning": teacher.tuning,
             **adapted(teacher, ds, used, run, synthetic=synthetic, seed=seed, log_fn=log_fn,
                       **overrides)}
-    info["seconds"] = {"place": placed - t, "tuning_and_correction": corrected - placed,
+    fitting = "tuning_and_correction" if tune else "correction"
+    info["seconds"] = {"place": placed - t, fitting: corrected - placed,
                        **info["seconds"], "total": time.perf_counter() - t}
     (Path(run) / "adaptation.json").write_text(json.dumps(info, indent=1))
     return info

@@ -129,7 +129,7 @@ class Predictor:
         if not _node_ids(load_nodes, points.shape[0]):
             raise ValueError(f"load_nodes: expected integer node ids in [0, {points.shape[0]})")
         rows = self._rows(nodes, static, geometry, points.shape[0])
-        extra = self._extra(forces.shape[0], material, geometry)
+        extra = self.varied_inputs(forces.shape[0], material, geometry)
         if geometry is None and self.loadable is not None:
             check_load_nodes(load_nodes, self.loadable)
         fmax = np.linalg.norm(forces, axis=-1).max()
@@ -162,7 +162,7 @@ class Predictor:
             self._sel = self.runtime.rows(self, static, nodes)
         return self._sel
 
-    def _extra(self, n_cases: int, material, geometry) -> np.ndarray:
+    def varied_inputs(self, n_cases: int, material, geometry) -> np.ndarray:
         """(n_cases, e) the material and shape inputs the scene varied, checked."""
         blocks = []
         spec = self.spec

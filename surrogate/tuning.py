@@ -69,7 +69,7 @@ def placed_cases(placed, forces, points, fields, groups) -> Cases:
     n = len(nodes)
     return Cases(pl.vectors_to_population(np.asarray(forces, float)[:, None]).astype(np.float32),
                  reg_points[nodes].astype(np.float32),
-                 pred._extra(n, None, placed.geometry).astype(np.float32),
+                 pred.varied_inputs(n, None, placed.geometry).astype(np.float32),
                  ctx.astype(np.float32),
                  pl.vectors_to_population(fields).reshape(n, -1).astype(np.float32),
                  np.asarray(groups))
@@ -113,7 +113,7 @@ def _trainer(runtime, rows) -> Trainer:
     unit = jnp.asarray(np.eye(k, 3 * -(-k // 3)), dtype=jnp.float32)
 
     def coefficients(params, forces, load_points, extra, context):
-        c = runtime._batched(params, unit, forces, load_points, extra, context)
+        c = runtime.fields_with(params, unit, forces, load_points, extra, context)
         return c.reshape(len(forces), -1)[:, :k]
 
     def loss(params, c: tuple):

@@ -175,7 +175,7 @@ def test_a_kept_placement_is_read_back_only_for_its_own_liver_and_model(tmp_path
 
 class _LinearRuntime:
     """A stand-in for a placed population basis's network: mode coefficients linear in the
-    force, ``c = f W`` (what :mod:`surrogate.tuning` calls: ``params`` and ``_batched``)."""
+    force, ``c = f W`` (what :mod:`surrogate.tuning` calls: ``params`` and ``fields_with``)."""
 
     def __init__(self, w):
         import jax.numpy as jnp
@@ -183,7 +183,7 @@ class _LinearRuntime:
         self.params = {"w": jnp.asarray(w, dtype=jnp.float32)}
 
     @staticmethod
-    def _batched(params, rows, forces, load_points, extra, context):
+    def fields_with(params, rows, forces, load_points, extra, context):
         return (forces[:, 0] @ params["w"]) @ rows
 
 
@@ -192,7 +192,7 @@ def _tuning_cases(w, rows, n_sims: int, steps: int = 4, noise: float = 0.0):
 
     rng = np.random.default_rng(3)
     f = rng.normal(size=(n_sims * steps, 1, 3)).astype(np.float32)
-    targets = np.asarray(_LinearRuntime._batched({"w": w}, rows, f, None, None, None))
+    targets = np.asarray(_LinearRuntime.fields_with({"w": w}, rows, f, None, None, None))
     targets = targets + noise * rng.normal(size=targets.shape)
     z = np.zeros((len(f), 1, 0), np.float32)
     return Cases(f, z, z[:, 0], z, targets.astype(np.float32),
@@ -226,13 +226,13 @@ def test_fine_tuning_moves_the_network_towards_the_patient_and_leaves_noise_alon
     assert placed.predictor.runtime.params["w"] is not tuned.predictor.runtime.params["w"]
 
     def mee(runtime):
-        d = np.asarray(runtime._batched(runtime.params, rows, held.forces, None, None, None))
+        d = np.asarray(runtime.fields_with(runtime.params, rows, held.forces, None, None, None))
         return float(np.linalg.norm((d - held.targets).reshape(len(d), -1, 3), axis=-1).mean())
 
     assert mee(tuned.predictor.runtime) < 0.5 * mee(placed.predictor.runtime)
     # each training case's out-of-fold field comes from a network tuned on the other folds:
     # tuned towards the truth, so nearer to it than the population's network
-    untuned = np.asarray(placed.predictor.runtime._batched(
+    untuned = np.asarray(placed.predictor.runtime.fields_with(
         placed.predictor.runtime.params, rows, train.forces, None, None, None))
 
     def to(u):
