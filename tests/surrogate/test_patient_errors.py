@@ -1,0 +1,62 @@
+"""surrogate.patient_errors: where a patient model's error is, on fields whose answers are known."""
+
+import numpy as np
+import pytest
+
+from surrogate.patient_errors import error_sources, projection_floor, rank_correlation
+
+
+def _fields(rng, n, nodes=50):
+    return rng.normal(size=(n, nodes, 3))
+
+
+def test_the_projection_floor_is_zero_in_the_span_and_the_field_itself_outside_it():
+    rng = np.random.default_rng(0)
+    train = _fields(rng, 6)
+    inside = np.einsum("hk,knc->hnc", rng.normal(size=(4, 6)), train)
+    assert projection_floor(train, inside) < 1e-10
+    # a field orthogonal to every training field (zero on the nodes they use, and they
+    # are zero where it is not): its projection is zero, so the floor is its own mean norm
+    train[:, :25], outside = 0.0, _fields(rng, 3)
+    outside[:, 25:] = 0.0
+    expected = np.linalg.norm(outside, axis=-1).mean()
+    assert projection_floor(train, outside) == pytest.approx(expected, rel=1e-12)
+
+
+def test_rank_correlation_is_spearmans():
+    stats = pytest.importorskip("scipy.stats")
+    rng = np.random.default_rng(1)
+    a, b = rng.normal(size=40), rng.normal(size=40)
+    assert rank_correlation(a, b) == pytest.approx(stats.spearmanr(a, b).statistic, abs=1e-12)
+    assert rank_correlation(a, np.exp(a)) == pytest.approx(1.0)      # any increasing map
+    assert rank_correlation(a, -a ** 3) == pytest.approx(-1.0)
+
+
+def test_error_sources_on_a_made_up_patient():
+    """Held-out fields in the training span, errors proportional to the displacement (alike at
+    every load step), the correction worse than the population on exactly one simulation.
+    """
+    rng = np.random.default_rng(2)
+    train = _fields(rng, 8)
+    sims = np.repeat(np.arange(4), 3)                          # 4 held-out sims, 3 steps
+    steps = np.tile([0.2, 0.6, 1.0], 4)
+    shapes = np.einsum("sk,knc->snc", rng.normal(size=(4, 8)), train)
+    true = shapes[sims] * steps[:, None, None]
+    noise = rng.normal(size=true.shape)
+    noise /= np.linalg.norm(noise, axis=-1, keepdims=True)      # unit vectors at every node
+    size = np.linalg.norm(true, axis=-1, keepdims=True)
+    corrected = true + 0.1 * size * noise                       # 10 % of the displacement
+    population = true + 0.3 * size * noise
+    population[sims == 2] = true[sims == 2] + 0.05 * size[sims == 2] * noise[sims == 2]
+    points = rng.normal(size=(12, 3)) * 50.0
+    train_points = points[:8] + 1.0
+    out = error_sources(train, train_points, true, points, population, corrected, sims)
+    assert out["projection_floor_mm"] < 1e-10
+    # each node's error is 10 % of its displacement, so the mean error is 10 % of the mean
+    # displacement at every step
+    assert out["relative_first_step"] == pytest.approx(0.1, rel=1e-9)
+    assert out["relative_last_step"] == pytest.approx(0.1, rel=1e-9)
+    assert out["worse_than_population"] == 1 and out["simulations"] == 4
+    assert out["corrected_mm"] < out["population_mm"]
+    assert out["spearman_displacement"] == pytest.approx(1.0)   # error = 0.1 x displacement
+    assert -1.0 <= out["spearman_nearest_load"] <= 1.0
