@@ -131,6 +131,47 @@ def test_hole_patches_close_a_surface_by_hand():
     assert enclosed_volume(P, np.concatenate([tris, patch])) == pytest.approx(1000 / 6)
 
 
+def finned_box(fin: float, thick: float = 1.8, side: float = 60.0):
+    """(points, outward tris): a box of ``side`` mm with a plate ``thick`` mm thin standing
+    ``fin`` mm out of its +x face over its whole height (an extruded outline), one triangle
+    of its -x face missing (a hole: the segmentation route). Offset off the voxel grid.
+    """
+    y0 = side / 2
+    outline = np.array([(0, 0), (side, 0), (side, y0), (side + fin, y0), (side + fin, y0 + thick),
+                        (side, y0 + thick), (side, side), (0, side)], float)
+    n = len(outline)
+    P = np.array([(x, y, z) for z in (0.0, side) for x, y in outline]) + 0.3
+    cap = [(0, 1, 2), (0, 2, 5), (0, 5, 6), (0, 6, 7), (2, 3, 4), (2, 4, 5)]  # outline's
+    T = [(a, c, b) for a, b, c in cap] + [(a + n, b + n, c + n) for a, b, c in cap]
+    for i in range(n):                                          # the sides, outward
+        j = (i + 1) % n
+        T += [(i, j, j + n), (i, j + n, i + n)]
+    T.pop(2 * 6 + 2 * (n - 1))                                  # the -x face's first half
+    return P, np.array(T, dtype=np.int64)
+
+
+def test_a_thin_fin_taken_off_by_the_opening_is_reported_not_refused():
+    """A box with a plate 1.8 mm thin and 15 mm out (as Amos-092's segmentation has): the
+    opening takes the plate off, so its edge lies 15 mm from the repaired surface, beyond the
+    distance bound, yet within a few mm of the solid before the opening: the repair did not
+    move the liver. The plate is reported (its vertices, how far, what the opening took off:
+    the plate's 15 x 1.8 x 60 mm, 1.6 mL, and the box's rounded edges) and the liver meshes. An 8 mm plate stays within the bound: nothing reported.
+    """
+    for fin, thin in ((8.0, False), (15.0, True)):
+        g, r = mesh_liver_surface(*finned_box(fin), 16.0, "fin.obj")
+        assert r.route == "segmentation route" and r.holes == 1 and refusal(r) is None
+        assert (r.thin_vertices > 0) == thin
+        assert r.repair_distance_mm <= BOUNDS["distance_mm"]
+        if thin:
+            assert r.thin_vertices == 4              # the plate's outer edge's corners
+            assert r.thin_distance_mm == pytest.approx(fin, abs=1.5)
+            # the plate's 1.6 mL, plus what the opening rounds off the box's 12 edges
+            # (720 mm of right-angled edge: about a voxel's square each, 0.7 mL at most)
+            assert 0.9 * 1.62 < r.thin_volume_ml < 1.62 + 1.0
+            assert "thin parts taken off by the opening (4 vertices" in r.summary()
+        assert g.n_nodes > 0
+
+
 def test_a_repair_beyond_the_bound_is_refused_naming_file_defect_and_bound():
     r = RepairReport(file="liver.obj", mesh_size=8.0, holes=12, volume_before_ml=1500.0,
                      volume_repaired_ml=1400.0)
