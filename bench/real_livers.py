@@ -170,6 +170,14 @@ def _mesh_section(rows: list, h: float) -> list[str]:
             out.append(f"| {label} | {np.median(v):.3g}, worst {v.min():.3g} |")
         else:
             out.append(f"| {label} | {_stats(vals)} |")
+    thin = [r for r in ok if r.get("thin_vertices")]
+    if thin:
+        out += ["", "Thin parts the segmentation route's opening takes off beyond the distance "
+                "bound (measured to the solid before the opening instead; "
+                "`fem_sim.geometry.repair`): "
+                + ", ".join(f"{Path(r['liver']).stem} ({r['thin_vertices']} input vertices up "
+                            f"to {r['thin_distance_mm']:.1f} mm out, {r['thin_volume_ml']:.2f} "
+                            "mL taken off by the opening in all)" for r in thin) + "."]
     refused = [r for r in at if not r["ok"]]
     if refused:
         out += ["", "Refused (the reason as the command gives it):", ""]

@@ -155,7 +155,8 @@ def test_a_thin_fin_taken_off_by_the_opening_is_reported_not_refused():
     opening takes the plate off, so its edge lies 15 mm from the repaired surface, beyond the
     distance bound, yet within a few mm of the solid before the opening: the repair did not
     move the liver. The plate is reported (its vertices, how far, what the opening took off:
-    the plate's 15 x 1.8 x 60 mm, 1.6 mL, and the box's rounded edges) and the liver meshes. An 8 mm plate stays within the bound: nothing reported.
+    the plate's 15 x 1.8 x 60 mm, 1.6 mL, and the box's rounded edges) and the liver meshes.
+    An 8 mm plate stays within the bound: nothing reported.
     """
     for fin, thin in ((8.0, False), (15.0, True)):
         g, r = mesh_liver_surface(*finned_box(fin), 16.0, "fin.obj")
