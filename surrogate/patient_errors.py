@@ -2,8 +2,9 @@
 (:mod:`surrogate.patient`) on a patient's held-out simulations.
 
 - the projection floor: the held-out FE fields' distance to the span of the K training FE
-  fields (every load step). The correction's output lies in a span of that kind (the
-  training residuals plus the population field of the load), so a floor far below the
+  fields (every load step). The correction's output (the load's population field plus a
+  combination of the training residuals) lies in a span that contains this one (the
+  training FE fields, their population fields and the load's), so a floor far below the
   corrected error says the fields are there to be combined and what is missing is how to
   combine them for a new load;
 - the error relative to the displacement at the first and the last load step of each held-out

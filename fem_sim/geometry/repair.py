@@ -18,7 +18,7 @@ specks and self-intersections. The route, each step reported (:class:`RepairRepo
    surface, the mesh's smallest dihedral angle and mean ratio. A liver moved beyond
    :data:`BOUNDS` is refused, naming the file, the defect and the bound. The distance bound
    holds the repair proper (the enclosed solid at 1 mm voxels); the opening then takes off
-   parts thinner than its ball (about two voxels: a segmentation's strands and fins), which
+   parts thinner than its ball (3 voxels across: a segmentation's strands and fins), which
    can reach farther. Those are reported (vertices, farthest distance, volume) and bounded
    by the volume bound only: a 2 mm fin is no liver tissue a 16 mm mesh could hold.
 
