@@ -196,7 +196,7 @@ def sources_lines(found: list[dict]) -> list[str]:
     return [
         f"Where the corrected model's error is, at K = {found[0]['k']} "
         "(`surrogate.patient_errors`, recomputed by each run): the projection floor is the "
-        "held-out FE fields' distance to the span of the K training FE fields (the span the "
+        "held-out FE fields' distance to the span of the K training FE fields (within the span the "
         "correction combines); the error relative to the mean displacement, median over the "
         "held-out simulations, at their first (nearly linear) and last load step; Spearman's "
         "rank correlation over the held-out simulations of their error with their mean "
