@@ -175,7 +175,8 @@ def _mesh_section(rows: list, h: float) -> list[str]:
         out += ["", "Thin parts the segmentation route's opening takes off beyond the distance "
                 "bound (measured to the solid before the opening instead; "
                 "`fem_sim.geometry.repair`): "
-                + ", ".join(f"{Path(r['liver']).stem} ({r['thin_vertices']} input vertices up "
+                + ", ".join(f"{Path(r['liver']).stem} ({r['thin_vertices']} input "
+                            f"vert{'ex' if r['thin_vertices'] == 1 else 'ices'} up "
                             f"to {r['thin_distance_mm']:.1f} mm out, {r['thin_volume_ml']:.2f} "
                             "mL taken off by the opening in all)" for r in thin) + "."]
     refused = [r for r in at if not r["ok"]]

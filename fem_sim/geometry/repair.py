@@ -102,7 +102,8 @@ class RepairReport:
 
     def _thin(self) -> str:
         return "" if not self.thin_vertices else (
-            f"thin parts taken off by the opening ({self.thin_vertices} vertices, up to "
+            f"thin parts taken off by the opening ({self.thin_vertices} "
+            f"vert{'ex' if self.thin_vertices == 1 else 'ices'}, up to "
             f"{self.thin_distance_mm:.1f} mm, {self.thin_volume_ml:.2f} mL); ")
 
     def to_dict(self) -> dict:
