@@ -90,8 +90,10 @@ def truth(pred, liver: Path, a) -> Path:
     return d / "data"
 
 
-def curve(liver: Path, a) -> dict:
-    """Every K's errors on the liver's held-out simulations (kept in RESULTS/<liver>/k.json)."""
+def curve(liver: Path, a) -> tuple[dict, dict]:
+    """Every K's errors on the liver's held-out simulations (kept in RESULTS/<liver>/k.json),
+    and where the corrected model's error is at SOURCES_K (:func:`sources`).
+    """
     from surrogate.data import load_dataset
     from surrogate.evaluate import place
     from surrogate.patient import held_out_errors
@@ -116,30 +118,26 @@ def curve(liver: Path, a) -> dict:
                                            log_fn=lambda m: None)
             path.write_text(json.dumps(done, indent=1))
         print(f"[{liver.stem}] K={k}: {done[str(k)]}", flush=True)
-    return {"liver": liver.stem, "nodes": int(ds.points[0].shape[0]), "points": done,
-            "fe_seconds": fe_seconds(data, a.np)}
+    return ({"liver": liver.stem, "nodes": int(ds.points[0].shape[0]), "points": done,
+             "fe_seconds": fe_seconds(data, a.np)},
+            {"liver": liver.stem, "k": SOURCES_K, **sources(pred, placement, ds, SOURCES_K)})
 
 
-def sources(liver: Path, a, k: int = SOURCES_K) -> dict:
-    """Where the corrected model's error is on the liver's held-out simulations at K = ``k``
-    (:func:`surrogate.patient_errors.error_sources`; recomputed each run: seconds).
+def sources(pred, placement, ds, k: int) -> dict:
+    """Where the corrected model's error is on the held-out simulations of the liver's truth
+    ``ds`` at K = ``k`` (:func:`surrogate.patient_errors.error_sources`; recomputed each run:
+    seconds).
     """
-    from surrogate.data import load_dataset
-    from surrogate.evaluate import place
     from surrogate.patient import Teacher, fit_teacher, sample_fields, sims_samples
     from surrogate.patient_errors import error_sources
-    from surrogate.predictor import load_predictor
 
-    pred = load_predictor(Path(a.model) / "model")
-    placement, _ = place(pred, liver, None)
-    ds = load_dataset(RESULTS / liver.stem / "data")
     sims = np.unique(ds.sample_sim)
     train, held = sims_samples(ds, sims[:k]), sims_samples(ds, sims[-HELD:])
     teacher = fit_teacher(Teacher(pred, placement, ds), ds, sims[:k])
     f, x = ds.forces[held, 0], ds.load_points[held, 0]
-    return {"liver": liver.stem, "k": k, **error_sources(
+    return error_sources(
         sample_fields(ds, train), ds.load_points[train, 0], sample_fields(ds, held), x,
-        teacher.population(f, x), teacher(f, x), ds.sample_sim[held])}
+        teacher.population(f, x), teacher(f, x), ds.sample_sim[held])
 
 
 def fe_seconds(data: Path, ranks: int) -> dict:
@@ -303,8 +301,7 @@ def main() -> int:
     unknown = [n for n in a.livers if n not in files]
     if unknown:
         ap.error(f"--livers: {unknown} are not validation livers of {SCENE.name}")
-    curves = [curve(files[n], a) for n in a.livers]
-    found = [sources(files[n], a) for n in a.livers]
+    curves, found = map(list, zip(*(curve(files[n], a) for n in a.livers)))
     md = ROOT / "docs" / "patient.md"
     saved = md.with_suffix(".json")
     e2e = end_to_end(files[a.livers[0]], a) if a.e2e else (

@@ -39,14 +39,6 @@ def projection_floor(train: np.ndarray, held: np.ndarray) -> float:
     return float(_node_mee(projected.reshape(held.shape), held).mean())
 
 
-def rank_correlation(a, b) -> float:
-    """Spearman's rank correlation of two samples (no ties expected: continuous values)."""
-    ra, rb = (np.argsort(np.argsort(np.asarray(v, float))).astype(float) for v in (a, b))
-    ra, rb = ra - ra.mean(), rb - rb.mean()
-    den = float(np.sqrt((ra ** 2).sum() * (rb ** 2).sum()))
-    return float((ra * rb).sum() / den) if den > 0 else float("nan")
-
-
 def error_sources(train_true, train_points, held_true, held_points, held_population,
                   held_corrected, held_sims) -> dict:
     """The figures of the module's docstring for one patient and one K.
@@ -57,6 +49,8 @@ def error_sources(train_true, train_points, held_true, held_points, held_populat
     one's; held_points (h, 3) mm; held_sims (h,): each held-out case's simulation, its load
     steps in order.
     """
+    from scipy.stats import spearmanr
+
     held_sims = np.asarray(held_sims)
     pop, cor = _node_mee(held_population, held_true), _node_mee(held_corrected, held_true)
     size = np.linalg.norm(held_true, axis=-1).mean(axis=1)
@@ -72,9 +66,9 @@ def error_sources(train_true, train_points, held_true, held_points, held_populat
         "projection_floor_mm": projection_floor(np.asarray(train_true), np.asarray(held_true)),
         "relative_first_step": float(np.median(cor[first] / np.maximum(size[first], 1e-12))),
         "relative_last_step": float(np.median(cor[last] / np.maximum(size[last], 1e-12))),
-        "spearman_displacement": rank_correlation(per_sim, [size[held_sims == s].mean()
-                                                            for s in sims]),
-        "spearman_nearest_load": rank_correlation(per_sim, near),
+        "spearman_displacement": float(spearmanr(per_sim, [size[held_sims == s].mean()
+                                                           for s in sims]).statistic),
+        "spearman_nearest_load": float(spearmanr(per_sim, near).statistic),
         "nearest_load_mm": float(np.median(near)),
         "worse_than_population": int((per_sim > per_pop).sum()), "simulations": int(sims.size),
     }

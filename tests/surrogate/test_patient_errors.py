@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from surrogate.patient_errors import error_sources, projection_floor, rank_correlation
+from surrogate.patient_errors import error_sources, projection_floor
 
 
 def _fields(rng, n, nodes=50):
@@ -21,15 +21,6 @@ def test_the_projection_floor_is_zero_in_the_span_and_the_field_itself_outside_i
     outside[:, 25:] = 0.0
     expected = np.linalg.norm(outside, axis=-1).mean()
     assert projection_floor(train, outside) == pytest.approx(expected, rel=1e-12)
-
-
-def test_rank_correlation_is_spearmans():
-    stats = pytest.importorskip("scipy.stats")
-    rng = np.random.default_rng(1)
-    a, b = rng.normal(size=40), rng.normal(size=40)
-    assert rank_correlation(a, b) == pytest.approx(stats.spearmanr(a, b).statistic, abs=1e-12)
-    assert rank_correlation(a, np.exp(a)) == pytest.approx(1.0)      # any increasing map
-    assert rank_correlation(a, -a ** 3) == pytest.approx(-1.0)
 
 
 def test_error_sources_on_a_made_up_patient():
