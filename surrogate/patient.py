@@ -344,13 +344,13 @@ def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | 
     from surrogate.predictor import load_predictor
 
     t = time.perf_counter()
+    ds = load_dataset(data)
+    used = used_simulations(ds, sims, data)
     pred = load_predictor(model_dir)
     if pred.shape_model is None:
         raise ValueError(f"{model_dir}: not a population model (no shape model): a patient "
                          "model adapts a model trained on a population of livers")
     placement, found = place(pred, liver, frame, saved)
-    ds = load_dataset(data)
-    used = np.unique(ds.sample_sim)[:sims]
     teacher = Teacher(pred, placement, ds)
     placed = time.perf_counter()
     fit_teacher(teacher, ds, used, tune)
@@ -366,6 +366,24 @@ def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | 
                        **info["seconds"], "total": time.perf_counter() - t}
     (Path(run) / "adaptation.json").write_text(json.dumps(info, indent=1))
     return info
+
+
+def used_simulations(ds: Dataset, sims: int | None, data) -> np.ndarray:
+    """The first ``sims`` simulations of the patient's dataset ``ds`` (read from ``data``)
+    with converged load steps (None: all of them); ValueError, before any work, for none,
+    or fewer than asked (a model fitted on fewer simulations than the user counted on).
+    """
+    done = np.unique(ds.sample_sim)
+    if sims == 0 or not done.size:
+        raise ValueError(f"{data}: adapting needs at least one FE simulation of the patient "
+                         f"(--sims {sims}; the data has {done.size} with converged load "
+                         "steps); predict-liver gives the population model on this liver")
+    if sims is not None and sims > done.size:
+        raise ValueError(f"{data}: {done.size} simulations with converged load steps, fewer "
+                         f"than the {sims} asked (--sims): ask for at most {done.size}, or "
+                         "run more (fem_sim generate keeps the done ones of a scene grown "
+                         "by raising its n_simulations, as make patient with a larger K)")
+    return done[:sims]
 
 
 def adapted(teacher: Teacher, ds: Dataset, used, run, *, synthetic: int = SYNTHETIC,

@@ -245,3 +245,21 @@ def test_fine_tuning_moves_the_network_towards_the_patient_and_leaves_noise_alon
     assert steps == 0
     same, info, oof = fine_tuned(placed, rows, noise, noise)
     assert same is placed and info["steps"] == 0 and oof is None
+
+
+@pytest.mark.dataset
+def test_adapting_to_none_or_more_simulations_than_there_are_is_a_clear_error(capsys):
+    """adapt --sims 0, or more simulations than the patient's data holds: a one-line error
+    naming the data, what was asked and what there is, before the liver is placed."""
+    from surrogate.__main__ import main
+
+    d = Path(generated_dataset("LIVERFEM_TEST_PATIENT"))
+    info = json.loads((d / "run" / "adaptation.json").read_text())
+    done = np.unique(load_dataset(d / "data").sample_sim).size
+    for sims, said in ((0, "at least one FE simulation"),
+                       (done + 1, f"{done} simulations with converged load steps, fewer than "
+                                  f"the {done + 1} asked")):
+        assert main(["adapt", info["population_model"], str(d / "data"), "--liver",
+                     "/nonexistent.obj", "--run", "/nonexistent-run", "--sims", str(sims)]) != 0
+        err = capsys.readouterr().err
+        assert said in err and str(d / "data") in err, err
