@@ -16,8 +16,14 @@ Gaussian of the distance between the load points times a polynomial of the force
 constant term, ``g(x, x') (f.f' + beta (f.f')^2)``: a residual that vanishes with the force
 and is nearly linear in it, as a hyperelastic liver's is for small loads, and that spreads
 from a loaded point to its neighbours (a Gaussian, or an exponential with its heavier tail).
-Its decay, length scale, ridge, beta and a weight on the population model's own field are
-chosen by cross-validation over the K simulations, grouped by simulation; with fewer than
+The kernel has a third term, the product of what the K FE simulations say of the load by
+reciprocity (:class:`Sensors`): by Maxwell-Betti, simulation k's first, nearly linear, load
+step gives the displacement at its load point along its force that any other load causes
+there, so each load reads the residual at the K load points: the regression learns how the
+whole residual field follows those K readings.
+Its decay, length scale, ridge, beta and the weights on the population model's own field and
+on the readings are chosen by cross-validation over the K simulations, grouped by simulation
+(a held-out simulation's readings come from the others); with fewer than
 two, or when no setting beats the model on the held-out simulations, the model is kept
 unchanged. The distillation draws loads as the scene draws them (its eligible nodes, uniform
 directions, its magnitude and load steps), takes their fields from the corrected model and
@@ -51,30 +57,86 @@ SYNTHETIC = 600
 
 def _products(a: tuple, b: tuple) -> tuple:
     """What the kernel needs of cases a, b = (load points (n, 3) mm, forces (n, 3) N,
-    population fields (n, m) mm): squared distances, force and field inner products.
+    population fields (n, m) mm, reciprocity readings (n, K) mm): squared distances, force,
+    field and readings inner products.
     """
-    (xa, fa, ua), (xb, fb, ub) = a, b
-    return ((xa[:, None, :] - xb[None, :, :]) ** 2).sum(-1), fa @ fb.T, ua @ ub.T
+    (xa, fa, ua, sa), (xb, fb, ub, sb) = a, b
+    return ((xa[:, None, :] - xb[None, :, :]) ** 2).sum(-1), fa @ fb.T, ua @ ub.T, sa @ sb.T
 
 
-def _combined(p: tuple, length: float, beta: float, mix: float, decay: str,
+def _combined(p: tuple, length: float, beta: float, mix: float, decay: str, gamma: float,
               scales: tuple) -> np.ndarray:
     """(na, nb): (1 - mix) x a decay in the load points' distance (``DECAYS``) times
-    f.f' + beta (f.f')^2, plus mix x the population fields' inner product (``scales``: the
-    force's and the fields' scales).
+    f.f' + beta (f.f')^2, plus mix x the population fields' inner product, plus gamma x the
+    reciprocity readings' (``scales``: the force's, the fields' and the readings' scales).
     """
-    d2, ff, uu = p[0], p[1] / scales[0] ** 2, p[2] / scales[1] ** 2
+    d2, ff = p[0], p[1] / scales[0] ** 2
+    uu, ss = p[2] / scales[1] ** 2, p[3] / scales[2] ** 2
     near = np.exp(-d2 / (2.0 * length ** 2)) if decay == "gauss" else \
         np.exp(-np.sqrt(np.maximum(d2, 0.0)) / length)
-    return (1.0 - mix) * near * (ff + beta * ff ** 2) + mix * uu
+    return (1.0 - mix) * near * (ff + beta * ff ** 2) + mix * uu + gamma * ss
 
 
 def _kernel(a: tuple, b: tuple, length: float, beta: float, mix: float, decay: str,
-            scales: tuple) -> np.ndarray:
-    return _combined(_products(a, b), length, beta, mix, decay, scales)
+            gamma: float, scales: tuple) -> np.ndarray:
+    return _combined(_products(a, b), length, beta, mix, decay, gamma, scales)
+
+
+@dataclasses.dataclass
+class Sensors:
+    """What the patient's K FE simulations say of any load by reciprocity (Maxwell-Betti: in
+    the linear range, the displacement at point a along d caused by a force f at b is f . the
+    displacement at b caused by a unit force at a along d). Simulation k's first load step
+    (the smallest force, nearly linear) divided by its force gives that unit field; a load
+    (b, f) then reads f . it at b, the displacement it causes at simulation k's load point
+    along its force, less what the population model's field for the load puts there: a
+    reading of the load's residual at the K load points, known for a new load without its
+    FE simulation. A load not at an output node reads the fields at the nearest one.
+    """
+
+    nodes: np.ndarray        # (n_out, 3) mm: the output nodes
+    at: np.ndarray           # (K,) the output node of each simulation's load point
+    along: np.ndarray        # (K, 3) its force's direction
+    unit: np.ndarray         # (K, n_out, 3) mm/N: its first load step's field per newton
+    sims: np.ndarray         # (K,) their simulations
+
+    @classmethod
+    def of(cls, nodes, x, f, fields, groups) -> Sensors:
+        """From the cases of the FE simulations: load points ``x`` (n, 3) mm, forces ``f``
+        (n, 3) N, ``fields`` (n, n_out, 3) mm at the output ``nodes``, each case's
+        simulation ``groups``.
+        """
+        from scipy.spatial import cKDTree
+
+        nodes, f, groups = np.asarray(nodes, float), np.asarray(f, float), np.asarray(groups)
+        sims = np.unique(groups)
+        norms = np.linalg.norm(f, axis=1)
+        first = np.array([np.flatnonzero(groups == s)[np.argmin(norms[groups == s])]
+                          for s in sims])
+        at = cKDTree(nodes).query(np.asarray(x, float)[first])[1]
+        unit = np.asarray(fields, float)[first] / np.maximum(norms[first], 1e-30)[:, None, None]
+        return cls(nodes, at, f[first] / np.maximum(norms[first], 1e-30)[:, None], unit, sims)
+
+    def __call__(self, x, f, fields, groups=None) -> np.ndarray:
+        """(n, K) mm: the readings of loads at ``x`` (n, 3) mm with forces ``f`` (n, 3) N whose
+        population fields are ``fields`` (n, m); ``groups``: the cases' own simulations, which
+        read nothing of themselves (zero), as a new load has no simulation of its own.
+        """
+        from scipy.spatial import cKDTree
+
+        b = cKDTree(self.nodes).query(np.asarray(x, float).reshape(-1, 3))[1]
+        f = np.asarray(f, float).reshape(-1, 3)
+        said = np.einsum("knc,nc->nk", self.unit[:, b], f)
+        put = np.einsum("nkc,kc->nk", np.asarray(fields, float).reshape(
+            len(f), len(self.nodes), 3)[:, self.at], self.along)
+        out = said - put
+        if groups is not None:
+            out[np.asarray(groups)[:, None] == self.sims[None, :]] = 0.0
+        return out
 
 
 MIXES = (0.0, 0.5, 1.0)                      # weight of the population fields' product
+GAMMAS = (0.0, 0.3, 1.0, 3.0)                # weight of the reciprocity readings' product
 MIN_GAIN = 0.01                              # a kept correction lowers the held-out
                                              # MEE by at least this fraction (a heavily
                                              # ridged fit of noise scrapes a few 1e-4)
@@ -88,22 +150,33 @@ def _take(cases: tuple, idx) -> tuple:
 
 @dataclasses.dataclass
 class Correction:
-    """Kernel ridge regression of residual fields on the load (one load per case) and the
-    population model's field for it.
+    """Kernel ridge regression of residual fields on the load (one load per case), the
+    population model's field for it and its reciprocity readings.
     """
 
-    cases: tuple            # the training cases: load points, forces, population fields
+    cases: tuple            # the training cases: load points, forces, population fields,
+    #                         readings
     weights: np.ndarray     # (n, m): dual coefficients, m = output nodes x 3
-    setting: tuple          # (length mm, beta, mix, decay, ridge)
-    scales: tuple           # the force's scale (N) and the fields' (mm)
+    setting: tuple          # (length mm, beta, mix, decay, gamma, ridge)
+    scales: tuple           # the force's scale (N), the fields' and the readings' (mm)
+    sensors: Sensors | None = None   # what gives a load its readings (None: no readings)
     cv_mee: float = float("nan")   # mm: the chosen setting's cross-validated residual MEE
 
     def __call__(self, points, forces, fields) -> np.ndarray:
         """(cases, m) residual at load points (cases, 3) mm with forces (cases, 3) N and the
         population model's fields (cases, m) mm for them.
         """
-        b = tuple(np.asarray(v, float).reshape(len(v), -1) for v in (points, forces, fields))
+        b = _cases(points, forces, fields, self.sensors)
         return _kernel(b, self.cases, *self.setting[:-1], self.scales) @ self.weights
+
+
+def _cases(x, f, u, sensors: Sensors | None, groups=None) -> tuple:
+    """The kernel's cases: load points, forces, population fields, reciprocity readings
+    (none without ``sensors``), each (n, ...) float64.
+    """
+    x, f, u = (np.asarray(a, dtype=np.float64).reshape(len(a), -1) for a in (x, f, u))
+    s = np.zeros((len(x), 0)) if sensors is None else sensors(x, f, u, groups)
+    return x, f, u, s
 
 
 def _mee(residual: np.ndarray) -> float:
@@ -114,18 +187,24 @@ def _sq(pred, true) -> float:
     return float(np.mean(np.sum((pred - true) ** 2, axis=1)))
 
 
-def _cv_scores(cases: tuple, r, groups, scales: tuple, score=_sq, grid=None) -> dict:
-    """{(length, beta, mix, decay, ridge): mean held-out ``score``} over folds of whole
-    simulations; ``grid``: the (length, beta, mix, decay) tried (default: every one) with
-    every ridge.
+def _cv_scores(cases: tuple, r, groups, scales: tuple, score=_sq, grid=None,
+               columns=None) -> dict:
+    """{(length, beta, mix, decay, gamma, ridge): mean held-out ``score``} over folds of
+    whole simulations; ``grid``: the (length, beta, mix, decay, gamma) tried (default: every
+    one, gamma 0 only without readings) with every ridge; ``columns``: the simulation each
+    reading comes from (a fold's held-out simulations read nothing).
     """
     folds = simulation_folds(groups, 5)
-    grid = grid or [(ln, b, m, d) for ln in LENGTHS for b in BETAS for m in MIXES
-                    for d in DECAYS]
+    gammas = GAMMAS if cases[3].shape[1] else (0.0,)
+    grid = grid or [(ln, b, m, d, g) for ln in LENGTHS for b in BETAS for m in MIXES
+                    for d in DECAYS for g in gammas]
     products = _products(cases, cases)  # once: every fold's kernels are slices of it
     scores: dict = {}
     for held in folds:
         te = np.isin(groups, held)
+        if cases[3].shape[1]:
+            s = cases[3][:, ~np.isin(columns, held)]
+            products = (*products[:3], s @ s.T)
         for kernel in grid:
             full = _combined(products, *kernel, scales)
             k = full[np.ix_(~te, ~te)]
@@ -151,35 +230,40 @@ def _spread_steps(groups: np.ndarray) -> np.ndarray:
     return np.sort(np.concatenate(out))
 
 
-def fit_correction(x, f, u, r, groups) -> Correction | None:
+def fit_correction(x, f, u, r, groups, sensors: Sensors | None = None) -> Correction | None:
     """The correction of residuals ``r`` (n, m) for loads at ``x`` (n, 3) mm with forces ``f``
     (n, 3) N whose population fields are ``u`` (n, m); ``groups``: each case's simulation (the
-    cross-validation holds out whole ones). The setting is the one of least cross-validated
-    squared error, computed on at most CV_STEPS load steps of each simulation (the steps of
-    one load are nearly proportional) and on the residuals' singular coordinates (the same
-    sums, far fewer columns). None (no correction) with fewer than two simulations, or when
-    that setting's cross-validated MEE is not MIN_GAIN below the residual's own.
+    cross-validation holds out whole ones); ``sensors``: the loads' reciprocity readings
+    (:class:`Sensors` of these simulations; None: none). The setting is the one of least
+    cross-validated squared error, computed on at most CV_STEPS load steps of each simulation
+    (the steps of one load are nearly proportional) and on the residuals' singular
+    coordinates (the same sums, far fewer columns). None (no correction) with fewer than two
+    simulations, or when that setting's cross-validated MEE is not MIN_GAIN below the
+    residual's own.
     """
-    cases = tuple(np.asarray(a, dtype=np.float64).reshape(len(a), -1) for a in (x, f, u))
-    r = np.asarray(r, dtype=np.float64)
+    groups = np.asarray(groups)
     if np.unique(groups).size < 2:
         return None   # nothing to check a setting on
-    scales = (float(np.linalg.norm(cases[1], axis=1).max()) or 1.0,
-              float(np.linalg.norm(cases[2], axis=1).max()) or 1.0)
-    sub = _spread_steps(np.asarray(groups))
-    cs, rs, gs = _take(cases, sub), r[sub], np.asarray(groups)[sub]
+    cases = _cases(x, f, u, sensors, groups)
+    r = np.asarray(r, dtype=np.float64)
+    scales = tuple(float(np.linalg.norm(c, axis=1).max(initial=0.0)) or 1.0
+                   for c in cases[1:])
+    columns = None if sensors is None else sensors.sims
+    sub = _spread_steps(groups)
+    cs, rs, gs = _take(cases, sub), r[sub], groups[sub]
     left, sv, _ = np.linalg.svd(rs, full_matrices=False)
-    scores = _cv_scores(cs, left * sv, gs, scales)
+    scores = _cv_scores(cs, left * sv, gs, scales, columns=columns)
     setting = min(scores, key=scores.get)
     kernel, ridge = setting[:-1], setting[-1]
-    cv = _cv_scores(cs, rs, gs, scales, lambda p, t: _mee(p - t), [kernel])[setting]
+    cv = _cv_scores(cs, rs, gs, scales, lambda p, t: _mee(p - t), [kernel],
+                    columns)[setting]
     if cv >= (1.0 - MIN_GAIN) * _mee(rs):   # no better than the population model on
         #                                     held-out simulations
         return None
     k = _kernel(cases, cases, *kernel, scales)
     diag = max(float(np.mean(np.diag(k))), 1e-30)
     w = np.linalg.solve(k + ridge * diag * np.eye(k.shape[0]), r)
-    return Correction(cases, w, setting, scales, cv)
+    return Correction(cases, w, setting, scales, sensors, cv)
 
 
 class Teacher:
@@ -259,7 +343,9 @@ def fit_teacher(teacher: Teacher, ds: Dataset, sims, tune: bool = False) -> Teac
     # the correction learns the residual of a load the network was not tuned on: out of fold
     u = teacher.out_of_fold if teacher.out_of_fold is not None else teacher.population(f, x)
     r = (fields - u).reshape(smp.size, -1)
-    teacher.correction = fit_correction(x, f, u, r, ds.sample_sim[smp])
+    groups = ds.sample_sim[smp]
+    sensors = Sensors.of(ds.points[0][teacher.out], x, f, fields, groups)
+    teacher.correction = fit_correction(x, f, u, r, groups, sensors)
     return teacher
 
 
@@ -400,7 +486,8 @@ def adapted(teacher: Teacher, ds: Dataset, used, run, *, synthetic: int = SYNTHE
     c = teacher.correction
     return {"fe_simulations": np.asarray(used).tolist(), "synthetic_simulations": synthetic,
             "correction": None if c is None else {
-                **dict(zip(("length_mm", "beta", "mix", "decay", "ridge"), c.setting)),
+                **dict(zip(("length_mm", "beta", "mix", "decay", "reciprocity", "ridge"),
+                           c.setting)),
                 "cv_mee_mm": c.cv_mee},
             "seconds": {"distillation": time.perf_counter() - t}}
 

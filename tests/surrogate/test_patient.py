@@ -14,6 +14,7 @@ import pytest
 from surrogate import load_predictor
 from surrogate.data import load_dataset
 from surrogate.patient import (
+    Sensors,
     Teacher,
     field_mee,
     fit_correction,
@@ -35,6 +36,48 @@ def _cases(n_sims: int, steps: int = 3, m: int = 60, seed: int = 0):
     f *= np.tile(np.arange(1, steps + 1) / steps, n_sims)[:, None]
     u = np.einsum("ni,ijm,nj->nm", 1 + x / 100.0, basis, f) * 10.0
     return x, f, u, np.repeat(np.arange(n_sims), steps)
+
+
+def test_reciprocity_readings_are_the_residual_at_the_simulations_load_points():
+    """A linear patient (fields = C f with a symmetric compliance C, as a linear elastic body
+    has, Maxwell-Betti): a new load's readings from K simulations are exactly its residual at
+    their load points along their forces, without its own FE simulation. The readings come
+    from each simulation's smallest force (its larger ones here carry a nonlinear part, as
+    a hyperelastic liver's do), a load between nodes reads the nearest node, and a
+    simulation's own cases read nothing of it."""
+    rng = np.random.default_rng(3)
+    n, k = 30, 6
+    nodes = rng.uniform(-50, 50, size=(n, 3))
+    a = rng.normal(size=(3 * n, 3 * n))
+    compliance = a @ a.T / (3 * n)                     # symmetric, positive definite
+
+    def field(node, force):
+        return (compliance[:, 3 * node:3 * node + 3] @ force).reshape(n, 3)
+
+    at = rng.choice(n, size=k, replace=False)
+    along = rng.normal(size=(k, 3))
+    along /= np.linalg.norm(along, axis=1, keepdims=True)
+    x, f, u, g = [], [], [], []
+    for s, (node, d) in enumerate(zip(at, along)):
+        for step in (3, 1, 2):                         # not in load order
+            force = 0.1 * step * d
+            lin = field(node, force)
+            x.append(nodes[node] + 1e-3)
+            f.append(force)
+            u.append(lin + (step > 1) * 0.3 * step ** 2 * lin ** 2)
+            g.append(s)
+    sensors = Sensors.of(nodes, np.array(x), np.array(f), np.array(u), np.array(g))
+    assert np.array_equal(sensors.at, at) and np.allclose(sensors.along, along)
+    b = int(np.setdiff1d(np.arange(n), at)[0])
+    new = np.array([[0.2, -0.1, 0.3]])
+    truth = field(b, new[0])
+    population = rng.normal(size=(1, n, 3))            # whatever the model says
+    read = sensors(nodes[[b]] - 2e-3, new, population)
+    expected = np.einsum("kc,kc->k", (truth - population[0])[at], along)
+    np.testing.assert_allclose(read[0], expected, rtol=1e-10, atol=1e-12)
+    own = sensors(np.array(x), np.array(f), np.zeros((len(g), n, 3)), np.array(g))
+    assert np.all(own[np.arange(len(g)), g] == 0.0)
+    assert np.all(np.delete(own, 0, axis=1)[np.array(g) == 0] != 0.0)
 
 
 def test_a_patient_stiffer_than_the_population_is_corrected():
