@@ -16,14 +16,14 @@ Gaussian of the distance between the load points times a polynomial of the force
 constant term, ``g(x, x') (f.f' + beta (f.f')^2)``: a residual that vanishes with the force
 and is nearly linear in it, as a hyperelastic liver's is for small loads, and that spreads
 from a loaded point to its neighbours (a Gaussian, or an exponential with its heavier tail).
-The kernel has a third term, the product of what the K FE simulations say of the load by
-reciprocity (:class:`Sensors`): by Maxwell-Betti, simulation k's first, nearly linear, load
-step gives the displacement at its load point along its force that any other load causes
-there, so each load reads the residual at the K load points: the regression learns how the
-whole residual field follows those K readings.
-Its decay, length scale, ridge, beta and the weights on the population model's own field and
-on the readings are chosen by cross-validation over the K simulations, grouped by simulation
-(a held-out simulation's readings come from the others); with fewer than
+Two terms are added to it: the product of the population model's fields for the two loads,
+and that of what the K FE simulations say of each load by reciprocity (:class:`Sensors`:
+by Maxwell-Betti, simulation k's first, nearly linear, load step gives the displacement at
+its load point along its force that any other load causes there; so a load reads its
+residual at the K load points, and the regression learns how the whole residual field
+follows those K readings). The decay, length scale, ridge, beta and the weights of the two
+added terms are chosen by cross-validation over the K simulations, grouped by simulation (a
+held-out simulation's readings come from the others only); with fewer than
 two, or when no setting beats the model on the held-out simulations, the model is kept
 unchanged. The distillation draws loads as the scene draws them (its eligible nodes, uniform
 directions, its magnitude and load steps), takes their fields from the corrected model and
