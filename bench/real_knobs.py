@@ -79,7 +79,8 @@ def trained(folds: int, evaluate: int, only: set | None, jobs: int = 1) -> dict:
 
 def grown_data(n: int, ranks: int) -> Path:
     """The shipped scene grown to ``n`` simulations in runs/grown/, its first shards the
-    shipped dataset's (linked), the rest generated where missing (resumable)."""
+    shipped dataset's (linked), the rest generated where missing (resumable; once all ``n``
+    are there, nothing is prepared again: the livers' meshing takes about 25 minutes)."""
     from data_spec.scene_writer import relocated_scene, scene_toml
     from data_spec.views import extension, shard_count
     from fem_sim.batch.chunked import generate_chunks
@@ -89,7 +90,8 @@ def grown_data(n: int, ranks: int) -> Path:
     d = relocated_scene(SCENE)
     d["scene"]["n_simulations"] = n
     (base / "scene.toml").write_text(scene_toml(d))
-    generate_chunks(base / "scene.toml", data, n, ranks=ranks, chunk=100)
+    if shard_count(data) < n:
+        generate_chunks(base / "scene.toml", data, n, ranks=ranks, chunk=100)
     return data
 
 
