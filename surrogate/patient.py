@@ -99,6 +99,7 @@ class Sensors:
     along: np.ndarray        # (K, 3) its force's direction
     unit: np.ndarray         # (K, n_out, 3) mm/N: its first load step's field per newton
     sims: np.ndarray         # (K,) their simulations
+    tree: object = dataclasses.field(repr=False, compare=False)  # KD-tree of the nodes
 
     @classmethod
     def of(cls, nodes, x, f, fields, groups) -> Sensors:
@@ -113,18 +114,18 @@ class Sensors:
         norms = np.linalg.norm(f, axis=1)
         first = np.array([np.flatnonzero(groups == s)[np.argmin(norms[groups == s])]
                           for s in sims])
-        at = cKDTree(nodes).query(np.asarray(x, float)[first])[1]
-        unit = np.asarray(fields, float)[first] / np.maximum(norms[first], 1e-30)[:, None, None]
-        return cls(nodes, at, f[first] / np.maximum(norms[first], 1e-30)[:, None], unit, sims)
+        tree = cKDTree(nodes)
+        at = tree.query(np.asarray(x, float)[first])[1]
+        size = np.maximum(norms[first], 1e-30)[:, None]
+        unit = np.asarray(fields, float)[first] / size[:, :, None]
+        return cls(nodes, at, f[first] / size, unit, sims, tree)
 
     def __call__(self, x, f, fields, groups=None) -> np.ndarray:
         """(n, K) mm: the readings of loads at ``x`` (n, 3) mm with forces ``f`` (n, 3) N whose
         population fields are ``fields`` (n, m); ``groups``: the cases' own simulations, which
         read nothing of themselves (zero), as a new load has no simulation of its own.
         """
-        from scipy.spatial import cKDTree
-
-        b = cKDTree(self.nodes).query(np.asarray(x, float).reshape(-1, 3))[1]
+        b = self.tree.query(np.asarray(x, float).reshape(-1, 3))[1]
         f = np.asarray(f, float).reshape(-1, 3)
         said = np.einsum("knc,nc->nk", self.unit[:, b], f)
         put = np.einsum("nkc,kc->nk", np.asarray(fields, float).reshape(
