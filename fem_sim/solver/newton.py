@@ -90,15 +90,20 @@ class NewtonSolver:
     def chord_allowed(self) -> bool:
         return self.settings.chord_contraction > 0 and self.linear.direct
 
-    def solve(self, lam: float, history: list[float], first_order_start: bool) -> int:
+    def solve(self, lam: float, history: list[float], first_order_start: bool,
+              worse_than: float = math.inf) -> int:
         """Iterate to convergence at load ``lam``; returns the Newton iterations of this
         attempt (each a factorisation, unless solved on the last one: ``near_steps``).
         ``history`` receives |R| after every step. ``first_order_start``: u comes from a
-        linear (or no) prediction.
+        linear (or no) prediction. ``worse_than``: a start whose |R| exceeds it is given up
+        before any Newton step (a guess worse than the alternative the stepper has).
         """
         s = self.settings
         self.attempt_iterations = 0
         a = self._start(lam, history)
+        if a.r > worse_than:
+            raise StepFailure(f"the predictor's guess at load {lam:.4g} is worse than the "
+                              f"last state (|R| = {a.r:.3e} > {worse_than:.3e})")
         while True:
             self.attempt_iterations = a.it
             if a.r <= a.tol and a.gap <= a.gap_tol:

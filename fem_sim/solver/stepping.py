@@ -160,11 +160,30 @@ class LoadStepper:
         guess = self.eqs.state() if q else None
         factorizations = self.linear.counts.factorizations
         try:
-            its = self.newton.solve(trial, st.history, self.predictor.order <= 1)
+            its = self.newton.solve(trial, st.history, self.predictor.order <= 1,
+                                    self.guess_bound(w, trial))
         except StepFailure as exc:
             self._failed(w, st, trial, exc)
             return
         self._converged(w, st, trial, its, guess, q, factorizations)
+
+    def guess_bound(self, w: _Walk, trial: float) -> float:
+        """|R| above which the predictor's guess is given up for the last state: ``guess_guard``
+        times the last state's |R| at ``trial``, which is the load increment's, (trial - lam)
+        |f| (that state is converged at lam to within Newton's tolerance).
+
+        On real livers under a point load (docs/guess_guard.md), a guess this far above the
+        last state's |R| after the hot-spot relaxation sends Newton into its slow phase, where
+        it stalls and the stepper retries from the last state anyway, after the stall's
+        factorisations. Not for the first increment (from u = 0 Newton's first step is the
+        linear guess itself), nor with prescribed displacements (the last state then leaves a
+        gap to close too).
+        """
+        g = self.settings.guess_guard
+        if g <= 0 or self.predictor.order == 0 or len(w.states) < 2 \
+                or self.eqs.cons.value_norm > 0:
+            return math.inf
+        return g * (trial - w.lam) * self.eqs.f_norm
 
     def _failed(self, w: _Walk, st: _Step, trial: float, exc: StepFailure) -> None:
         s = self.settings

@@ -669,3 +669,69 @@ def test_the_textbook_dolfinx_solver_gives_our_answer():
     assert s.status == "ok" and len(its) == 2
     ref = s.displacement[-1]
     assert np.abs(u_tb[-1] - ref).max() <= 1e-5 * np.abs(ref).max()
+
+
+def test_a_guess_worse_than_the_last_state_is_given_up_before_newton(monkeypatch):
+    """guess_guard: the predictor's guess at one increment spoilt (three times the predicted
+    displacement; no hot-spot relaxation, which would mend much of it). With the guard its |R|
+    exceeds guess_guard times the last state's at the new load, which is the load increment's
+    (checked: from a converged state, |R| at a larger load is h |f| to Newton's tolerance,
+    |f| = 0.3 sqrt(2) N for this nodal force), so the attempt ends before any Newton step and
+    the increment starts from the last state; without the guard Newton iterates from the
+    spoilt guess. Both reach the unspoilt answer."""
+    from fem_sim.solver.predictors import StepPredictor
+    from fem_sim.solver.results import StepFailure
+
+    g = make_phantom(0, 20.0)
+    node = int(np.argmax(g.points[:, 0]))
+    cons = [Constraint(g.regions["vena_cava"])]
+    load = [NodalLoad([node], [[0.0, -0.3, -0.3]])]
+    fractions = np.linspace(0.1, 1.0, 10)
+    ref = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, settings={"rtol": 1e-10},
+                       prefix="gg_ref_").solve(MAT, cons, load, fractions)
+    predict = StepPredictor.predict
+    spoilt = {"calls": 0, "order": None}
+
+    def spoil(self, states, lam, extrapolate=True):
+        predict(self, states, lam, extrapolate)
+        spoilt["calls"] += 1
+        if spoilt["calls"] == 4 and extrapolate:  # one extrapolated guess, past the first
+            spoilt["order"] = self.order
+            self.eqs.u.x.array[:] *= 3.0  # the fixed nodes stay in place
+
+    monkeypatch.setattr(StepPredictor, "predict", spoil)
+    runs, given_up = {}, []
+    for guard in (10.0, 0.0):
+        spoilt["calls"] = 0
+        prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, prefix=f"gg_{guard:g}_",
+                            settings={"rtol": 1e-10, "guess_guard": guard,
+                                      "local_relaxation": False})
+        solve = prob.newton.solve
+
+        def watched(*args, solve=solve, guard=guard, newton=prob.newton):
+            try:
+                return solve(*args)
+            except StepFailure as exc:
+                given_up.append((guard, str(exc), newton.attempt_iterations))
+                raise
+
+        prob.newton.solve = watched
+        runs[guard] = prob.solve(MAT, cons, load, fractions)
+        assert runs[guard].status == "ok", (guard, runs[guard].failure_reason)
+        assert spoilt["order"] >= 1
+    assert [(w, it) for w, _, it in given_up] == [(10.0, 0)], given_up
+    assert "worse than the last state" in given_up[0][1]
+    if MPI.COMM_WORLD.rank == 0:
+        for guard, s in runs.items():
+            for k in range(fractions.size):
+                assert np.abs(s.displacement[k] - ref.displacement[k]).max() <= \
+                    1e-8 * np.abs(ref.displacement[-1]).max(), (guard, k)
+    # The bound's premise, by hand: from a converged state at lam, |R(u, lam + h)| = h |f|.
+    p = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, settings={"rtol": 1e-10},
+                     prefix="gg_bound_")
+    p.solve(MAT, cons, load, [0.1])
+    eqs = p.equations
+    assert eqs.f_norm == pytest.approx(0.3 * np.sqrt(2.0), rel=1e-12)
+    eqs.update_points()
+    tol = 1e-10 * 0.1 * eqs.f_norm
+    assert abs(eqs.residual(0.15) - 0.05 * eqs.f_norm) <= 2 * tol
