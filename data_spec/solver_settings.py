@@ -97,11 +97,12 @@ class SolverSettings:
                                      "given up (retried or cut back as a failed one) instead "
                                      "of going on to max_iterations (0: never; measured in "
                                      "docs/solver_stalls.md)", lo=0)
-    guess_guard: float = _setting(10.0, "an extrapolated guess whose |R| (after the hot-spot "
-                                  "relaxation) exceeds this many times the last state's at "
-                                  "the new load (the load increment's |R|) is not iterated "
-                                  "from: the increment starts from the last state instead "
-                                  "(0: never; measured in docs/guess_guard.md)", lo=0.0)
+    guess_guard: float = _setting(10.0, "with the local relaxation: an extrapolated guess "
+                                  "whose |R| after it exceeds this many times the last "
+                                  "state's at the new load (the load increment's |R|) is "
+                                  "not iterated from: the increment starts from the last "
+                                  "state instead (0: never; measured in "
+                                  "docs/guess_guard.md)", lo=0.0)
     first_increment: float = _setting(0.25, "the first increment as a fraction of the first "
                                       "output step or of a tenth of the load, whichever is "
                                       "smaller (the stiffening start is taken in "

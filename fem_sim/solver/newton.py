@@ -78,6 +78,11 @@ class NewtonSolver:
             self.relax.reset()
 
     @property
+    def relaxes(self) -> bool:
+        """Whether each attempt starts with the hot-spot relaxation (one rank only)."""
+        return self.relax is not None
+
+    @property
     def local_iterations(self) -> int:
         return self.relax.iterations if self.relax is not None else 0
 

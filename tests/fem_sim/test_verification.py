@@ -672,13 +672,14 @@ def test_the_textbook_dolfinx_solver_gives_our_answer():
 
 
 def test_a_guess_worse_than_the_last_state_is_given_up_before_newton(monkeypatch):
-    """guess_guard: the predictor's guess at one increment spoilt (three times the predicted
-    displacement; no hot-spot relaxation, which would mend much of it). With the guard its |R|
-    exceeds guess_guard times the last state's at the new load, which is the load increment's
-    (checked: from a converged state, |R| at a larger load is h |f| to Newton's tolerance,
-    |f| = 0.3 sqrt(2) N for this nodal force), so the attempt ends before any Newton step and
-    the increment starts from the last state; without the guard Newton iterates from the
-    spoilt guess. Both reach the unspoilt answer."""
+    """guess_guard: the predictor's guess at one increment spoilt (every free node pushed by
+    0.5 mm, the fixed ones kept: a shear layer along the fixed region that the hot-spot
+    relaxation cannot mend). With the guard its |R| after the relaxation exceeds guess_guard
+    times the last state's at the new load, which is the load increment's (checked: from a
+    converged state, |R| at a larger load is h |f| to Newton's tolerance, |f| = 0.3 sqrt(2) N
+    for this nodal force), so the attempt ends before any Newton step and the increment starts
+    from the last state; without the guard Newton iterates from the spoilt guess. Both reach
+    the unspoilt answer. Without the relaxation (several ranks) there is no guard."""
     from fem_sim.solver.predictors import StepPredictor
     from fem_sim.solver.results import StepFailure
 
@@ -697,15 +698,16 @@ def test_a_guess_worse_than_the_last_state_is_given_up_before_newton(monkeypatch
         spoilt["calls"] += 1
         if spoilt["calls"] == 4 and extrapolate:  # one extrapolated guess, past the first
             spoilt["order"] = self.order
-            self.eqs.u.x.array[:] *= 3.0  # the fixed nodes stay in place
+            push = np.full(self.eqs.u.x.array.size, 0.5)
+            push[self.eqs.cons.local] = 0.0
+            self.eqs.u.x.array[:] += push
 
     monkeypatch.setattr(StepPredictor, "predict", spoil)
     runs, given_up = {}, []
     for guard in (10.0, 0.0):
         spoilt["calls"] = 0
         prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, prefix=f"gg_{guard:g}_",
-                            settings={"rtol": 1e-10, "guess_guard": guard,
-                                      "local_relaxation": False})
+                            settings={"rtol": 1e-10, "guess_guard": guard})
         solve = prob.newton.solve
 
         def watched(*args, solve=solve, guard=guard, newton=prob.newton):
@@ -719,8 +721,8 @@ def test_a_guess_worse_than_the_last_state_is_given_up_before_newton(monkeypatch
         runs[guard] = prob.solve(MAT, cons, load, fractions)
         assert runs[guard].status == "ok", (guard, runs[guard].failure_reason)
         assert spoilt["order"] >= 1
-    assert [(w, it) for w, _, it in given_up] == [(10.0, 0)], given_up
-    assert "worse than the last state" in given_up[0][1]
+    worse = [(w, it) for w, why, it in given_up if "worse than the last state" in why]
+    assert worse == ([(10.0, 0)] if prob.newton.relaxes else []), given_up
     if MPI.COMM_WORLD.rank == 0:
         for guard, s in runs.items():
             for k in range(fractions.size):
