@@ -175,14 +175,14 @@ class LoadStepper:
         On real livers under a point load (docs/guess_guard.md), a guess this far above the
         last state's |R| after the hot-spot relaxation sends Newton into its slow phase, where
         it stalls and the stepper retries from the last state anyway, after the stall's
-        factorisations. Only where that relaxation runs (one rank): before it, the hot spot
-        under the load dominates |R| even of a good guess, and Newton mends it in a step or
-        two. Not for the first increment (from u = 0 Newton's first step is the linear guess
-        itself), nor with prescribed displacements (the last state then leaves a gap to close
-        too).
+        factorisations. At the first increment (from u = 0, whose Newton step is the linear
+        guess itself) there is no other start: the increment is cut back at once. Only where
+        the relaxation runs (one rank): before it, the hot spot under the load dominates |R|
+        even of a good guess, and Newton mends it in a step or two. Not with prescribed
+        displacements (the last state then leaves a gap to close too).
         """
         g = self.settings.guess_guard
-        if g <= 0 or self.predictor.order == 0 or len(w.states) < 2 \
+        if g <= 0 or self.predictor.order == 0 \
                 or self.eqs.cons.value_norm > 0 or not self.newton.relaxes:
             return math.inf
         return g * (trial - w.lam) * self.eqs.f_norm

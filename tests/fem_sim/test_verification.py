@@ -671,15 +671,17 @@ def test_the_textbook_dolfinx_solver_gives_our_answer():
     assert np.abs(u_tb[-1] - ref).max() <= 1e-5 * np.abs(ref).max()
 
 
-def test_a_guess_worse_than_the_last_state_is_given_up_before_newton(monkeypatch):
+@pytest.mark.parametrize("spoilt_call", [1, 4])
+def test_a_guess_worse_than_the_last_state_is_given_up_before_newton(monkeypatch, spoilt_call):
     """guess_guard: the predictor's guess at one increment spoilt (every free node pushed by
     0.5 mm, the fixed ones kept: a shear layer along the fixed region that the hot-spot
     relaxation cannot mend). With the guard its |R| after the relaxation exceeds guess_guard
     times the last state's at the new load, which is the load increment's (checked: from a
     converged state, |R| at a larger load is h |f| to Newton's tolerance, |f| = 0.3 sqrt(2) N
-    for this nodal force), so the attempt ends before any Newton step and the increment starts
-    from the last state; without the guard Newton iterates from the spoilt guess. Both reach
-    the unspoilt answer. Without the relaxation (several ranks) there is no guard."""
+    for this nodal force), so the attempt ends before any Newton step: a later increment
+    starts from the last state, the first one (the linear guess from u = 0) is cut back;
+    without the guard Newton iterates from the spoilt guess. Both reach the unspoilt answer.
+    Without the relaxation (several ranks) there is no guard."""
     from fem_sim.solver.predictors import StepPredictor
     from fem_sim.solver.results import StepFailure
 
@@ -696,7 +698,7 @@ def test_a_guess_worse_than_the_last_state_is_given_up_before_newton(monkeypatch
     def spoil(self, states, lam, extrapolate=True):
         predict(self, states, lam, extrapolate)
         spoilt["calls"] += 1
-        if spoilt["calls"] == 4 and extrapolate:  # one extrapolated guess, past the first
+        if spoilt["calls"] == spoilt_call and extrapolate:
             spoilt["order"] = self.order
             push = np.full(self.eqs.u.x.array.size, 0.5)
             push[self.eqs.cons.local] = 0.0
@@ -721,6 +723,7 @@ def test_a_guess_worse_than_the_last_state_is_given_up_before_newton(monkeypatch
         runs[guard] = prob.solve(MAT, cons, load, fractions)
         assert runs[guard].status == "ok", (guard, runs[guard].failure_reason)
         assert spoilt["order"] >= 1
+        assert sum(runs[guard].cutbacks) == (1 if guard and spoilt_call == 1 else 0)
     worse = [(w, it) for w, why, it in given_up if "worse than the last state" in why]
     assert worse == ([(10.0, 0)] if prob.newton.relaxes else []), given_up
     if MPI.COMM_WORLD.rank == 0:
