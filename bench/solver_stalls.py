@@ -80,15 +80,26 @@ def solve(data: Path, index: int, settings: dict) -> dict:
             "cutbacks": int(np.sum(sol.cutbacks)), "u": sol.displacement}
 
 
-def compared(data: Path, index: int, settings: dict, k: int) -> dict:
-    """Both settings on one simulation (the second first on every other one)."""
+def _difference(u0: np.ndarray, u1: np.ndarray) -> float:
+    """The largest nodal distance between two solutions over their common load steps."""
+    n = min(len(u0), len(u1))
+    return float(np.linalg.norm(u0[:n] - u1[:n], axis=2).max()) if n else float("nan")
+
+
+def compared(data: Path, index: int, settings: dict, k: int, variants=()) -> dict:
+    """Both settings on one simulation (the second first on every other one), then each of
+    ``variants`` (its difference measured against the baseline).
+    """
     runs = {}
     for name in (("baseline", "settings") if k % 2 == 0 else ("settings", "baseline")):
         runs[name] = solve(data, index, settings[name])
     u0, u1 = runs["baseline"].pop("u"), runs["settings"].pop("u")
-    n = min(len(u0), len(u1))
-    diff = float(np.linalg.norm(u0[:n] - u1[:n], axis=2).max()) if n else float("nan")
-    return {"data": str(data.relative_to(ROOT)), "sim": index, **runs, "max_diff_mm": diff,
+    others = []
+    for v in variants:
+        run = solve(data, index, v)
+        others.append(run | {"max_diff_mm": _difference(u0, run.pop("u"))})
+    return {"data": str(data.relative_to(ROOT)), "sim": index, **runs,
+            "max_diff_mm": _difference(u0, u1), "variants": others,
             "max_u_mm": float(np.linalg.norm(u0[-1], axis=1).max()) if len(u0) else 0.0}
 
 
@@ -120,7 +131,28 @@ def _totals(rows: list[dict]) -> list[str]:
     return out
 
 
-def report(rows: list[dict], settings: dict, every: bool) -> str:
+def _variants(rows: list[dict], settings: dict, variants: list[dict]) -> list[str]:
+    """The variants' totals beside the baseline's and the settings' (all datasets)."""
+    runs = [("baseline", settings["baseline"], [r["baseline"] for r in rows]),
+            ("settings", settings["settings"], [r["settings"] for r in rows])]
+    runs += [(f"variant {i + 1}", v, [r["variants"][i] for r in rows])
+             for i, v in enumerate(variants)]
+    base = sum(r["factorizations"] for r in runs[0][2])
+    out = ["Variants, each over the solver's defaults, on the same simulations (their "
+           "difference against the baseline):", "",
+           "| run | settings | factorisations | ratio to the baseline | Newton iterations | "
+           "cut-backs | failed | max difference mm |", "|---|---|---|---|---|---|---|---|"]
+    for name, v, rs in runs:
+        f = sum(r["factorizations"] for r in rs)
+        diff = ("" if name == "baseline" else
+                f"{max(r['max_diff_mm'] for r in (rows if name == 'settings' else rs)):.1e}")
+        out.append(f"| {name} | `{json.dumps(v)}` | {f} | {f / base:.3f} | "
+                   f"{sum(r['iterations'] for r in rs)} | {sum(r['cutbacks'] for r in rs)} | "
+                   f"{sum(r['status'] != 'ok' for r in rs)} | {diff} |")
+    return out
+
+
+def report(rows: list[dict], settings: dict, every: bool, variants=()) -> str:
     shown = [r for r in rows if not every
              or r["baseline"]["factorizations"] != r["settings"]["factorizations"]]
     out = [f"Baseline `{json.dumps(settings['baseline'])}` against "
@@ -138,6 +170,8 @@ def report(rows: list[dict], settings: dict, every: bool) -> str:
             "one run each: the counts are the steadier figure). Max difference: the largest "
             "nodal distance between the two solutions over the load steps (both converged to "
             "Newton's tolerance; exactly 0 where both took the same path)."]
+    if variants:
+        out += ["", *_variants(rows, settings, list(variants))]
     return "\n".join(out)
 
 
@@ -153,8 +187,12 @@ def main() -> int:
     ap.add_argument("--all", action="store_true", help="every simulation of each dataset")
     ap.add_argument("--out", default=str(ROOT / "docs" / "solver_stalls.md"), help="report")
     ap.add_argument("--title", default="Newton's stalls on real livers")
+    ap.add_argument("--variants", default="[]",
+                    help="JSON list: more settings solved on the same simulations, reported "
+                    "as totals")
     a = ap.parse_args()
     settings = {"baseline": json.loads(a.baseline), "settings": json.loads(a.settings)}
+    variants = json.loads(a.variants)
     sets = [Path(d).resolve() for d in a.data] if a.data else sorted(
         p.parent / "data" for p in PATIENTS.glob("*/k.json"))
     if not sets:
@@ -162,13 +200,13 @@ def main() -> int:
     rows, k = [], 0
     for data in sets:
         for index in chosen(data, a.worst, a.typical, a.all):
-            rows.append(compared(data, index, settings, k))
+            rows.append(compared(data, index, settings, k, variants))
             k += 1
             print(json.dumps({key: rows[-1][key] for key in ("data", "sim", "max_diff_mm")}
                              | {s: rows[-1][s]["factorizations"]
                                 for s in ("baseline", "settings")}), flush=True)
-    write_report(a.out, a.title, report(rows, settings, a.all),
-                 {"settings": settings, "rows": rows})
+    write_report(a.out, a.title, report(rows, settings, a.all, variants),
+                 {"settings": settings, "variants": variants, "rows": rows})
     return 0
 
 
