@@ -161,13 +161,13 @@ class LoadStepper:
         factorizations = self.linear.counts.factorizations
         try:
             its = self.newton.solve(trial, st.history, self.predictor.order <= 1,
-                                    self.guess_bound(w, trial))
+                                    self.guess_bound(w, st, trial))
         except StepFailure as exc:
             self._failed(w, st, trial, exc)
             return
         self._converged(w, st, trial, its, guess, q, factorizations)
 
-    def guess_bound(self, w: _Walk, trial: float) -> float:
+    def guess_bound(self, w: _Walk, st: _Step, trial: float) -> float:
         """|R| above which the predictor's guess is given up for the last state: ``guess_guard``
         times the last state's |R| at ``trial``, which is the load increment's, (trial - lam)
         |f| (that state is converged at lam to within Newton's tolerance).
@@ -176,13 +176,15 @@ class LoadStepper:
         last state's |R| after the hot-spot relaxation sends Newton into its slow phase, where
         it stalls and the stepper retries from the last state anyway, after the stall's
         factorisations. At the first increment (from u = 0, whose Newton step is the linear
-        guess itself) there is no other start: the increment is cut back at once. Only where
-        the relaxation runs (one rank): before it, the hot spot under the load dominates |R|
-        even of a good guess, and Newton mends it in a step or two. Not with prescribed
+        guess itself) there is no other start: the increment is cut back at once, unless the
+        cut-backs are spent (the last attempt is Newton's, and its failure the reason). Only
+        where the relaxation runs (one rank): before it, the hot spot under the load dominates
+        |R| even of a good guess, and Newton mends it in a step or two. Not with prescribed
         displacements (the last state then leaves a gap to close too).
         """
         g = self.settings.guess_guard
-        if g <= 0 or self.predictor.order == 0 \
+        last_chance = len(w.states) < 2 and st.cutbacks >= self.settings.max_cutbacks
+        if g <= 0 or self.predictor.order == 0 or last_chance \
                 or self.eqs.cons.value_norm > 0 or not self.newton.relaxes:
             return math.inf
         return g * (trial - w.lam) * self.eqs.f_norm
