@@ -2,7 +2,8 @@
 settings and with others, side by side (docs/solver_stalls.md, docs/guess_guard.md).
 
     .venv-solver/bin/python bench/solver_stalls.py [--data DIR ...] [--worst 2] [--typical 1]
-        [--all] [--baseline '{"stall_iterations": 0}'] [--settings '{}'] [--out REPORT]
+        [--all] [--baseline '{"stall_iterations": 0}'] [--settings '{}'] [--variants '[...]']
+        [--out REPORT] [--title TITLE]
 
 By default the solver's defaults (``settings``, where ``stall_iterations`` gives up an attempt
 still far from converging after 10 Newton iterations) against the same without that rule
@@ -15,9 +16,10 @@ rank, in alternating order, from the shard's own load, fixed nodes and material.
 factorisations, Newton iterations, cut-backs, seconds, the status, and the largest nodal
 difference between the two solutions (the same equilibrium must come out).
 
-The guard on the predictor's guess (docs/guess_guard.md): the training livers of
-bench/stalls_lits.toml and bench/stalls_amos.toml, generated first (their headers say how),
-``--all --baseline '{"guess_guard": 0}' --out docs/guess_guard.md``.
+The guard on the predictor's guess (docs/guess_guard.md, whose header has the whole command):
+the training livers of bench/stalls_lits.toml and bench/stalls_amos.toml, generated first
+(their headers say how), ``--all --baseline '{"guess_guard": 0}'`` with ``--variants`` (a JSON
+list of more settings, each solved on the same simulations and reported as totals).
 """
 
 from __future__ import annotations

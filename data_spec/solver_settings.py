@@ -101,8 +101,8 @@ class SolverSettings:
                                   "whose |R| after it exceeds this many times the last "
                                   "state's at the new load (the load increment's |R|) is "
                                   "not iterated from: the increment starts from the last "
-                                  "state instead (0: never; measured in "
-                                  "docs/guess_guard.md)", lo=0.0)
+                                  "state instead (the first increment is cut back) (0: "
+                                  "never; measured in docs/guess_guard.md)", lo=0.0)
     first_increment: float = _setting(0.25, "the first increment as a fraction of the first "
                                       "output step or of a tenth of the load, whichever is "
                                       "smaller (the stiffening start is taken in "
