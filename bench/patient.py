@@ -1,6 +1,7 @@
 """A new patient's model against K, the FE simulations on the patient's own mesh: docs/patient.md.
 
     .venv-train/bin/python bench/patient.py [--model RUN] [--livers Amos-054 LiTS-100 LiTS-67]
+        [--ks 0 5 10 20 40 80]
 
 For each validation liver (never seen by the population model, its PCA or any design choice):
 its FE truth with the population model's boundary condition, K_MAX + HELD simulations
@@ -102,7 +103,7 @@ def truth(pred, liver: Path, a) -> Path:
 
     d = RESULTS / liver.stem
     d.mkdir(parents=True, exist_ok=True)
-    n = max(KS) + HELD
+    n = max(a.ks) + HELD
     text = truth_scene(pred, SCENE, liver, n, None)
     scene = d / "scene.toml"
     if not scene.exists() or scene.read_text() != text:
@@ -136,7 +137,7 @@ def curve(liver: Path, a) -> tuple[dict, dict]:
     done = json.loads(path.read_text()) if path.exists() else {}
     if done.get("made_by") != key:   # another population model, adaptation or truth
         done = {"made_by": key}
-    for k in KS:
+    for k in a.ks:
         if str(k) not in done:
             done[str(k)] = held_out_errors(pred, placement, ds, sims[:k], held,
                                            run=RESULTS / liver.stem / f"run_K{k}",
@@ -144,7 +145,7 @@ def curve(liver: Path, a) -> tuple[dict, dict]:
             path.write_text(json.dumps(done, indent=1))
         print(f"[{liver.stem}] K={k}: {done[str(k)]}", flush=True)
     return ({"liver": liver.stem, "nodes": int(ds.points[0].shape[0]), "points": done,
-             "fe_seconds": fe_seconds(data, a.np), "place_seconds": placing},
+             "fe_seconds": fe_seconds(data, a.np, a.ks), "place_seconds": placing},
             {"liver": liver.stem, "k": SOURCES_K, **sources(pred, placement, ds, SOURCES_K)})
 
 
@@ -165,7 +166,7 @@ def sources(pred, placement, ds, k: int) -> dict:
         teacher.population(f, x), teacher(f, x), ds.sample_sim[held])
 
 
-def fe_seconds(data: Path, ranks: int) -> dict:
+def fe_seconds(data: Path, ranks: int, ks=KS) -> dict:
     """For each K, the first K simulations' own solve seconds (the shards' records) over
     ``ranks`` ranks: what make patient's FE takes at that K, meshing and start-up aside.
     """
@@ -173,7 +174,7 @@ def fe_seconds(data: Path, ranks: int) -> dict:
 
     t = [float(read_shard(p).stats.info.get("total_wall_time", np.nan))
          for p in list_shards(data)]
-    return {str(k): sum(t[:k]) / ranks for k in KS if k}
+    return {str(k): sum(t[:k]) / ranks for k in ks if k}
 
 
 def minutes(c: dict, k: int, start: float) -> float:
@@ -217,7 +218,7 @@ def end_to_end(liver: Path, a, k: int = 40) -> dict:
     placed = (out / "scene.toml").stat().st_mtime
     solved = max(f.stat().st_mtime for f in (out / "data").rglob("*") if f.is_file())
     return {"total": end - t, "place": placed - t, "fe": solved - placed,
-            "solves": fe_seconds(out / "data", a.np)[str(k)], "adapt": end - solved, "k": k,
+            "solves": fe_seconds(out / "data", a.np, [k])[str(k)], "adapt": end - solved, "k": k,
             "liver": liver.stem}
 
 
@@ -255,8 +256,9 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
     # the FE start-up (meshing, MPI, the forms, the ranks' uneven end) as make patient spent
     # it: its FE step's wall seconds less its simulations' own solves over the ranks
     start = max(0.0, e2e["fe"] - e2e["solves"]) if e2e and "solves" in e2e else None
+    ks = a.ks
     rows = []
-    for k in KS:
+    for k in ks:
         for c in curves:
             p = c["points"][str(k)]
             cells = [f"{p.get(key, float('nan')):.3f}" if key in p else "" for key in
@@ -272,7 +274,7 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
                         f"{' | '.join(cells[4:])} |")
     med = {k: np.median([c["points"][str(k)].get("patient_model",
                                                  c["points"][str(k)]["population"])
-                         for c in curves]) for k in KS}
+                         for c in curves]) for k in ks}
     lines = [
         f"Validation livers {', '.join(c['liver'] for c in curves)} (never seen by the "
         f"population model `{Path(a.model).relative_to(ROOT)}`, its PCA or any design "
@@ -296,11 +298,11 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
         "scratch MEE mm | adaptation s | minutes | tuned MEE mm | tuned + corrected MEE mm | "
         "tuning s |", "|---|---|---|---|---|---|---|---|---|---|---|", *rows, "",
         "Median over the livers (patient model; K = 0: the population model): "
-        + ", ".join(f"K = {k}: {med[k]:.3f} mm" for k in KS) + ".", ""]
+        + ", ".join(f"K = {k}: {med[k]:.3f} mm" for k in ks) + ".", ""]
     tuned = {k: [np.median([c["points"][str(k)][key] for c in curves])
-                 for key in ("corrected", "tuned", "tuned_corrected")] for k in KS if k}
+                 for key in ("corrected", "tuned", "tuned_corrected")] for k in ks if k}
     lower = {k: sum(c["points"][str(k)]["tuned_corrected"] < c["points"][str(k)]["corrected"]
-                    for c in curves) for k in KS if k}
+                    for c in curves) for k in ks if k}
     lines += ["Fine-tuning the population network (`--tune`), median over the livers, "
               "corrected / tuned / tuned + corrected: "
               + "; ".join(f"K = {k}: {a:.3f} / {b:.3f} / {c:.3f} mm" for k, (a, b, c)
@@ -313,7 +315,7 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
     def mee(c, k):
         return c["points"][str(k)].get("patient_model", c["points"][str(k)]["population"])
 
-    reached = {c["liver"]: next((k for k in KS if mee(c, k) <= GOAL_MM), None) for c in curves}
+    reached = {c["liver"]: next((k for k in ks if mee(c, k) <= GOAL_MM), None) for c in curves}
     fe = {c["liver"]: c["fe_seconds"] for c in curves}
     lines += ["Least K at which the patient model is within the goal's "
               f"{GOAL_MM} mm, with the FE seconds of those K simulations on two ranks (their "
@@ -326,12 +328,12 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
                      " min") + ")" for n, k in reached.items())
               + ".", "", "FE seconds on two ranks against K (the same records): "
               + "; ".join(f"{n}: " + ", ".join(f"{v:.0f}" for v in s.values())
-                          for n, s in fe.items()) + f" (K = {', '.join(map(str, KS[1:]))}).",
+                          for n, s in fe.items()) + f" (K = {', '.join(map(str, ks[1:]))}).",
               ""]
     if start is not None:
         best = []
         for c in curves:
-            within = [k for k in KS if minutes(c, k, start) <= GOAL_MINUTES]
+            within = [k for k in ks if minutes(c, k, start) <= GOAL_MINUTES]
             k = min(within, key=lambda k: mee(c, k)) if within else None
             best.append(f"{c['liver']}: none" if k is None else
                         f"{c['liver']}: {mee(c, k):.3f} mm (K = {k}, "
@@ -362,9 +364,16 @@ def main() -> int:
     ap.add_argument("--livers", nargs="+", default=["Amos-054", "LiTS-100", "LiTS-67"],
                     help="validation livers of the scene")
     ap.add_argument("--np", type=int, default=2, help="MPI ranks")
+    ap.add_argument("--ks", nargs="+", type=int, default=list(KS),
+                    help=f"the K values (the truth holds the largest plus {HELD} held out; "
+                    f"include 0 and {SOURCES_K})")
     ap.add_argument("--no-end-to-end", dest="e2e", action="store_false",
                     help="keep the end-to-end times of docs/patient.json")
     a = ap.parse_args()
+    a.ks = sorted(set(a.ks))
+    if a.ks[0] != 0 or SOURCES_K not in a.ks:
+        ap.error(f"--ks {a.ks}: expected 0 and {SOURCES_K} among them (the population "
+                 "model alone, and where the error's sources are measured)")
     from data_spec import load_scene
     from data_spec.livers import validation_files
 
