@@ -257,6 +257,10 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
     # it: its FE step's wall seconds less its simulations' own solves over the ranks
     start = max(0.0, e2e["fe"] - e2e["solves"]) if e2e and "solves" in e2e else None
     ks = a.ks
+
+    def mee(c, k):   # the patient model's MEE (K = 0: the population model's)
+        return c["points"][str(k)].get("patient_model", c["points"][str(k)]["population"])
+
     rows = []
     for k in ks:
         for c in curves:
@@ -272,9 +276,7 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
             wall = "" if start is None else f"{minutes(c, k, start):.1f}"
             rows.append(f"| {k} | {c['liver']} | {' | '.join(cells[:4])} | {adapt} | {wall} | "
                         f"{' | '.join(cells[4:])} |")
-    med = {k: np.median([c["points"][str(k)].get("patient_model",
-                                                 c["points"][str(k)]["population"])
-                         for c in curves]) for k in ks}
+    med = {k: np.median([mee(c, k) for c in curves]) for k in ks}
     lines = [
         f"Validation livers {', '.join(c['liver'] for c in curves)} (never seen by the "
         f"population model `{Path(a.model).relative_to(ROOT)}`, its PCA or any design "
@@ -312,9 +314,6 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
               + f" ({sum(lower.values())} of {len(curves) * len(lower)} points): `make "
               "patient` corrects the population network as it is unless told `ADAPT=--tune`.",
               ""]
-    def mee(c, k):
-        return c["points"][str(k)].get("patient_model", c["points"][str(k)]["population"])
-
     reached = {c["liver"]: next((k for k in ks if mee(c, k) <= GOAL_MM), None) for c in curves}
     fe = {c["liver"]: c["fe_seconds"] for c in curves}
     lines += ["Least K at which the patient model is within the goal's "
