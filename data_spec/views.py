@@ -1,9 +1,10 @@
 """Dataset views: a dataset directory made of links to another's files, nothing copied.
 
 A view is a valid dataset for every reader (the trainer, the validator, ``fem_sim generate``):
-``first(data, n)`` holds the first ``n`` simulations of ``data``; ``extension(data, n, out)``
-starts a larger dataset of the same scene from ``data``'s shards, so that ``generate`` goes on
-past them without touching ``data``.
+``first(data, n)`` holds the first ``n`` simulations of ``data``; ``without(data, ids, view)``
+its simulations less those on the livers ``ids``; ``extension(data, n, out)`` starts a larger
+dataset of the same scene from ``data``'s shards, so that ``generate`` goes on past them
+without touching ``data``.
 """
 
 from __future__ import annotations
@@ -39,15 +40,26 @@ def dataset_fingerprint(data: str | Path) -> str:
     return h.hexdigest()[:16]
 
 
-def link_shards(data: Path, view: Path, n: int) -> None:
-    """Symbolic links in ``view/sims`` to the first ``n`` shards of ``data`` with their XDMF
-    files (a shard without its XDMF is not a valid one).
+def link_shards(data: Path, view: Path, n: int, shards=None) -> None:
+    """Symbolic links in ``view/sims`` to the first ``n`` shards of ``data`` (or to
+    ``shards``, paths of its shards) with their XDMF files (a shard without its XDMF is not a
+    valid one).
     """
     (view / "sims").mkdir(parents=True, exist_ok=True)
-    for shard in sorted((data / "sims").glob("sim_*.h5"))[:n]:
-        for p in (data / "sims").glob(shard.stem + ".*"):
+    if shards is None:
+        shards = sorted((data / "sims").glob("sim_*.h5"))[:n]
+    for shard in shards:
+        for p in (data / "sims").glob(Path(shard).stem + ".*"):
             if not (view / "sims" / p.name).exists():
                 (view / "sims" / p.name).symlink_to(p.resolve())
+
+
+def _link_scene(data: Path, view: Path) -> None:
+    """Links in ``view`` to ``data``'s scene copy and liver files."""
+    view.mkdir(parents=True, exist_ok=True)
+    for name in ("scene.toml", "geometry"):
+        if not (view / name).exists():
+            (view / name).symlink_to((data / name).resolve())
 
 
 def first(data: str | Path, n: int, view: str | Path | None = None) -> Path:
@@ -58,11 +70,29 @@ def first(data: str | Path, n: int, view: str | Path | None = None) -> Path:
     if n >= shard_count(data):
         return data
     view = Path(view) if view is not None else data.parent / f"first_{n}"
-    (view / "sims").mkdir(parents=True, exist_ok=True)
-    for name in ("scene.toml", "geometry"):
-        if not (view / name).exists():
-            (view / name).symlink_to((data / name).resolve())
+    _link_scene(data, view)
     link_shards(data, view, n)
+    return view
+
+
+def without(data: str | Path, geometry_ids, view: str | Path) -> Path:
+    """A view of ``data``'s simulations less those on the livers ``geometry_ids`` (its scene
+    and liver files as they are: a population's registration keeps every liver's shape).
+    ValueError for an id no simulation of ``data`` is on.
+    """
+    from data_spec.shards import list_shards, read_shard
+
+    data, view, drop = Path(data), Path(view), set(geometry_ids)
+    kept, seen = [], set()
+    for shard in list_shards(data):
+        gid = read_shard(shard).geometry_id
+        seen.add(gid)
+        if gid not in drop:
+            kept.append(shard)
+    if drop - seen:
+        raise ValueError(f"{data}: no simulation on the livers {sorted(drop - seen)}")
+    _link_scene(data, view)
+    link_shards(data, view, len(kept), kept)
     return view
 
 

@@ -5,6 +5,7 @@ another's shards (data_spec.views); a liver placed once per shape model (surroga
 import json
 
 import h5py
+import pytest
 
 import surrogate.train
 from data_spec import views
@@ -135,3 +136,29 @@ def test_a_liver_is_registered_once_per_shape_model(tmp_path, monkeypatch):
     found = evaluate.place(a, liver, "LPS")[1]
     found.append("the caller's own")  # a caller's list is its own
     assert evaluate.place(a, liver, "LPS")[1] == ["warning 1"]
+
+
+def test_a_view_without_some_livers_links_the_other_livers_simulations(tmp_path, monkeypatch):
+    import types
+
+    import data_spec.shards
+
+    data = tmp_path / "data"
+    (data / "sims").mkdir(parents=True)
+    (data / "geometry").mkdir()
+    (data / "scene.toml").write_text("the scene")
+    on = {}
+    for i, gid in enumerate(["g1", "g2", "g1", "g3"]):
+        (data / "sims" / f"sim_{i:06d}.h5").write_text(f"shard {i}")
+        (data / "sims" / f"sim_{i:06d}.xdmf").write_text(f"shard {i}'s XDMF")
+        on[f"sim_{i:06d}.h5"] = gid
+    monkeypatch.setattr(data_spec.shards, "read_shard",
+                        lambda p: types.SimpleNamespace(geometry_id=on[p.name]))
+    view = views.without(data, ["g1"], tmp_path / "view")
+    assert sorted(p.name for p in (view / "sims").iterdir()) == \
+        sorted(f"sim_{i:06d}.{e}" for i in (1, 3) for e in ("h5", "xdmf"))
+    assert (view / "scene.toml").read_text() == "the scene"
+    assert (view / "geometry").resolve() == (data / "geometry").resolve()
+    assert len(list((data / "sims").iterdir())) == 8   # nothing moved
+    with pytest.raises(ValueError, match="g9"):
+        views.without(data, ["g9"], tmp_path / "other")
