@@ -1,7 +1,7 @@
 """A new patient's model against K, the FE simulations on the patient's own mesh: docs/patient.md.
 
     .venv-train/bin/python bench/patient.py [--model RUN] [--livers Amos-054 LiTS-100 LiTS-67]
-        [--ks 0 5 10 20 40 80]
+        [--ks 0 5 10 20 40 80] [--design]
 
 For each validation liver (never seen by the population model, its PCA or any design choice):
 its FE truth with the population model's boundary condition, K_MAX + HELD simulations
@@ -11,6 +11,11 @@ model (``surrogate adapt`` on the first K, :mod:`surrogate.patient`), the reduce
 trained on the same K simulations from scratch, with the adaptation's seconds, and the
 population network fine-tuned on them (``--tune``), alone and corrected; and the wall
 time of ``make patient`` end to end at K = 40 on the first liver, on two cores.
+
+``--design``: the same on training livers (default Amos-005, LiTS-12, LiTS-16), with a
+population model trained as the shipped one on scene 4's dataset less their simulations
+(under bench/results/patient_design/): docs/patient_design.md, where the adaptation's settings
+are chosen, so that the validation livers stay out of every choice.
 """
 
 from __future__ import annotations
@@ -32,6 +37,9 @@ from liverviz.report import ROOT, write_report
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
 RESULTS = ROOT / "bench" / "results" / "patient"
 MODEL = ROOT / "bench" / "results" / "scene4_real" / "run_population_basis"
+DATA = ROOT / "runs" / "data" / "scene4_livers"   # scene 4's dataset (bench/scene4_real.py)
+DESIGN_OVERRIDES = {"folds": 10, "evaluate_folds": 1}   # as bench/scene4_real.py trains it
+DESIGN_LIVERS = ["Amos-005", "LiTS-12", "LiTS-16"]
 KS = (0, 5, 10, 20, 40, 80)
 HELD = 10
 SOURCES_K = 40  # the K at which the error's sources are measured
@@ -101,7 +109,7 @@ def truth(pred, liver: Path, a) -> Path:
     """The liver's FE truth with the model's boundary condition, K_MAX + HELD simulations."""
     from surrogate.evaluate import truth_scene
 
-    d = RESULTS / liver.stem
+    d = a.results / liver.stem
     d.mkdir(parents=True, exist_ok=True)
     n = max(a.ks) + HELD
     text = truth_scene(pred, SCENE, liver, n, None)
@@ -115,7 +123,7 @@ def truth(pred, liver: Path, a) -> Path:
 
 
 def curve(liver: Path, a) -> tuple[dict, dict]:
-    """Every K's errors on the liver's held-out simulations (kept in RESULTS/<liver>/k.json),
+    """Every K's errors on the liver's held-out simulations (kept in <results>/<liver>/k.json),
     and where the corrected model's error is at SOURCES_K (:func:`sources`).
     """
     from surrogate.data import load_dataset
@@ -132,7 +140,7 @@ def curve(liver: Path, a) -> tuple[dict, dict]:
     ds = load_dataset(data)
     sims = np.unique(ds.sample_sim)
     held = sims[-HELD:]
-    path = RESULTS / liver.stem / "k.json"
+    path = a.results / liver.stem / "k.json"
     key = made_by(model, data)
     done = json.loads(path.read_text()) if path.exists() else {}
     if done.get("made_by") != key:   # another population model, adaptation or truth
@@ -140,7 +148,7 @@ def curve(liver: Path, a) -> tuple[dict, dict]:
     for k in a.ks:
         if str(k) not in done:
             done[str(k)] = held_out_errors(pred, placement, ds, sims[:k], held,
-                                           run=RESULTS / liver.stem / f"run_K{k}",
+                                           run=a.results / liver.stem / f"run_K{k}",
                                            log_fn=lambda m: None)
             path.write_text(json.dumps(done, indent=1))
         print(f"[{liver.stem}] K={k}: {done[str(k)]}", flush=True)
@@ -277,10 +285,15 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
             rows.append(f"| {k} | {c['liver']} | {' | '.join(cells[:4])} | {adapt} | {wall} | "
                         f"{' | '.join(cells[4:])} |")
     med = {k: np.median([mee(c, k) for c in curves]) for k in ks}
+    names = ", ".join(c["liver"] for c in curves)
     lines = [
-        f"Validation livers {', '.join(c['liver'] for c in curves)} (never seen by the "
-        f"population model `{Path(a.model).relative_to(ROOT)}`, its PCA or any design "
-        f"choice); FE truth on each liver's own mesh with the model's boundary condition "
+        (f"Design livers {names}: training livers of the scene whose simulations the "
+         f"population model `{Path(a.model).relative_to(ROOT)}` was not trained on (trained "
+         "as the shipped one on the scene's dataset less them; the PCA is the scene's, which "
+         "has their shapes), to choose the adaptation's settings on" if a.design else
+         f"Validation livers {names} (never seen by the "
+         f"population model `{Path(a.model).relative_to(ROOT)}`, its PCA or any design "
+         "choice)") + "; FE truth on each liver's own mesh with the model's boundary condition "
         f"(scene 4's settings: P2 at 16 mm, one random 0.4 N force, 10 load steps); MEE on "
         f"its last {HELD} simulations, never used to adapt. Population: the model placed as "
         "predict-liver places it. Corrected: plus the kernel ridge correction fitted on the "
@@ -353,15 +366,38 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
                   f"two cores: placing the liver and writing its scene {e2e['place']:.0f} s, "
                   f"meshing and {e2e['k']} FE simulations on two ranks {e2e['fe']:.0f} s, "
                   f"adapting {e2e['adapt']:.0f} s." + check, ""]
-    lines += sources_lines(found) + REJECTED
+    lines += sources_lines(found) + ([] if a.design else REJECTED)
     return "\n".join(lines)
+
+
+def design_model(names: list[str], a) -> Path:
+    """The population model for the design livers ``names``: the shipped one's config
+    trained on scene 4's dataset less their simulations (reused when done).
+    """
+    from data_spec import read_geometry
+    from data_spec.shards import geometry_path
+    from data_spec.views import without
+    from surrogate.evaluate import shards_by_liver
+    from surrogate.train import train_or_reuse
+
+    ids = {read_geometry(geometry_path(DATA, gid)).description.split(".")[0]: gid
+           for gid in shards_by_liver(DATA)}
+    view = without(DATA, [ids[n] for n in names], a.results / "data")
+    run = a.results / "run_population_basis"
+    train_or_reuse(view, run, "population_basis", DESIGN_OVERRIDES)
+    return run
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--model", default=str(MODEL), help="the population model's run")
-    ap.add_argument("--livers", nargs="+", default=["Amos-054", "LiTS-100", "LiTS-67"],
-                    help="validation livers of the scene")
+    ap.add_argument("--livers", nargs="+", default=None,
+                    help="validation livers of the scene (default: Amos-054 LiTS-100 LiTS-67); "
+                    "with --design, training livers (default: "
+                    f"{' '.join(DESIGN_LIVERS)})")
+    ap.add_argument("--design", action="store_true",
+                    help="training livers, with a population model trained without their "
+                    "simulations: docs/patient_design.md, the settings' playground")
     ap.add_argument("--np", type=int, default=2, help="MPI ranks")
     ap.add_argument("--ks", nargs="+", type=int, default=list(KS),
                     help=f"the K values (the truth holds the largest plus {HELD} held out; "
@@ -374,18 +410,25 @@ def main() -> int:
         ap.error(f"--ks {a.ks}: expected 0 and {SOURCES_K} among them (the population "
                  "model alone, and where the error's sources are measured)")
     from data_spec import load_scene
-    from data_spec.livers import validation_files
+    from data_spec.livers import training_files, validation_files
 
-    files = {f.stem: f for f in validation_files(load_scene(SCENE)["geometry"])}
+    g = load_scene(SCENE)["geometry"]
+    a.livers = a.livers or (DESIGN_LIVERS if a.design else ["Amos-054", "LiTS-100", "LiTS-67"])
+    files = {f.stem: f for f in (training_files(g) if a.design else validation_files(g))}
     unknown = [n for n in a.livers if n not in files]
     if unknown:
-        ap.error(f"--livers: {unknown} are not validation livers of {SCENE.name}")
+        ap.error(f"--livers: {unknown} are not {'training' if a.design else 'validation'} "
+                 f"livers of {SCENE.name}")
+    a.results = RESULTS.with_name("patient_design") if a.design else RESULTS
+    if a.design:
+        a.model = str(design_model(a.livers, a))
     curves, found = map(list, zip(*(curve(files[n], a) for n in a.livers)))
-    md = ROOT / "docs" / "patient.md"
+    md = ROOT / "docs" / ("patient_design.md" if a.design else "patient.md")
     saved = md.with_suffix(".json")
-    e2e = end_to_end(files[a.livers[0]], a) if a.e2e else (
+    e2e = None if a.design else end_to_end(files[a.livers[0]], a) if a.e2e else (
         json.loads(saved.read_text()).get("make_patient") if saved.exists() else None)
-    write_report(md, "A new patient's model", report(curves, e2e, a, found),
+    title = "A new patient's model: the design livers" if a.design else "A new patient's model"
+    write_report(md, title, report(curves, e2e, a, found),
                  {"curves": curves, "make_patient": e2e, "sources": found})
     return 0
 
