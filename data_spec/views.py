@@ -77,8 +77,9 @@ def first(data: str | Path, n: int, view: str | Path | None = None) -> Path:
 
 def without(data: str | Path, geometry_ids, view: str | Path) -> Path:
     """A view of ``data``'s simulations less those on the livers ``geometry_ids`` (its scene
-    and liver files as they are: a population's registration keeps every liver's shape).
-    ValueError for an id no simulation of ``data`` is on.
+    and liver files as they are: a population's registration keeps every liver's shape); an
+    earlier view in ``view`` of other livers is brought to these. ValueError for an id no
+    simulation of ``data`` is on.
     """
     from data_spec.shards import list_shards, read_shard
 
@@ -92,6 +93,10 @@ def without(data: str | Path, geometry_ids, view: str | Path) -> Path:
     if drop - seen:
         raise ValueError(f"{data}: no simulation on the livers {sorted(drop - seen)}")
     _link_scene(data, view)
+    stems = {shard.stem for shard in kept}
+    for p in (view / "sims").glob("sim_*.*") if (view / "sims").exists() else ():
+        if p.is_symlink() and p.name.split(".")[0] not in stems:
+            p.unlink()   # a link of an earlier view of other livers
     link_shards(data, view, len(kept), kept)
     return view
 

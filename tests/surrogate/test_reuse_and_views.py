@@ -160,5 +160,9 @@ def test_a_view_without_some_livers_links_the_other_livers_simulations(tmp_path,
     assert (view / "scene.toml").read_text() == "the scene"
     assert (view / "geometry").resolve() == (data / "geometry").resolve()
     assert len(list((data / "sims").iterdir())) == 8   # nothing moved
+    # made again without another liver: the earlier view's links follow
+    views.without(data, ["g3"], view)
+    assert sorted(p.name for p in (view / "sims").iterdir()) == \
+        sorted(f"sim_{i:06d}.{e}" for i in (0, 1, 2) for e in ("h5", "xdmf"))
     with pytest.raises(ValueError, match="g9"):
         views.without(data, ["g9"], tmp_path / "other")
