@@ -327,20 +327,22 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
               + f" ({sum(lower.values())} of {len(curves) * len(lower)} points): `make "
               "patient` corrects the population network as it is unless told `ADAPT=--tune`.",
               ""]
-    reached = {c["liver"]: next((k for k in ks if mee(c, k) <= GOAL_MM), None) for c in curves}
-    fe = {c["liver"]: c["fe_seconds"] for c in curves}
+    def reached(c) -> str:   # the least K within GOAL_MM, its FE seconds (and minutes)
+        k = next((k for k in ks if mee(c, k) <= GOAL_MM), None)
+        if k is None:
+            return f"{c['liver']}: not reached"
+        wall = "" if start is None else f", {minutes(c, k, start):.1f} min"
+        return f"{c['liver']}: {k} ({c['fe_seconds'][str(k)]:.0f} s{wall})"
+
     lines += ["Least K at which the patient model is within the goal's "
               f"{GOAL_MM} mm, with the FE seconds of those K simulations on two ranks (their "
               "own solve seconds over the ranks; meshing, start-up and adapting aside)"
               + ("" if start is None else " and the minutes from the liver file")
-              + ": " + ", ".join(
-                  f"{n}: not reached" if k is None else f"{n}: {k} ({fe[n][str(k)]:.0f} s"
-                  + ("" if start is None else
-                     f", {minutes(next(c for c in curves if c['liver'] == n), k, start):.1f}"
-                     " min") + ")" for n, k in reached.items())
+              + ": " + ", ".join(map(reached, curves))
               + ".", "", "FE seconds on two ranks against K (the same records): "
-              + "; ".join(f"{n}: " + ", ".join(f"{v:.0f}" for v in s.values())
-                          for n, s in fe.items()) + f" (K = {', '.join(map(str, ks[1:]))}).",
+              + "; ".join(f"{c['liver']}: " + ", ".join(f"{v:.0f}" for v in
+                                                         c["fe_seconds"].values())
+                          for c in curves) + f" (K = {', '.join(map(str, ks[1:]))}).",
               ""]
     if start is not None:
         best = []
