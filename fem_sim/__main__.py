@@ -5,6 +5,8 @@ mpirun -n N python3 -m fem_sim generate SCENE.toml --out DIR [--ranks-per-sim R]
 python3 -m fem_sim summary DIR
 python3 -m fem_sim population SCENE.toml --out DIR   (scene 4: CPD + PCA shape coefficients)
 python3 -m fem_sim phantom SEED --out FILE.h5 [--variety V] [--spread S] [--mesh-size H]
+python3 -m fem_sim linear SCENE.toml --out DIR [--synthetic N]   (a one-liver scene's
+small-strain responses, DIR/linear.h5)
 """
 
 from __future__ import annotations
@@ -49,7 +51,8 @@ def _collective(run) -> int:
 
 
 # What each command imports that only the solver environment has.
-NEEDS = {"generate": "dolfinx", "population": "gmsh", "phantom": "gmsh", "mesh": "gmsh"}
+NEEDS = {"generate": "dolfinx", "linear": "dolfinx", "population": "gmsh", "phantom": "gmsh",
+         "mesh": "gmsh"}
 
 
 def wrong_environment(command: str) -> str | None:
@@ -105,6 +108,13 @@ def _parser() -> argparse.ArgumentParser:
     me.add_argument("--scale-to-mm", type=float, default=1.0,
                     help="multiply the file's coordinates by this (1000 for metres)")
     me.add_argument("--no-picture", action="store_true")
+    li = sub.add_parser("linear", help="small-strain responses of a one-liver scene (its "
+                        "liver linearised at u = 0) under its simulations' loads and N drawn "
+                        "ones: DIR/linear.h5, what a patient model learns from")
+    li.add_argument("scene", help="scene TOML file (one liver, one material)")
+    li.add_argument("--out", required=True, help="dataset directory (its liver meshed there)")
+    li.add_argument("--synthetic", type=int, default=0, metavar="N",
+                    help="loads drawn by the scene's rule beside its simulations' (default 0)")
     s = sub.add_parser("summary", help="print counts and statistics of a dataset")
     s.add_argument("directory")
     s.add_argument("--png", help="picture of deformed livers (default DIR/summary.png)")
@@ -146,6 +156,8 @@ def main(argv: list[str] | None = None) -> int:
         return _generate(args, parser)
     if args.command == "phantom":
         return _phantom(args, parser)
+    if args.command == "linear":
+        return _linear(args)
     if args.command == "mesh":
         from fem_sim.geometry.mesh_command import run
 
@@ -154,6 +166,20 @@ def main(argv: list[str] | None = None) -> int:
     from fem_sim.batch.summary import summary
 
     return summary(args.directory, png=args.png)
+
+
+def _linear(args) -> int:
+    from data_spec import SceneError
+    from fem_sim.batch.linear import linear_fields
+    from fem_sim.geometry.errors import GeometryError
+
+    try:
+        path = linear_fields(args.scene, args.out, args.synthetic)
+    except (SceneError, GeometryError, ValueError, OSError) as exc:
+        print(f"fem_sim linear: {exc}", file=sys.stderr)
+        return 2
+    print(f"{path}: small-strain responses of {args.scene}")
+    return 0
 
 
 def _phantom(args, parser) -> int:

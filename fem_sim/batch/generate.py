@@ -306,16 +306,22 @@ def _warm_jit_cache(degree: int, qdeg: int) -> None:
     OgdenProblem(MPI.COMM_SELF, g.points, g.cells, degree=degree, quadrature_degree=qdeg)
 
 
+def case_loads(case: cs.Case, g: Geometry) -> list:
+    """The solver's loads of a case (at load fraction 1)."""
+    from fem_sim.solver.loads import NodalLoad, PatchLoad
+
+    if case.load_kind == "patch":
+        return [PatchLoad(g.points[node], force, case.patch_radius)
+                for node, force in zip(case.load_nodes, case.forces)]
+    return [NodalLoad(case.load_nodes, case.forces)]
+
+
 def run_case(problem, scene: Scene, case: cs.Case, g: Geometry, fixed: np.ndarray,
              out_nodes: np.ndarray, geometry_id: str) -> Shard | None:
     """Solve one case on the group (collective); the shard on the group's rank 0."""
-    from fem_sim.solver.problem import Constraint, NodalLoad, PatchLoad
+    from fem_sim.solver.problem import Constraint
 
-    if case.load_kind == "patch":
-        loads = [PatchLoad(g.points[node], force, case.patch_radius)
-                 for node, force in zip(case.load_nodes, case.forces)]
-    else:
-        loads = [NodalLoad(case.load_nodes, case.forces)]
+    loads = case_loads(case, g)
     fractions = np.asarray(scene.load_fractions)
     t0 = time.perf_counter()
     try:

@@ -96,6 +96,27 @@ class OgdenProblem:
         self.equations.set_problem(material, constraints, loads)
         return self.stepper.run(fractions, self.displacement)
 
+    def linear_responses(self, material: OgdenMaterial, constraints: list[Constraint],
+                         loads: list[list], rtol: float = 1e-8) -> np.ndarray | None:
+        """Small-strain displacements (len(loads), n_nodes, 3) mm on rank 0 (collective): the
+        body linearised at u = 0 (its tangent there is the small-strain elasticity tensor of
+        the material) under each entry of ``loads`` (a list of loads at fraction 1). One
+        factorisation of that tangent serves every load set (each solve refined to ``rtol``);
+        the state is left at u = 0.
+        """
+        eqs = self.equations
+        eqs.set_problem(material, constraints, loads[0] if loads else [])
+        eqs.set_state(np.zeros_like(eqs.u.x.array))
+        eqs.update_points(tangent=True)
+        J = eqs.jacobian(lift=False)
+        out = []
+        for ld in loads:
+            self.disc.load_vector(ld, eqs.f_ext)
+            eqs.set_rhs_to_load()
+            self.linear.solve_recurring(J, eqs.rhs, eqs.du, rtol)
+            out.append(self.disc.gather_vertex_values(eqs.du.array.reshape(-1, 3)))
+        return np.stack(out) if self.comm.rank == 0 and out else None
+
     def displacement(self) -> np.ndarray | None:
         """Current displacement at the mesh nodes, source order, on rank 0 (collective)."""
         return self.disc.gather_vertex_values(self.disc.u.x.array.reshape(-1, 3))

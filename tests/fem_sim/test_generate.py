@@ -462,3 +462,41 @@ def test_an_out_that_is_a_file_is_refused_naming_the_flag(tmp_path):
     assert res.returncode == 2, res.stderr
     assert "--out" in res.stderr and "is a file; expected the dataset's directory" in res.stderr
     assert "Errno" not in res.stderr
+
+
+def linear(scene, out, *extra):
+    cmd = [sys.executable, "-m", "fem_sim", "linear", str(scene), "--out", str(out), *extra]
+    return subprocess.run(cmd, env=ENV, capture_output=True, text=True, timeout=600)
+
+
+def test_small_strain_responses_of_the_scenes_loads_and_drawn_ones(reference, tmp_path):
+    """fem_sim linear on the dataset's own scene: the responses of its 4 simulations' loads
+    (the same draws as generate's shards) and of 3 drawn cases, zero on the fixed region; the
+    first load step of each shard (fraction 1/3) near a third of its linear response, its last
+    not as near (the liver stiffens).
+    """
+    out = tmp_path / "d"
+    shutil.copytree(reference, out)
+    res = linear(TINY, out, "--synthetic", "3")
+    assert res.returncode == 0, res.stderr
+    from data_spec.linear_fields import SYNTHETIC_FIRST, linear_fields_path, read_linear_fields
+
+    lf = read_linear_fields(linear_fields_path(out))
+    assert lf.case_index.tolist() == [0, 1, 2, 3, *range(SYNTHETIC_FIRST, SYNTHETIC_FIRST + 3)]
+    assert lf.synthetic.tolist() == [4, 5, 6]
+    for sh in map(read_shard, list_shards(out)):
+        row = lf.rows([sh.sim_index])[0]
+        np.testing.assert_array_equal(lf.load_nodes[row], sh.load_nodes)
+        np.testing.assert_allclose(lf.forces[row], sh.forces)
+        u = lf.displacement[row][np.searchsorted(lf.output_nodes, sh.output_nodes)]
+        assert np.all(u[np.isin(sh.output_nodes, sh.fixed_nodes)] == 0.0)
+        gaps = [np.linalg.norm(d - lam * u, axis=1).mean() / np.linalg.norm(d, axis=1).mean()
+                for d, lam in zip(sh.displacement, sh.load_fractions)]
+        assert gaps[0] < 0.1 and gaps[-1] > gaps[0]
+    assert validate_dataset(out) == []   # the file beside the shards breaks nothing
+
+
+def test_small_strain_responses_of_many_livers_are_refused(tmp_path):
+    res = linear(ROOT / "data_spec" / "scenes" / "ci_scene4.toml", tmp_path / "d")
+    assert res.returncode == 2
+    assert "ci_scene4.toml" in res.stderr and "one liver" in res.stderr

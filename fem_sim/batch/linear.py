@@ -1,0 +1,82 @@
+"""The small-strain responses of a one-liver scene (:mod:`data_spec.linear_fields`): the
+liver linearised at u = 0 under the loads of every simulation of the scene and of
+``synthetic`` more cases drawn by the scene's own rule (case indices from
+``SYNTHETIC_FIRST``), from one factorisation of the tangent, one refined solve per load.
+
+    python -m fem_sim linear SCENE --out DATA [--synthetic N]
+
+What a patient model learns beside its few nonlinear simulations (:mod:`surrogate.patient`):
+the exact linear elasticity of the patient's own mesh, for as many loads as it likes, at the
+price of back-solves. Runs on one process (the factorisation's threads use the cores).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from data_spec import load_scene
+from data_spec.linear_fields import (
+    SYNTHETIC_FIRST,
+    LinearFields,
+    linear_fields_path,
+    write_linear_fields,
+)
+from fem_sim.batch import cases as cs
+from fem_sim.batch.generate import _scene_livers, _write_livers, case_loads, solver_settings
+from fem_sim.geometry.source import n_geometries
+
+
+def _cases(scene, scene_file: str, g, fixed: np.ndarray, synthetic: int) -> list:
+    """The scene's simulations and ``synthetic`` drawn cases, all of one material."""
+    if synthetic < 0:
+        raise ValueError(f"--synthetic must be >= 0, got {synthetic}")
+    table = cs.material_table(scene)
+    eligible = None if scene.cases else cs.eligible_load_nodes(scene, g, fixed)
+    indices = [*range(scene.n_simulations), *range(SYNTHETIC_FIRST, SYNTHETIC_FIRST + synthetic)]
+    if scene.cases and synthetic:
+        raise ValueError(f"{scene_file}: [[cases]] lists its loads; drawn cases need the "
+                         "scene's load rule ([loads] without [[cases]])")
+    out = [cs.make_case(scene, i, g, fixed, table, eligible) for i in indices]
+    materials = {c.material for c in out}
+    if len(materials) > 1:
+        raise ValueError(f"{scene_file}: [material] varies between simulations; small-strain "
+                         "responses are of one liver and one material")
+    return out
+
+
+def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0) -> Path:
+    """``out/linear.h5`` for the one-liver scene ``scene_file`` (its liver meshed and checked
+    as ``fem_sim generate`` does it, into the same dataset directory ``out``).
+    """
+    from mpi4py import MPI
+
+    from fem_sim.solver.loads import Constraint
+    from fem_sim.solver.problem import OgdenProblem
+
+    scene_file, out = str(scene_file), Path(out)
+    scene = load_scene(scene_file)
+    if n_geometries(scene) != 1:
+        raise ValueError(f"{scene_file}: [geometry] has {n_geometries(scene)} livers; small-"
+                         "strain responses are of one liver (a patient's scene)")
+    livers = _scene_livers(scene, out, progress=False)
+    ids, fixed = _write_livers(scene, scene_file, livers, out)
+    g, fixed = livers[0], fixed[0]
+    cases = _cases(scene, scene_file, g, fixed, synthetic)
+    solver = scene["solver"]
+    t = time.perf_counter()
+    problem = OgdenProblem(MPI.COMM_SELF, g.points, g.cells, degree=solver["degree"],
+                           quadrature_degree=solver["quadrature_degree"],
+                           element=solver.get("element", "lagrange"),
+                           settings=solver_settings(scene))
+    u = problem.linear_responses(cases[0].material, [Constraint(fixed)],
+                                 [case_loads(c, g) for c in cases])
+    nodes = cs.output_nodes(scene, g)
+    return write_linear_fields(linear_fields_path(out), LinearFields(
+        case_index=np.array([c.index for c in cases], np.int64),
+        load_nodes=np.stack([c.load_nodes for c in cases]),
+        forces=np.stack([c.forces for c in cases]), output_nodes=nodes,
+        displacement=u[:, nodes], scene_name=scene.name, scene_hash=scene.hash,
+        geometry_id=ids[0], seconds=time.perf_counter() - t))
