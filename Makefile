@@ -189,9 +189,10 @@ truth: setup
 
 # A new patient (docs/patient.md): the population model MODEL (a run) placed on the liver file
 # LIVER, K FE simulations on the patient's own mesh with the model's boundary condition (solver
-# environment, mpirun), the model corrected with them and distilled into the patient's own
-# model, $(PATIENT)/run/model (trainer environment). PSCENE: the population scene MODEL was
-# trained on (its loads, material, steps and solver). HELD more simulations are solved and kept
+# environment, mpirun), the liver's small-strain responses to them and to SYNTHETIC drawn
+# loads (fem_sim linear: one factorisation), those corrected with the K simulations and
+# distilled into the patient's own model, $(PATIENT)/run/model (trainer environment). PSCENE:
+# the population scene MODEL was trained on (its loads, material, steps and solver). HELD more simulations are solved and kept
 # out of the adaptation (to measure the patient model on); FRAME: the liver file's frame;
 # ADAPT: more options of surrogate adapt (ADAPT=--tune fine-tunes the population network).
 K ?= 40
@@ -200,6 +201,7 @@ FRAME ?=
 ADAPT ?=
 MODEL ?=
 PSCENE ?= data_spec/scenes/scene4_livers.toml
+SYNTHETIC ?= 600
 PATIENT ?= runs/patient/$(basename $(notdir $(LIVER)))
 patient: setup
 	@test -n "$(LIVER)" -a -n "$(MODEL)" || { echo "make patient: LIVER=file MODEL=run [K=40] [PSCENE=scene] [PATIENT=dir]"; exit 2; }
@@ -207,8 +209,10 @@ patient: setup
 	    $(if $(FRAME),--frame $(FRAME)) --out $(PATIENT)/scene.toml \
 	    --placement $(PATIENT)/placement.npz
 	$(MPIRUN) $(SPY) -m fem_sim generate $(PATIENT)/scene.toml --out $(PATIENT)/data
+	$(SPY) -m fem_sim linear $(PATIENT)/scene.toml --out $(PATIENT)/data --synthetic $(SYNTHETIC)
 	$(TPY) -m surrogate adapt $(MODEL) $(PATIENT)/data --liver $(LIVER) --run $(PATIENT)/run \
-	    --sims $(K) $(if $(FRAME),--frame $(FRAME)) --placement $(PATIENT)/placement.npz $(ADAPT)
+	    --sims $(K) --synthetic $(SYNTHETIC) $(if $(FRAME),--frame $(FRAME)) \
+	    --placement $(PATIENT)/placement.npz $(ADAPT)
 
 # Scene 4 on real livers (long, resumable): both designs cross-validated by liver, the livers
 # never seen against FE -> docs/scene4_real.md (then make table4 T4=--report-only puts its

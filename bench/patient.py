@@ -33,6 +33,7 @@ import numpy as np
 
 from fem_sim.batch.chunked import generate_chunks
 from liverviz.report import ROOT, write_report
+from surrogate.patient import SYNTHETIC
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
 RESULTS = ROOT / "bench" / "results" / "patient"
@@ -119,7 +120,30 @@ def truth(pred, liver: Path, a) -> Path:
         (d / "generation.json").unlink(missing_ok=True)
         scene.write_text(text)
     generate_chunks(scene, d / "data", n, ranks=a.np, chunk=n)
+    linear(scene, d / "data", d / "linear.json")
     return d / "data"
+
+
+def linear(scene: Path, data: Path, record: Path) -> dict:
+    """``fem_sim linear`` on the truth's scene (SYNTHETIC drawn loads), as make patient runs
+    it, once: its wall seconds in ``record``.
+    """
+    from data_spec import load_scene
+    from data_spec.linear_fields import linear_fields_path, read_linear_fields
+
+    path = linear_fields_path(data)
+    done = json.loads(record.read_text()) if record.exists() else {}
+    if path.exists() and read_linear_fields(path).scene_hash == load_scene(scene).hash \
+            and done.get("seconds"):
+        return done
+    t = time.perf_counter()
+    subprocess.run([str(ROOT / ".venv-solver" / "bin" / "python"), "-m", "fem_sim", "linear",
+                    str(scene), "--out", str(data), "--synthetic", str(SYNTHETIC)], cwd=ROOT,
+                   check=True)
+    done = {"seconds": time.perf_counter() - t,
+            "solves_seconds": read_linear_fields(path).seconds}
+    record.write_text(json.dumps(done))
+    return done
 
 
 def curve(liver: Path, a) -> tuple[dict, dict]:
@@ -153,7 +177,8 @@ def curve(liver: Path, a) -> tuple[dict, dict]:
             path.write_text(json.dumps(done, indent=1))
         print(f"[{liver.stem}] K={k}: {done[str(k)]}", flush=True)
     return ({"liver": liver.stem, "nodes": int(ds.points[0].shape[0]), "points": done,
-             "fe_seconds": fe_seconds(data, a.np, a.ks), "place_seconds": placing},
+             "fe_seconds": fe_seconds(data, a.np, a.ks), "place_seconds": placing,
+             "linear_seconds": json.loads((data.parent / "linear.json").read_text())["seconds"]},
             {"liver": liver.stem, "k": SOURCES_K, **sources(pred, placement, ds, SOURCES_K)})
 
 
@@ -188,14 +213,15 @@ def fe_seconds(data: Path, ranks: int, ks=KS) -> dict:
 def minutes(c: dict, k: int, start: float) -> float:
     """Wall minutes from the liver file to the patient model at K = ``k`` on two cores, by
     parts: placing, ``start`` seconds of FE start-up (meshing, MPI, the forms), the first
-    ``k`` simulations' solves over the ranks and the adaptation (K = 0: placing only, the
-    population model's predictor).
+    ``k`` simulations' solves over the ranks, the small-strain responses (``fem_sim
+    linear``, a process of its own) and the adaptation (K = 0 without the responses:
+    placing only, the population model's predictor).
     """
-    if k == 0:
-        return c["place_seconds"] / 60
     p = c["points"][str(k)]
-    return (c["place_seconds"] + start + c["fe_seconds"][str(k)]
-            + sum(p["adapt_seconds"].values())) / 60
+    if "adapt_seconds" not in p:
+        return c["place_seconds"] / 60
+    return (c["place_seconds"] + start + c["fe_seconds"].get(str(k), 0.0)
+            + c.get("linear_seconds", 0.0) + sum(p["adapt_seconds"].values())) / 60
 
 
 def made_by(model: Path, data: Path) -> str:
@@ -205,7 +231,7 @@ def made_by(model: Path, data: Path) -> str:
     from data_spec.views import dataset_fingerprint
 
     h = hashlib.sha256(dataset_fingerprint(data).encode())
-    code = [ROOT / "surrogate" / n for n in ("patient.py", "tuning.py")]
+    code = [ROOT / "surrogate" / n for n in ("patient.py", "tuning.py", "linear_base.py")]
     for f in [*sorted(model.glob("*")), *code]:
         h.update(f.read_bytes())
     return h.hexdigest()[:16]
@@ -266,7 +292,7 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
     start = max(0.0, e2e["fe"] - e2e["solves"]) if e2e and "solves" in e2e else None
     ks = a.ks
 
-    def mee(c, k):   # the patient model's MEE (K = 0: the population model's)
+    def mee(c, k):   # the patient model's MEE (none at K = 0: the population model's)
         return c["points"][str(k)].get("patient_model", c["points"][str(k)]["population"])
 
     rows = []
@@ -274,16 +300,16 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
         for c in curves:
             p = c["points"][str(k)]
             cells = [f"{p.get(key, float('nan')):.3f}" if key in p else "" for key in
-                     ("population", "corrected", "patient_model", "scratch", "tuned",
-                      "tuned_corrected")]
+                     ("population", "corrected", "linear", "linear_corrected",
+                      "patient_model", "scratch", "tuned", "tuned_corrected")]
             adapt = f"{sum(p['adapt_seconds'].values()):.0f}" if "adapt_seconds" in p else ""
             tuning = p.get("tuning") or {}
             if tuning.get("steps"):
-                cells[4] += f" ({tuning['steps']} steps)"
+                cells[6] += f" ({tuning['steps']} steps)"
             cells.append(f"{tuning['seconds']:.0f}" if "seconds" in tuning else "")
             wall = "" if start is None else f"{minutes(c, k, start):.1f}"
-            rows.append(f"| {k} | {c['liver']} | {' | '.join(cells[:4])} | {adapt} | {wall} | "
-                        f"{' | '.join(cells[4:])} |")
+            rows.append(f"| {k} | {c['liver']} | {' | '.join(cells[:6])} | {adapt} | {wall} | "
+                        f"{' | '.join(cells[6:])} |")
     med = {k: np.median([mee(c, k) for c in curves]) for k in ks}
     names = ", ".join(c["liver"] for c in curves)
     lines = [
@@ -297,21 +323,29 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
         f"(scene 4's settings: P2 at 16 mm, one random 0.4 N force, 10 load steps); MEE on "
         f"its last {HELD} simulations, never used to adapt. Population: the model placed as "
         "predict-liver places it. Corrected: plus the kernel ridge correction fitted on the "
-        "first K simulations. Patient model: that, distilled into the exported one-liver "
-        "model (`make patient`). Scratch: the reduced basis trained on the same K "
-        "simulations alone. Adaptation: the seconds of correcting and distilling (placing the "
-        "liver and the FE simulations not included). Minutes: from the liver file to the "
-        "patient model on two cores, by parts: placing the liver (this run's), the FE "
+        "first K simulations. Linear: the liver's small-strain response on its own mesh "
+        "(`fem_sim linear`: the body linearised at u = 0, one factorisation, a back-solve "
+        "per load, scaled by the load fraction), no nonlinear simulation needed; linear + "
+        "corrected: plus the same correction fitted on its residuals (the liver's "
+        "stiffening). Patient model: the linear + corrected teacher (at K = 0 the linear "
+        f"responses alone) on {SYNTHETIC} drawn loads and the K simulations, distilled into "
+        "the exported one-liver model (`make patient`). Scratch: the reduced basis trained on "
+        "the same K simulations alone. Adaptation: the seconds of correcting and distilling "
+        "(placing the liver and the FE simulations not included). Minutes: from the liver "
+        "file to the patient model on two cores, by parts: placing the liver (this run's), the FE "
         "start-up as `make patient` spent it (below), the first K simulations' own solve "
-        "seconds over the two ranks (the shards' records) and the adaptation. Tuned "
+        "seconds over the two ranks (the shards' records), the small-strain responses "
+        "(`fem_sim linear` with its start-up and meshing, this run's) and the adaptation. "
+        "Tuned "
         "(`surrogate adapt --tune`, not the default): the population network fine-tuned "
         "on the K simulations "
         "(surrogate.tuning; how many Adam steps, chosen by cross-validation over them, in "
         "brackets); tuned + corrected: the correction fitted on the tuned network's "
         "out-of-fold residuals; tuning s: the seconds of both.", "",
-        "| K | liver | population MEE mm | corrected MEE mm | patient model MEE mm | "
-        "scratch MEE mm | adaptation s | minutes | tuned MEE mm | tuned + corrected MEE mm | "
-        "tuning s |", "|---|---|---|---|---|---|---|---|---|---|---|", *rows, "",
+        "| K | liver | population MEE mm | corrected MEE mm | linear MEE mm | linear + "
+        "corrected MEE mm | patient model MEE mm | scratch MEE mm | adaptation s | minutes | "
+        "tuned MEE mm | tuned + corrected MEE mm | tuning s |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|", *rows, "",
         "Median over the livers (patient model; K = 0: the population model): "
         + ", ".join(f"K = {k}: {med[k]:.3f} mm" for k in ks) + ".", ""]
     tuned = {k: [np.median([c["points"][str(k)][key] for c in curves])
@@ -332,7 +366,7 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
         if k is None:
             return f"{c['liver']}: not reached"
         wall = "" if start is None else f", {minutes(c, k, start):.1f} min"
-        return f"{c['liver']}: {k} ({c['fe_seconds'][str(k)]:.0f} s{wall})"
+        return f"{c['liver']}: {k} ({c['fe_seconds'].get(str(k), 0.0):.0f} s{wall})"
 
     lines += ["Least K at which the patient model is within the goal's "
               f"{GOAL_MM} mm, with the FE seconds of those K simulations on two ranks (their "

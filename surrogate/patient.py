@@ -1,22 +1,27 @@
-"""A new patient's model: the population model placed on the patient's liver, corrected with a
-few FE simulations on the patient's own mesh, and distilled into a model of that one liver
-(the reduced basis, :mod:`surrogate.basis`) that ``load_predictor``, the viewer and the
-manipulator use as any other one-liver model.
+"""A new patient's model: the population model placed on the patient's liver (its boundary
+condition), the liver's small-strain responses on its own mesh corrected with a few FE
+simulations there, and distilled into a model of that one liver (the reduced basis,
+:mod:`surrogate.basis`) that ``load_predictor``, the viewer and the manipulator use as any
+other one-liver model.
 
     python -m surrogate adapt MODEL DATA --liver FILE --run OUT [--sims K] [--frame F] [--tune]
 
 ``DATA``: the patient's FE simulations with the model's boundary condition (``truth-scene``
-then ``fem_sim generate``; ``make patient`` runs the three steps).
+then ``fem_sim generate``), and their small-strain responses with those of the drawn loads
+(``fem_sim linear``, ``DATA/linear.h5``, :mod:`surrogate.linear_base`); ``make patient``
+runs the four steps. The teacher's base is those responses (the exact linear elasticity of
+the patient's mesh); a dataset without them falls back on the placed population model.
 
-The correction (:class:`Correction`) is the residual of the FE fields against the placed
-population model, regressed on the load by kernel ridge regression (with ``tune``: against
+The correction (:class:`Correction`) is the residual of the FE fields against the base,
+regressed on the load by kernel ridge regression (with ``tune``: against
 that model with its network first fine-tuned on the K simulations, :mod:`surrogate.tuning`,
 on the tuned network's out-of-fold residuals; docs/patient.md measures both). The kernel is a
 Gaussian of the distance between the load points times a polynomial of the forces with no
 constant term, ``g(x, x') (f.f' + beta (f.f')^2)``: a residual that vanishes with the force
-and is nearly linear in it, as a hyperelastic liver's is for small loads, and that spreads
+and is nearly linear in it, as a hyperelastic liver's against a population model is for
+small loads (against its own small-strain response, nearly quadratic), and that spreads
 from a loaded point to its neighbours (a Gaussian, or an exponential with its heavier tail).
-Two terms are added to it: the product of the population model's fields for the two loads,
+Two terms are added to it: the product of the base's fields for the two loads,
 and that of what the K FE simulations say of each load by reciprocity (:class:`Sensors`:
 by Maxwell-Betti, simulation k's first, nearly linear, load step gives the displacement at
 its load point along its force that any other load causes there; so a load reads its
@@ -24,10 +29,11 @@ residual at the K load points, and the regression learns how the whole residual 
 follows those K readings). The decay, length scale, ridge, beta and the weights of the two
 added terms are chosen by cross-validation over the K simulations, grouped by simulation (a
 held-out simulation's readings come from the others only); with fewer than
-two, or when no setting beats the model on the held-out simulations, the model is kept
-unchanged. The distillation draws loads as the scene draws them (its eligible nodes, uniform
-directions, its magnitude and load steps), takes their fields from the corrected model and
-trains the reduced basis on them with the K FE fields.
+two, or when no setting beats the base on the held-out simulations, the base is kept
+unchanged. The distillation takes loads drawn as the scene draws them (its eligible nodes,
+uniform directions, its magnitude and load steps: ``fem_sim linear``'s drawn cases, or drawn
+here without them), their fields from the corrected base, and trains the reduced basis on
+them with the K FE fields.
 """
 
 from __future__ import annotations
@@ -41,6 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from surrogate.data import Dataset
+from surrogate.linear_base import LinearBase
 from surrogate.tuning import fine_tuned, placed_cases, placed_modes, simulation_folds
 
 LENGTHS = (10.0, 20.0, 40.0, 80.0, 160.0)   # mm: the kernel's length scales tried
@@ -272,7 +279,8 @@ class Teacher:
     mesh ``ds`` (its output nodes), plus the correction once fitted.
     """
 
-    def __init__(self, pred, placement, ds: Dataset, shape: str | None = None):
+    def __init__(self, pred, placement, ds: Dataset, shape: str | None = None,
+                 linear: LinearBase | None = None):
         from surrogate.predict_liver import PlacedModel
 
         with warnings.catch_warnings():
@@ -280,6 +288,7 @@ class Teacher:
             self.placed = PlacedModel(pred, nodes=ds.points[0], placement=placement,
                                       shape=shape)
         self.out = np.asarray(ds.out_nodes[0])
+        self.linear = linear   # the patient's small-strain responses: the base when given
         self.correction: Correction | None = None
         self.tuning: dict | None = None
         self.out_of_fold: np.ndarray | None = None   # (samples, n_out, 3) mm, once tuned
@@ -288,6 +297,9 @@ class Teacher:
         """The placed network fine-tuned on the FE ``fields`` of the patient's ``samples``
         (:mod:`surrogate.tuning`; how far chosen by cross-validation over simulations).
         """
+        if self.linear is not None:
+            raise ValueError("fine-tuning adapts the population network; with the patient's "
+                             "small-strain responses as the base there is none to tune")
         groups = ds.sample_sim[samples]
         cases = placed_cases(self.placed, ds.forces[samples, 0], ds.load_points[samples, 0],
                              fields, groups)
@@ -311,9 +323,19 @@ class Teacher:
                 out.append(self.placed(f, self.placed.load_nodes(p))[:, self.out])
         return np.concatenate(out) if out else np.zeros((0, self.out.size, 3))
 
-    def __call__(self, forces, points) -> np.ndarray:
-        """(cases, n_out, 3) mm: the population model plus the correction."""
-        u = self.population(forces, points)
+    def base(self, ds: Dataset, samples: np.ndarray) -> np.ndarray:
+        """(samples, n_out, 3) mm: what the correction corrects for the samples of ``ds``:
+        the small-strain responses when the teacher has them, else the population model.
+        """
+        if self.linear is not None:
+            return self.linear.samples(ds, samples)
+        return self.population(ds.forces[samples, 0], ds.load_points[samples, 0])
+
+    def __call__(self, forces, points, base: np.ndarray | None = None) -> np.ndarray:
+        """(cases, n_out, 3) mm: the base (``base``; default the population model) plus
+        the correction.
+        """
+        u = self.population(forces, points) if base is None else base
         if self.correction is not None and len(u):
             u = u + self.correction(points, forces, u).reshape(u.shape)
         return u
@@ -342,7 +364,7 @@ def fit_teacher(teacher: Teacher, ds: Dataset, sims, tune: bool = False) -> Teac
     if tune:
         teacher.tune(ds, smp, fields)
     # the correction learns the residual of a load the network was not tuned on: out of fold
-    u = teacher.out_of_fold if teacher.out_of_fold is not None else teacher.population(f, x)
+    u = teacher.out_of_fold if teacher.out_of_fold is not None else teacher.base(ds, smp)
     r = (fields - u).reshape(smp.size, -1)
     groups = ds.sample_sim[smp]
     sensors = Sensors.of(ds.points[0][teacher.out], x, f, fields, groups)
@@ -402,8 +424,12 @@ def distilled(teacher: Teacher, ds: Dataset, sims, n_synthetic: int, cfg: dict,
     """
     from surrogate.train import fit_design
 
-    forces, nodes, fractions, sim = drawn_loads(ds, n_synthetic, seed)
-    fields = teacher(forces, ds.points[0][nodes])
+    if teacher.linear is not None:   # the drawn cases of fem_sim linear, with their responses
+        forces, nodes, fractions, sim, base = teacher.linear.drawn(n_synthetic)
+        fields = teacher(forces, ds.points[0][nodes], base)
+    else:
+        forces, nodes, fractions, sim = drawn_loads(ds, n_synthetic, seed)
+        fields = teacher(forces, ds.points[0][nodes])
     aug = with_cases(ds, sims_samples(ds, sims), forces, nodes, fractions, sim, fields)
     model, _ = fit_design(aug, np.arange(aug.n_samples), cfg, seed, "patient ", log_fn)
     return model, aug
@@ -438,13 +464,15 @@ def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | 
         raise ValueError(f"{model_dir}: not a population model (no shape model): a patient "
                          "model adapts a model trained on a population of livers")
     placement, found = place(pred, liver, frame, saved)
-    teacher = Teacher(pred, placement, ds)
+    teacher = Teacher(pred, placement, ds, linear=LinearBase.of(ds))
     placed = time.perf_counter()
     fit_teacher(teacher, ds, used, tune)
     corrected = time.perf_counter()
     info = {"population_model": str(Path(model_dir).resolve()),
             "liver": str(Path(liver).resolve()), "data": str(Path(data).resolve()),
             "placement_residual_mm": placement.residual, "warnings": list(found),
+            "base": "population model" if teacher.linear is None else
+                    f"small-strain responses ({teacher.linear.path})",
             "tuning": teacher.tuning,
             **adapted(teacher, ds, used, run, synthetic=synthetic, seed=seed, log_fn=log_fn,
                       **overrides)}
@@ -524,35 +552,63 @@ def scratch_model(ds: Dataset, sims, cfg: dict, seed: int = 0, log_fn=print):
 def held_out_errors(pred, placement, ds: Dataset, train_sims, held_sims, *, run: Path,
                     synthetic: int = SYNTHETIC, log_fn=print) -> dict:
     """MEE (mm) on the patient's simulations ``held_sims`` of: the population model ``pred``
-    placed by ``placement``; it corrected with ``train_sims`` (``corrected``: the teacher);
-    the patient model distilled from it (exported to ``run``); the population network
-    fine-tuned on ``train_sims`` (``tuned``), and that corrected (``tuned_corrected``); the
-    reduced basis trained on ``train_sims`` alone. With the seconds of each step.
+    placed by ``placement``; it corrected with ``train_sims`` (``corrected``); with the
+    dataset's small-strain responses (``linear.h5``), those alone (``linear``) and corrected
+    (``linear_corrected``); the patient model distilled from the teacher ``adapt`` uses (the
+    responses' when there are any), exported to ``run``; the population network fine-tuned
+    on ``train_sims`` (``tuned``), and that corrected (``tuned_corrected``); the reduced
+    basis trained on ``train_sims`` alone. With the seconds of each step.
     """
-    from surrogate.designs import DESIGNS
-    from surrogate.predictor import load_predictor
-
     smp = sims_samples(ds, held_sims)
     true = sample_fields(ds, smp)
     f, x = ds.forces[smp, 0], ds.load_points[smp, 0]
     teacher = Teacher(pred, placement, ds)
     out = {"fe_simulations": len(train_sims), "held_out": len(held_sims),
-           "population": field_mee(teacher.population(f, x), true)}
-    if len(train_sims) == 0:
+           "population": field_mee(teacher.base(ds, smp), true)}
+    linear = LinearBase.of(ds)
+    if linear is not None:
+        out["linear"] = field_mee(linear.samples(ds, smp), true)
+    if len(train_sims) == 0 and linear is None:
         return out
-    start = time.perf_counter()
-    out["corrected"] = field_mee(fit_teacher(teacher, ds, train_sims)(f, x), true)
-    fitted = time.perf_counter() - start
+    start, fitted = time.perf_counter(), 0.0
+    if len(train_sims):
+        fit_teacher(teacher, ds, train_sims)
+        out["corrected"] = field_mee(teacher(f, x, teacher.base(ds, smp)), true)
+        fitted = time.perf_counter() - start
+    if linear is not None:   # K = 0: the small-strain responses alone, distilled
+        start = time.perf_counter()
+        teacher = Teacher(pred, placement, ds, linear=linear)
+        if len(train_sims):
+            fit_teacher(teacher, ds, train_sims)
+            out["linear_corrected"] = field_mee(teacher(f, x, teacher.base(ds, smp)), true)
+        fitted = time.perf_counter() - start
     info = adapted(teacher, ds, train_sims, run, synthetic=synthetic, log_fn=log_fn)
-    out["patient_model"] = field_mee(predictor_fields(load_predictor(run / "model"), ds, smp),
-                                     true)
+    out["patient_model"] = field_mee(predictor_fields(load_predictor_of(run), ds, smp), true)
     out["adapt_seconds"] = {"correction": fitted, **info["seconds"]}
     out["correction"] = info["correction"]
+    if len(train_sims):
+        out.update(_baselines(pred, placement, ds, train_sims, smp, true, log_fn))
+    return out
+
+
+def load_predictor_of(run: Path):
+    from surrogate.predictor import load_predictor
+
+    return load_predictor(Path(run) / "model")
+
+
+def _baselines(pred, placement, ds: Dataset, train_sims, smp, true, log_fn) -> dict:
+    """The population network fine-tuned on ``train_sims`` (alone and corrected) and the
+    reduced basis trained on them alone, on the held-out samples ``smp``.
+    """
+    from surrogate.designs import DESIGNS
+
     start = time.perf_counter()
     tuned = fit_teacher(Teacher(pred, placement, ds), ds, train_sims, tune=True)
-    out["tuned"] = field_mee(tuned.population(f, x), true)
-    out["tuned_corrected"] = field_mee(tuned(f, x), true)
-    out["tuning"] = {**tuned.tuning, "seconds": time.perf_counter() - start}
+    f, x = ds.forces[smp, 0], ds.load_points[smp, 0]
+    out = {"tuned": field_mee(tuned.population(f, x), true),
+           "tuned_corrected": field_mee(tuned(f, x), true),
+           "tuning": {**tuned.tuning, "seconds": time.perf_counter() - start}}
     model, cfg = scratch_model(ds, train_sims, student_config(), log_fn=log_fn)
     p, t, _ = DESIGNS["basis"].predict_samples(ds, model, cfg, smp)
     out["scratch"] = float(np.linalg.norm(np.asarray(p) - np.asarray(t), axis=-1).mean())

@@ -14,7 +14,13 @@ from data_spec import Geometry, Scene, read_geometry
 from data_spec.geometry import boundary_triangles, geometry_problems
 from data_spec.livers import members
 from fem_sim.geometry.errors import GeometryError
-from fem_sim.geometry.mesh_index import indexed, phantom_key, read_index, write_index
+from fem_sim.geometry.mesh_index import (
+    indexed,
+    phantom_code,
+    phantom_key,
+    read_index,
+    write_index,
+)
 from fem_sim.geometry.quality import mesh_problems, orient
 from fem_sim.geometry.regions import default_vena_cava
 
@@ -62,12 +68,23 @@ def scene_geometries(scene: Scene, cache=None, progress=None, dataset=None,
 
 
 def _mesh_key(scene: Scene, index: int) -> str | None:
-    """What a phantom's mesh depends on; None for a liver file (read, not generated)."""
+    """What a phantom's or a liver file's mesh depends on (a file's bytes, its settings and
+    the code that repairs and meshes it); None for a file that is a mesh already (read).
+    """
     g = scene["geometry"]
     if g["source"] == "phantom":
         seed, variety = g["phantom_seed"], "narrow"
     elif g["source"] == "population":
         seed, variety = g["population_seed"] + index, g.get("variety", "anatomical")
+    elif Path(g["path"]).suffix.lower() in SURFACES:
+        import hashlib
+
+        from fem_sim.geometry.file_population import _code_bytes
+
+        h = hashlib.sha256(Path(g["path"]).read_bytes())
+        h.update(_code_bytes())
+        return (f"file {h.hexdigest()[:16]}, mesh size {float(g['mesh_size'])!r}, scale "
+                f"{g['scale_to_mm']!r}, spacing {g.get('spacing')}, {phantom_code()}")
     else:
         return None
     return phantom_key(seed, variety, g["mesh_size"])

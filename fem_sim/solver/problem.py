@@ -97,7 +97,7 @@ class OgdenProblem:
         return self.stepper.run(fractions, self.displacement)
 
     def linear_responses(self, material: OgdenMaterial, constraints: list[Constraint],
-                         loads: list[list], rtol: float = 1e-8) -> np.ndarray | None:
+                         loads: list[list], rtol: float = 1e-6) -> np.ndarray | None:
         """Small-strain displacements (len(loads), n_nodes, 3) mm on rank 0 (collective): the
         body linearised at u = 0 (its tangent there is the small-strain elasticity tensor of
         the material) under each entry of ``loads`` (a list of loads at fraction 1). One

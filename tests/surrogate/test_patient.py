@@ -13,6 +13,7 @@ import pytest
 
 from surrogate import load_predictor
 from surrogate.data import load_dataset
+from surrogate.linear_base import LinearBase
 from surrogate.patient import (
     Sensors,
     Teacher,
@@ -113,7 +114,8 @@ def test_adapting_lowers_the_patients_error_and_exports_a_one_liver_model():
     by at least 10 %."""
     d = Path(generated_dataset("LIVERFEM_TEST_PATIENT"))
     info = json.loads((d / "run" / "adaptation.json").read_text())
-    assert len(info["fe_simulations"]) == 20 and info["correction"] is not None
+    assert len(info["fe_simulations"]) == 20
+    assert info["base"].startswith("small-strain responses")   # make patient ran fem_sim linear
     assert (d / "placement.npz").is_file()   # placed once, by truth-scene; adapt read it
     pred = load_predictor(d / "run" / "model")
     meta = json.loads((d / "run" / "model" / "model.json").read_text())
@@ -139,8 +141,13 @@ def test_adapting_lowers_the_patients_error_and_exports_a_one_liver_model():
     before = field_mee(Teacher(population, placement, ds).population(
         ds.forces[smp, 0], ds.load_points[smp, 0]), true)
     after = field_mee(predictor_fields(pred, ds, smp), true)
-    print(f"held-out MEE: population {before:.3f} mm, patient model {after:.3f} mm")
+    linear = field_mee(LinearBase(ds).samples(ds, smp), true)
+    print(f"held-out MEE: population {before:.3f} mm, small-strain responses {linear:.3f} "
+          f"mm, patient model {after:.3f} mm")
     assert after < 0.9 * before, (after, before)
+    # the liver's own linear elasticity beats a model of other livers on it (these loads
+    # strain it little); wrong nodes, frame or boundary condition would not
+    assert linear < 0.5 * before, (linear, before)
 
 
 @pytest.mark.dataset
@@ -306,3 +313,26 @@ def test_adapting_to_none_or_more_simulations_than_there_are_is_a_clear_error(ca
                      "/nonexistent.obj", "--run", "/nonexistent-run", "--sims", str(sims)]) != 0
         err = capsys.readouterr().err
         assert said in err and str(d / "data") in err, err
+
+
+@pytest.mark.dataset
+def test_the_small_strain_base_scales_with_the_load_fraction_and_draws_the_files_cases():
+    """LinearBase on make patient's data: a simulation's samples are its response times their
+    load fraction; the drawn cases are fem_sim linear's, at every fraction; asking for more
+    than the file has names the option that makes them."""
+    d = Path(generated_dataset("LIVERFEM_TEST_PATIENT"))
+    ds = load_dataset(d / "data")
+    lb = LinearBase(ds)
+    smp = sims_samples(ds, [int(ds.sample_sim[0])])
+    u = lb.samples(ds, smp)
+    lam = ds.sample_fraction[smp]
+    np.testing.assert_allclose(u / lam[:, None, None], np.broadcast_to(u[-1] / lam[-1], u.shape),
+                               rtol=1e-5, atol=1e-7)
+    forces, nodes, fractions, case, fields = lb.drawn(50)
+    n = lb.fractions.size
+    assert forces.shape == (50 * n, 3) and fields.shape == (50 * n, ds.out_nodes[0].size, 3)
+    rows = lb.lf.synthetic[case]
+    np.testing.assert_allclose(forces, lb.lf.forces[rows, 0] * fractions[:, None])
+    np.testing.assert_array_equal(nodes, lb.lf.load_nodes[rows, 0])
+    with pytest.raises(ValueError, match="--synthetic"):
+        lb.drawn(lb.lf.synthetic.size + 1)

@@ -1,0 +1,68 @@
+"""The patient's small-strain responses (``fem_sim linear``, :mod:`data_spec.linear_fields`)
+as what a patient model starts from: the exact linear elasticity of the patient's own mesh
+with the model's boundary condition, for the loads of its FE simulations and for drawn loads
+of the same rule. A linear response scales with the load fraction, so a case at fraction
+``lam`` is ``lam`` times its response at fraction 1; what the nonlinear FE simulations add is
+the liver's stiffening (:mod:`surrogate.patient` corrects for it).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from data_spec.linear_fields import linear_fields_path, read_linear_fields
+from surrogate.data import Dataset
+
+
+class LinearBase:
+    """The responses of ``path`` (default ``ds.directory/linear.h5``) at the output nodes of
+    the one-liver dataset ``ds``.
+    """
+
+    def __init__(self, ds: Dataset, path: str | Path | None = None):
+        path = Path(path) if path else linear_fields_path(ds.directory)
+        self.path, self.lf = path, read_linear_fields(path)
+        out = np.asarray(ds.out_nodes[0])
+        where = np.searchsorted(self.lf.output_nodes, out)
+        if np.any(where >= self.lf.output_nodes.size) or \
+                np.any(self.lf.output_nodes[np.minimum(where, out.size - 1)] != out):
+            raise ValueError(f"{path}: its output nodes are not the dataset's "
+                             f"({ds.directory}): rerun fem_sim linear on the dataset's scene")
+        self.columns = where
+        self.fractions = np.unique(np.round(ds.sample_fraction, 9))
+
+    @classmethod
+    def of(cls, ds: Dataset) -> LinearBase | None:
+        """The dataset's responses, None when it has no linear.h5."""
+        if ds.directory is None or not linear_fields_path(ds.directory).exists():
+            return None
+        return cls(ds)
+
+    def samples(self, ds: Dataset, samples: np.ndarray) -> np.ndarray:
+        """(samples, n_out, 3) mm: the responses of the samples' simulations at their load
+        fractions.
+        """
+        rows = self.lf.rows(ds.sample_sim[samples])
+        u = self.lf.displacement[rows][:, self.columns].astype(np.float64)
+        return u * np.asarray(ds.sample_fraction[samples], np.float64)[:, None, None]
+
+    def drawn(self, n: int) -> tuple:
+        """(forces (S, 3) N, load nodes (S,), fractions (S,), case (S,), fields (S, n_out, 3)
+        mm): the file's first ``n`` drawn cases, each at every load fraction of the dataset;
+        ValueError when the file has fewer.
+        """
+        rows = self.lf.synthetic[:n]
+        if rows.size < n:
+            raise ValueError(f"{self.path}: {rows.size} drawn cases, fewer than the {n} asked: "
+                             f"rerun fem_sim linear with --synthetic {n}")
+        if self.lf.load_nodes.shape[1] != 1:
+            raise ValueError(f"{self.path}: {self.lf.load_nodes.shape[1]} loads per case; a "
+                             "patient model is of one load")
+        rep = self.fractions.size
+        lam = np.tile(self.fractions, n)
+        forces = np.repeat(self.lf.forces[rows, 0], rep, axis=0) * lam[:, None]
+        fields = np.repeat(self.lf.displacement[rows][:, self.columns], rep, axis=0)
+        return (forces, np.repeat(self.lf.load_nodes[rows, 0], rep), lam,
+                np.repeat(np.arange(n), rep), fields.astype(np.float64) * lam[:, None, None])
