@@ -6,7 +6,8 @@
 For each validation liver (never seen by the population model, its PCA or any design choice):
 its FE truth with the population model's boundary condition, K_MAX + HELD simulations
 (resumable, under bench/results/patient/); then for every K the MEE on the last HELD
-simulations of the placed population model alone, the corrected one, the exported patient
+simulations of the placed population model alone, the corrected one, the liver's
+small-strain responses (``fem_sim linear``) alone and corrected, the exported patient
 model (``surrogate adapt`` on the first K, :mod:`surrogate.patient`), the reduced basis
 trained on the same K simulations from scratch, with the adaptation's seconds, and the
 population network fine-tuned on them (``--tune``), alone and corrected; and the wall
@@ -292,7 +293,8 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
     start = max(0.0, e2e["fe"] - e2e["solves"]) if e2e and "solves" in e2e else None
     ks = a.ks
 
-    def mee(c, k):   # the patient model's MEE (none at K = 0: the population model's)
+    def mee(c, k):   # the patient model's MEE (none at K = 0 without the small-strain
+        #              responses: the population model's)
         return c["points"][str(k)].get("patient_model", c["points"][str(k)]["population"])
 
     rows = []
@@ -346,7 +348,8 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
         "corrected MEE mm | patient model MEE mm | scratch MEE mm | adaptation s | minutes | "
         "tuned MEE mm | tuned + corrected MEE mm | tuning s |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|", *rows, "",
-        "Median over the livers (patient model; K = 0: the population model): "
+        "Median over the livers (patient model; at K = 0 the small-strain responses alone, "
+        "distilled): "
         + ", ".join(f"K = {k}: {med[k]:.3f} mm" for k in ks) + ".", ""]
     tuned = {k: [np.median([c["points"][str(k)][key] for c in curves])
                  for key in ("corrected", "tuned", "tuned_corrected")] for k in ks if k}
