@@ -174,7 +174,7 @@ def curve(liver: Path, a) -> tuple[dict, dict]:
         if str(k) not in done:
             done[str(k)] = held_out_errors(pred, placement, ds, sims[:k], held,
                                            run=a.results / liver.stem / f"run_K{k}",
-                                           log_fn=lambda m: None)
+                                           tune=a.tune, log_fn=lambda m: None)
             path.write_text(json.dumps(done, indent=1))
         print(f"[{liver.stem}] K={k}: {done[str(k)]}", flush=True)
     return ({"liver": liver.stem, "nodes": int(ds.points[0].shape[0]), "points": done,
@@ -352,18 +352,20 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
         "distilled): "
         + ", ".join(f"K = {k}: {med[k]:.3f} mm" for k in ks) + ".", ""]
     tuned = {k: [np.median([c["points"][str(k)][key] for c in curves])
-                 for key in ("corrected", "tuned", "tuned_corrected")] for k in ks if k}
+                 for key in ("corrected", "tuned", "tuned_corrected")] for k in ks
+             if k and all("tuned" in c["points"][str(k)] for c in curves)}
     lower = {k: sum(c["points"][str(k)]["tuned_corrected"] < c["points"][str(k)]["corrected"]
-                    for c in curves) for k in ks if k}
-    lines += ["Fine-tuning the population network (`--tune`), median over the livers, "
-              "corrected / tuned / tuned + corrected: "
-              + "; ".join(f"K = {k}: {a:.3f} / {b:.3f} / {c:.3f} mm" for k, (a, b, c)
-                          in tuned.items())
-              + ". Tuned + corrected below corrected on "
-              + ", ".join(f"{n} of {len(curves)} livers at K = {k}" for k, n in lower.items())
-              + f" ({sum(lower.values())} of {len(curves) * len(lower)} points): `make "
-              "patient` corrects the population network as it is unless told `ADAPT=--tune`.",
-              ""]
+                    for c in curves) for k in tuned}
+    if tuned:
+        lines += ["Fine-tuning the population network (`--tune`), median over the livers, "
+                  "corrected / tuned / tuned + corrected: "
+                  + "; ".join(f"K = {k}: {a:.3f} / {b:.3f} / {c:.3f} mm" for k, (a, b, c)
+                              in tuned.items())
+                  + ". Tuned + corrected below corrected on "
+                  + ", ".join(f"{n} of {len(curves)} livers at K = {k}"
+                              for k, n in lower.items())
+                  + f" ({sum(lower.values())} of {len(curves) * len(lower)} points).", ""]
+
     def reached(c) -> str:   # the least K within GOAL_MM, its FE seconds (and minutes)
         k = next((k for k in ks if mee(c, k) <= GOAL_MM), None)
         if k is None:
@@ -441,6 +443,8 @@ def main() -> int:
     ap.add_argument("--ks", nargs="+", type=int, default=list(KS),
                     help=f"the K values (the truth holds the largest plus {HELD} held out; "
                     f"include 0 and {SOURCES_K})")
+    ap.add_argument("--no-tune", dest="tune", action="store_false",
+                    help="leave out the fine-tuned population network (ADAPT=--tune)")
     ap.add_argument("--no-end-to-end", dest="e2e", action="store_false",
                     help="keep the end-to-end times of docs/patient.json")
     a = ap.parse_args()

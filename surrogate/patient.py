@@ -550,14 +550,15 @@ def scratch_model(ds: Dataset, sims, cfg: dict, seed: int = 0, log_fn=print):
 
 
 def held_out_errors(pred, placement, ds: Dataset, train_sims, held_sims, *, run: Path,
-                    synthetic: int = SYNTHETIC, log_fn=print) -> dict:
+                    synthetic: int = SYNTHETIC, tune: bool = True, log_fn=print) -> dict:
     """MEE (mm) on the patient's simulations ``held_sims`` of: the population model ``pred``
     placed by ``placement``; it corrected with ``train_sims`` (``corrected``); with the
     dataset's small-strain responses (``linear.h5``), those alone (``linear``) and corrected
     (``linear_corrected``); the patient model distilled from the teacher ``adapt`` uses (the
     responses' when there are any), exported to ``run``; the population network fine-tuned
-    on ``train_sims`` (``tuned``), and that corrected (``tuned_corrected``); the reduced
-    basis trained on ``train_sims`` alone. With the seconds of each step.
+    on ``train_sims`` (``tuned``), and that corrected (``tuned_corrected``; not with
+    ``tune`` False); the reduced basis trained on ``train_sims`` alone. With the seconds of
+    each step.
     """
     smp = sims_samples(ds, held_sims)
     true = sample_fields(ds, smp)
@@ -587,7 +588,7 @@ def held_out_errors(pred, placement, ds: Dataset, train_sims, held_sims, *, run:
     out["adapt_seconds"] = {"correction": fitted, **info["seconds"]}
     out["correction"] = info["correction"]
     if len(train_sims):
-        out.update(_baselines(pred, placement, ds, train_sims, smp, true, log_fn))
+        out.update(_baselines(pred, placement, ds, train_sims, smp, true, tune, log_fn))
     return out
 
 
@@ -597,18 +598,21 @@ def load_predictor_of(run: Path):
     return load_predictor(Path(run) / "model")
 
 
-def _baselines(pred, placement, ds: Dataset, train_sims, smp, true, log_fn) -> dict:
-    """The population network fine-tuned on ``train_sims`` (alone and corrected) and the
-    reduced basis trained on them alone, on the held-out samples ``smp``.
+def _baselines(pred, placement, ds: Dataset, train_sims, smp, true, tune: bool,
+               log_fn) -> dict:
+    """The population network fine-tuned on ``train_sims`` (alone and corrected; with
+    ``tune``) and the reduced basis trained on them alone, on the held-out samples ``smp``.
     """
     from surrogate.designs import DESIGNS
 
-    start = time.perf_counter()
-    tuned = fit_teacher(Teacher(pred, placement, ds), ds, train_sims, tune=True)
-    f, x = ds.forces[smp, 0], ds.load_points[smp, 0]
-    out = {"tuned": field_mee(tuned.population(f, x), true),
-           "tuned_corrected": field_mee(tuned(f, x), true),
-           "tuning": {**tuned.tuning, "seconds": time.perf_counter() - start}}
+    out = {}
+    if tune:
+        start = time.perf_counter()
+        tuned = fit_teacher(Teacher(pred, placement, ds), ds, train_sims, tune=True)
+        f, x = ds.forces[smp, 0], ds.load_points[smp, 0]
+        out = {"tuned": field_mee(tuned.population(f, x), true),
+               "tuned_corrected": field_mee(tuned(f, x), true),
+               "tuning": {**tuned.tuning, "seconds": time.perf_counter() - start}}
     model, cfg = scratch_model(ds, train_sims, student_config(), log_fn=log_fn)
     p, t, _ = DESIGNS["basis"].predict_samples(ds, model, cfg, smp)
     out["scratch"] = float(np.linalg.norm(np.asarray(p) - np.asarray(t), axis=-1).mean())
