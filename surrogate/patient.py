@@ -464,7 +464,8 @@ def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | 
         raise ValueError(f"{model_dir}: not a population model (no shape model): a patient "
                          "model adapts a model trained on a population of livers")
     placement, found = place(pred, liver, frame, saved)
-    teacher = Teacher(pred, placement, ds, linear=LinearBase.of(ds))
+    # --tune adapts the population network, so it keeps the population model as the base
+    teacher = Teacher(pred, placement, ds, linear=None if tune else LinearBase.of(ds))
     placed = time.perf_counter()
     fit_teacher(teacher, ds, used, tune)
     corrected = time.perf_counter()
