@@ -25,9 +25,9 @@ class LinearBase:
         path = Path(path) if path else linear_fields_path(ds.directory)
         self.path, self.lf = path, read_linear_fields(path)
         out = np.asarray(ds.out_nodes[0])
-        where = np.searchsorted(self.lf.output_nodes, out)
-        if np.any(where >= self.lf.output_nodes.size) or \
-                np.any(self.lf.output_nodes[np.minimum(where, out.size - 1)] != out):
+        have = self.lf.output_nodes
+        where = np.searchsorted(have, out)
+        if np.any(where >= have.size) or np.any(have[np.minimum(where, have.size - 1)] != out):
             raise ValueError(f"{path}: its output nodes are not the dataset's "
                              f"({ds.directory}): rerun fem_sim linear on the dataset's scene")
         self.columns = where
