@@ -104,9 +104,28 @@ class OgdenProblem:
         factorisation of that tangent serves every load set (each solve refined to ``rtol``);
         the state is left at u = 0.
         """
+        out = self.load_expansion(material, constraints, loads, order=1, rtol=rtol)
+        return None if out is None else out[:, 0]
+
+    def load_expansion(self, material: OgdenMaterial, constraints: list[Constraint],
+                       loads: list[list], order: int = 2, rtol: float = 1e-6,
+                       step: float = 1e-3) -> np.ndarray | None:
+        """The displacement's Taylor coefficients in the load fraction at u = 0 (collective):
+        (len(loads), order, n_nodes, 3) mm on rank 0, u(lam) = lam u1 + lam^2 u2 + O(lam^3).
+
+        Expanding F_int(u(lam)) = lam f: K u1 = f (K the tangent at u = 0, as in
+        :meth:`linear_responses`) and K u2 = -1/2 D^2F_int(0)[u1, u1], the internal force's
+        second derivative along u1 taken by the central difference
+        (F_int(e u1) + F_int(-e u1)) / e^2 (F_int(0) = 0: the body is stress-free there), whose
+        error is O(e^2) relative; ``step`` = e. The same factorisation solves both; the state
+        is left at u = 0.
+        """
+        if order not in (1, 2):
+            raise ValueError(f"load_expansion: order must be 1 or 2, got {order}")
         eqs = self.equations
         eqs.set_problem(material, constraints, loads[0] if loads else [])
-        eqs.set_state(np.zeros_like(eqs.u.x.array))
+        zero = np.zeros_like(eqs.u.x.array)
+        eqs.set_state(zero)
         eqs.update_points(tangent=True)
         J = eqs.jacobian(lift=False)
         out = []
@@ -114,8 +133,27 @@ class OgdenProblem:
             self.disc.load_vector(ld, eqs.f_ext)
             eqs.set_rhs_to_load()
             self.linear.solve_recurring(J, eqs.rhs, eqs.du, rtol)
-            out.append(self.disc.gather_vertex_values(eqs.du.array.reshape(-1, 3)))
-        return np.stack(out) if self.comm.rank == 0 and out else None
+            terms = [eqs.du.array_r.copy()]
+            if order == 2:
+                eqs.rhs.array[:] = -0.5 * self._second_derivative(terms[0], step)
+                eqs.rhs.array[eqs.cons.owned] = 0.0
+                self.linear.solve_recurring(J, eqs.rhs, eqs.du, rtol)
+                terms.append(eqs.du.array_r.copy())
+            out.append([self.disc.gather_vertex_values(t.reshape(-1, 3)) for t in terms])
+        eqs.set_state(zero)
+        return np.array(out) if self.comm.rank == 0 and out else None
+
+    def _second_derivative(self, v: np.ndarray, step: float) -> np.ndarray:
+        """D^2F_int(0)[v, v] at the owned dofs by a central difference (collective)."""
+        eqs, total = self.equations, np.zeros_like(v)
+        for sign in (1.0, -1.0):
+            eqs.set_state(np.zeros_like(eqs.u.x.array))
+            eqs.u.x.array[: v.size] = sign * step * v
+            eqs.scatter()
+            eqs.update_points(tangent=False)
+            eqs.assembler.internal_forces(eqs.b)
+            total += eqs.b.array_r[: v.size]
+        return total / step**2
 
     def displacement(self) -> np.ndarray | None:
         """Current displacement at the mesh nodes, source order, on rank 0 (collective)."""

@@ -1,5 +1,6 @@
 """OgdenProblem.linear_responses: the body linearised at u = 0, against closed-form small-strain
-elasticity, Maxwell-Betti reciprocity and the nonlinear solve at a small load."""
+elasticity, Maxwell-Betti reciprocity and the nonlinear solve at a small load; its second-order
+term (OgdenProblem.load_expansion) against the homogeneous bar and the O(lam^3) limit."""
 
 import numpy as np
 import pytest
@@ -81,3 +82,54 @@ def test_reciprocity_and_small_load_limit(degree):
     assert d1 <= 5e-4
     assert 5.0 < d2 / d1 < 20.0   # the gap closes as the load fraction: first order
     assert d3 >= 0.05             # the liver's stiffening shows at fraction 1
+
+
+def test_second_order_uniaxial_closed_form():
+    """The load's second-order term of the homogeneous uniaxial bar (rollers, dead traction t
+    on x = 1), from the energy in log-stretches p = ln a, q = ln b (stretches (a, b, b)),
+    d = p - q: W = c/m^2 (e^(2md/3) + 2 e^(-md/3) - 3) + K/2 (p + 2q)^2. P22 = 0 gives
+    K (p + 2q) = g(d)/2 with g = 2c/(3m) (e^(2md/3) - e^(-md/3)) = (2c/3)(d + m d^2/6 + ...),
+    and P11 = t gives t = (3/2) g e^-p. In tau = t/c, to second order:
+    p = A tau + (B - A s) tau^2, q = C tau + (B - C s) tau^2, with A = 2/3 + c/(9K),
+    C = c/(9K) - 1/3, s = m/6 - A, B = c m/(54K); so a - 1 = A tau + (B - A s + A^2/2) tau^2
+    and b - 1 = C tau + (B - C s + C^2/2) tau^2: -0.448888 and 0.392224 for the shipped liver
+    (A = 1/E c and C = -nu/E c: the first-order term is the linear test's).
+    """
+    g, prob = _problem(1)
+    x = g.points
+    rollers = [Constraint(np.flatnonzero(x[:, i] == 0.0), (i,), 0.0) for i in range(3)]
+    t, c, m, k = 1e-3, C1, 10.06, 100 * C1
+    u = prob.load_expansion(MAT, rollers, [[_face_loads(g, t)]], order=2, rtol=1e-10)[0]
+    a_, c_ = 2 / 3 + c / (9 * k), c / (9 * k) - 1 / 3
+    s, b_ = m / 6 - a_, c * m / (54 * k)
+    qa, qb = b_ - a_ * s + a_**2 / 2, b_ - c_ * s + c_**2 / 2
+    assert abs(qa + 0.448888) < 1e-5 and abs(qb - 0.392224) < 1e-5
+    tau = t / c
+    first = tau * np.column_stack([a_ * x[:, 0], c_ * x[:, 1], c_ * x[:, 2]])
+    second = tau**2 * np.column_stack([qa * x[:, 0], qb * x[:, 1], qb * x[:, 2]])
+    np.testing.assert_allclose(u[0], first, atol=1e-6 * np.abs(first).max())
+    np.testing.assert_allclose(u[1], second, atol=1e-5 * np.abs(second).max())
+
+
+@pytest.mark.parametrize("degree", [1, 2], ids=["P1", "P2"])
+def test_second_order_limit_of_the_nonlinear_solve(degree):
+    """A cantilever under a tip force: lam u1 + lam^2 u2 misses the nonlinear solution by
+    O(lam^3) (the gap falls 8-fold when lam halves), lam u1 alone by O(lam^2) (4-fold); the
+    second-order term is what the body adds beyond the linear response.
+    """
+    g, prob = _problem(degree, n=3)
+    x = g.points
+    fixed = [Constraint(np.flatnonzero(x[:, 0] == 0.0))]
+    tip = np.flatnonzero((x[:, 0] == 1.0) & (x[:, 2] == 1.0))
+    load = NodalLoad(tip[:1], [[0.0, 3e-4 * 0.3, -3e-4 * 0.2]])
+    u1, u2 = prob.load_expansion(MAT, fixed, [[load]], order=2, rtol=1e-10)[0]
+    np.testing.assert_allclose(u1, prob.linear_responses(MAT, fixed, [[load]], rtol=1e-10)[0],
+                               atol=1e-9 * np.abs(u1).max())
+    lams = [0.005, 0.01, 0.02]
+    sol = prob.solve(MAT, fixed, [load], lams)
+    assert sol.status == "ok", sol.failure_reason
+    one = [np.abs(u - lam * u1).max() for u, lam in zip(sol.displacement, lams)]
+    two = [np.abs(u - lam * u1 - lam**2 * u2).max() for u, lam in zip(sol.displacement, lams)]
+    assert all(3.5 < hi / lo < 4.5 for lo, hi in zip(one[:-1], one[1:])), one
+    assert all(7.0 < hi / lo < 9.0 for lo, hi in zip(two[:-1], two[1:])), two
+    assert two[0] < 0.05 * one[0]
