@@ -4,13 +4,16 @@
 The liver linearised at u = 0 (its Ogden tangent there, the small-strain elasticity of the
 material) under the loads of the scene's simulations and of drawn cases of the same rule
 (case index ``SYNTHETIC_FIRST`` on), at load fraction 1: a linear response scales with the
-fraction, so case ``i`` at fraction ``lam`` is ``lam * displacement[i]``::
+fraction, so case ``i`` at fraction ``lam`` is ``lam * displacement[i]``; with the optional
+second-order term (``fem_sim linear --order 2``), ``lam * displacement[i] + lam**2 *
+second_order[i]``, the Taylor expansion of the Ogden body's response to second order::
 
     /case_index    (n,)              int64    the scene's case index of each response
     /load_nodes    (n, n_loads)      int64    source node ids (patch centres for patch loads)
     /forces        (n, n_loads, 3)   float64  N at load fraction 1
     /output_nodes  (n_out,)          int64    the scene's output nodes
     /displacement  (n, n_out, 3)     float32  mm at load fraction 1, at the output nodes
+    /second_order  (n, n_out, 3)     float32  mm, the lam^2 coefficient (optional)
     attrs: format, scene_name, scene_hash, geometry_id, synthetic_first, units_length,
            units_force, seconds (the factorisation and the solves)
 """
@@ -43,6 +46,12 @@ class LinearFields:
     scene_hash: str
     geometry_id: str
     seconds: float = 0.0
+    second_order: np.ndarray | None = None
+
+    @property
+    def order(self) -> int:
+        """1 (the linear response) or 2 (with its second-order term)."""
+        return 1 if self.second_order is None else 2
 
     def rows(self, cases) -> np.ndarray:
         """Row of each case index in ``cases``; KeyError naming the missing ones."""
@@ -68,8 +77,10 @@ def write_linear_fields(path: str | Path, lf: LinearFields) -> Path:
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
         for name in ("case_index", "load_nodes", "forces", "output_nodes"):
             f[name] = np.asarray(getattr(lf, name))
-        f.create_dataset("displacement", data=np.asarray(lf.displacement, np.float32),
-                         compression="gzip", compression_opts=1, shuffle=True)
+        for name in ("displacement", "second_order"):
+            if getattr(lf, name) is not None:
+                f.create_dataset(name, data=np.asarray(getattr(lf, name), np.float32),
+                                 compression="gzip", compression_opts=1, shuffle=True)
         f.attrs.update(format=FORMAT, scene_name=lf.scene_name, scene_hash=lf.scene_hash,
                        geometry_id=lf.geometry_id, synthetic_first=SYNTHETIC_FIRST,
                        units_length="mm", units_force="N", seconds=float(lf.seconds))
@@ -86,4 +97,5 @@ def read_linear_fields(path: str | Path) -> LinearFields:
             **{k: f[k][()] for k in ("case_index", "load_nodes", "forces", "output_nodes",
                                       "displacement")},
             scene_name=str(f.attrs["scene_name"]), scene_hash=str(f.attrs["scene_hash"]),
-            geometry_id=str(f.attrs["geometry_id"]), seconds=float(f.attrs["seconds"]))
+            geometry_id=str(f.attrs["geometry_id"]), seconds=float(f.attrs["seconds"]),
+            second_order=f["second_order"][()] if "second_order" in f else None)

@@ -5,7 +5,7 @@ mpirun -n N python3 -m fem_sim generate SCENE.toml --out DIR [--ranks-per-sim R]
 python3 -m fem_sim summary DIR
 python3 -m fem_sim population SCENE.toml --out DIR   (scene 4: CPD + PCA shape coefficients)
 python3 -m fem_sim phantom SEED --out FILE.h5 [--variety V] [--spread S] [--mesh-size H]
-python3 -m fem_sim linear SCENE.toml --out DIR [--synthetic N]   (a one-liver scene's
+python3 -m fem_sim linear SCENE.toml --out DIR [--synthetic N] [--order 2]   (a one-liver scene's
 small-strain responses, DIR/linear.h5)
 """
 
@@ -115,6 +115,8 @@ def _parser() -> argparse.ArgumentParser:
     li.add_argument("--out", required=True, help="dataset directory (its liver meshed there)")
     li.add_argument("--synthetic", type=int, default=0, metavar="N",
                     help="loads drawn by the scene's rule beside its simulations' (default 0)")
+    li.add_argument("--order", type=int, default=1, choices=(1, 2),
+                    help="2: each response's second-order term in the load too (default 1)")
     s = sub.add_parser("summary", help="print counts and statistics of a dataset")
     s.add_argument("directory")
     s.add_argument("--png", help="picture of deformed livers (default DIR/summary.png)")
@@ -174,7 +176,7 @@ def _linear(args) -> int:
     from fem_sim.geometry.errors import GeometryError
 
     try:
-        path = linear_fields(args.scene, args.out, args.synthetic)
+        path = linear_fields(args.scene, args.out, args.synthetic, args.order)
     except (SceneError, GeometryError, ValueError, OSError) as exc:
         print(f"fem_sim linear: {exc}", file=sys.stderr)
         return 2

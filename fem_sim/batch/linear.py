@@ -3,11 +3,14 @@ liver linearised at u = 0 under the loads of every simulation of the scene and o
 ``synthetic`` more cases drawn by the scene's own rule (case indices from
 ``SYNTHETIC_FIRST``), from one factorisation of the tangent, one refined solve per load.
 
-    python -m fem_sim linear SCENE --out DATA [--synthetic N]
+    python -m fem_sim linear SCENE --out DATA [--synthetic N] [--order 2]
 
 What a patient model learns beside its few nonlinear simulations (:mod:`surrogate.patient`):
 the exact linear elasticity of the patient's own mesh, for as many loads as it likes, at the
-price of back-solves. Runs on one process (the factorisation's threads use the cores).
+price of back-solves; ``--order 2`` adds each load's second-order term (the Ogden law's
+first stiffening, :meth:`~fem_sim.solver.problem.OgdenProblem.load_expansion`: two internal
+force assemblies and one more back-solve per load). Runs on one process (the
+factorisation's threads use the cores).
 """
 
 from __future__ import annotations
@@ -47,7 +50,8 @@ def _cases(scene, scene_file: str, g, fixed: np.ndarray, synthetic: int) -> list
     return out
 
 
-def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0) -> Path:
+def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
+                  order: int = 1) -> Path:
     """``out/linear.h5`` for the one-liver scene ``scene_file`` (its liver meshed and checked
     as ``fem_sim generate`` does it, into the same dataset directory ``out``).
     """
@@ -57,6 +61,8 @@ def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0) -
     from fem_sim.solver.problem import OgdenProblem
 
     scene_file, out = str(scene_file), Path(out)
+    if order not in (1, 2):
+        raise ValueError(f"--order must be 1 or 2, got {order}")
     scene = load_scene(scene_file)
     if n_geometries(scene) != 1:
         raise ValueError(f"{scene_file}: [geometry] has {n_geometries(scene)} livers; small-"
@@ -71,12 +77,13 @@ def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0) -
                            quadrature_degree=solver["quadrature_degree"],
                            element=solver.get("element", "lagrange"),
                            settings=solver_settings(scene))
-    u = problem.linear_responses(cases[0].material, [Constraint(fixed)],
-                                 [case_loads(c, g) for c in cases])
     nodes = cs.output_nodes(scene, g)
+    u = problem.load_expansion(cases[0].material, [Constraint(fixed)],
+                               [case_loads(c, g) for c in cases], order=order)[:, :, nodes]
     return write_linear_fields(linear_fields_path(out), LinearFields(
         case_index=np.array([c.index for c in cases], np.int64),
         load_nodes=np.stack([c.load_nodes for c in cases]),
         forces=np.stack([c.forces for c in cases]), output_nodes=nodes,
-        displacement=u[:, nodes], scene_name=scene.name, scene_hash=scene.hash,
-        geometry_id=ids[0], seconds=time.perf_counter() - t))
+        displacement=u[:, 0], scene_name=scene.name, scene_hash=scene.hash,
+        geometry_id=ids[0], seconds=time.perf_counter() - t,
+        second_order=u[:, 1] if order == 2 else None))

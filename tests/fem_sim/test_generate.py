@@ -496,6 +496,33 @@ def test_small_strain_responses_of_the_scenes_loads_and_drawn_ones(reference, tm
     assert validate_dataset(out) == []   # the file beside the shards breaks nothing
 
 
+def test_second_order_responses_close_most_of_the_first_steps_gap(reference, tmp_path):
+    """fem_sim linear --order 2: the same linear responses as order 1, and
+    lam u1 + lam^2 u2 nearer each shard's first load step (fraction 1/3) than lam u1 is (the
+    gap left is third order in the load).
+    """
+    from data_spec.linear_fields import linear_fields_path, read_linear_fields
+
+    out = tmp_path / "d"
+    shutil.copytree(reference, out)
+    assert linear(TINY, out).returncode == 0
+    first = read_linear_fields(linear_fields_path(out))
+    res = linear(TINY, out, "--order", "2")
+    assert res.returncode == 0, res.stderr
+    lf = read_linear_fields(linear_fields_path(out))
+    assert first.order == 1 and lf.order == 2
+    np.testing.assert_allclose(lf.displacement, first.displacement,
+                               atol=1e-6 * np.abs(first.displacement).max())
+    for sh in map(read_shard, list_shards(out)):
+        row = lf.rows([sh.sim_index])[0]
+        cols = np.searchsorted(lf.output_nodes, sh.output_nodes)
+        u1, u2 = lf.displacement[row][cols], lf.second_order[row][cols]
+        lam, d = sh.load_fractions[0], sh.displacement[0]
+        one = np.linalg.norm(d - lam * u1, axis=1).mean()
+        two = np.linalg.norm(d - lam * u1 - lam**2 * u2, axis=1).mean()
+        assert two < 0.2 * one, (sh.sim_index, one, two)
+
+
 def test_small_strain_responses_of_many_livers_are_refused(tmp_path):
     res = linear(ROOT / "data_spec" / "scenes" / "ci_scene4.toml", tmp_path / "d")
     assert res.returncode == 2
