@@ -2,8 +2,10 @@
 as what a patient model starts from: the exact linear elasticity of the patient's own mesh
 with the model's boundary condition, for the loads of its FE simulations and for drawn loads
 of the same rule. A linear response scales with the load fraction, so a case at fraction
-``lam`` is ``lam`` times its response at fraction 1; what the nonlinear FE simulations add is
-the liver's stiffening (:mod:`surrogate.patient` corrects for it).
+``lam`` is ``lam`` times its response at fraction 1; a file of order 2 (``fem_sim linear
+--order 2``) adds ``lam**2`` times the second-order term, the law's first stiffening. What the
+nonlinear FE simulations add is the rest of the liver's stiffening (:mod:`surrogate.patient`
+corrects for it).
 """
 
 from __future__ import annotations
@@ -45,8 +47,21 @@ class LinearBase:
         fractions.
         """
         rows = self.lf.rows(ds.sample_sim[samples])
+        return self._at(rows, np.asarray(ds.sample_fraction[samples], np.float64))
+
+    @property
+    def order(self) -> int:
+        return self.lf.order
+
+    def _at(self, rows: np.ndarray, lam: np.ndarray) -> np.ndarray:
+        """(len(rows), n_out, 3) mm: the responses of the file's ``rows`` at fractions ``lam``,
+        to the file's order.
+        """
         u = self.lf.displacement[rows][:, self.columns].astype(np.float64)
-        return u * np.asarray(ds.sample_fraction[samples], np.float64)[:, None, None]
+        u *= lam[:, None, None]
+        if self.lf.second_order is not None:
+            u += self.lf.second_order[rows][:, self.columns] * (lam**2)[:, None, None]
+        return u
 
     def drawn(self, n: int) -> tuple:
         """(forces (S, 3) N, load nodes (S,), fractions (S,), case (S,), fields (S, n_out, 3)
@@ -63,6 +78,5 @@ class LinearBase:
         rep = self.fractions.size
         lam = np.tile(self.fractions, n)
         forces = np.repeat(self.lf.forces[rows, 0], rep, axis=0) * lam[:, None]
-        fields = np.repeat(self.lf.displacement[rows][:, self.columns], rep, axis=0)
         return (forces, np.repeat(self.lf.load_nodes[rows, 0], rep), lam,
-                np.repeat(np.arange(n), rep), fields.astype(np.float64) * lam[:, None, None])
+                np.repeat(np.arange(n), rep), self._at(np.repeat(rows, rep), lam))

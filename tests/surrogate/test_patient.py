@@ -336,3 +336,26 @@ def test_the_small_strain_base_scales_with_the_load_fraction_and_draws_the_files
     np.testing.assert_array_equal(nodes, lb.lf.load_nodes[rows, 0])
     with pytest.raises(ValueError, match="--synthetic"):
         lb.drawn(lb.lf.synthetic.size + 1)
+
+
+@pytest.mark.dataset
+def test_a_second_order_base_adds_its_term_times_the_fraction_squared():
+    """A file of order 2: the samples and drawn fields are lam u1 + lam^2 u2, u1 the order-1
+    fields above (u2 any field here: the sum is what is checked)."""
+    d = Path(generated_dataset("LIVERFEM_TEST_PATIENT"))
+    ds = load_dataset(d / "data")
+    lb = LinearBase(ds)
+    smp = sims_samples(ds, [int(ds.sample_sim[0])])
+    u1, drawn1 = lb.samples(ds, smp), lb.drawn(5)[4]
+    assert lb.order == 1
+    lb.lf.second_order = np.random.default_rng(0).normal(
+        size=lb.lf.displacement.shape).astype(np.float32)
+    assert lb.order == 2
+    lam = ds.sample_fraction[smp]
+    u2 = lb.lf.second_order[lb.lf.rows(ds.sample_sim[smp])][:, lb.columns]
+    np.testing.assert_allclose(lb.samples(ds, smp), u1 + lam[:, None, None] ** 2 * u2,
+                               rtol=1e-6, atol=1e-9)
+    _, _, fractions, case, fields = lb.drawn(5)
+    u2 = lb.lf.second_order[lb.lf.synthetic[case]][:, lb.columns]
+    np.testing.assert_allclose(fields, drawn1 + fractions[:, None, None] ** 2 * u2,
+                               rtol=1e-6, atol=1e-9)
