@@ -3,9 +3,12 @@ as what a patient model starts from: the exact linear elasticity of the patient'
 with the model's boundary condition, for the loads of its FE simulations and for drawn loads
 of the same rule. A linear response scales with the load fraction, so a case at fraction
 ``lam`` is ``lam`` times its response at fraction 1; a file of order 2 (``fem_sim linear
---order 2``) adds ``lam**2`` times the second-order term, the law's first stiffening. What the
-nonlinear FE simulations add is the rest of the liver's stiffening (:mod:`surrogate.patient`
-corrects for it).
+--order 2``) adds ``lam**2`` times the second-order term, the law's first stiffening. At the
+loads of a patient's scene the truncated series is far from converged, but its two terms
+still span most of the FE field: fitted on the patient's FE simulations (:meth:`LinearBase.fit`),
+each load fraction weighs them by the median over the simulations of their least-squares
+weights (docs/load_expansion.md measures both). What the nonlinear FE simulations add beyond
+that is corrected by :mod:`surrogate.patient`.
 """
 
 from __future__ import annotations
@@ -34,6 +37,8 @@ class LinearBase:
                              f"({ds.directory}): rerun fem_sim linear on the dataset's scene")
         self.columns = where
         self.fractions = np.unique(np.round(ds.sample_fraction, 9))
+        # the terms' weights relative to the series (lam, lam^2) by load fraction: fitted
+        self.weights: tuple | None = None   # (fractions (F,), weights (F, 2)), or None
 
     @classmethod
     def of(cls, ds: Dataset) -> LinearBase | None:
@@ -57,11 +62,43 @@ class LinearBase:
         """(len(rows), n_out, 3) mm: the responses of the file's ``rows`` at fractions ``lam``,
         to the file's order.
         """
+        w = self.weights_at(lam)
         u = self.lf.displacement[rows][:, self.columns].astype(np.float64)
-        u *= lam[:, None, None]
+        u *= (lam * w[:, 0])[:, None, None]
         if self.lf.second_order is not None:
-            u += self.lf.second_order[rows][:, self.columns] * (lam**2)[:, None, None]
+            u += self.lf.second_order[rows][:, self.columns] * (lam**2 * w[:, 1])[:, None, None]
         return u
+
+    def weights_at(self, lam: np.ndarray) -> np.ndarray:
+        """(len(lam), 2): the terms' weights relative to the series, (1, 1) until fitted;
+        between fitted fractions interpolated, from (1, 1) at lam = 0 (where the series is
+        exact).
+        """
+        lam = np.asarray(lam, np.float64)
+        if self.weights is None:
+            return np.ones((lam.size, 2))
+        at, w = self.weights
+        return np.column_stack([np.interp(lam, np.r_[0.0, at], np.r_[1.0, w[:, i]])
+                                for i in range(2)])
+
+    def fit(self, ds: Dataset, samples: np.ndarray, fields: np.ndarray) -> None:
+        """The terms' weights from the FE ``fields`` (samples, n_out, 3) mm of the patient's
+        ``samples``: for each sample the least-squares weights of lam u1 and lam^2 u2 on its
+        field, then by load fraction the median over the samples (robust to a simulation
+        whose load sits where the series fails worst). Nothing to fit at order 1: one
+        scale of the linear response, fitted so, was measured not to help.
+        """
+        if self.lf.second_order is None or not len(samples):
+            return
+        rows = self.lf.rows(ds.sample_sim[samples])
+        lam = np.asarray(ds.sample_fraction[samples], np.float64)
+        u1 = self.lf.displacement[rows][:, self.columns].astype(np.float64)
+        u2 = self.lf.second_order[rows][:, self.columns].astype(np.float64)
+        w = np.array([np.linalg.lstsq(np.column_stack([a.ravel() * x, b.ravel() * x**2]),
+                                      d.ravel(), rcond=None)[0]
+                      for a, b, d, x in zip(u1, u2, np.asarray(fields, np.float64), lam)])
+        at = np.unique(np.round(lam, 9))
+        self.weights = (at, np.array([np.median(w[np.isclose(lam, x)], axis=0) for x in at]))
 
     def drawn(self, n: int) -> tuple:
         """(forces (S, 3) N, load nodes (S,), fractions (S,), case (S,), fields (S, n_out, 3)

@@ -359,3 +359,36 @@ def test_a_second_order_base_adds_its_term_times_the_fraction_squared():
     u2 = lb.lf.second_order[lb.lf.synthetic[case]][:, lb.columns]
     np.testing.assert_allclose(fields, drawn1 + fractions[:, None, None] ** 2 * u2,
                                rtol=1e-6, atol=1e-9)
+
+
+@pytest.mark.dataset
+def test_fitting_a_second_order_base_recovers_the_weights_of_its_terms():
+    """FE fields made of the base's two terms with known weights by load fraction (and one
+    simulation far off, which the median ignores): fit finds the weights, the base then
+    gives those fields, and fractions between the fitted ones are interpolated from (1, 1)
+    at lam = 0."""
+    d = Path(generated_dataset("LIVERFEM_TEST_PATIENT"))
+    ds = load_dataset(d / "data")
+    lb = LinearBase(ds)
+    lb.lf.second_order = np.random.default_rng(1).normal(
+        size=lb.lf.displacement.shape).astype(np.float32)
+    sims = np.unique(ds.sample_sim)[:5]
+    smp = sims_samples(ds, sims)
+    lam = ds.sample_fraction[smp]
+    at = np.unique(np.round(lam, 9))
+    want = np.column_stack([1.0 - 0.1 * at, 1.0 - 0.5 * at])       # weights by fraction
+    w = want[np.searchsorted(at, np.round(lam, 9))]
+    rows = lb.lf.rows(ds.sample_sim[smp])
+    u1 = lb.lf.displacement[rows][:, lb.columns].astype(np.float64)
+    u2 = lb.lf.second_order[rows][:, lb.columns].astype(np.float64)
+    fields = (lam * w[:, 0])[:, None, None] * u1 + (lam**2 * w[:, 1])[:, None, None] * u2
+    off = ds.sample_sim[smp] == sims[-1]
+    fields[off] *= 3.0
+    lb.fit(ds, smp, fields)
+    np.testing.assert_allclose(lb.weights[0], at)
+    np.testing.assert_allclose(lb.weights[1], want, rtol=1e-5)
+    ok = ~off
+    np.testing.assert_allclose(lb.samples(ds, smp[ok]), fields[ok], rtol=1e-4,
+                               atol=1e-6 * np.abs(fields).max())
+    half = 0.5 * at[0]
+    np.testing.assert_allclose(lb.weights_at(np.array([half]))[0], 1.0 + 0.5 * (want[0] - 1.0))
