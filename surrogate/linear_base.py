@@ -3,12 +3,13 @@ as what a patient model starts from: the exact linear elasticity of the patient'
 with the model's boundary condition, for the loads of its FE simulations and for drawn loads
 of the same rule. A linear response scales with the load fraction, so a case at fraction
 ``lam`` is ``lam`` times its response at fraction 1; a file of order 2 (``fem_sim linear
---order 2``) adds ``lam**2`` times the second-order term, the law's first stiffening. At the
-loads of a patient's scene the truncated series is far from converged, but its two terms
-still span most of the FE field: fitted on the patient's FE simulations (:meth:`LinearBase.fit`),
-each load fraction weighs them by the median over the simulations of their least-squares
-weights (docs/load_expansion.md measures both). What the nonlinear FE simulations add beyond
-that is corrected by :mod:`surrogate.patient`.
+--order 2``) adds the second-order term, the law's first stiffening, damped and gated by the
+response's own ratio of terms (:meth:`LinearBase.terms`). At the loads of a patient's scene
+the truncated series is far from converged, but its two terms still span most of the FE
+field: fitted on the patient's FE simulations (:meth:`LinearBase.fit`), each load fraction
+weighs them by the median over the simulations of their least-squares weights
+(docs/load_expansion.md measures the choices on training livers). What the nonlinear FE
+simulations add beyond that is corrected by :mod:`surrogate.patient`.
 """
 
 from __future__ import annotations
@@ -19,6 +20,19 @@ import numpy as np
 
 from data_spec.linear_fields import linear_fields_path, read_linear_fields
 from surrogate.data import Dataset
+
+R_MAX = 1.0   # a load's second term is kept while |u2| / |u1| is below this
+
+
+def _ratio(lf) -> np.ndarray:
+    """(n,): |u2| / |u1| of each response of the file (root of the sums of squares over its
+    output nodes; zero at order 1).
+    """
+    if lf.second_order is None:
+        return np.zeros(lf.case_index.size)
+    one = np.sqrt((lf.displacement.astype(np.float64) ** 2).sum(axis=(1, 2)))
+    two = np.sqrt((lf.second_order.astype(np.float64) ** 2).sum(axis=(1, 2)))
+    return two / np.maximum(one, 1e-300)
 
 
 class LinearBase:
@@ -37,8 +51,9 @@ class LinearBase:
                              f"({ds.directory}): rerun fem_sim linear on the dataset's scene")
         self.columns = where
         self.fractions = np.unique(np.round(ds.sample_fraction, 9))
-        # the terms' weights relative to the series (lam, lam^2) by load fraction: fitted
-        self.weights: tuple | None = None   # (fractions (F,), weights (F, 2)), or None
+        # the terms' weights by load fraction (:meth:`fit`): (fractions (F,), (F, 2)) or None
+        self.weights: tuple | None = None
+        self.ratio = _ratio(self.lf)
 
     @classmethod
     def of(cls, ds: Dataset) -> LinearBase | None:
@@ -58,21 +73,32 @@ class LinearBase:
     def order(self) -> int:
         return self.lf.order
 
-    def _at(self, rows: np.ndarray, lam: np.ndarray) -> np.ndarray:
-        """(len(rows), n_out, 3) mm: the responses of the file's ``rows`` at fractions ``lam``,
-        to the file's order.
+    def terms(self, rows: np.ndarray, lam: np.ndarray) -> tuple:
+        """The base's two terms for the file's ``rows`` at fractions ``lam``, each
+        (len(rows), n_out, 3) mm: lam u1, and lam^2 u2 / (1 + lam R) with R = |u2| / |u1|
+        (the response's own ratio, over the file's output nodes): the series' second term,
+        damped as the [1/1] rational form of a series of that ratio would, and zero where
+        R >= R_MAX (a load whose second term outgrows its first: the series is no guide
+        there, the linear response alone is kept). At order 1 the second term is zero.
         """
-        w = self.weights_at(lam)
+        lam = np.asarray(lam, np.float64)
         u = self.lf.displacement[rows][:, self.columns].astype(np.float64)
-        u *= (lam * w[:, 0])[:, None, None]
-        if self.lf.second_order is not None:
-            u += self.lf.second_order[rows][:, self.columns] * (lam**2 * w[:, 1])[:, None, None]
-        return u
+        one = u * lam[:, None, None]
+        if self.lf.second_order is None:
+            return one, np.zeros_like(one)
+        r = self.ratio[rows]
+        damp = np.where(r < R_MAX, lam**2 / (1.0 + lam * r), 0.0)
+        return one, self.lf.second_order[rows][:, self.columns] * damp[:, None, None]
+
+    def _at(self, rows: np.ndarray, lam: np.ndarray) -> np.ndarray:
+        """(len(rows), n_out, 3) mm: the base for the file's ``rows`` at fractions ``lam``."""
+        w = self.weights_at(lam)
+        one, two = self.terms(rows, lam)
+        return one * w[:, 0, None, None] + two * w[:, 1, None, None]
 
     def weights_at(self, lam: np.ndarray) -> np.ndarray:
-        """(len(lam), 2): the terms' weights relative to the series, (1, 1) until fitted;
-        between fitted fractions interpolated, from (1, 1) at lam = 0 (where the series is
-        exact).
+        """(len(lam), 2): the terms' weights, (1, 1) until fitted; between fitted fractions
+        interpolated, from (1, 1) at lam = 0 (where the series is exact).
         """
         lam = np.asarray(lam, np.float64)
         if self.weights is None:
@@ -83,20 +109,24 @@ class LinearBase:
 
     def fit(self, ds: Dataset, samples: np.ndarray, fields: np.ndarray) -> None:
         """The terms' weights from the FE ``fields`` (samples, n_out, 3) mm of the patient's
-        ``samples``: for each sample the least-squares weights of lam u1 and lam^2 u2 on its
-        field, then by load fraction the median over the samples (robust to a simulation
-        whose load sits where the series fails worst). Nothing to fit at order 1: one
-        scale of the linear response, fitted so, was measured not to help.
+        ``samples``: for each sample the least-squares weights of its two terms on its field,
+        then by load fraction the median over the samples (robust to a simulation whose
+        load sits where the series fails worst); samples whose second term is gated off
+        (R >= R_MAX) say nothing of its weight and are left out. Nothing to fit at order 1:
+        one scale of the linear response, fitted so, was measured not to help.
         """
-        if self.lf.second_order is None or not len(samples):
+        if self.lf.second_order is None:
             return
+        samples = np.asarray(samples)
         rows = self.lf.rows(ds.sample_sim[samples])
-        lam = np.asarray(ds.sample_fraction[samples], np.float64)
-        u1 = self.lf.displacement[rows][:, self.columns].astype(np.float64)
-        u2 = self.lf.second_order[rows][:, self.columns].astype(np.float64)
-        w = np.array([np.linalg.lstsq(np.column_stack([a.ravel() * x, b.ravel() * x**2]),
-                                      d.ravel(), rcond=None)[0]
-                      for a, b, d, x in zip(u1, u2, np.asarray(fields, np.float64), lam)])
+        keep = self.ratio[rows] < R_MAX
+        if not keep.any():
+            return
+        rows, fields = rows[keep], np.asarray(fields, np.float64)[keep]
+        lam = np.asarray(ds.sample_fraction[samples], np.float64)[keep]
+        one, two = self.terms(rows, lam)
+        w = np.array([np.linalg.lstsq(np.column_stack([a.ravel(), b.ravel()]), d.ravel(),
+                                      rcond=None)[0] for a, b, d in zip(one, two, fields)])
         at = np.unique(np.round(lam, 9))
         self.weights = (at, np.array([np.median(w[np.isclose(lam, x)], axis=0) for x in at]))
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from surrogate import load_predictor
+from surrogate import linear_base, load_predictor
 from surrogate.data import load_dataset
 from surrogate.linear_base import LinearBase
 from surrogate.patient import (
@@ -338,56 +338,69 @@ def test_the_small_strain_base_scales_with_the_load_fraction_and_draws_the_files
         lb.drawn(lb.lf.synthetic.size + 1)
 
 
+def _second_order(lb, ratio, seed=0):
+    """A second-order term for the file of ``lb``: noise whose ratio to each response (root
+    of the sums of squares) is ``ratio`` (one value, or one per response)."""
+    u1 = lb.lf.displacement.astype(np.float64)
+    u2 = np.random.default_rng(seed).normal(size=u1.shape)
+    scale = np.broadcast_to(ratio, (u1.shape[0],)) * np.sqrt((u1**2).sum(axis=(1, 2)))
+    lb.lf.second_order = (u2 * (scale / np.sqrt((u2**2).sum(axis=(1, 2))))[:, None, None]
+                          ).astype(np.float32)
+    lb.ratio = linear_base._ratio(lb.lf)
+
+
 @pytest.mark.dataset
-def test_a_second_order_base_adds_its_term_times_the_fraction_squared():
-    """A file of order 2: the samples and drawn fields are lam u1 + lam^2 u2, u1 the order-1
-    fields above (u2 any field here: the sum is what is checked)."""
+def test_a_second_order_base_adds_its_damped_term_and_gates_it_past_r_max():
+    """A file of order 2: the samples and drawn fields are lam u1 + lam^2 u2 / (1 + lam R),
+    R = |u2| / |u1| of the response (0.3 here), u1 the order-1 fields; a response whose R
+    is R_MAX or more keeps its linear response alone."""
     d = Path(generated_dataset("LIVERFEM_TEST_PATIENT"))
     ds = load_dataset(d / "data")
     lb = LinearBase(ds)
-    smp = sims_samples(ds, [int(ds.sample_sim[0])])
+    first = int(ds.sample_sim[0])
+    smp = sims_samples(ds, [first])
     u1, drawn1 = lb.samples(ds, smp), lb.drawn(5)[4]
     assert lb.order == 1
-    lb.lf.second_order = np.random.default_rng(0).normal(
-        size=lb.lf.displacement.shape).astype(np.float32)
+    ratio = np.full(lb.lf.case_index.size, 0.3)
+    gated = lb.lf.rows([first])[0]
+    ratio[gated] = 1.5 * linear_base.R_MAX
+    _second_order(lb, ratio)
     assert lb.order == 2
-    lam = ds.sample_fraction[smp]
-    u2 = lb.lf.second_order[lb.lf.rows(ds.sample_sim[smp])][:, lb.columns]
-    np.testing.assert_allclose(lb.samples(ds, smp), u1 + lam[:, None, None] ** 2 * u2,
-                               rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(lb.ratio, ratio, rtol=1e-5)
+    np.testing.assert_allclose(lb.samples(ds, smp), u1, rtol=1e-6, atol=1e-9)   # gated
     _, _, fractions, case, fields = lb.drawn(5)
     u2 = lb.lf.second_order[lb.lf.synthetic[case]][:, lb.columns]
-    np.testing.assert_allclose(fields, drawn1 + fractions[:, None, None] ** 2 * u2,
-                               rtol=1e-6, atol=1e-9)
+    damp = fractions**2 / (1.0 + 0.3 * fractions)
+    np.testing.assert_allclose(fields, drawn1 + damp[:, None, None] * u2, rtol=1e-5, atol=1e-8)
 
 
 @pytest.mark.dataset
 def test_fitting_a_second_order_base_recovers_the_weights_of_its_terms():
     """FE fields made of the base's two terms with known weights by load fraction (and one
-    simulation far off, which the median ignores): fit finds the weights, the base then
-    gives those fields, and fractions between the fitted ones are interpolated from (1, 1)
-    at lam = 0."""
+    simulation far off, which the median ignores; one whose second term is gated, which
+    says nothing of its weight): fit finds the weights, the base then gives those fields,
+    and fractions between the fitted ones are interpolated from (1, 1) at lam = 0."""
     d = Path(generated_dataset("LIVERFEM_TEST_PATIENT"))
     ds = load_dataset(d / "data")
     lb = LinearBase(ds)
-    lb.lf.second_order = np.random.default_rng(1).normal(
-        size=lb.lf.displacement.shape).astype(np.float32)
-    sims = np.unique(ds.sample_sim)[:5]
+    sims = np.unique(ds.sample_sim)[:6]
+    ratio = np.full(lb.lf.case_index.size, 0.4)
+    ratio[lb.lf.rows([sims[-1]])[0]] = 2.0 * linear_base.R_MAX
+    _second_order(lb, ratio, seed=1)
     smp = sims_samples(ds, sims)
     lam = ds.sample_fraction[smp]
     at = np.unique(np.round(lam, 9))
     want = np.column_stack([1.0 - 0.1 * at, 1.0 - 0.5 * at])       # weights by fraction
     w = want[np.searchsorted(at, np.round(lam, 9))]
-    rows = lb.lf.rows(ds.sample_sim[smp])
-    u1 = lb.lf.displacement[rows][:, lb.columns].astype(np.float64)
-    u2 = lb.lf.second_order[rows][:, lb.columns].astype(np.float64)
-    fields = (lam * w[:, 0])[:, None, None] * u1 + (lam**2 * w[:, 1])[:, None, None] * u2
-    off = ds.sample_sim[smp] == sims[-1]
+    one, two = lb.terms(lb.lf.rows(ds.sample_sim[smp]), lam)
+    fields = w[:, 0, None, None] * one + w[:, 1, None, None] * two
+    fields[ds.sample_sim[smp] == sims[-1]] *= 0.2                  # gated: left out
+    off = ds.sample_sim[smp] == sims[-2]
     fields[off] *= 3.0
     lb.fit(ds, smp, fields)
     np.testing.assert_allclose(lb.weights[0], at)
     np.testing.assert_allclose(lb.weights[1], want, rtol=1e-5)
-    ok = ~off
+    ok = np.isin(ds.sample_sim[smp], sims[:-2])
     np.testing.assert_allclose(lb.samples(ds, smp[ok]), fields[ok], rtol=1e-4,
                                atol=1e-6 * np.abs(fields).max())
     half = 0.5 * at[0]
