@@ -194,7 +194,8 @@ truth: setup
 # distilled into the patient's own model, $(PATIENT)/run/model (trainer environment). PSCENE:
 # the population scene MODEL was trained on (its loads, material, steps and solver). HELD more simulations are solved and kept
 # out of the adaptation (to measure the patient model on); FRAME: the liver file's frame;
-# ADAPT: more options of surrogate adapt (ADAPT=--tune fine-tunes the population network).
+# ADAPT: more options of surrogate adapt (ADAPT=--tune fine-tunes the population network);
+# ORDER=2: the small-strain responses with their second-order terms (docs/load_expansion.md).
 K ?= 40
 HELD ?= 0
 FRAME ?=
@@ -202,6 +203,7 @@ ADAPT ?=
 MODEL ?=
 PSCENE ?= data_spec/scenes/scene4_livers.toml
 SYNTHETIC ?= 600
+ORDER ?= 1
 PATIENT ?= runs/patient/$(basename $(notdir $(LIVER)))
 patient: setup
 	@test -n "$(LIVER)" -a -n "$(MODEL)" || { echo "make patient: LIVER=file MODEL=run [K=40] [PSCENE=scene] [PATIENT=dir]"; exit 2; }
@@ -209,7 +211,8 @@ patient: setup
 	    $(if $(FRAME),--frame $(FRAME)) --out $(PATIENT)/scene.toml \
 	    --placement $(PATIENT)/placement.npz
 	$(MPIRUN) $(SPY) -m fem_sim generate $(PATIENT)/scene.toml --out $(PATIENT)/data
-	$(SPY) -m fem_sim linear $(PATIENT)/scene.toml --out $(PATIENT)/data --synthetic $(SYNTHETIC)
+	$(SPY) -m fem_sim linear $(PATIENT)/scene.toml --out $(PATIENT)/data --synthetic $(SYNTHETIC) \
+	    --order $(ORDER)
 	$(TPY) -m surrogate adapt $(MODEL) $(PATIENT)/data --liver $(LIVER) --run $(PATIENT)/run \
 	    --sims $(K) --synthetic $(SYNTHETIC) $(if $(FRAME),--frame $(FRAME)) \
 	    --placement $(PATIENT)/placement.npz $(ADAPT)

@@ -1,7 +1,7 @@
 """A new patient's model against K, the FE simulations on the patient's own mesh: docs/patient.md.
 
     .venv-train/bin/python bench/patient.py [--model RUN] [--livers Amos-054 LiTS-100 LiTS-67]
-        [--ks 0 5 10 20 40 80] [--design]
+        [--ks 0 5 10 20 40 80] [--design] [--order 2] [--no-tune]
 
 For each validation liver (never seen by the population model, its PCA or any design choice):
 its FE truth with the population model's boundary condition, K_MAX + HELD simulations
@@ -121,27 +121,28 @@ def truth(pred, liver: Path, a) -> Path:
         (d / "generation.json").unlink(missing_ok=True)
         scene.write_text(text)
     generate_chunks(scene, d / "data", n, ranks=a.np, chunk=n)
-    linear(scene, d / "data", d / "linear.json")
+    linear(scene, d / "data", d / "linear.json", a.order)
     return d / "data"
 
 
-def linear(scene: Path, data: Path, record: Path) -> dict:
-    """``fem_sim linear`` on the truth's scene (SYNTHETIC drawn loads), as make patient runs
-    it, once: its wall seconds in ``record``.
+def linear(scene: Path, data: Path, record: Path, order: int = 1) -> dict:
+    """``fem_sim linear`` on the truth's scene (SYNTHETIC drawn loads, ``order``), as make
+    patient runs it, once per order: its wall seconds in ``record``.
     """
     from data_spec import load_scene
     from data_spec.linear_fields import linear_fields_path, read_linear_fields
 
     path = linear_fields_path(data)
     done = json.loads(record.read_text()) if record.exists() else {}
-    if path.exists() and read_linear_fields(path).scene_hash == load_scene(scene).hash \
-            and done.get("seconds"):
-        return done
+    if path.exists() and done.get("seconds") and done.get("order", 1) == order:
+        lf = read_linear_fields(path)
+        if lf.scene_hash == load_scene(scene).hash and lf.order == order:
+            return done
     t = time.perf_counter()
     subprocess.run([str(ROOT / ".venv-solver" / "bin" / "python"), "-m", "fem_sim", "linear",
-                    str(scene), "--out", str(data), "--synthetic", str(SYNTHETIC)], cwd=ROOT,
-                   check=True)
-    done = {"seconds": time.perf_counter() - t,
+                    str(scene), "--out", str(data), "--synthetic", str(SYNTHETIC), "--order",
+                    str(order)], cwd=ROOT, check=True)
+    done = {"seconds": time.perf_counter() - t, "order": order,
             "solves_seconds": read_linear_fields(path).seconds}
     record.write_text(json.dumps(done))
     return done
@@ -231,9 +232,12 @@ def made_by(model: Path, data: Path) -> str:
     """A digest of what a K's errors depend on: the population model's files, the
     adaptation's code and the truth's simulations.
     """
+    from data_spec.linear_fields import linear_fields_path, read_linear_fields
     from data_spec.views import dataset_fingerprint
 
     h = hashlib.sha256(dataset_fingerprint(data).encode())
+    if linear_fields_path(data).exists():
+        h.update(f"order {read_linear_fields(linear_fields_path(data)).order}".encode())
     code = [ROOT / "surrogate" / n for n in ("patient.py", "tuning.py", "linear_base.py")]
     for f in [*sorted(model.glob("*")), *code]:
         h.update(f.read_bytes())
@@ -249,7 +253,8 @@ def end_to_end(liver: Path, a, k: int = 40) -> dict:
     shutil.rmtree(out, ignore_errors=True)
     t = time.time()
     subprocess.run(["make", "--no-print-directory", "patient", f"LIVER={liver}",
-                    f"MODEL={a.model}", f"K={k}", f"PATIENT={out}"], cwd=ROOT, check=True,
+                    f"MODEL={a.model}", f"K={k}", f"PATIENT={out}", f"ORDER={a.order}"],
+                   cwd=ROOT, check=True,
                    stdout=subprocess.DEVNULL)
     end = time.time()
     placed = (out / "scene.toml").stat().st_mtime
@@ -299,6 +304,8 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
         #              responses: the population model's)
         return c["points"][str(k)].get("patient_model", c["points"][str(k)]["population"])
 
+    order_note = ("; at `--order 2`, as here, plus its second-order term, damped and gated: "
+                  "docs/load_expansion.md" if a.order == 2 else "")
     rows = []
     for k in ks:
         for c in curves:
@@ -329,8 +336,8 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
         "predict-liver places it. Corrected: plus the kernel ridge correction fitted on the "
         "first K simulations. Linear: the liver's small-strain response on its own mesh "
         "(`fem_sim linear`: the body linearised at u = 0, one factorisation, a back-solve "
-        "per load, scaled by the load fraction), no nonlinear simulation needed; linear + "
-        "corrected: plus the same correction fitted on its residuals (the liver's "
+        f"per load, scaled by the load fraction{order_note}), no nonlinear simulation "
+        "needed; linear + corrected: plus the same correction fitted on its residuals (the liver's "
         "stiffening). Patient model: the linear + corrected teacher (at K = 0 the linear "
         f"responses alone) on {SYNTHETIC} drawn loads and the K simulations, distilled into "
         "the exported one-liver model (`make patient`). Scratch: the reduced basis trained on "
@@ -447,6 +454,8 @@ def main() -> int:
                     "include 0)")
     ap.add_argument("--no-tune", dest="tune", action="store_false",
                     help="leave out the fine-tuned population network (ADAPT=--tune)")
+    ap.add_argument("--order", type=int, default=1, choices=(1, 2),
+                    help="the small-strain responses' order (make patient's ORDER)")
     ap.add_argument("--no-end-to-end", dest="e2e", action="store_false",
                     help="keep the end-to-end times of docs/patient.json")
     a = ap.parse_args()

@@ -4,12 +4,9 @@ with the model's boundary condition, for the loads of its FE simulations and for
 of the same rule. A linear response scales with the load fraction, so a case at fraction
 ``lam`` is ``lam`` times its response at fraction 1; a file of order 2 (``fem_sim linear
 --order 2``) adds the second-order term, the law's first stiffening, damped and gated by the
-response's own ratio of terms (:meth:`LinearBase.terms`). At the loads of a patient's scene
-the truncated series is far from converged, but its two terms still span most of the FE
-field: fitted on the patient's FE simulations (:meth:`LinearBase.fit`), each load fraction
-weighs them by the median over the simulations of their least-squares weights
-(docs/load_expansion.md measures the choices on training livers). What the nonlinear FE
-simulations add beyond that is corrected by :mod:`surrogate.patient`.
+response's own ratio of terms (:meth:`LinearBase.terms`; docs/load_expansion.md measures the
+choices on training livers). What the nonlinear FE simulations add beyond that is corrected
+by :mod:`surrogate.patient`.
 """
 
 from __future__ import annotations
@@ -51,8 +48,6 @@ class LinearBase:
                              f"({ds.directory}): rerun fem_sim linear on the dataset's scene")
         self.columns = where
         self.fractions = np.unique(np.round(ds.sample_fraction, 9))
-        # the terms' weights by load fraction (:meth:`fit`): (fractions (F,), (F, 2)) or None
-        self.weights: tuple | None = None
         self.ratio = _ratio(self.lf)
 
     @classmethod
@@ -92,43 +87,8 @@ class LinearBase:
 
     def _at(self, rows: np.ndarray, lam: np.ndarray) -> np.ndarray:
         """(len(rows), n_out, 3) mm: the base for the file's ``rows`` at fractions ``lam``."""
-        w = self.weights_at(lam)
         one, two = self.terms(rows, lam)
-        return one * w[:, 0, None, None] + two * w[:, 1, None, None]
-
-    def weights_at(self, lam: np.ndarray) -> np.ndarray:
-        """(len(lam), 2): the terms' weights, (1, 1) until fitted; between fitted fractions
-        interpolated, from (1, 1) at lam = 0 (where the series is exact).
-        """
-        lam = np.asarray(lam, np.float64)
-        if self.weights is None:
-            return np.ones((lam.size, 2))
-        at, w = self.weights
-        return np.column_stack([np.interp(lam, np.r_[0.0, at], np.r_[1.0, w[:, i]])
-                                for i in range(2)])
-
-    def fit(self, ds: Dataset, samples: np.ndarray, fields: np.ndarray) -> None:
-        """The terms' weights from the FE ``fields`` (samples, n_out, 3) mm of the patient's
-        ``samples``: for each sample the least-squares weights of its two terms on its field,
-        then by load fraction the median over the samples (robust to a simulation whose
-        load sits where the series fails worst); samples whose second term is gated off
-        (R >= R_MAX) say nothing of its weight and are left out. Nothing to fit at order 1:
-        one scale of the linear response, fitted so, was measured not to help.
-        """
-        if self.lf.second_order is None:
-            return
-        samples = np.asarray(samples)
-        rows = self.lf.rows(ds.sample_sim[samples])
-        keep = self.ratio[rows] < R_MAX
-        if not keep.any():
-            return
-        rows, fields = rows[keep], np.asarray(fields, np.float64)[keep]
-        lam = np.asarray(ds.sample_fraction[samples], np.float64)[keep]
-        one, two = self.terms(rows, lam)
-        w = np.array([np.linalg.lstsq(np.column_stack([a.ravel(), b.ravel()]), d.ravel(),
-                                      rcond=None)[0] for a, b, d in zip(one, two, fields)])
-        at = np.unique(np.round(lam, 9))
-        self.weights = (at, np.array([np.median(w[np.isclose(lam, x)], axis=0) for x in at]))
+        return one + two
 
     def drawn(self, n: int) -> tuple:
         """(forces (S, 3) N, load nodes (S,), fractions (S,), case (S,), fields (S, n_out, 3)

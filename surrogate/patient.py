@@ -10,8 +10,8 @@ other one-liver model.
 then ``fem_sim generate``), and their small-strain responses with those of the drawn loads
 (``fem_sim linear``, ``DATA/linear.h5``, :mod:`surrogate.linear_base`); ``make patient``
 runs the four steps. The teacher's base is those responses (the exact linear elasticity of
-the patient's mesh; with their second-order terms, both weighed on the K simulations:
-:meth:`~surrogate.linear_base.LinearBase.fit`); a dataset without them falls back on the placed
+the patient's mesh, with their second-order terms when ``fem_sim linear --order 2`` gave
+them: :mod:`surrogate.linear_base`); a dataset without them falls back on the placed
 population model.
 
 The correction (:class:`Correction`) is the residual of the FE fields against the base,
@@ -365,8 +365,6 @@ def fit_teacher(teacher: Teacher, ds: Dataset, sims, tune: bool = False) -> Teac
     fields = sample_fields(ds, smp)
     if tune:
         teacher.tune(ds, smp, fields)
-    if teacher.linear is not None:   # a second-order base weighs its terms on them
-        teacher.linear.fit(ds, smp, fields)
     # the correction learns the residual of a load the network was not tuned on: out of fold
     u = teacher.out_of_fold if teacher.out_of_fold is not None else teacher.base(ds, smp)
     r = (fields - u).reshape(smp.size, -1)
@@ -559,8 +557,7 @@ def held_out_errors(pred, placement, ds: Dataset, train_sims, held_sims, *, run:
     """MEE (mm) on the patient's simulations ``held_sims`` of: the population model ``pred``
     placed by ``placement``; it corrected with ``train_sims`` (``corrected``); with the
     dataset's small-strain responses (``linear.h5``), those alone (``linear``) and corrected
-    (``linear_corrected``), and at order 2 with its terms weighed on ``train_sims``
-    (``linear_fitted``, uncorrected); the patient model distilled from the teacher ``adapt``
+    (``linear_corrected``); the patient model distilled from the teacher ``adapt``
     uses (the responses' when there are any), exported to ``run``; the population network fine-tuned
     on ``train_sims`` (``tuned``), and that corrected (``tuned_corrected``; not with
     ``tune`` False); the reduced basis trained on ``train_sims`` alone. With the seconds of
@@ -588,8 +585,6 @@ def held_out_errors(pred, placement, ds: Dataset, train_sims, held_sims, *, run:
         if len(train_sims):
             fit_teacher(teacher, ds, train_sims)
             out["linear_corrected"] = field_mee(teacher(f, x, teacher.base(ds, smp)), true)
-            if linear.order == 2:   # its terms weighed on train_sims, uncorrected
-                out["linear_fitted"] = field_mee(teacher.base(ds, smp), true)
         fitted = time.perf_counter() - start
     info = adapted(teacher, ds, train_sims, run, synthetic=synthetic, log_fn=log_fn)
     out["patient_model"] = field_mee(predictor_fields(load_predictor_of(run), ds, smp), true)

@@ -372,36 +372,3 @@ def test_a_second_order_base_adds_its_damped_term_and_gates_it_past_r_max():
     u2 = lb.lf.second_order[lb.lf.synthetic[case]][:, lb.columns]
     damp = fractions**2 / (1.0 + 0.3 * fractions)
     np.testing.assert_allclose(fields, drawn1 + damp[:, None, None] * u2, rtol=1e-5, atol=1e-8)
-
-
-@pytest.mark.dataset
-def test_fitting_a_second_order_base_recovers_the_weights_of_its_terms():
-    """FE fields made of the base's two terms with known weights by load fraction (and one
-    simulation far off, which the median ignores; one whose second term is gated, which
-    says nothing of its weight): fit finds the weights, the base then gives those fields,
-    and fractions between the fitted ones are interpolated from (1, 1) at lam = 0."""
-    d = Path(generated_dataset("LIVERFEM_TEST_PATIENT"))
-    ds = load_dataset(d / "data")
-    lb = LinearBase(ds)
-    sims = np.unique(ds.sample_sim)[:6]
-    ratio = np.full(lb.lf.case_index.size, 0.4)
-    ratio[lb.lf.rows([sims[-1]])[0]] = 2.0 * linear_base.R_MAX
-    _second_order(lb, ratio, seed=1)
-    smp = sims_samples(ds, sims)
-    lam = ds.sample_fraction[smp]
-    at = np.unique(np.round(lam, 9))
-    want = np.column_stack([1.0 - 0.1 * at, 1.0 - 0.5 * at])       # weights by fraction
-    w = want[np.searchsorted(at, np.round(lam, 9))]
-    one, two = lb.terms(lb.lf.rows(ds.sample_sim[smp]), lam)
-    fields = w[:, 0, None, None] * one + w[:, 1, None, None] * two
-    fields[ds.sample_sim[smp] == sims[-1]] *= 0.2                  # gated: left out
-    off = ds.sample_sim[smp] == sims[-2]
-    fields[off] *= 3.0
-    lb.fit(ds, smp, fields)
-    np.testing.assert_allclose(lb.weights[0], at)
-    np.testing.assert_allclose(lb.weights[1], want, rtol=1e-5)
-    ok = np.isin(ds.sample_sim[smp], sims[:-2])
-    np.testing.assert_allclose(lb.samples(ds, smp[ok]), fields[ok], rtol=1e-4,
-                               atol=1e-6 * np.abs(fields).max())
-    half = 0.5 * at[0]
-    np.testing.assert_allclose(lb.weights_at(np.array([half]))[0], 1.0 + 0.5 * (want[0] - 1.0))
