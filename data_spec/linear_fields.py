@@ -14,6 +14,12 @@ second_order[i]``, the Taylor expansion of the Ogden body's response to second o
     /output_nodes  (n_out,)          int64    the scene's output nodes
     /displacement  (n, n_out, 3)     float32  mm at load fraction 1, at the output nodes
     /second_order  (n, n_out, 3)     float32  mm, the lam^2 coefficient (optional)
+    /green_nodes   (n_g,)            int64    surface nodes off the fixed region (optional,
+                                              ``--green``)
+    /green         (n_g, 3, n_out, 3) float32 mm/N: the response to a unit force at each of
+                                              them along x, y, z (the small-strain Green's
+                                              function: any nodal load's response is
+                                              green[node] contracted with its force)
     attrs: format, scene_name, scene_hash, geometry_id, synthetic_first, units_length,
            units_force, seconds (the factorisation and the solves)
 """
@@ -47,6 +53,8 @@ class LinearFields:
     geometry_id: str
     seconds: float = 0.0
     second_order: np.ndarray | None = None
+    green_nodes: np.ndarray | None = None
+    green: np.ndarray | None = None
 
     @property
     def order(self) -> int:
@@ -77,7 +85,9 @@ def write_linear_fields(path: str | Path, lf: LinearFields) -> Path:
     with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
         for name in ("case_index", "load_nodes", "forces", "output_nodes"):
             f[name] = np.asarray(getattr(lf, name))
-        for name in ("displacement", "second_order"):
+        if lf.green is not None:
+            f["green_nodes"] = np.asarray(lf.green_nodes, np.int64)
+        for name in ("displacement", "second_order", "green"):
             if getattr(lf, name) is not None:
                 f.create_dataset(name, data=np.asarray(getattr(lf, name), np.float32),
                                  compression="gzip", compression_opts=1, shuffle=True)
@@ -98,4 +108,5 @@ def read_linear_fields(path: str | Path) -> LinearFields:
                                       "displacement")},
             scene_name=str(f.attrs["scene_name"]), scene_hash=str(f.attrs["scene_hash"]),
             geometry_id=str(f.attrs["geometry_id"]), seconds=float(f.attrs["seconds"]),
-            second_order=f["second_order"][()] if "second_order" in f else None)
+            **{k: f[k][()] if k in f else None for k in ("second_order", "green_nodes",
+                                                          "green")})

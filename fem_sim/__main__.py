@@ -5,8 +5,8 @@ mpirun -n N python3 -m fem_sim generate SCENE.toml --out DIR [--ranks-per-sim R]
 python3 -m fem_sim summary DIR
 python3 -m fem_sim population SCENE.toml --out DIR   (scene 4: CPD + PCA shape coefficients)
 python3 -m fem_sim phantom SEED --out FILE.h5 [--variety V] [--spread S] [--mesh-size H]
-python3 -m fem_sim linear SCENE.toml --out DIR [--synthetic N] [--order 2]   (a one-liver scene's
-small-strain responses, DIR/linear.h5)
+python3 -m fem_sim linear SCENE.toml --out DIR [--synthetic N] [--order 2] [--green]
+    (a one-liver scene's small-strain responses, DIR/linear.h5)
 """
 
 from __future__ import annotations
@@ -117,6 +117,9 @@ def _parser() -> argparse.ArgumentParser:
                     help="loads drawn by the scene's rule beside its simulations' (default 0)")
     li.add_argument("--order", type=int, default=1, choices=(1, 2),
                     help="2: each response's second-order term in the load too (default 1)")
+    li.add_argument("--green", action="store_true",
+                    help="also the response to a unit force at every surface node off the "
+                    "fixed region (a patient model's exact small-strain part)")
     s = sub.add_parser("summary", help="print counts and statistics of a dataset")
     s.add_argument("directory")
     s.add_argument("--png", help="picture of deformed livers (default DIR/summary.png)")
@@ -176,7 +179,8 @@ def _linear(args) -> int:
     from fem_sim.geometry.errors import GeometryError
 
     try:
-        path = linear_fields(args.scene, args.out, args.synthetic, args.order)
+        path = linear_fields(args.scene, args.out, args.synthetic, args.order,
+                             args.green)
     except (SceneError, GeometryError, ValueError, OSError) as exc:
         print(f"fem_sim linear: {exc}", file=sys.stderr)
         return 2

@@ -3,14 +3,16 @@ liver linearised at u = 0 under the loads of every simulation of the scene and o
 ``synthetic`` more cases drawn by the scene's own rule (case indices from
 ``SYNTHETIC_FIRST``), from one factorisation of the tangent, one refined solve per load.
 
-    python -m fem_sim linear SCENE --out DATA [--synthetic N] [--order 2]
+    python -m fem_sim linear SCENE --out DATA [--synthetic N] [--order 2] [--green]
 
 What a patient model learns beside its few nonlinear simulations (:mod:`surrogate.patient`):
 the exact linear elasticity of the patient's own mesh, for as many loads as it likes, at the
 price of back-solves; ``--order 2`` adds each load's second-order term (the Ogden law's
 first stiffening, :meth:`~fem_sim.solver.problem.OgdenProblem.load_expansion`: two internal
-force assemblies and one more back-solve per load). Runs on one process (the
-factorisation's threads use the cores).
+force assemblies and one more back-solve per load); ``--green`` adds the response to a unit
+force along each axis at every surface node off the fixed region (three back-solves per node),
+from which a patient model gives the exact small-strain part of any nodal load at run time.
+Runs on one process (the factorisation's threads use the cores).
 """
 
 from __future__ import annotations
@@ -50,8 +52,16 @@ def _cases(scene, scene_file: str, g, fixed: np.ndarray, synthetic: int) -> list
     return out
 
 
+def _green_loads(g, fixed: np.ndarray) -> tuple[np.ndarray, list]:
+    """The surface nodes off the fixed region and a unit nodal force at each along x, y, z."""
+    from fem_sim.solver.loads import NodalLoad
+
+    nodes = np.setdiff1d(g.surface_nodes, fixed)
+    return nodes, [[NodalLoad([int(n)], [e])] for n in nodes for e in np.eye(3)]
+
+
 def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
-                  order: int = 1) -> Path:
+                  order: int = 1, green: bool = False) -> Path:
     """``out/linear.h5`` for the one-liver scene ``scene_file`` (its liver meshed and checked
     as ``fem_sim generate`` does it, into the same dataset directory ``out``).
     """
@@ -64,6 +74,9 @@ def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
     if order not in (1, 2):
         raise ValueError(f"--order must be 1 or 2, got {order}")
     scene = load_scene(scene_file)
+    if green and scene["loads"]["kind"] != "nodal":
+        raise ValueError(f"{scene_file}: loads.kind = {scene['loads']['kind']!r}; --green gives "
+                         "the responses to unit nodal forces, of a scene of nodal loads")
     if n_geometries(scene) != 1:
         raise ValueError(f"{scene_file}: [geometry] has {n_geometries(scene)} livers; small-"
                          "strain responses are of one liver (a patient's scene)")
@@ -78,12 +91,17 @@ def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
                            element=solver.get("element", "lagrange"),
                            settings=solver_settings(scene))
     nodes = cs.output_nodes(scene, g)
-    u = problem.load_expansion(cases[0].material, [Constraint(fixed)],
-                               [case_loads(c, g) for c in cases], order=order)[:, :, nodes]
+    loads = [case_loads(c, g) for c in cases]
+    u = problem.load_expansion(cases[0].material, [Constraint(fixed)], loads,
+                               order=order)[:, :, nodes]
+    gnodes, gf = _green_loads(g, fixed) if green else (None, None)
+    if green:   # the same factorisation (kept by solve_recurring)
+        gf = problem.linear_responses(cases[0].material, [Constraint(fixed)], gf)[:, nodes]
+        gf = gf.reshape(gnodes.size, 3, nodes.size, 3)
     return write_linear_fields(linear_fields_path(out), LinearFields(
         case_index=np.array([c.index for c in cases], np.int64),
         load_nodes=np.stack([c.load_nodes for c in cases]),
         forces=np.stack([c.forces for c in cases]), output_nodes=nodes,
         displacement=u[:, 0], scene_name=scene.name, scene_hash=scene.hash,
         geometry_id=ids[0], seconds=time.perf_counter() - t,
-        second_order=u[:, 1] if order == 2 else None))
+        second_order=u[:, 1] if order == 2 else None, green_nodes=gnodes, green=gf))

@@ -523,6 +523,30 @@ def test_second_order_responses_close_most_of_the_first_steps_gap(reference, tmp
         assert two < 0.2 * one, (sh.sim_index, one, two)
 
 
+def test_greens_function_gives_every_nodal_loads_response(reference, tmp_path):
+    """fem_sim linear --green: a unit response per axis at every surface node off the fixed
+    region; contracted with a case's force at its node, the case's own response (linearity:
+    both from the same factorisation, each refined to 1e-6)."""
+    from data_spec.geometry import read_geometry
+    from data_spec.linear_fields import linear_fields_path, read_linear_fields
+
+    out = tmp_path / "d"
+    shutil.copytree(reference, out)
+    res = linear(TINY, out, "--synthetic", "3", "--green")
+    assert res.returncode == 0, res.stderr
+    lf = read_linear_fields(linear_fields_path(out))
+    sh = read_shard(list_shards(out)[0])
+    g = read_geometry(next((out / "geometry").glob("g*.h5")))
+    np.testing.assert_array_equal(lf.green_nodes, np.setdiff1d(g.surface_nodes, sh.fixed_nodes))
+    assert lf.green.shape == (lf.green_nodes.size, 3, lf.output_nodes.size, 3)
+    for row in range(lf.case_index.size):
+        at = np.searchsorted(lf.green_nodes, lf.load_nodes[row, 0])
+        assert lf.green_nodes[at] == lf.load_nodes[row, 0]
+        u = np.einsum("cnd,c->nd", lf.green[at].astype(np.float64), lf.forces[row, 0])
+        np.testing.assert_allclose(u, lf.displacement[row], rtol=0,
+                                   atol=1e-5 * np.abs(lf.displacement[row]).max())
+
+
 def test_small_strain_responses_of_many_livers_are_refused(tmp_path):
     res = linear(ROOT / "data_spec" / "scenes" / "ci_scene4.toml", tmp_path / "d")
     assert res.returncode == 2
