@@ -72,40 +72,48 @@ def truth(model: Path, liver: Path, n: int, ranks: int) -> Path:
     return d / "data"
 
 
-def order_data(data: Path, order: int) -> Path:
-    """The truth's directory with a small-strain file of ``order``: ``data`` itself for 2,
-    a copy of its shards beside it for 1.
+# the variants compared: (order, Green's function) by key; "2" is the truth's own directory
+VARIANTS = {"1": (1, False), "2": (2, False), "1g": (1, True), "2g": (2, True)}
+LABELS = {"1": "order 1", "2": "order 2", "1g": "order 1, exact linear part",
+          "2g": "order 2, exact linear part"}
+
+
+def order_data(data: Path, key: str) -> Path:
+    """The truth's directory with the small-strain file of variant ``key``: ``data`` itself
+    for "2", a copy of its shards beside it for the others.
     """
-    if order == 2:
+    if key == "2":
         return data
-    return data.parent / "data_order1"
+    return data.parent / ("data_order1" if key == "1" else f"data_{key}")
 
 
 def expansion(data: Path) -> dict:
-    """``fem_sim linear`` at order 1 (into a copy of the truth) and 2, wall seconds each,
-    once per truth (kept in linear.json; a missing file is made again, its seconds kept).
+    """``fem_sim linear`` of each variant (the others into copies of the truth), wall
+    seconds each, once per truth (kept in linear.json; a missing file is made again, its
+    seconds kept).
     """
     record = data.parent / "linear.json"
     seconds = json.loads(record.read_text()) if record.exists() else {}
-    for order in (1, 2):
-        out = order_data(data, order)
-        if str(order) in seconds and linear_fields_path(out).exists():
+    for key, (order, green) in VARIANTS.items():
+        out = order_data(data, key)
+        if key in seconds and linear_fields_path(out).exists():
             continue
-        if order == 1:
+        if out != data:
             shutil.rmtree(out, ignore_errors=True)
             shutil.copytree(data, out, ignore=shutil.ignore_patterns("linear.h5"))
         t = time.perf_counter()
         subprocess.run([str(ROOT / ".venv-solver" / "bin" / "python"), "-m", "fem_sim",
                         "linear", str(data.parent / "scene.toml"), "--out", str(out),
-                        "--synthetic", str(SYNTHETIC), "--order", str(order)], cwd=ROOT,
-                       check=True, stdout=subprocess.DEVNULL)
-        seconds.setdefault(str(order), time.perf_counter() - t)
+                        "--synthetic", str(SYNTHETIC), "--order", str(order),
+                        *(["--green"] if green else [])], cwd=ROOT, check=True,
+                       stdout=subprocess.DEVNULL)
+        seconds.setdefault(key, time.perf_counter() - t)
     record.write_text(json.dumps(seconds))
     return seconds
 
 
 def patient_errors(model: Path, liver: Path, data: Path, ks, n: int) -> dict:
-    """{order: {K: held_out_errors}} on the last n - max(ks) simulations (kept in
+    """{"variant/K": held_out_errors} on the last n - max(ks) simulations (kept in
     patient.json; tune off: the population network is not what is compared).
     """
     from surrogate.data import load_dataset
@@ -117,20 +125,20 @@ def patient_errors(model: Path, liver: Path, data: Path, ks, n: int) -> dict:
     done = json.loads(path.read_text()) if path.exists() else {}
     pred = load_predictor(model / "model")
     placement = None
-    for order in (1, 2):
-        ds = load_dataset(order_data(data, order))
+    for variant in VARIANTS:
+        ds = load_dataset(order_data(data, variant))
         sims = np.unique(ds.sample_sim)
         for k in ks:
-            key = f"{order}/{k}"
+            key = f"{variant}/{k}"
             if key in done:
                 continue
             if placement is None:
                 placement, _ = place(pred, liver, None)
             done[key] = held_out_errors(pred, placement, ds, sims[:k], sims[max(ks):n],
-                                        run=data.parent / f"run_{order}_{k}", tune=False,
+                                        run=data.parent / f"run_{variant}_{k}", tune=False,
                                         log_fn=lambda m: None)
             path.write_text(json.dumps(done, indent=1, default=float))
-            print(f"[{liver.stem}] order {order} K={k}: {done[key]}", flush=True)
+            print(f"[{liver.stem}] {LABELS[variant]} K={k}: {done[key]}", flush=True)
     return done
 
 
@@ -204,21 +212,25 @@ def patient_lines(patient: dict, a) -> list[str]:
              f"no fine-tuning), adapted on the first K simulations, MEE (mm) on the last "
              f"{held} (mean over their nodes and load steps); corrected: the kernel "
              "correction on top (dropped where its cross-validation finds no gain); patient "
-             "model: distilled and exported as `make patient` does it; scratch: the reduced "
-             "basis trained on the K alone.", "",
+             "model: distilled and exported as `make patient` does it (with the exact "
+             "linear part, `fem_sim linear --green`: the student learns what the teacher "
+             "holds beyond the liver's small-strain Green's function, which the exported "
+             "model adds back at run time); scratch: the reduced basis trained on the K "
+             "alone.", "",
              "| liver | K | base | base alone | corrected | patient model | scratch |",
              "|---|---:|---|---:|---:|---:|---:|"]
     for name, by in patient.items():
         for k in a.ks:
-            for order in (1, 2):
-                p = by[f"{order}/{k}"]
-                lines.append(f"| {name} | {k} | order {order} | {p['linear']:.3f} | "
+            for v in VARIANTS:
+                p = by[f"{v}/{k}"]
+                lines.append(f"| {name} | {k} | {LABELS[v]} | {p['linear']:.3f} | "
                              f"{p['linear_corrected']:.3f} | {p['patient_model']:.3f} | "
                              f"{p['scratch']:.3f} |")
-    med = {o: {k: np.median([by[f"{o}/{k}"]["patient_model"] for by in patient.values()])
-               for k in a.ks} for o in (1, 2)}
+    med = {v: {k: np.median([by[f"{v}/{k}"]["patient_model"] for by in patient.values()])
+               for k in a.ks} for v in VARIANTS}
     lines += ["", "Median over the livers, patient model: " + "; ".join(
-        f"K = {k}: order 1 {med[1][k]:.3f}, order 2 {med[2][k]:.3f} mm" for k in a.ks) + "."]
+        f"K = {k}: " + ", ".join(f"{LABELS[v]} {med[v][k]:.3f}" for v in VARIANTS) + " mm"
+        for k in a.ks) + "."]
     return lines
 
 
@@ -244,8 +256,8 @@ def report(found: dict, seconds: dict, patient: dict, a) -> str:
                          f"{e['base'][i] / e['order1'][i]:.2f} |")
     lines += ["", "| liver | slope linear | slope series | mean over fractions, linear | "
               "series | base | worst simulation at fraction 1, linear | series | base | loads "
-              "gated | seconds order 1 | order 2 |",
-              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+              "gated | seconds order 1 | order 2 | order 1 --green |",
+              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for name, e in found.items():
         s = seconds[name]
         lines.append(f"| {name} | {slope(e['fractions'], e['order1']):.2f} | "
@@ -253,7 +265,7 @@ def report(found: dict, seconds: dict, patient: dict, a) -> str:
                      f"{np.mean(e['order2']):.3f} | {np.mean(e['base']):.3f} | "
                      f"{e['worst']['order1']:.3f} | {e['worst']['order2']:.3f} | "
                      f"{e['worst']['base']:.3f} | {e['gated']} of {e['sims']} | {s['1']:.0f} | "
-                     f"{s['2']:.0f} |")
+                     f"{s['2']:.0f} | {s['1g']:.0f} |")
     lines += ["", f"Seconds: `fem_sim linear` in all ({found[next(iter(found))]['loads']} "
               "loads per liver: the simulations' and the drawn ones; meshing, forms, one "
               "factorisation and the solves), one process.", "",

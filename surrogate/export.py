@@ -9,6 +9,10 @@ model never executes code. This module writes them and reads them back checked;
     RUN/model/geometry.npz   the liver (points, fixed nodes, output nodes, outward surface
                              triangles, the nodes the scene loads) when the scene has one
                              liver: enough to draw it
+    RUN/model/linear_part.npz  optional (a patient model): the liver's small-strain Green's
+                             function, "nodes" (n_g,) and "green" (n_g, 3, n_out, 3) mm/N at
+                             the output nodes; the predictor adds green[load node] . force
+                             to the network's output, which is then what is left beyond it
     RUN/model/shape_model.npz  when the scene varies the liver: the template, the PCA of the
                              population and the registration settings
                              (:class:`liverreg.shape_model.ShapeModel`): what a new liver
@@ -29,10 +33,11 @@ from surrogate.model_files import MODEL_FORMAT, MODEL_VERSION
 log = logging.getLogger(__name__)
 
 
-def export_model(directory, model, cfg, ds, unseen=()) -> Path:
+def export_model(directory, model, cfg, ds, unseen=(), linear_part=None) -> Path:
     """Write a model directory from a trained model of the config's design (node-wise:
     (parameters, normaliser); basis: a :class:`surrogate.basis.BasisModel`) and its dataset.
     ``unseen``: the simulations the model never trained on (recorded for viewers).
+    ``linear_part``: (nodes, green) of a one-liver model trained on what is left beyond it.
     """
     from surrogate.designs import DESIGNS
 
@@ -42,6 +47,13 @@ def export_model(directory, model, cfg, ds, unseen=()) -> Path:
                 on_template=design.on_template)
     for name, arrays in files.items():
         np.savez(d / name, **arrays)
+    if linear_part is not None:
+        nodes, green = linear_part
+        np.savez(d / "linear_part.npz", nodes=np.asarray(nodes, np.int64),
+                 green=np.asarray(green, np.float32))
+        meta = json.loads((d / "model.json").read_text())
+        meta["linear_part"] = "linear_part.npz"
+        (d / "model.json").write_text(json.dumps(meta, indent=1))
     return d
 
 

@@ -68,6 +68,29 @@ class LinearBase:
     def order(self) -> int:
         return self.lf.order
 
+    @property
+    def green(self) -> tuple | None:
+        """(nodes (n_g,), (n_g, 3, n_out, 3) mm/N at the dataset's output nodes): the file's
+        Green's function (``fem_sim linear --green``), None without it.
+        """
+        if self.lf.green is None:
+            return None
+        return self.lf.green_nodes, self.lf.green[:, :, self.columns]
+
+    def green_part(self, load_nodes, forces) -> np.ndarray:
+        """(S, n_out, 3) mm: the exact small-strain response of one nodal load per case
+        (load nodes (S,), forces (S, 3) N) from the Green's function; ValueError naming the
+        nodes it does not hold.
+        """
+        nodes, g = self.green
+        load_nodes = np.asarray(load_nodes).ravel()
+        at = np.minimum(np.searchsorted(nodes, load_nodes), nodes.size - 1)
+        if np.any(nodes[at] != load_nodes):
+            raise ValueError(f"{self.path}: no unit response at node(s) "
+                             f"{load_nodes[nodes[at] != load_nodes][:5].tolist()}")
+        return np.einsum("scnd,sc->snd", g[at], np.asarray(forces, np.float64).reshape(-1, 3),
+                         dtype=np.float64)
+
     def terms(self, rows: np.ndarray, lam: np.ndarray) -> tuple:
         """The base's two terms for the file's ``rows`` at fractions ``lam``, each
         (len(rows), n_out, 3) mm: lam u1, and lam^2 u2 / (1 + lam R) with R = |u2| / |u1|

@@ -421,8 +421,11 @@ def with_cases(ds: Dataset, keep: np.ndarray, forces, nodes, fractions, sims,
 
 def distilled(teacher: Teacher, ds: Dataset, sims, n_synthetic: int, cfg: dict,
               seed: int = 0, log_fn=print):
-    """(model, dataset): the reduced basis trained on the FE simulations ``sims`` and
-    ``n_synthetic`` drawn loads with the teacher's fields.
+    """(model, dataset, linear part): the reduced basis trained on the FE simulations
+    ``sims`` and ``n_synthetic`` drawn loads with the teacher's fields; with the small-strain
+    Green's function (``fem_sim linear --green``), trained on what the fields hold beyond
+    its exact small-strain part, which the exported model adds back at run time (the linear
+    part: (nodes, unit responses), else None).
     """
     from surrogate.train import fit_design
 
@@ -433,8 +436,13 @@ def distilled(teacher: Teacher, ds: Dataset, sims, n_synthetic: int, cfg: dict,
         forces, nodes, fractions, sim = drawn_loads(ds, n_synthetic, seed)
         fields = teacher(forces, ds.points[0][nodes])
     aug = with_cases(ds, sims_samples(ds, sims), forces, nodes, fractions, sim, fields)
+    part = None if teacher.linear is None else teacher.linear.green
+    if part is not None:
+        exact = teacher.linear.green_part(aug.load_nodes[:, 0], aug.forces[:, 0])
+        aug = dataclasses.replace(aug, targets=(np.asarray(aug.targets, np.float64)
+                                                - exact.reshape(-1, 3)).astype(np.float32))
     model, _ = fit_design(aug, np.arange(aug.n_samples), cfg, seed, "patient ", log_fn)
-    return model, aug
+    return model, aug, part
 
 
 def student_config(**overrides) -> dict:
@@ -513,8 +521,8 @@ def adapted(teacher: Teacher, ds: Dataset, used, run, *, synthetic: int = SYNTHE
 
     t = time.perf_counter()
     cfg = student_config(**overrides)
-    model, aug = distilled(teacher, ds, used, synthetic, cfg, seed, log_fn)
-    export_model(Path(run) / "model", model, cfg, aug)
+    model, aug, part = distilled(teacher, ds, used, synthetic, cfg, seed, log_fn)
+    export_model(Path(run) / "model", model, cfg, aug, linear_part=part)
     c = teacher.correction
     return {"fe_simulations": np.asarray(used).tolist(), "synthetic_simulations": synthetic,
             "correction": None if c is None else {

@@ -94,6 +94,7 @@ class Predictor:
         self._shape_model = None
         self.runtime = DESIGNS[self.design].runtime(d, self, hidden, dropout, dtype)
         self._geo_key = self._sel_key = None
+        self.linear_part = _read_linear_part(d, meta, self.points, self.output_nodes)
 
     def _read_liver(self, geo: Path, required: bool) -> None:
         """The liver the model was exported with (geometry.npz), if any."""
@@ -123,6 +124,9 @@ class Predictor:
 
     def __call__(self, forces, load_nodes, nodes=None, material=None, geometry=None):
         forces, load_nodes, single = _check_loads(forces, load_nodes, self.spec.n_loads)
+        if self.linear_part is not None and geometry is not None:
+            raise ValueError("geometry: this model's small-strain part is of its own liver's "
+                             "mesh; it predicts on that mesh only")
         self.runtime.check_geometry(self, geometry)
         static, points = self._geometry(geometry)
         self.runtime.check_points(self, points.shape[0])
@@ -143,6 +147,8 @@ class Predictor:
                 np.asarray(extra, dtype=np.float32))
         liver = None if geometry is None else (self._geo_key, points, np.asarray(geometry[1]))
         out = np.asarray(self.runtime.apply(self, rows, *args, load_nodes, liver))
+        if self.linear_part is not None:
+            out = out + self.linear_part(forces, load_nodes, nodes).astype(out.dtype)
         return out[0] if single else out
 
     def _rows(self, nodes, static, geometry, n_nodes: int):
@@ -232,6 +238,47 @@ class Predictor:
             self._geo_static = jnp.asarray(static_node_features(points, fixed),
                                            dtype=jnp.float32)
         return self._geo_static, points
+
+
+class LinearPart:
+    """The exact small-strain part of a patient model (``linear_part.npz``, see
+    :mod:`surrogate.export`): the sum over the loads of green[load node] . force, a load at
+    a node without a unit response taking the nearest one's (an interior or fixed node the
+    predictor already warns of).
+    """
+
+    def __init__(self, nodes: np.ndarray, green: np.ndarray, points: np.ndarray,
+                 output_nodes: np.ndarray):
+        from scipy.spatial import cKDTree
+
+        self.green = green
+        self.row = cKDTree(points[nodes]).query(points)[1]   # each mesh node's nearest row
+        self.output_nodes = output_nodes
+
+    def __call__(self, forces: np.ndarray, load_nodes: np.ndarray, nodes=None) -> np.ndarray:
+        """(n_cases, n_out or len(nodes), 3) mm for forces (n_cases, L, 3) N at load_nodes
+        (n_cases, L).
+        """
+        g = self.green[self.row[load_nodes]]          # (cases, L, 3, n_out, 3)
+        if nodes is not None:
+            g = g[:, :, :, np.searchsorted(self.output_nodes, np.asarray(nodes))]
+        return np.einsum("slcnd,slc->snd", g, forces, dtype=np.float64)
+
+
+def _read_linear_part(d: Path, meta: dict, points, output_nodes) -> LinearPart | None:
+    if not meta.get("linear_part"):
+        return None
+    path = d / meta["linear_part"]
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            nodes, green = z["nodes"], z["green"]
+    except (OSError, KeyError, ValueError) as exc:
+        raise ValueError(f"{path}: cannot be read ({exc})") from None
+    n_out = 0 if output_nodes is None else output_nodes.size
+    if points is None or green.shape != (nodes.size, 3, n_out, 3):
+        raise ValueError(f"{path}: expected unit responses ({nodes.size}, 3, {n_out}, 3) at "
+                         f"the output nodes of the model's liver, got {green.shape}")
+    return LinearPart(nodes, green, points, output_nodes)
 
 
 def load_predictor(directory, dtype: str = "float32") -> Predictor:

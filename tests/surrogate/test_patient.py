@@ -372,3 +372,39 @@ def test_a_second_order_base_adds_its_damped_term_and_gates_it_past_r_max():
     u2 = lb.lf.second_order[lb.lf.synthetic[case]][:, lb.columns]
     damp = fractions**2 / (1.0 + 0.3 * fractions)
     np.testing.assert_allclose(fields, drawn1 + damp[:, None, None] * u2, rtol=1e-5, atol=1e-8)
+
+
+@pytest.mark.dataset
+def test_a_models_linear_part_is_added_to_its_network_at_its_load_nodes(tmp_path):
+    """A model directory with linear_part.npz: the prediction is the network's plus
+    green[load node] . force summed over the loads, at all output nodes or a chosen few; a
+    load node without a unit response takes the nearest one's; another mesh is refused."""
+    import shutil
+
+    d = Path(generated_dataset("LIVERFEM_TEST_PATIENT"))
+    plain = load_predictor(d / "run" / "model")
+    model = tmp_path / "model"
+    shutil.copytree(d / "run" / "model", model)
+    out = plain.output_nodes
+    nodes = np.asarray(plain.loadable)[::3]
+    green = np.random.default_rng(2).normal(size=(nodes.size, 3, out.size, 3))
+    np.savez(model / "linear_part.npz", nodes=nodes, green=green.astype(np.float32))
+    meta = json.loads((model / "model.json").read_text())
+    (model / "model.json").write_text(json.dumps({**meta, "linear_part": "linear_part.npz"}))
+    pred = load_predictor(model)
+    f = np.array([[0.1, -0.2, 0.3], [0.0, 0.05, -0.1]])[:, None]
+    at = np.array([nodes[4], nodes[7]])[:, None]
+    want = plain(f, at) + np.einsum("scnd,sc->snd", green[[4, 7]], f[:, 0])
+    np.testing.assert_allclose(pred(f, at), want, rtol=1e-5, atol=1e-5)
+    some = out[[0, 5, 9]]
+    np.testing.assert_allclose(pred(f, at, nodes=some), want[:, [0, 5, 9]], rtol=1e-5,
+                               atol=1e-5)
+    near = np.setdiff1d(plain.loadable, nodes)[0]   # no unit response of its own
+    row = np.argmin(np.linalg.norm(pred.points[nodes] - pred.points[near], axis=1))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        np.testing.assert_allclose(pred(f[0], [near]) - plain(f[0], [near]),
+                                   np.einsum("cnd,c->nd", green[row], f[0, 0]), rtol=1e-4,
+                                   atol=1e-5)
+    with pytest.raises(ValueError, match="its own liver's mesh"):
+        pred(f[0], at[0], geometry=(pred.points, pred.fixed, np.zeros(0)))
