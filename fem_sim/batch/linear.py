@@ -52,6 +52,9 @@ def _cases(scene, scene_file: str, g, fixed: np.ndarray, synthetic: int) -> list
     return out
 
 
+GREEN_MAX_BYTES = 2 * 2**30   # the Green's function's float32 size at most
+
+
 def _green_loads(g, fixed: np.ndarray) -> tuple[np.ndarray, list]:
     """The surface nodes off the fixed region and a unit nodal force at each along x, y, z."""
     from fem_sim.solver.loads import NodalLoad
@@ -84,17 +87,23 @@ def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
     ids, fixed = _write_livers(scene, scene_file, livers, out)
     g, fixed = livers[0], fixed[0]
     cases = _cases(scene, scene_file, g, fixed, synthetic)
+    nodes = cs.output_nodes(scene, g)
+    gnodes, gf = _green_loads(g, fixed) if green else (None, None)
+    size = 0 if gnodes is None else gnodes.size * 36 * nodes.size   # float32 bytes
+    if size > GREEN_MAX_BYTES:
+        raise ValueError(f"{scene_file}: --green would hold {gnodes.size} x 3 unit responses "
+                         f"at {nodes.size} output nodes ({size / 2**30:.1f} GiB), beyond "
+                         f"{GREEN_MAX_BYTES / 2**30:.0f} GiB: a coarser mesh ([geometry] "
+                         "mesh_size), or no --green")
     solver = scene["solver"]
     t = time.perf_counter()
     problem = OgdenProblem(MPI.COMM_SELF, g.points, g.cells, degree=solver["degree"],
                            quadrature_degree=solver["quadrature_degree"],
                            element=solver.get("element", "lagrange"),
                            settings=solver_settings(scene))
-    nodes = cs.output_nodes(scene, g)
     loads = [case_loads(c, g) for c in cases]
     u = problem.load_expansion(cases[0].material, [Constraint(fixed)], loads,
                                order=order)[:, :, nodes]
-    gnodes, gf = _green_loads(g, fixed) if green else (None, None)
     if green:   # the same factorisation (kept by solve_recurring)
         gf = problem.linear_responses(cases[0].material, [Constraint(fixed)], gf)[:, nodes]
         gf = gf.reshape(gnodes.size, 3, nodes.size, 3)

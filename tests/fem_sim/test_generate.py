@@ -547,6 +547,18 @@ def test_greens_function_gives_every_nodal_loads_response(reference, tmp_path):
                                    atol=1e-5 * np.abs(lf.displacement[row]).max())
 
 
+def test_a_greens_function_beyond_its_bound_is_refused_before_solving(reference, tmp_path,
+                                                                     monkeypatch):
+    from fem_sim.batch import linear as lin
+
+    out = tmp_path / "d"
+    shutil.copytree(reference, out)
+    monkeypatch.setattr(lin, "GREEN_MAX_BYTES", 1000)
+    with pytest.raises(ValueError, match=r"--green would hold .* unit responses"):
+        lin.linear_fields(TINY, out, green=True)
+    assert not (out / "linear.h5").exists()
+
+
 def test_small_strain_responses_of_many_livers_are_refused(tmp_path):
     res = linear(ROOT / "data_spec" / "scenes" / "ci_scene4.toml", tmp_path / "d")
     assert res.returncode == 2
