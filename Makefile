@@ -190,8 +190,10 @@ truth: setup
 # A new patient (docs/patient.md): the population model MODEL (a run) placed on the liver file
 # LIVER, K FE simulations on the patient's own mesh with the model's boundary condition (solver
 # environment, mpirun), the liver's small-strain responses to them and to SYNTHETIC drawn
-# loads (fem_sim linear: one factorisation), those corrected with the K simulations and
-# distilled into the patient's own model, $(PATIENT)/run/model (trainer environment). PSCENE:
+# loads (fem_sim linear: one factorisation) and its Green's function (the unit responses at
+# its surface nodes), those corrected with the K simulations and distilled into the patient's
+# own model, $(PATIENT)/run/model, which adds the exact small-strain part back (trainer
+# environment). PSCENE:
 # the population scene MODEL was trained on (its loads, material, steps and solver). HELD more simulations are solved and kept
 # out of the adaptation (to measure the patient model on); FRAME: the liver file's frame;
 # ADAPT: more options of surrogate adapt (ADAPT=--tune fine-tunes the population network);
@@ -212,7 +214,7 @@ patient: setup
 	    --placement $(PATIENT)/placement.npz
 	$(MPIRUN) $(SPY) -m fem_sim generate $(PATIENT)/scene.toml --out $(PATIENT)/data
 	$(SPY) -m fem_sim linear $(PATIENT)/scene.toml --out $(PATIENT)/data --synthetic $(SYNTHETIC) \
-	    --order $(ORDER)
+	    --order $(ORDER) --green
 	$(TPY) -m surrogate adapt $(MODEL) $(PATIENT)/data --liver $(LIVER) --run $(PATIENT)/run \
 	    --sims $(K) --synthetic $(SYNTHETIC) $(if $(FRAME),--frame $(FRAME)) \
 	    --placement $(PATIENT)/placement.npz $(ADAPT)

@@ -126,8 +126,8 @@ def truth(pred, liver: Path, a) -> Path:
 
 
 def linear(scene: Path, data: Path, record: Path, order: int = 1) -> dict:
-    """``fem_sim linear`` on the truth's scene (SYNTHETIC drawn loads, ``order``), as make
-    patient runs it, once per order: its wall seconds in ``record``.
+    """``fem_sim linear`` on the truth's scene (SYNTHETIC drawn loads, ``order``, the Green's
+    function), as make patient runs it, once per order: its wall seconds in ``record``.
     """
     from data_spec import load_scene
     from data_spec.linear_fields import linear_fields_path, read_linear_fields
@@ -136,12 +136,13 @@ def linear(scene: Path, data: Path, record: Path, order: int = 1) -> dict:
     done = json.loads(record.read_text()) if record.exists() else {}
     if path.exists() and done.get("seconds") and done.get("order", 1) == order:
         lf = read_linear_fields(path)
-        if lf.scene_hash == load_scene(scene).hash and lf.order == order:
+        if lf.scene_hash == load_scene(scene).hash and lf.order == order \
+                and lf.green is not None:
             return done
     t = time.perf_counter()
     subprocess.run([str(ROOT / ".venv-solver" / "bin" / "python"), "-m", "fem_sim", "linear",
                     str(scene), "--out", str(data), "--synthetic", str(SYNTHETIC), "--order",
-                    str(order)], cwd=ROOT, check=True)
+                    str(order), "--green"], cwd=ROOT, check=True)
     done = {"seconds": time.perf_counter() - t, "order": order,
             "solves_seconds": read_linear_fields(path).seconds}
     record.write_text(json.dumps(done))

@@ -378,18 +378,23 @@ def test_a_second_order_base_adds_its_damped_term_and_gates_it_past_r_max():
 def test_a_models_linear_part_is_added_to_its_network_at_its_load_nodes(tmp_path):
     """A model directory with linear_part.npz: the prediction is the network's plus
     green[load node] . force summed over the loads, at all output nodes or a chosen few; a
-    load node without a unit response takes the nearest one's; another mesh is refused."""
+    load node without a unit response takes the nearest one's; another mesh is refused.
+    make patient's model carries the liver's Green's function (fem_sim linear --green)."""
     import shutil
 
     d = Path(generated_dataset("LIVERFEM_TEST_PATIENT"))
-    plain = load_predictor(d / "run" / "model")
-    model = tmp_path / "model"
-    shutil.copytree(d / "run" / "model", model)
+    net, model = tmp_path / "network", tmp_path / "model"
+    shutil.copytree(d / "run" / "model", net)
+    meta = json.loads((net / "model.json").read_text())
+    meta.pop("linear_part", None)   # the network alone
+    (net / "model.json").write_text(json.dumps(meta))
+    (net / "linear_part.npz").unlink(missing_ok=True)
+    shutil.copytree(net, model)
+    plain = load_predictor(net)
     out = plain.output_nodes
     nodes = np.asarray(plain.loadable)[::3]
     green = np.random.default_rng(2).normal(size=(nodes.size, 3, out.size, 3))
     np.savez(model / "linear_part.npz", nodes=nodes, green=green.astype(np.float32))
-    meta = json.loads((model / "model.json").read_text())
     (model / "model.json").write_text(json.dumps({**meta, "linear_part": "linear_part.npz"}))
     pred = load_predictor(model)
     f = np.array([[0.1, -0.2, 0.3], [0.0, 0.05, -0.1]])[:, None]
@@ -408,3 +413,10 @@ def test_a_models_linear_part_is_added_to_its_network_at_its_load_nodes(tmp_path
                                    atol=1e-5)
     with pytest.raises(ValueError, match="its own liver's mesh"):
         pred(f[0], at[0], geometry=(pred.points, pred.fixed, np.zeros(0)))
+    from data_spec.linear_fields import linear_fields_path, read_linear_fields
+
+    lf = read_linear_fields(linear_fields_path(d / "data"))   # make patient's export
+    with np.load(d / "run" / "model" / "linear_part.npz") as z:
+        np.testing.assert_array_equal(z["nodes"], lf.green_nodes)
+        np.testing.assert_array_equal(z["green"],
+                                      lf.green[:, :, np.searchsorted(lf.output_nodes, out)])
