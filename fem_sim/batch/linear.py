@@ -55,12 +55,9 @@ def _cases(scene, scene_file: str, g, fixed: np.ndarray, synthetic: int) -> list
 GREEN_MAX_BYTES = 2 * 2**30   # the Green's function's float32 size at most
 
 
-def _green_loads(g, fixed: np.ndarray) -> tuple[np.ndarray, list]:
-    """The surface nodes off the fixed region and a unit nodal force at each along x, y, z."""
-    from fem_sim.solver.loads import NodalLoad
-
-    nodes = np.setdiff1d(g.surface_nodes, fixed)
-    return nodes, [[NodalLoad([int(n)], [e])] for n in nodes for e in np.eye(3)]
+def _green_nodes(g, fixed: np.ndarray) -> np.ndarray:
+    """The surface nodes off the fixed region: where a patient model's loads act."""
+    return np.setdiff1d(g.surface_nodes, fixed)
 
 
 def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
@@ -88,7 +85,7 @@ def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
     g, fixed = livers[0], fixed[0]
     cases = _cases(scene, scene_file, g, fixed, synthetic)
     nodes = cs.output_nodes(scene, g)
-    gnodes, gf = _green_loads(g, fixed) if green else (None, None)
+    gnodes, gf = (_green_nodes(g, fixed), None) if green else (None, None)
     size = 0 if gnodes is None else gnodes.size * 36 * nodes.size   # float32 bytes
     if size > GREEN_MAX_BYTES:
         raise ValueError(f"{scene_file}: --green would hold {gnodes.size} x 3 unit responses "
@@ -105,8 +102,8 @@ def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
     u = problem.load_expansion(cases[0].material, [Constraint(fixed)], loads,
                                order=order)[:, :, nodes]
     if green:   # the same factorisation (kept by solve_recurring)
-        gf = problem.linear_responses(cases[0].material, [Constraint(fixed)], gf)[:, nodes]
-        gf = gf.reshape(gnodes.size, 3, nodes.size, 3)
+        gf = problem.unit_responses(cases[0].material, [Constraint(fixed)],
+                                    gnodes)[:, :, nodes]
     return write_linear_fields(linear_fields_path(out), LinearFields(
         case_index=np.array([c.index for c in cases], np.int64),
         load_nodes=np.stack([c.load_nodes for c in cases]),

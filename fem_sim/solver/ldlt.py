@@ -224,6 +224,10 @@ class SerialLDLT:
         self._check("solve")
         return x.astype(np.float64)
 
+    def solve_block(self, b: np.ndarray) -> np.ndarray:
+        """Back-solves of the rows of ``b`` (k, n), one by one."""
+        return np.stack([self.solve(row) for row in b]) if len(b) else np.zeros_like(b)
+
     def solve_refined(self, A, b: np.ndarray, rtol: float, maxit: int = 30):
         """Solve A x = b to |b - A x| <= rtol |b| in float64: GMRES preconditioned (on the
         right) by the factors. A is the factorised matrix (double-precision factors usually

@@ -138,7 +138,7 @@ class _Handle:
         self.dummy = np.zeros(1, dtype=np.float32)
 
     def call(self, phase: int, mnum: int = 1, a: np.ndarray | None = None,
-             b: np.ndarray | None = None, x: np.ndarray | None = None) -> int:
+             b: np.ndarray | None = None, x: np.ndarray | None = None, nrhs: int = 1) -> int:
         ffi = self.ffi
         err = ffi.new("int *")
         i = lambda v: ffi.new("int *", v)  # noqa: E731
@@ -147,7 +147,7 @@ class _Handle:
         self.lib.pardiso(ptr(self.pt), i(MAXFCT), i(mnum), i(SPD), i(phase), i(self.n),
                          ptr(a if a is not None else d), ffi.cast("int *", self.ia.ctypes.data),
                          ffi.cast("int *", self.ja.ctypes.data),
-                         ffi.cast("int *", self.perm.ctypes.data), i(1),
+                         ffi.cast("int *", self.perm.ctypes.data), i(nrhs),
                          ffi.cast("int *", self.iparm.ctypes.data), i(0),
                          ptr(b if b is not None else d), ptr(x if x is not None else d), err)
         return int(err[0])
@@ -284,6 +284,19 @@ class PardisoCholesky:
         rhs = np.ascontiguousarray(b, dtype=np.float32)
         x = np.empty_like(rhs)
         err = self._h.call(33, self._mnum, self._a, rhs, x)
+        if err:
+            raise FactorError(f"PARDISO solve failed: error {err} ({ERRORS.get(err, '?')})")
+        return x.astype(np.float64)
+
+    def solve_block(self, b: np.ndarray) -> np.ndarray:
+        """Back-solves of the rows of ``b`` (k, n) in one call (PARDISO's multiple right-hand
+        sides, column-major: each row contiguous), float64 result.
+        """
+        if not self._factored:
+            raise FactorError("PARDISO solve without a factorisation")
+        rhs = np.ascontiguousarray(b, dtype=np.float32)
+        x = np.empty_like(rhs)
+        err = self._h.call(33, self._mnum, self._a, rhs, x, nrhs=rhs.shape[0])
         if err:
             raise FactorError(f"PARDISO solve failed: error {err} ({ERRORS.get(err, '?')})")
         return x.astype(np.float64)

@@ -143,6 +143,33 @@ class OgdenProblem:
         eqs.set_state(zero)
         return np.array(out) if self.comm.rank == 0 and out else None
 
+    def unit_responses(self, material: OgdenMaterial, constraints: list[Constraint],
+                       nodes: np.ndarray, rtol: float = 1e-6) -> np.ndarray | None:
+        """Small-strain responses to a unit force at each of ``nodes`` (source ids) along x,
+        y, z: (len(nodes), 3, n_nodes, 3) mm/N on rank 0 (collective), the body's Green's
+        function there, as :meth:`linear_responses` of those nodal loads but solved as one
+        block (the linear solver's :meth:`solve_recurring_block`); the state is left at
+        u = 0.
+        """
+        eqs = self.equations
+        eqs.set_problem(material, constraints, [])
+        eqs.set_state(np.zeros_like(eqs.u.x.array))
+        eqs.update_points(tangent=True)
+        J = eqs.jacobian(lift=False)
+        nodes = np.asarray(nodes, dtype=np.int64)
+        n = eqs.n_owned_dofs
+        B = np.zeros((3 * nodes.size, n))
+        for i, node in enumerate(nodes.tolist()):
+            blk = self.disc.src_to_block.get(node)
+            if blk is not None and blk < self.disc.n_owned:
+                B[3 * i: 3 * i + 3, 3 * blk: 3 * blk + 3] = np.eye(3)
+        B[:, eqs.cons.owned] = 0.0
+        X = self.linear.solve_recurring_block(J, eqs.rhs, eqs.du, B, rtol)
+        out = [self.disc.gather_vertex_values(x.reshape(-1, 3)) for x in X]
+        if self.comm.rank != 0:
+            return None
+        return np.array(out).reshape(nodes.size, 3, self.n_nodes, 3)
+
     def _second_derivative(self, v: np.ndarray, step: float) -> np.ndarray:
         """D^2F_int(0)[v, v] at the owned dofs by a central difference (collective)."""
         eqs, total = self.equations, np.zeros_like(v)
