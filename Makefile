@@ -150,7 +150,7 @@ $(TEST_PATIENT)/.done: $(TEST_LIVERS)/.done | setup
 	    folds=3 evaluate_folds=1 epochs=60 hidden=[64,64] ensemble=1 modes=16 > /dev/null
 	$(MAKE) --no-print-directory patient LIVER=$(LIVERS)/Amos-004.obj \
 	    MODEL=$(TEST_PATIENT)/population PSCENE=$(TEST_LIVERS)/scene.toml K=20 HELD=6 \
-	    PATIENT=$(TEST_PATIENT)
+	    GREEN=1 PATIENT=$(TEST_PATIENT)
 	@touch $@
 
 test-trainer: setup-trainer $(TEST_DATA)/.done $(TEST_DATA4)/.done $(TEST_PATIENT)/.done
@@ -190,10 +190,11 @@ truth: setup
 # A new patient (docs/patient.md): the population model MODEL (a run) placed on the liver file
 # LIVER, K FE simulations on the patient's own mesh with the model's boundary condition (solver
 # environment, mpirun), the liver's small-strain responses to them and to SYNTHETIC drawn
-# loads (fem_sim linear: one factorisation) and its Green's function (the unit responses at
-# its surface nodes), those corrected with the K simulations and distilled into the patient's
-# own model, $(PATIENT)/run/model, which adds the exact small-strain part back (trainer
-# environment). PSCENE:
+# loads (fem_sim linear: one factorisation), those corrected with the K simulations and
+# distilled into the patient's own model, $(PATIENT)/run/model (trainer environment); GREEN=1
+# adds the liver's Green's function (a unit response at each surface node), so that the model
+# carries the exact small-strain part and learns only the rest (docs/load_expansion.md: more
+# accurate, minutes more of fem_sim linear on a large mesh). PSCENE:
 # the population scene MODEL was trained on (its loads, material, steps and solver). HELD more simulations are solved and kept
 # out of the adaptation (to measure the patient model on); FRAME: the liver file's frame;
 # ADAPT: more options of surrogate adapt (ADAPT=--tune fine-tunes the population network);
@@ -206,6 +207,7 @@ MODEL ?=
 PSCENE ?= data_spec/scenes/scene4_livers.toml
 SYNTHETIC ?= 600
 ORDER ?= 1
+GREEN ?= 0
 PATIENT ?= runs/patient/$(basename $(notdir $(LIVER)))
 patient: setup
 	@test -n "$(LIVER)" -a -n "$(MODEL)" || { echo "make patient: LIVER=file MODEL=run [K=40] [PSCENE=scene] [PATIENT=dir]"; exit 2; }
@@ -214,7 +216,7 @@ patient: setup
 	    --placement $(PATIENT)/placement.npz
 	$(MPIRUN) $(SPY) -m fem_sim generate $(PATIENT)/scene.toml --out $(PATIENT)/data
 	$(SPY) -m fem_sim linear $(PATIENT)/scene.toml --out $(PATIENT)/data --synthetic $(SYNTHETIC) \
-	    --order $(ORDER) --green
+	    --order $(ORDER) $(if $(filter 1,$(GREEN)),--green)
 	$(TPY) -m surrogate adapt $(MODEL) $(PATIENT)/data --liver $(LIVER) --run $(PATIENT)/run \
 	    --sims $(K) --synthetic $(SYNTHETIC) $(if $(FRAME),--frame $(FRAME)) \
 	    --placement $(PATIENT)/placement.npz $(ADAPT)

@@ -1,7 +1,7 @@
 """A new patient's model against K, the FE simulations on the patient's own mesh: docs/patient.md.
 
     .venv-train/bin/python bench/patient.py [--model RUN] [--livers Amos-054 LiTS-100 LiTS-67]
-        [--ks 0 5 10 20 40 80] [--design] [--order 2] [--no-tune]
+        [--ks 0 5 10 20 40 80] [--design] [--order 2] [--green] [--no-tune]
 
 For each validation liver (never seen by the population model, its PCA or any design choice):
 its FE truth with the population model's boundary condition, K_MAX + HELD simulations
@@ -121,13 +121,14 @@ def truth(pred, liver: Path, a) -> Path:
         (d / "generation.json").unlink(missing_ok=True)
         scene.write_text(text)
     generate_chunks(scene, d / "data", n, ranks=a.np, chunk=n)
-    linear(scene, d / "data", d / "linear.json", a.order)
+    linear(scene, d / "data", d / "linear.json", a.order, a.green)
     return d / "data"
 
 
-def linear(scene: Path, data: Path, record: Path, order: int = 1) -> dict:
-    """``fem_sim linear`` on the truth's scene (SYNTHETIC drawn loads, ``order``, the Green's
-    function), as make patient runs it, once per order: its wall seconds in ``record``.
+def linear(scene: Path, data: Path, record: Path, order: int = 1, green: bool = False) -> dict:
+    """``fem_sim linear`` on the truth's scene (SYNTHETIC drawn loads, ``order``, with the
+    Green's function if ``green``), as make patient runs it, once per setting: its wall
+    seconds in ``record``.
     """
     from data_spec import load_scene
     from data_spec.linear_fields import linear_fields_path, read_linear_fields
@@ -137,12 +138,12 @@ def linear(scene: Path, data: Path, record: Path, order: int = 1) -> dict:
     if path.exists() and done.get("seconds") and done.get("order", 1) == order:
         lf = read_linear_fields(path)
         if lf.scene_hash == load_scene(scene).hash and lf.order == order \
-                and lf.green is not None:
+                and (lf.green is not None) == green:
             return done
     t = time.perf_counter()
     subprocess.run([str(ROOT / ".venv-solver" / "bin" / "python"), "-m", "fem_sim", "linear",
                     str(scene), "--out", str(data), "--synthetic", str(SYNTHETIC), "--order",
-                    str(order), "--green"], cwd=ROOT, check=True)
+                    str(order), *(["--green"] if green else [])], cwd=ROOT, check=True)
     done = {"seconds": time.perf_counter() - t, "order": order,
             "solves_seconds": read_linear_fields(path).seconds}
     record.write_text(json.dumps(done))
@@ -238,7 +239,8 @@ def made_by(model: Path, data: Path) -> str:
 
     h = hashlib.sha256(dataset_fingerprint(data).encode())
     if linear_fields_path(data).exists():
-        h.update(f"order {read_linear_fields(linear_fields_path(data)).order}".encode())
+        lf = read_linear_fields(linear_fields_path(data))
+        h.update(f"order {lf.order} green {lf.green is not None}".encode())
     code = [ROOT / "surrogate" / n for n in ("patient.py", "tuning.py", "linear_base.py")]
     for f in [*sorted(model.glob("*")), *code]:
         h.update(f.read_bytes())
@@ -254,7 +256,8 @@ def end_to_end(liver: Path, a, k: int = 40) -> dict:
     shutil.rmtree(out, ignore_errors=True)
     t = time.time()
     subprocess.run(["make", "--no-print-directory", "patient", f"LIVER={liver}",
-                    f"MODEL={a.model}", f"K={k}", f"PATIENT={out}", f"ORDER={a.order}"],
+                    f"MODEL={a.model}", f"K={k}", f"PATIENT={out}", f"ORDER={a.order}",
+                    f"GREEN={int(a.green)}"],
                    cwd=ROOT, check=True,
                    stdout=subprocess.DEVNULL)
     end = time.time()
@@ -457,6 +460,9 @@ def main() -> int:
                     help="leave out the fine-tuned population network (ADAPT=--tune)")
     ap.add_argument("--order", type=int, default=1, choices=(1, 2),
                     help="the small-strain responses' order (make patient's ORDER)")
+    ap.add_argument("--green", action="store_true",
+                    help="the liver's Green's function in the patient model (make patient's "
+                    "GREEN=1)")
     ap.add_argument("--no-end-to-end", dest="e2e", action="store_false",
                     help="keep the end-to-end times of docs/patient.json")
     a = ap.parse_args()
