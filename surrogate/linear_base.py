@@ -11,6 +11,7 @@ by :mod:`surrogate.patient`.
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
@@ -68,7 +69,7 @@ class LinearBase:
     def order(self) -> int:
         return self.lf.order
 
-    @property
+    @functools.cached_property
     def green(self) -> tuple | None:
         """(nodes (n_g,), (n_g, 3, n_out, 3) mm/N at the dataset's output nodes): the file's
         Green's function (``fem_sim linear --green``), None without it.

@@ -123,11 +123,7 @@ class OgdenProblem:
         if order not in (1, 2):
             raise ValueError(f"load_expansion: order must be 1 or 2, got {order}")
         eqs = self.equations
-        eqs.set_problem(material, constraints, loads[0] if loads else [])
-        zero = np.zeros_like(eqs.u.x.array)
-        eqs.set_state(zero)
-        eqs.update_points(tangent=True)
-        J = eqs.jacobian(lift=False)
+        J = self._tangent_at_rest(material, constraints, loads[0] if loads else [])
         out = []
         for ld in loads:
             self.disc.load_vector(ld, eqs.f_ext)
@@ -140,8 +136,17 @@ class OgdenProblem:
                 self.linear.solve_recurring(J, eqs.rhs, eqs.du, rtol)
                 terms.append(eqs.du.array_r.copy())
             out.append([self.disc.gather_vertex_values(t.reshape(-1, 3)) for t in terms])
-        eqs.set_state(zero)
+        eqs.set_state(np.zeros_like(eqs.u.x.array))
         return np.array(out) if self.comm.rank == 0 and out else None
+
+    def _tangent_at_rest(self, material: OgdenMaterial, constraints: list[Constraint],
+                         loads: list):
+        """The tangent at u = 0 of the problem (collective), the state left there."""
+        eqs = self.equations
+        eqs.set_problem(material, constraints, loads)
+        eqs.set_state(np.zeros_like(eqs.u.x.array))
+        eqs.update_points(tangent=True)
+        return eqs.jacobian(lift=False)
 
     def unit_responses(self, material: OgdenMaterial, constraints: list[Constraint],
                        nodes: np.ndarray, rtol: float = 1e-6) -> np.ndarray | None:
@@ -152,10 +157,7 @@ class OgdenProblem:
         u = 0.
         """
         eqs = self.equations
-        eqs.set_problem(material, constraints, [])
-        eqs.set_state(np.zeros_like(eqs.u.x.array))
-        eqs.update_points(tangent=True)
-        J = eqs.jacobian(lift=False)
+        J = self._tangent_at_rest(material, constraints, [])
         nodes = np.asarray(nodes, dtype=np.int64)
         n = eqs.n_owned_dofs
         B = np.zeros((3 * nodes.size, n))
