@@ -1,7 +1,8 @@
 """The small-strain responses of a one-liver scene (:mod:`data_spec.linear_fields`): the
 liver linearised at u = 0 under the loads of every simulation of the scene and of
 ``synthetic`` more cases drawn by the scene's own rule (case indices from
-``SYNTHETIC_FIRST``), from one factorisation of the tangent, one refined solve per load.
+``SYNTHETIC_FIRST``), from one float64 factorisation of the tangent, the loads back-solved
+as one block.
 
     python -m fem_sim linear SCENE --out DATA [--synthetic N] [--order 2] [--green]
 

@@ -1,4 +1,4 @@
-"""Serial sparse Cholesky in float32 by MKL PARDISO (its own METIS ordering).
+"""Serial sparse Cholesky in float32 (or float64) by MKL PARDISO (its own METIS ordering).
 
 Why: on this project's Jacobians (symmetric positive definite at every stable state, constraints
 lifted) a float32 supernodal Cholesky factorises faster than MUMPS' LDL^T, and PARDISO runs the
@@ -119,8 +119,8 @@ class _Handle:
     factors (PARDISO's ``mnum``).
     """
 
-    def __init__(self, ffi, lib):
-        self.ffi, self.lib = ffi, lib
+    def __init__(self, ffi, lib, double: bool = False):
+        self.ffi, self.lib, self.double = ffi, lib, double
         self.pt = np.zeros(64, dtype=np.int64)  # PARDISO's handle: 64 pointers
         self.iparm = np.zeros(64, dtype=np.int32)
         ip = self.iparm
@@ -131,11 +131,11 @@ class _Handle:
         ip[18] = -1  # and its Mflop
         ip[23] = 0   # classic parallel factorisation: faster than two-level at two threads
         ip[26] = 0   # no matrix checker (the arrays come from our assembly)
-        ip[27] = 1   # single precision: float32 values and factors
+        ip[27] = 0 if double else 1   # 1: single precision, float32 values and factors
         ip[34] = 1   # zero-based ia / ja
         self.pattern = None
         self.users: set[int] = set()  # the mnum in use
-        self.dummy = np.zeros(1, dtype=np.float32)
+        self.dummy = np.zeros(1, dtype=np.float64 if double else np.float32)
 
     def call(self, phase: int, mnum: int = 1, a: np.ndarray | None = None,
              b: np.ndarray | None = None, x: np.ndarray | None = None, nrhs: int = 1) -> int:
@@ -199,7 +199,9 @@ class _Handle:
 
 class PardisoCholesky:
     """Float32 Cholesky (LL^T) of a symmetric positive definite matrix given by its full CSR
-    arrays, with the interface of :class:`~fem_sim.solver.ldlt.SerialLDLT`.
+    arrays, with the interface of :class:`~fem_sim.solver.ldlt.SerialLDLT`; float64 with
+    ``double=True`` (twice the memory and about twice the time, for the many right-hand sides
+    whose float32 refinement would cost more sweeps than that).
 
     ``factor(indptr, indices, values)`` analyses on the first call (and whenever the pattern
     changes: PARDISO's METIS nested dissection and symbolic factorisation),
@@ -207,16 +209,17 @@ class PardisoCholesky:
     accuracy (relative residual ~1e-3: GMRES refines it, :meth:`solve_refined`).
     """
 
-    dtype = np.float32
     negative_pivots = 0  # a Cholesky factorisation that succeeded: the matrix is SPD
 
-    def __init__(self):
+    def __init__(self, double: bool = False):
         mod = load()
         if mod is None:
             raise RuntimeError("MKL PARDISO is unavailable (pip install mkl)")
         self.ffi, self.lib = mod
+        self.double = double
+        self.dtype = np.float64 if double else np.float32
         self._h: _Handle | None = None
-        self._join(_Handle(self.ffi, self.lib), 1)
+        self._join(_Handle(self.ffi, self.lib, double), 1)
         self.analyses = self.factorizations = 0
         ldlt._live.add(self)  # freed at exit with the MUMPS instances
 
@@ -230,7 +233,7 @@ class PardisoCholesky:
         """
         h = other._h
         free = [m for m in range(1, MAXFCT + 1) if m not in h.users]
-        if h is not self._h and free:
+        if h is not self._h and free and h.double == self.double:
             self._join(h, free[0])
 
     def _join(self, h: _Handle, mnum: int) -> None:
@@ -264,11 +267,11 @@ class PardisoCholesky:
         if not h.same_pattern(indptr, indices):
             if h.pattern is not None and h.users != {self._mnum}:
                 # shared and analysed for another pattern: a handle of its own
-                self._join(_Handle(self.ffi, self.lib), 1)
+                self._join(_Handle(self.ffi, self.lib, self.double), 1)
                 h = self._h
             h.analyse(indptr, indices)
             self.analyses += 1
-        self._a = np.ascontiguousarray(values[h.upper], dtype=np.float32)
+        self._a = np.ascontiguousarray(values[h.upper], dtype=self.dtype)
         self._factored = False
         err = h.call(22, self._mnum, self._a)
         if err:
@@ -281,12 +284,12 @@ class PardisoCholesky:
         """One back-solve with the factors (float64 result; ~1e-3 relative error)."""
         if not self._factored:
             raise FactorError("PARDISO solve without a factorisation")
-        rhs = np.ascontiguousarray(b, dtype=np.float32)
+        rhs = np.ascontiguousarray(b, dtype=self.dtype)
         x = np.empty_like(rhs)
         err = self._h.call(33, self._mnum, self._a, rhs, x)
         if err:
             raise FactorError(f"PARDISO solve failed: error {err} ({ERRORS.get(err, '?')})")
-        return x.astype(np.float64)
+        return x.astype(np.float64, copy=False)
 
     def solve_block(self, b: np.ndarray) -> np.ndarray:
         """Back-solves of the rows of ``b`` (k, n) in one call (PARDISO's multiple right-hand
@@ -294,12 +297,12 @@ class PardisoCholesky:
         """
         if not self._factored:
             raise FactorError("PARDISO solve without a factorisation")
-        rhs = np.ascontiguousarray(b, dtype=np.float32)
+        rhs = np.ascontiguousarray(b, dtype=self.dtype)
         x = np.empty_like(rhs)
         err = self._h.call(33, self._mnum, self._a, rhs, x, nrhs=rhs.shape[0])
         if err:
             raise FactorError(f"PARDISO solve failed: error {err} ({ERRORS.get(err, '?')})")
-        return x.astype(np.float64)
+        return x.astype(np.float64, copy=False)
 
     def solve_refined(self, A, b: np.ndarray, rtol: float, maxit: int = 30):
         """GMRES on A preconditioned by the factors, as :meth:`SerialLDLT.solve_refined`."""

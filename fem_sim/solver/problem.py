@@ -117,25 +117,27 @@ class OgdenProblem:
         :meth:`linear_responses`) and K u2 = -1/2 D^2F_int(0)[u1, u1], the internal force's
         second derivative along u1 taken by the central difference
         (F_int(e u1) + F_int(-e u1)) / e^2 (F_int(0) = 0: the body is stress-free there), whose
-        error is O(e^2) relative; ``step`` = e. The same factorisation solves both; the state
-        is left at u = 0.
+        error is O(e^2) relative; ``step`` = e. The same factorisation solves both, each order's
+        loads as one block (the linear solver's :meth:`solve_recurring_block`); the state is
+        left at u = 0.
         """
         if order not in (1, 2):
             raise ValueError(f"load_expansion: order must be 1 or 2, got {order}")
         eqs = self.equations
         J = self._tangent_at_rest(material, constraints, loads[0] if loads else [])
-        out = []
-        for ld in loads:
+        B = np.empty((len(loads), eqs.n_owned_dofs))
+        for i, ld in enumerate(loads):
             self.disc.load_vector(ld, eqs.f_ext)
             eqs.set_rhs_to_load()
-            self.linear.solve_recurring(J, eqs.rhs, eqs.du, rtol)
-            terms = [eqs.du.array_r.copy()]
-            if order == 2:
-                eqs.rhs.array[:] = -0.5 * self._second_derivative(terms[0], step)
-                eqs.rhs.array[eqs.cons.owned] = 0.0
-                self.linear.solve_recurring(J, eqs.rhs, eqs.du, rtol)
-                terms.append(eqs.du.array_r.copy())
-            out.append([self.disc.gather_vertex_values(t.reshape(-1, 3)) for t in terms])
+            B[i] = eqs.rhs.array_r
+        terms = [self.linear.solve_recurring_block(J, eqs.rhs, eqs.du, B, rtol)]
+        if order == 2:
+            for i, u1 in enumerate(terms[0]):
+                B[i] = -0.5 * self._second_derivative(u1, step)
+            B[:, eqs.cons.owned] = 0.0
+            terms.append(self.linear.solve_recurring_block(J, eqs.rhs, eqs.du, B, rtol))
+        out = [[self.disc.gather_vertex_values(t[i].reshape(-1, 3)) for t in terms]
+               for i in range(len(loads))]
         eqs.set_state(np.zeros_like(eqs.u.x.array))
         return np.array(out) if self.comm.rank == 0 and out else None
 

@@ -138,18 +138,23 @@ def test_second_order_limit_of_the_nonlinear_solve(degree):
 @pytest.mark.parametrize("factorization", ["auto", "single"], ids=["default", "MUMPS"])
 @pytest.mark.parametrize("degree", [1, 2], ids=["P1", "P2"])
 def test_unit_responses_are_the_linear_responses_of_unit_nodal_forces(degree, factorization):
-    """The block solve of the Green's function against one refined solve per unit load."""
+    """The block solve of the Green's function (float64 factors, kept) against one PETSc
+    MUMPS solve per unit load (the base class's row loop: another solver's path)."""
     from mpi4py import MPI
 
     g = box_mesh(3)
-    prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, degree=degree,
-                        settings={"factorization": factorization})
+    prob, ref = (OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, degree=degree,
+                              settings={"factorization": f}) for f in (factorization, "petsc"))
     x = g.points
     fixed = [Constraint(np.flatnonzero(x[:, 0] == 0.0))]
     nodes = np.flatnonzero(x[:, 0] == 1.0)[:4]
     green = prob.unit_responses(MAT, fixed, nodes, rtol=1e-8)
-    each = prob.linear_responses(MAT, fixed, [[NodalLoad([n], [e])] for n in nodes
-                                              for e in np.eye(3)], rtol=1e-8)
+    loads = [[NodalLoad([n], [e])] for n in nodes for e in np.eye(3)]
+    each = ref.linear_responses(MAT, fixed, loads, rtol=1e-8)
     np.testing.assert_allclose(green.reshape(each.shape), each, rtol=0,
                                atol=1e-6 * np.abs(each).max())
     assert np.abs(each).max() > 0
+    made = prob.linear.counts.factorizations
+    again = prob.linear_responses(MAT, fixed, loads[:2], rtol=1e-8)   # the same matrix
+    np.testing.assert_allclose(again, each[:2], rtol=0, atol=1e-6 * np.abs(each).max())
+    assert prob.linear.counts.factorizations == made
