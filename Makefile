@@ -150,7 +150,7 @@ $(TEST_PATIENT)/.done: $(TEST_LIVERS)/.done | setup
 	    folds=3 evaluate_folds=1 epochs=60 hidden=[64,64] ensemble=1 modes=16 > /dev/null
 	$(MAKE) --no-print-directory patient LIVER=$(LIVERS)/Amos-004.obj \
 	    MODEL=$(TEST_PATIENT)/population PSCENE=$(TEST_LIVERS)/scene.toml K=20 HELD=6 \
-	    GREEN=1 PATIENT=$(TEST_PATIENT)
+	    PATIENT=$(TEST_PATIENT)
 	@touch $@
 
 test-trainer: setup-trainer $(TEST_DATA)/.done $(TEST_DATA4)/.done $(TEST_PATIENT)/.done
@@ -191,14 +191,14 @@ truth: setup
 # LIVER, K FE simulations on the patient's own mesh with the model's boundary condition (solver
 # environment, mpirun), the liver's small-strain responses to them and to SYNTHETIC drawn
 # loads (fem_sim linear: one factorisation), those corrected with the K simulations and
-# distilled into the patient's own model, $(PATIENT)/run/model (trainer environment); GREEN=1
-# adds the liver's Green's function (a unit response at each surface node), so that the model
-# carries the exact small-strain part and learns only the rest (docs/load_expansion.md: more
-# accurate, minutes more of fem_sim linear on a large mesh). PSCENE:
+# distilled into the patient's own model, $(PATIENT)/run/model (trainer environment), which
+# carries the liver's Green's function (a unit response at each surface node: the exact
+# small-strain part of any nodal load) and learns only the rest (docs/load_expansion.md;
+# GREEN=0 leaves it out: less accurate, a shorter fem_sim linear on a large mesh). PSCENE:
 # the population scene MODEL was trained on (its loads, material, steps and solver). HELD more simulations are solved and kept
 # out of the adaptation (to measure the patient model on); FRAME: the liver file's frame;
 # ADAPT: more options of surrogate adapt (ADAPT=--tune fine-tunes the population network);
-# ORDER=2: the small-strain responses with their second-order terms (docs/load_expansion.md).
+# ORDER: 2, the small-strain responses with their second-order terms (docs/load_expansion.md).
 K ?= 40
 HELD ?= 0
 FRAME ?=
@@ -206,8 +206,8 @@ ADAPT ?=
 MODEL ?=
 PSCENE ?= data_spec/scenes/scene4_livers.toml
 SYNTHETIC ?= 600
-ORDER ?= 1
-GREEN ?= 0
+ORDER ?= 2
+GREEN ?= 1
 PATIENT ?= runs/patient/$(basename $(notdir $(LIVER)))
 patient: setup
 	@test -n "$(LIVER)" -a -n "$(MODEL)" || { echo "make patient: LIVER=file MODEL=run [K=40] [PSCENE=scene] [PATIENT=dir]"; exit 2; }

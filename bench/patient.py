@@ -1,7 +1,7 @@
 """A new patient's model against K, the FE simulations on the patient's own mesh: docs/patient.md.
 
     .venv-train/bin/python bench/patient.py [--model RUN] [--livers Amos-054 LiTS-100 LiTS-67]
-        [--ks 0 5 10 20 40 80] [--design] [--order 2] [--green] [--no-tune]
+        [--ks 0 5 10 20 40 80] [--design] [--order 1] [--no-green] [--no-tune]
 
 For each validation liver (never seen by the population model, its PCA or any design choice):
 its FE truth with the population model's boundary condition, K_MAX + HELD simulations
@@ -458,11 +458,10 @@ def main() -> int:
                     "include 0)")
     ap.add_argument("--no-tune", dest="tune", action="store_false",
                     help="leave out the fine-tuned population network (ADAPT=--tune)")
-    ap.add_argument("--order", type=int, default=1, choices=(1, 2),
-                    help="the small-strain responses' order (make patient's ORDER)")
-    ap.add_argument("--green", action="store_true",
-                    help="the liver's Green's function in the patient model (make patient's "
-                    "GREEN=1)")
+    ap.add_argument("--order", type=int, default=2, choices=(1, 2),
+                    help="the small-strain responses' order (make patient's ORDER, default 2)")
+    ap.add_argument("--no-green", dest="green", action="store_false",
+                    help="no Green's function in the patient model (make patient's GREEN=0)")
     ap.add_argument("--no-end-to-end", dest="e2e", action="store_false",
                     help="keep the end-to-end times of docs/patient.json")
     a = ap.parse_args()
