@@ -198,7 +198,7 @@ truth: setup
 # the population scene MODEL was trained on (its loads, material, steps and solver). HELD more simulations are solved and kept
 # out of the adaptation (to measure the patient model on); FRAME: the liver file's frame;
 # ADAPT: more options of surrogate adapt (ADAPT=--tune fine-tunes the population network);
-# ORDER: 2, the small-strain responses with their second-order terms (docs/load_expansion.md).
+# ORDER=1: the small-strain responses without their second-order terms (docs/load_expansion.md).
 K ?= 40
 HELD ?= 0
 FRAME ?=

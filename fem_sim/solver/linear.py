@@ -131,6 +131,11 @@ class LinearSolver:
         pass
 
 
+def _is_kept(kept: tuple | None, indices: np.ndarray, values: np.ndarray) -> bool:
+    """Whether ``kept`` (column indices, values, factors) holds this matrix, entry by entry."""
+    return kept is not None and np.array_equal(kept[1], values) \
+        and np.array_equal(kept[0], indices)
+
 class SerialLDLTSolver(LinearSolver):
     """Float32 Cholesky by MKL PARDISO ("pardiso"), or MUMPS LDL^T in float32 ("single") or
     float64 ("double"), all with METIS ordering.
@@ -218,8 +223,7 @@ class SerialLDLTSolver(LinearSolver):
         """
         _, indices, values = J.csr()
         kept = self._recurring
-        if kept is not None and np.array_equal(kept[1], values) \
-                and np.array_equal(kept[0], indices) \
+        if _is_kept(kept, indices, values) \
                 and self._refine(kept[2], J, rhs, du, rtol,
                                  self.settings.max_krylov or REFINE_MAX_IT)[0]:
             self.counts.reused_factorizations += 1
@@ -247,20 +251,21 @@ class SerialLDLTSolver(LinearSolver):
         self.counts.back_solves += len(B)
         size = np.maximum(np.linalg.norm(B, axis=1), 1e-300)
         todo, last = np.arange(len(B)), np.full(len(B), np.inf)
+        R = B - (A @ X.T).T   # every row's residual, without gathering copies of B and X
         for sweep in range(REFINE_BLOCK_IT + 1):
-            R = B[todo] - (A @ X[todo].T).T
             rel = np.linalg.norm(R, axis=1) / size[todo]
             going = (rel > rtol) & (rel < BLOCK_CONTRACTION * last[todo])
             stalled = todo[(rel > rtol) & ~going]
             last[todo] = rel
-            todo, R = todo[going], R[going]
+            todo = todo[going]
             if sweep == REFINE_BLOCK_IT:
                 stalled = np.concatenate([stalled, todo])
             self._gmres_rows(J, rhs, du, B, X, stalled, rtol)
             if not todo.size or sweep == REFINE_BLOCK_IT:
                 return X
-            X[todo] += factors.solve_block(R)
-            self.counts.back_solves += len(R)
+            X[todo] += factors.solve_block(R[going])
+            self.counts.back_solves += todo.size
+            R = B[todo] - (A @ X[todo].T).T
         return X
 
     def _block_factors(self, J: Jacobian) -> Factors:
@@ -269,8 +274,7 @@ class SerialLDLTSolver(LinearSolver):
         """
         indptr, indices, values = J.csr()
         kept = self._block
-        if kept is not None and np.array_equal(kept[1], values) \
-                and np.array_equal(kept[0], indices):
+        if _is_kept(kept, indices, values):
             self.counts.reused_factorizations += 1
             return kept[2]
         self._block = None
