@@ -1,5 +1,6 @@
 """Small-strain responses of a one-liver dataset: one HDF5 file beside its shards
-(``DATA/linear.h5``) that ``fem_sim linear`` writes and the patient adaptation reads.
+(``DATA/linear.h5``) that ``fem_sim linear`` writes and the patient adaptation reads; in a
+population dataset, one such file per liver (``DATA/linear/<geometry id>.h5``).
 
 The liver linearised at u = 0 (its Ogden tangent there, the small-strain elasticity of the
 material) under the loads of the scene's simulations and of drawn cases of the same rule
@@ -76,8 +77,14 @@ class LinearFields:
         return np.flatnonzero(self.case_index >= SYNTHETIC_FIRST)
 
 
-def linear_fields_path(directory: str | Path) -> Path:
-    return Path(directory) / FILE_NAME
+def linear_fields_path(directory: str | Path, geometry_id: str | None = None) -> Path:
+    """The one-liver dataset's file, or with ``geometry_id`` that liver's file in a
+    population dataset (``DATA/linear/<geometry id>.h5``: the same format, the responses of
+    that liver's simulations).
+    """
+    if geometry_id is None:
+        return Path(directory) / FILE_NAME
+    return Path(directory) / "linear" / f"{geometry_id}.h5"
 
 
 def write_linear_fields(path: str | Path, lf: LinearFields) -> Path:

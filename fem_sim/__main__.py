@@ -7,6 +7,8 @@ python3 -m fem_sim population SCENE.toml --out DIR   (scene 4: CPD + PCA shape c
 python3 -m fem_sim phantom SEED --out FILE.h5 [--variety V] [--spread S] [--mesh-size H]
 python3 -m fem_sim linear SCENE.toml --out DIR [--synthetic N] [--order 2] [--green]
     (a one-liver scene's small-strain responses, DIR/linear.h5)
+python3 -m fem_sim linear --population DATA [--order 2]
+    (every liver of a population dataset under its simulations' loads, DATA/linear/)
 """
 
 from __future__ import annotations
@@ -111,8 +113,11 @@ def _parser() -> argparse.ArgumentParser:
     li = sub.add_parser("linear", help="small-strain responses of a one-liver scene (its "
                         "liver linearised at u = 0) under its simulations' loads and N drawn "
                         "ones: DIR/linear.h5, what a patient model learns from")
-    li.add_argument("scene", help="scene TOML file (one liver, one material)")
-    li.add_argument("--out", required=True, help="dataset directory (its liver meshed there)")
+    li.add_argument("scene", nargs="?", help="scene TOML file (one liver, one material)")
+    li.add_argument("--out", help="dataset directory (its liver meshed there)")
+    li.add_argument("--population", metavar="DATA",
+                    help="instead: every liver of the population dataset DATA under its own "
+                    "simulations' loads, DATA/linear/<geometry id>.h5 (ranks share livers)")
     li.add_argument("--synthetic", type=int, default=0, metavar="N",
                     help="loads drawn by the scene's rule beside its simulations' (default 0)")
     li.add_argument("--order", type=int, default=1, choices=(1, 2),
@@ -178,7 +183,19 @@ def _linear(args) -> int:
     from fem_sim.batch.linear import linear_fields
     from fem_sim.geometry.errors import GeometryError
 
+    if (args.population is None) == (args.scene is None or args.out is None):
+        print("fem_sim linear: give SCENE --out DIR, or --population DATA", file=sys.stderr)
+        return 2
     try:
+        if args.population is not None:
+            from fem_sim.batch.linear import population_linear_fields
+
+            if args.synthetic or args.green:
+                raise ValueError("--population takes the simulations' loads only (no "
+                                 "--synthetic, no --green)")
+            written = population_linear_fields(args.population, args.order)
+            print(f"{args.population}/linear: {len(written)} livers written by this rank")
+            return 0
         path = linear_fields(args.scene, args.out, args.synthetic, args.order,
                              args.green)
     except (SceneError, GeometryError, ValueError, OSError) as exc:

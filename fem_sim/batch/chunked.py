@@ -77,3 +77,31 @@ def generate_chunks(scene: str | Path, data: str | Path, n: int, *, ranks: int =
     data.parent.mkdir(parents=True, exist_ok=True)
     state_path.write_text(json.dumps(state))
     return state
+
+
+def linear_bases(data: str | Path, *, ranks: int = 2, order: int = 2,
+                 scene: str | Path | None = None,
+                 solver_python: str | Path | None = None) -> None:
+    """The small-strain bases of a dataset from any environment (``fem_sim linear`` in the
+    solver's): of every liver of the population dataset ``data`` on ``ranks`` ranks (each
+    liver's file skipped when whole), or with ``scene``, of the one-liver dataset ``data`` of
+    that scene (``data/linear.h5``, kept when it holds the scene's simulations at ``order``).
+    """
+    data = Path(data)
+    solver_python = str(solver_python or ROOT / ".venv-solver" / "bin" / "python")
+    if scene is None:
+        cmd = ["mpirun", "-n", str(ranks), solver_python, "-m", "fem_sim", "linear",
+               "--population", str(data), "--order", str(order)]
+        subprocess.run(cmd, check=True, cwd=ROOT, env=mpirun_env(oversubscribe=False))
+        return
+    from data_spec import load_scene
+    from data_spec.linear_fields import linear_fields_path, read_linear_fields
+
+    path = linear_fields_path(data)
+    if path.exists():
+        lf, sc = read_linear_fields(path), load_scene(scene)
+        if lf.scene_hash == sc.hash and lf.order == order \
+                and lf.case_index.size >= sc.n_simulations:
+            return
+    subprocess.run([solver_python, "-m", "fem_sim", "linear", str(scene), "--out", str(data),
+                    "--order", str(order)], check=True, cwd=ROOT)

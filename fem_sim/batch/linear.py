@@ -18,6 +18,7 @@ Runs on one process (the factorisation's threads use the cores).
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 
@@ -112,3 +113,96 @@ def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
         displacement=u[:, 0], scene_name=scene.name, scene_hash=scene.hash,
         geometry_id=ids[0], seconds=time.perf_counter() - t,
         second_order=u[:, 1] if order == 2 else None, green_nodes=gnodes, green=gf))
+
+
+def _liver_shards(data: Path) -> dict:
+    """{geometry id: [shards]} of a dataset's complete simulations, in simulation order."""
+    from data_spec.shards import list_shards, read_shard
+
+    out: dict = {}
+    for path in list_shards(data):
+        sh = read_shard(path)
+        if sh.status == "ok":
+            out.setdefault(sh.geometry_id, []).append(sh)
+    return out
+
+
+def _liver_file_done(path: Path, shards: list, order: int) -> bool:
+    """Whether ``path`` holds this liver's responses of these simulations at ``order``."""
+    from data_spec.linear_fields import read_linear_fields
+
+    if not path.exists():
+        return False
+    try:
+        lf = read_linear_fields(path)
+    except (OSError, ValueError, KeyError):
+        return False
+    return lf.order == order and set(lf.case_index.tolist()) == {s.sim_index for s in shards}
+
+
+def _one_liver(data: Path, gid: str, shards: list, order: int) -> Path:
+    """The responses of one liver of a population dataset under its simulations' loads."""
+    from mpi4py import MPI
+
+    from data_spec.geometry import read_geometry
+    from data_spec.shards import geometry_path
+    from fem_sim.solver.loads import Constraint, NodalLoad
+    from fem_sim.solver.problem import OgdenProblem
+
+    scene = load_scene(data / "scene.toml")
+    if scene["loads"]["kind"] != "nodal":
+        raise ValueError(f"{data}/scene.toml: loads.kind = {scene['loads']['kind']!r}; the "
+                         "population's small-strain responses are of nodal loads")
+    g, first = read_geometry(geometry_path(data, gid)), shards[0]
+    if len({s.material for s in shards}) > 1:
+        raise ValueError(f"{data}: liver {gid}: its simulations' materials differ; small-"
+                         "strain responses are of one material")
+    solver, t = scene["solver"], time.perf_counter()
+    problem = OgdenProblem(MPI.COMM_SELF, g.points, g.cells, degree=solver["degree"],
+                           quadrature_degree=solver["quadrature_degree"],
+                           element=solver.get("element", "lagrange"),
+                           settings=solver_settings(scene))
+    loads = [[NodalLoad(s.load_nodes, s.forces)] for s in shards]
+    nodes = first.output_nodes
+    u = problem.load_expansion(first.material, [Constraint(first.fixed_nodes)], loads,
+                               order=order)[:, :, nodes]
+    return write_linear_fields(linear_fields_path(data, gid), LinearFields(
+        case_index=np.array([s.sim_index for s in shards], np.int64),
+        load_nodes=np.stack([s.load_nodes for s in shards]),
+        forces=np.stack([s.forces for s in shards]), output_nodes=nodes,
+        displacement=u[:, 0], scene_name=scene.name, scene_hash=scene.hash, geometry_id=gid,
+        seconds=time.perf_counter() - t, second_order=u[:, 1] if order == 2 else None))
+
+
+def population_linear_fields(data: str | Path, order: int = 2, progress: bool = True) -> list:
+    """``data/linear/<geometry id>.h5`` for every liver of the population dataset ``data``:
+    each liver's small-strain responses under its own complete simulations' loads (what the
+    FE fields are compared with, liver by liver). Livers whose file is already whole are
+    skipped; under ``mpirun -n N`` the ranks share the livers (one factorisation per liver on
+    one process each). Returns the files this rank wrote.
+    """
+    from mpi4py import MPI
+
+    data, world = Path(data), MPI.COMM_WORLD
+    if order not in (1, 2):
+        raise ValueError(f"--order must be 1 or 2, got {order}")
+    if not (data / "scene.toml").exists():
+        raise ValueError(f"{data}: no scene.toml: not a dataset directory of fem_sim generate")
+    livers = _liver_shards(data) if world.rank == 0 else None
+    livers = world.bcast(livers, root=0)   # collective: every rank the same list
+    todo = [gid for gid in sorted(livers) if not _liver_file_done(
+        linear_fields_path(data, gid), livers[gid], order)]
+    mine, written = todo[world.rank::world.size], []
+    bar = None
+    if progress and world.rank == 0:
+        from tqdm import tqdm
+        bar = tqdm(total=len(mine), unit="liver", desc="small-strain responses (rank 0)",
+                   file=sys.stderr)
+    for gid in mine:
+        written.append(_one_liver(data, gid, livers[gid], order))
+        if bar is not None:
+            bar.update()
+    if bar is not None:
+        bar.close()
+    world.Barrier()   # collective: every liver written before any rank returns
+    return written
