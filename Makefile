@@ -129,16 +129,19 @@ $(TEST_DATA)/.done: data_spec/scenes/ci_scene1.toml | setup-solver
 	$(MPIRUN) $(SPY) -m fem_sim generate $< --out $(TEST_DATA) --no-progress
 	@touch $@
 
-# A population of 6 livers for predict-liver's tests (data_spec/scenes/ci_scene4.toml).
+# A population of 6 livers for predict-liver's tests (data_spec/scenes/ci_scene4.toml), with
+# each liver's small-strain base (tests/surrogate/test_population_linear.py).
 TEST_DATA4 := runs/test-data/ci_scene4
 $(TEST_DATA4)/.done: data_spec/scenes/ci_scene4.toml | setup-solver
 	$(MPIRUN) $(SPY) -m fem_sim generate $< --out $(TEST_DATA4) --no-progress
+	$(SPY) -m fem_sim linear --population $(TEST_DATA4) --order 2
 	@touch $@
 
 # Three real livers as a file population (data_spec/scenes/ci_livers.toml, ../shared).
 TEST_LIVERS := runs/test-data/ci_livers
 $(TEST_LIVERS)/.done: data_spec/scenes/ci_livers.toml | setup-solver
 	$(MPIRUN) $(SPY) -m fem_sim generate $< --out $(TEST_LIVERS) --no-progress
+	$(SPY) -m fem_sim linear --population $(TEST_LIVERS) --order 2
 	@touch $@
 
 # A tiny new patient end to end: a population model trained on the three livers, make patient
@@ -156,7 +159,7 @@ $(TEST_PATIENT)/.done: $(TEST_LIVERS)/.done | setup
 test-trainer: setup-trainer $(TEST_DATA)/.done $(TEST_DATA4)/.done $(TEST_PATIENT)/.done
 	$(TRAIN_VENV)/bin/ruff check .
 	LIVERFEM_TEST_DATASET=$(TEST_DATA) LIVERFEM_TEST_DATASET4=$(TEST_DATA4) \
-	    LIVERFEM_TEST_PATIENT=$(TEST_PATIENT) \
+	    LIVERFEM_TEST_PATIENT=$(TEST_PATIENT) LIVERFEM_TEST_LIVERS=$(TEST_LIVERS) \
 	    bash scripts/run_pytest.sh $(TPY) tests/data_spec tests/liverviz tests/liverreg \
 	    tests/surrogate tests/reliability tests/common/test_environments.py -q $(TESTS)
 
@@ -198,13 +201,16 @@ truth: setup
 # the population scene MODEL was trained on (its loads, material, steps and solver). HELD more simulations are solved and kept
 # out of the adaptation (to measure the patient model on); FRAME: the liver file's frame;
 # ADAPT: more options of surrogate adapt (ADAPT=--tune fine-tunes the population network);
-# ORDER=1: the small-strain responses without their second-order terms (docs/load_expansion.md).
+# ORDER=1: the small-strain responses without their second-order terms (docs/load_expansion.md);
+# REST: a population model of what each liver's small-strain base misses (config
+# population_linear, docs/scene4_real.md), added to the patient's base.
 K ?= 40
 HELD ?= 0
 FRAME ?=
 ADAPT ?=
 MODEL ?=
 PSCENE ?= data_spec/scenes/scene4_livers.toml
+REST ?=
 SYNTHETIC ?= 600
 ORDER ?= 2
 GREEN ?= 1
@@ -219,7 +225,7 @@ patient: setup
 	    --order $(ORDER) $(if $(filter 1,$(GREEN)),--green)
 	$(TPY) -m surrogate adapt $(MODEL) $(PATIENT)/data --liver $(LIVER) --run $(PATIENT)/run \
 	    --sims $(K) --synthetic $(SYNTHETIC) $(if $(FRAME),--frame $(FRAME)) \
-	    --placement $(PATIENT)/placement.npz $(ADAPT)
+	    --placement $(PATIENT)/placement.npz $(if $(REST),--rest $(REST)) $(ADAPT)
 
 # Scene 4 on real livers (long, resumable): both designs cross-validated by liver, the livers
 # never seen against FE -> docs/scene4_real.md (then make table4 T4=--report-only puts its

@@ -5,6 +5,7 @@
     truth-scene RUN LIVER --scene SCENE [--sims N] --out FILE [--placement NPZ]
     evaluate RUN DATA [--liver LIVER] [--population DIR] [--out FILE]
     adapt RUN DATA --liver LIVER --run OUT [--sims K] [--synthetic N] [--placement NPZ] [--tune]
+          [--rest RUN]
 
 A killed training resumes when the same command is run again (``--fresh`` starts over).
 ``truth-scene`` writes the scene of a liver's FE truth with the model's boundary condition
@@ -119,6 +120,9 @@ def _add_adapt(sub) -> None:
     a.add_argument("--tune", action="store_true",
                    help="fine-tune the population network on the simulations before the "
                    "correction (docs/patient.md measures it)")
+    a.add_argument("--rest", metavar="RUN",
+                   help="a population model of what each liver's small-strain base misses "
+                   "(config population_linear), added to the patient's own base")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -263,6 +267,7 @@ def _adapt(args) -> int:
         info = adapt(model_dir(Path(args.model)), args.data, args.liver, args.run,
                      sims=args.sims, frame=args.frame, synthetic=args.synthetic,
                      saved=args.placement, tune=args.tune,
+                     rest=model_dir(Path(args.rest)) if args.rest else None,
                      log_fn=lambda m: print(m, file=sys.stderr, flush=True))
     except (DataError, ValueError, OSError) as exc:
         return _fail("adapt", str(exc))

@@ -356,7 +356,7 @@ class Basis:
                     "'population_basis' or a node-wise config")
         return None
 
-    def check(self, ds: Dataset) -> None:
+    def check(self, ds: Dataset, cfg: dict | None = None) -> None:
         check_dataset(ds)
 
     def problem(self, ds, train, val, cfg, rng) -> BasisProblem:

@@ -20,6 +20,10 @@ BASE = {
     "load_context": False,     # population_basis: tell the network where each load sits on
                                # the liver (template place, offset and distance to the fixed
                                # region; surrogate/population_basis.py)
+    "linear_base": 0,          # population_basis: learn the FE fields less each liver's
+                               # small-strain base of this order (1: linear, 2: with its second-
+                               # order term; 0: none; fem_sim linear --population; a prediction
+                               # adds it back: surrogate/linear_base.py)
     "ensemble": 1,             # basis designs: networks trained on the same modes from other
                                # initialisations and batch orders; their coefficients averaged
                                # (one mode product per call whatever their number)
@@ -97,6 +101,10 @@ CONFIGS = {
                          # slightly slower call (docs/population_basis.md)
                          "ensemble": 5},
 }
+# Scene 4 over each liver's own small-strain base (fem_sim linear --population --order 2): the
+# population basis learns only what the base misses (the stiffening beyond second order), and
+# a prediction adds the base of the liver's own mesh (docs/scene4_real.md).
+CONFIGS["population_linear"] = {**CONFIGS["population_basis"], "linear_base": 2}
 
 
 # key -> (check, what is expected): every value is checked before training starts.
@@ -112,6 +120,7 @@ CHECKS = {
                     "null or a finite number >= 0"),
     "load_context": (lambda v: isinstance(v, bool), "true or false"),
     "shared_loads": (lambda v: isinstance(v, bool), "true or false"),
+    "linear_base": (lambda v: v in (0, 1, 2) and not isinstance(v, bool), "0, 1 or 2"),
     "ensemble": (lambda v: is_int(v) and v >= 1, "an integer >= 1"),
     "shape_inputs": (lambda v: v == "all" or is_int(v) and v >= 0, "'all' or an integer >= 0"),
     "batch_size": (lambda v: is_int(v) and v >= 1, "an integer >= 1"),

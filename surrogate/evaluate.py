@@ -155,10 +155,12 @@ def fixed_extents(data: Path) -> np.ndarray:
     return np.array(out)
 
 
-def _placed_fields(pred, placement, shape, points, shards):
+def _placed_fields(pred, placement, shape, points, shards, base=None):
     """(predicted, true) (n, 3) mm of every done load step of ``shards`` at the liver's own
-    nodes ``points``, and the placed model.
+    nodes ``points``, and the placed model; ``base``: the liver's small-strain responses
+    (:class:`~data_spec.linear_fields.LinearFields`) a model of their rest adds its field to.
     """
+    from surrogate.linear_base import case_base
     from surrogate.predict_liver import PlacedModel
 
     P, T = [], []
@@ -169,10 +171,28 @@ def _placed_fields(pred, placement, shape, points, shards):
             fr = np.asarray(sh.load_fractions[:sh.n_done])
             forces = fr[:, None, None] * np.asarray(sh.forces)[None]
             at = np.broadcast_to(points[sh.load_nodes], forces.shape)
-            u = placed(forces, placed.load_nodes(at))
-            P.append(u[:, sh.output_nodes].reshape(-1, 3))
+            u = placed(forces, placed.load_nodes(at), rest=base is not None)[:, sh.output_nodes]
+            if base is not None:
+                u = u + case_base(base, pred.linear_base, sh.sim_index, fr)
+            P.append(u.reshape(-1, 3))
             T.append(np.asarray(sh.displacement[:sh.n_done]).reshape(-1, 3))
     return np.concatenate(P), np.concatenate(T), placed
+
+
+def _base_of(pred, data: Path):
+    """The small-strain responses of ``data``'s liver when ``pred`` models their rest (its
+    linear.h5, ``fem_sim linear --order 2``), else None; ValueError naming the file missing.
+    """
+    from data_spec.linear_fields import linear_fields_path, read_linear_fields
+
+    if not getattr(pred, "linear_base", 0):
+        return None
+    path = linear_fields_path(data)
+    if not path.exists():
+        raise ValueError(f"{path}: missing; the model predicts the rest of each liver's "
+                         f"small-strain base: run `fem_sim linear {data}/scene.toml --out {data} "
+                         f"--order {pred.linear_base}` first")
+    return read_linear_fields(path)
 
 
 def _scale_fit(pred_all, true_all) -> dict:
@@ -212,7 +232,8 @@ def evaluate_liver(pred, data: Path, placement, found: list = (), *, population_
     """The loaded population model ``pred`` on the FE simulations ``data`` of a liver it never
     saw, placed by ``placement`` (predict-liver's), predicted at the liver's own mesh nodes and
     told the shape ``shape`` gives (:meth:`liverreg.shape_model.ShapeModel.shape_told`; None:
-    the design's, as predict-liver), against the FE solution. Naive model: the mean
+    the design's, as predict-liver), against the FE solution (a model of the rest of the
+    small-strain base: plus the liver's own base, ``data/linear.h5``). Naive model: the mean
     displacement of ``population_data``'s simulations (None: of ``data``'s), turned into the
     liver's frame. ``geometry_id``: only that liver's simulations of ``data``.
     """
@@ -224,13 +245,14 @@ def evaluate_liver(pred, data: Path, placement, found: list = (), *, population_
     if not shards:
         raise ValueError(f"{data}: no simulation with a converged load step")
     g = read_geometry(geometry_path(data, shards[0].geometry_id))
-    pred_all, true_all, placed = _placed_fields(pred, placement, shape, g.points, shards)
+    base = _base_of(pred, data)
+    pred_all, true_all, placed = _placed_fields(pred, placement, shape, g.points, shards, base)
     mean = mean_displacement(Path(population_data) if population_data else data)
     m_nn = displacement_metrics(pred_all, true_all)
     m_naive = displacement_metrics(np.broadcast_to(placement.vectors_to_liver(mean),
                                                    true_all.shape), true_all)
     floor = ({"modes_floor_mm": modes_floor(pred, placement, placed.interpolation, shards)}
-             if pred.modes is not None else {})
+             if pred.modes is not None and base is None else {})
     return {"sims": len(shards), "stopped": stopped_simulations(shards), "nodes": g.n_nodes,
             "network": m_nn, "naive": m_naive,
             "skill": m_nn["mee"] / m_naive["mee"],

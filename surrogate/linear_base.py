@@ -33,6 +33,23 @@ def _ratio(lf) -> np.ndarray:
     return two / np.maximum(one, 1e-300)
 
 
+def series_terms(u1, u2, ratio, lam) -> tuple:
+    """The base's two terms of responses ``u1`` (and second-order terms ``u2``, or None), each
+    (n, n_out, 3), at fractions ``lam`` (n,): lam u1, and lam^2 u2 / (1 + lam R) with R =
+    ``ratio`` = |u2| / |u1| (the response's own ratio, over its output nodes): the series'
+    second term, damped as the [1/1] rational form of a series of that ratio would, and zero
+    where R >= R_MAX (a load whose second term outgrows its first: the series is no guide
+    there, the linear response alone is kept). At order 1 the second term is zero.
+    """
+    lam = np.asarray(lam, np.float64)
+    one = np.asarray(u1, np.float64) * lam[:, None, None]
+    if u2 is None:
+        return one, np.zeros_like(one)
+    r = np.asarray(ratio, np.float64)
+    damp = np.where(r < R_MAX, lam**2 / (1.0 + lam * r), 0.0)
+    return one, np.asarray(u2, np.float64) * damp[:, None, None]
+
+
 class LinearBase:
     """The responses of ``path`` (default ``ds.directory/linear.h5``) at the output nodes of
     the one-liver dataset ``ds``.
@@ -94,20 +111,12 @@ class LinearBase:
 
     def terms(self, rows: np.ndarray, lam: np.ndarray) -> tuple:
         """The base's two terms for the file's ``rows`` at fractions ``lam``, each
-        (len(rows), n_out, 3) mm: lam u1, and lam^2 u2 / (1 + lam R) with R = |u2| / |u1|
-        (the response's own ratio, over the file's output nodes): the series' second term,
-        damped as the [1/1] rational form of a series of that ratio would, and zero where
-        R >= R_MAX (a load whose second term outgrows its first: the series is no guide
-        there, the linear response alone is kept). At order 1 the second term is zero.
+        (len(rows), n_out, 3) mm (:func:`series_terms`).
         """
-        lam = np.asarray(lam, np.float64)
-        u = self.lf.displacement[rows][:, self.columns].astype(np.float64)
-        one = u * lam[:, None, None]
-        if self.lf.second_order is None:
-            return one, np.zeros_like(one)
-        r = self.ratio[rows]
-        damp = np.where(r < R_MAX, lam**2 / (1.0 + lam * r), 0.0)
-        return one, self.lf.second_order[rows][:, self.columns] * damp[:, None, None]
+        u = self.lf.displacement[rows][:, self.columns]
+        two = None if self.lf.second_order is None else \
+            self.lf.second_order[rows][:, self.columns]
+        return series_terms(u, two, self.ratio[rows], lam)
 
     def _at(self, rows: np.ndarray, lam: np.ndarray) -> np.ndarray:
         """(len(rows), n_out, 3) mm: the base for the file's ``rows`` at fractions ``lam``."""
@@ -131,3 +140,96 @@ class LinearBase:
         forces = np.repeat(self.lf.forces[rows, 0], rep, axis=0) * lam[:, None]
         return (forces, np.repeat(self.lf.load_nodes[rows, 0], rep), lam,
                 np.repeat(np.arange(n), rep), self._at(np.repeat(rows, rep), lam))
+
+
+def case_base(lf, order: int, case: int, lam) -> np.ndarray:
+    """(len(lam), n_out, 3) mm: the series of file ``lf``'s response to ``case`` to ``order``
+    (1 or 2) at the fractions ``lam``, at the file's output nodes.
+    """
+    r = int(lf.rows([case])[0])
+    if order > lf.order:
+        raise ValueError(f"liver {lf.geometry_id}: responses of order {lf.order}, {order} "
+                         "asked: rerun fem_sim linear with --order 2")
+    lam = np.asarray(lam, np.float64)
+    n = lam.size
+    one, two = series_terms(np.repeat(lf.displacement[r:r + 1], n, axis=0),
+                            None if order == 1 else np.repeat(lf.second_order[r:r + 1], n, 0),
+                            np.full(n, _ratio(lf)[r]), lam)
+    return one + two
+
+
+class PopulationLinearBase:
+    """The small-strain responses of every liver of a population dataset (``fem_sim linear
+    --population``: ``DATA/linear/<geometry id>.h5``), at each liver's output nodes: the base
+    a population model may learn the rest of (config ``linear_base``: the series to that
+    order).
+    """
+
+    def __init__(self, ds: Dataset, order: int = 2):
+        self.files, self.order = {}, int(order)
+        for g, gid in enumerate(ds.geo_ids):
+            path = linear_fields_path(ds.directory, gid)
+            if not path.exists():
+                raise ValueError(f"{path}: no small-strain responses of liver {gid}: run "
+                                 f"`fem_sim linear --population {ds.directory} --order 2`")
+            lf = read_linear_fields(path)
+            if not np.array_equal(lf.output_nodes, np.asarray(ds.out_nodes[g])):
+                raise ValueError(f"{path}: its output nodes are not the dataset's liver {gid}'s: "
+                                 "rerun fem_sim linear --population")
+            if lf.order < self.order:
+                raise ValueError(f"{path}: responses of order {lf.order}, the config's "
+                                 f"linear_base asks {self.order}: rerun fem_sim linear "
+                                 "--population --order 2")
+            self.files[g] = lf
+
+    def sample(self, ds: Dataset, s: int) -> np.ndarray:
+        """(n_out, 3) mm: sample ``s``'s base on its own liver's output nodes."""
+        lf = self.files[int(ds.sample_geo[s])]
+        return case_base(lf, self.order, int(ds.sample_sim[s]), [ds.sample_fraction[s]])[0]
+
+
+def heldout_base(data: str | Path, run: str | Path, order: int = 2) -> dict:
+    """The small-strain base alone (no network) on the held-out livers of a population run's
+    evaluated folds (``RUN/config.json``: its folds and seed), in metrics.json's terms: its
+    MEE beside the naive model's (each fold's training mean displacement), per liver.
+    """
+    import json
+
+    from surrogate.data import kfold_groups, load_dataset
+    from surrogate.metrics import displacement_metrics
+    from surrogate.train import per_liver, training_mean, training_samples
+
+    cfg = json.loads((Path(run) / "config.json").read_text())
+    ds = load_dataset(data)
+    base = PopulationLinearBase(ds, order)
+    folds = kfold_groups(ds, cfg["folds"], cfg["seed"])[:cfg.get("evaluate_folds") or None]
+    P, T, N, G = [], [], [], []
+    for held in folds:
+        mean = training_mean(ds, training_samples(ds, held, cfg))
+        for s in held:
+            t = np.asarray(ds.targets[ds.sample_offset[s]:ds.sample_offset[s + 1]], np.float64)
+            P.append(base.sample(ds, s))
+            T.append(t)
+            N.append(np.broadcast_to(mean, t.shape))
+            G.append(np.full(len(t), ds.sample_geo[s]))
+    pred, true, naive, geo = (np.concatenate(a) for a in (P, T, N, G))
+    m, m_naive = displacement_metrics(pred, true), displacement_metrics(naive, true)
+    return {"network": m, "naive": m_naive, "skill": m["mee"] / m_naive["mee"],
+            "per_liver_mee": per_liver(pred, true, naive, geo), "order": order,
+            "evaluated_folds": len(folds)}
+
+
+def liver_base_metrics(data: str | Path, order: int = 2) -> dict:
+    """The small-strain base alone against the FE fields of a one-liver dataset ``data``
+    (its ``linear.h5``): the displacement metrics over every done load step.
+    """
+    from data_spec.shards import list_shards, read_shard
+    from surrogate.metrics import displacement_metrics
+
+    lf = read_linear_fields(linear_fields_path(data))
+    P, T = [], []
+    for sh in (s for s in map(read_shard, list_shards(data)) if s.n_done):
+        fr = np.asarray(sh.load_fractions[:sh.n_done])
+        P.append(case_base(lf, order, sh.sim_index, fr).reshape(-1, 3))
+        T.append(np.asarray(sh.displacement[:sh.n_done]).reshape(-1, 3))
+    return displacement_metrics(np.concatenate(P), np.concatenate(T))

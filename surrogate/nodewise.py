@@ -152,7 +152,7 @@ class NodeWise:
     node_sampled = True   # trains on a fraction of the nodes per epoch (node_fraction)
     takes = frozenset({"dropout"})  # the design-specific config keys it reads
 
-    def check(self, ds: Dataset) -> None:
+    def check(self, ds: Dataset, cfg: dict | None = None) -> None:
         """Every dataset takes the node-wise design."""
 
     def scene_problem(self, varies_geometry: bool) -> str | None:

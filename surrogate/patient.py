@@ -316,13 +316,23 @@ class Teacher:
     """
 
     def __init__(self, pred, placement, ds: Dataset, shape: str | None = None,
-                 linear: LinearBase | None = None):
+                 linear: LinearBase | None = None, rest=None):
+        """``rest``: a population model of what each liver's small-strain base misses (config
+        ``linear_base``), placed as ``pred`` and added to ``linear``, the patient's own base.
+        """
         from surrogate.predict_liver import PlacedModel
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             self.placed = PlacedModel(pred, nodes=ds.points[0], placement=placement,
                                       shape=shape)
+            self.rest = None if rest is None else PlacedModel(
+                rest, nodes=ds.points[0], placement=placement, shape=shape)
+        if rest is not None and (linear is None or linear.order < rest.linear_base):
+            raise ValueError(f"the population model of the base's rest was trained over a "
+                             f"small-strain base of order {rest.linear_base}; the patient's "
+                             f"is {'missing' if linear is None else f'of order {linear.order}'}"
+                             f": run fem_sim linear --order {rest.linear_base} on its scene")
         self.out = np.asarray(ds.out_nodes[0])
         self.linear = linear   # the patient's small-strain responses: the base when given
         self.correction: Correction | None = None
@@ -346,26 +356,35 @@ class Teacher:
         self.out_of_fold = None if oof is None else \
             placement.vectors_to_liver(oof.reshape(fields.shape))
 
-    def population(self, forces, points, chunk: int = 256) -> np.ndarray:
-        """(cases, n_out, 3) mm: the placed population model for one load per case, forces
-        (cases, 3) N at the load points (cases, 3) mm (the patient's frame).
+    def population(self, forces, points, chunk: int = 256, placed=None) -> np.ndarray:
+        """(cases, n_out, 3) mm: the placed population model (``placed``: another one, of
+        the base's rest) for one load per case, forces (cases, 3) N at the load points
+        (cases, 3) mm (the patient's frame).
         """
         forces, points = np.asarray(forces, float), np.asarray(points, float)
-        out = []
+        placed, out = placed or self.placed, []
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             for s in range(0, forces.shape[0], chunk):
                 f, p = forces[s:s + chunk, None], points[s:s + chunk, None]
-                out.append(self.placed(f, self.placed.load_nodes(p))[:, self.out])
+                out.append(placed(f, placed.load_nodes(p), rest=placed is self.rest)[:, self.out])
         return np.concatenate(out) if out else np.zeros((0, self.out.size, 3))
+
+    def over_base(self, base: np.ndarray, forces, points) -> np.ndarray:
+        """The small-strain ``base`` of the cases plus the population's rest, when given."""
+        if self.rest is None:
+            return base
+        return base + self.population(forces, points, placed=self.rest)
 
     def base(self, ds: Dataset, samples: np.ndarray) -> np.ndarray:
         """(samples, n_out, 3) mm: what the correction corrects for the samples of ``ds``:
-        the small-strain responses when the teacher has them, else the population model.
+        the small-strain responses when the teacher has them (plus the population's rest of
+        them when given), else the population model.
         """
+        f, x = ds.forces[samples, 0], ds.load_points[samples, 0]
         if self.linear is not None:
-            return self.linear.samples(ds, samples)
-        return self.population(ds.forces[samples, 0], ds.load_points[samples, 0])
+            return self.over_base(self.linear.samples(ds, samples), f, x)
+        return self.population(f, x)
 
     def __call__(self, forces, points, base: np.ndarray | None = None) -> np.ndarray:
         """(cases, n_out, 3) mm: the base (``base``; default the population model) plus
@@ -465,6 +484,7 @@ def distilled(teacher: Teacher, ds: Dataset, sims, n_synthetic: int, cfg: dict,
 
     if teacher.linear is not None:   # the drawn cases of fem_sim linear, with their responses
         forces, nodes, fractions, sim, base = teacher.linear.drawn(n_synthetic)
+        base = teacher.over_base(base, forces, ds.points[0][nodes])
         fields = teacher(forces, ds.points[0][nodes], base)
     else:
         forces, nodes, fractions, sim = drawn_loads(ds, n_synthetic, seed)
@@ -488,11 +508,13 @@ def student_config(**overrides) -> dict:
 
 def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | None = None,
           synthetic: int = SYNTHETIC, seed: int = 0, saved=None, tune: bool = False,
-          log_fn=print, **overrides) -> dict:
+          rest=None, log_fn=print, **overrides) -> dict:
     """The patient model of ``liver`` in ``run/model``: the population model ``model_dir``
     placed on it (as predict-liver places it; ``saved``: a placement file truth-scene wrote),
     corrected (its network first fine-tuned with ``tune``) with the first ``sims`` FE
-    simulations of ``data`` (None: all) and distilled.
+    simulations of ``data`` (None: all; 0 with the patient's small-strain responses: those
+    alone) and distilled; ``rest``: the model directory of a population model of the
+    base's rest (:class:`Teacher`).
     Writes and returns ``run/adaptation.json`` (what was used, the correction's setting,
     seconds per step).
     """
@@ -502,16 +524,19 @@ def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | 
 
     t = time.perf_counter()
     ds = load_dataset(data)
-    used = used_simulations(ds, sims, data)
+    linear = None if tune else LinearBase.of(ds)
+    used = used_simulations(ds, sims, data, linear is not None)
     pred = load_predictor(model_dir)
     if pred.shape_model is None:
         raise ValueError(f"{model_dir}: not a population model (no shape model): a patient "
                          "model adapts a model trained on a population of livers")
+    rest_pred = None if rest is None else _rest_model(rest, pred, model_dir)
     placement, found = place(pred, liver, frame, saved)
     # --tune adapts the population network, so it keeps the population model as the base
-    teacher = Teacher(pred, placement, ds, linear=None if tune else LinearBase.of(ds))
+    teacher = Teacher(pred, placement, ds, linear=linear, rest=rest_pred)
     placed = time.perf_counter()
-    fit_teacher(teacher, ds, used, tune)
+    if len(used):
+        fit_teacher(teacher, ds, used, tune)
     corrected = time.perf_counter()
     info = {"population_model": str(Path(model_dir).resolve()),
             "liver": str(Path(liver).resolve()), "data": str(Path(data).resolve()),
@@ -528,16 +553,39 @@ def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | 
     return info
 
 
-def used_simulations(ds: Dataset, sims: int | None, data) -> np.ndarray:
+def _rest_model(rest, pred, model_dir):
+    """The population model of the base's rest in ``rest``, checked against ``pred``'s
+    template (it is placed by ``pred``'s placement).
+    """
+    from surrogate.evaluate import shape_model_digest
+    from surrogate.predictor import load_predictor
+
+    out = load_predictor(rest)
+    if not out.linear_base:
+        raise ValueError(f"--rest {rest}: not a model of a small-strain base's rest (config "
+                         "linear_base = 0); train config population_linear")
+    if out.shape_model is None or \
+            shape_model_digest(out.shape_model) != shape_model_digest(pred.shape_model):
+        raise ValueError(f"--rest {rest}: another template or shape model than {model_dir}'s: "
+                         "both must be trained on the same population dataset")
+    return out
+
+
+def used_simulations(ds: Dataset, sims: int | None, data, linear: bool = False) -> np.ndarray:
     """The first ``sims`` simulations of the patient's dataset ``ds`` (read from ``data``)
-    with converged load steps (None: all of them); ValueError, before any work, for none,
-    or fewer than asked (a model fitted on fewer simulations than the user counted on).
+    with converged load steps (None: all of them; 0 only with the patient's small-strain
+    responses, ``linear``); ValueError, before any work, for none, or fewer than asked (a
+    model fitted on fewer simulations than the user counted on).
     """
     done = np.unique(ds.sample_sim)
+    if sims == 0 and linear:
+        return done[:0]
     if sims == 0 or not done.size:
         raise ValueError(f"{data}: adapting needs at least one FE simulation of the patient "
                          f"(--sims {sims}; the data has {done.size} with converged load "
-                         "steps); predict-liver gives the population model on this liver")
+                         "steps), or at --sims 0 its small-strain responses (fem_sim linear, "
+                         "as make patient runs it); predict-liver gives the population model "
+                         "on this liver")
     if sims is not None and sims > done.size:
         raise ValueError(f"{data}: {done.size} simulations with converged load steps, fewer "
                          f"than the {sims} asked (--sims): ask for at most {done.size}, or "
@@ -595,15 +643,17 @@ def scratch_model(ds: Dataset, sims, cfg: dict, seed: int = 0, log_fn=print):
 
 
 def held_out_errors(pred, placement, ds: Dataset, train_sims, held_sims, *, run: Path,
-                    synthetic: int = SYNTHETIC, tune: bool = True, log_fn=print) -> dict:
+                    synthetic: int = SYNTHETIC, tune: bool = True, rest=None,
+                    log_fn=print) -> dict:
     """MEE (mm) on the patient's simulations ``held_sims`` of: the population model ``pred``
     placed by ``placement``; it corrected with ``train_sims`` (``corrected``); with the
     dataset's small-strain responses (``linear.h5``), those alone (``linear``) and corrected
     (``linear_corrected``); the patient model distilled from the teacher ``adapt``
     uses (the responses' when there are any), exported to ``run``; the population network fine-tuned
     on ``train_sims`` (``tuned``), and that corrected (``tuned_corrected``; not with
-    ``tune`` False); the reduced basis trained on ``train_sims`` alone. With the seconds of
-    each step.
+    ``tune`` False); the reduced basis trained on ``train_sims`` alone. With ``rest`` (a
+    loaded population model of the base's rest), the responses plus it (``linear_rest``)
+    are the teacher's base. With the seconds of each step.
     """
     smp = sims_samples(ds, held_sims)
     true = sample_fields(ds, smp)
@@ -623,7 +673,9 @@ def held_out_errors(pred, placement, ds: Dataset, train_sims, held_sims, *, run:
         fitted = time.perf_counter() - start
     if linear is not None:   # K = 0: the small-strain responses alone, distilled
         start = time.perf_counter()
-        teacher = Teacher(pred, placement, ds, linear=linear)
+        teacher = Teacher(pred, placement, ds, linear=linear, rest=rest)
+        if rest is not None:
+            out["linear_rest"] = field_mee(teacher.base(ds, smp), true)
         if len(train_sims):
             fit_teacher(teacher, ds, train_sims)
             out["linear_corrected"] = field_mee(teacher(f, x, teacher.base(ds, smp)), true)

@@ -86,12 +86,17 @@ class TemplateFields:
             self.context[sel] = load_context(P, anatomical, ds.points[g][ds.fixed[g]])
         self.n_template = next(iter(reg.values())).shape[0]
 
-    def fields(self, ds: Dataset, samples: np.ndarray) -> np.ndarray:
-        """(len(samples), 3 n_template) fields of samples on the registered template."""
+    def fields(self, ds: Dataset, samples: np.ndarray, base=None) -> np.ndarray:
+        """(len(samples), 3 n_template) fields of samples on the registered template; less
+        each sample's small-strain base on its liver's nodes when ``base`` (a
+        :class:`~surrogate.linear_base.PopulationLinearBase`) is given.
+        """
         out = np.empty((len(samples), 3 * self.n_template))
         for i, s in enumerate(samples):
             u = np.asarray(ds.targets[ds.sample_offset[s]:ds.sample_offset[s + 1]],
                            dtype=np.float64)
+            if base is not None:
+                u = u - base.sample(ds, s)
             out[i] = (self.to_template[ds.sample_geo[s]] @ u).ravel()
         return out
 
@@ -148,7 +153,7 @@ class PopulationBasis(Basis):
     # population, docs/shape_rule.md)
     shape_rule = "outside"
     on_template = True  # its modes, and the liver it is exported with, are the template's
-    takes = Basis.takes | {"shape_inputs", "load_context", "shape_noise"}
+    takes = Basis.takes | {"shape_inputs", "load_context", "shape_noise", "linear_base"}
 
     def scene_problem(self, varies_geometry: bool) -> str | None:
         """Why a scene cannot take the design (None when it can)."""
@@ -170,13 +175,29 @@ class PopulationBasis(Basis):
             ds._template_fields = TemplateFields(ds)
         return ds._template_fields
 
-    def check(self, ds: Dataset) -> None:
+    def base(self, ds: Dataset, cfg: dict):
+        """The dataset's small-strain base when the config learns the rest of it (kept with
+        the dataset), else None.
+        """
+        from surrogate.linear_base import PopulationLinearBase
+
+        if not cfg.get("linear_base"):
+            return None
+        if getattr(ds, "_linear_base", None) is None:
+            ds._linear_base = {}
+        if cfg["linear_base"] not in ds._linear_base:
+            ds._linear_base[cfg["linear_base"]] = PopulationLinearBase(ds, cfg["linear_base"])
+        return ds._linear_base[cfg["linear_base"]]
+
+    def check(self, ds: Dataset, cfg: dict | None = None) -> None:
         self.maps(ds)
+        if cfg is not None:
+            self.base(ds, cfg)
 
     def problem(self, ds, train, val, cfg, rng) -> BasisProblem:
-        maps = self.maps(ds)
+        maps, base = self.maps(ds), self.base(ds, cfg)
         return BasisProblem(ds, train, val, cfg, int(rng.integers(2**31)),
-                            fields_of=lambda s: maps.fields(ds, s),
+                            fields_of=lambda s: maps.fields(ds, s, base),
                             context=maps.context if cfg["load_context"] else None)
 
     def summary(self, problem: BasisProblem) -> str:
@@ -185,10 +206,10 @@ class PopulationBasis(Basis):
 
     def predict_samples(self, ds: Dataset, model: BasisModel, cfg: dict, samples: np.ndarray):
         """Predicted and true displacement on each sample's own liver nodes."""
-        maps = self.maps(ds)
+        maps, base = self.maps(ds), self.base(ds, cfg)
         U = predict_fields(ds, model, samples, maps.context if model.context else None)
         pred = [maps.to_liver[ds.sample_geo[s]] @ u.reshape(-1, 3)
-                for s, u in zip(samples, U)]
+                + (0.0 if base is None else base.sample(ds, s)) for s, u in zip(samples, U)]
         true = [ds.targets[ds.sample_offset[s]:ds.sample_offset[s + 1]] for s in samples]
         rows = [np.full(len(t), s) for s, t in zip(samples, true)]
         return (np.concatenate(pred).astype(np.float32),

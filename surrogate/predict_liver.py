@@ -311,14 +311,15 @@ class PlacedModel:
                                     self.predictor.shape_model.surface_triangles, flat)
         return ids.reshape(at.shape[:-1])
 
-    def __call__(self, forces, load_nodes) -> np.ndarray:
+    def __call__(self, forces, load_nodes, rest: bool = False) -> np.ndarray:
         """Displacements (n_nodes, 3), or (n_cases, n_nodes, 3) for forces (n_cases, n_loads,
         3), mm in the liver's frame, for ``forces`` N (the liver's frame) at the template node
-        ids ``load_nodes`` (:meth:`load_nodes`).
+        ids ``load_nodes`` (:meth:`load_nodes`); ``rest``: of a model of what the liver's
+        small-strain base misses (the predictor's ``rest``).
         """
         f = self.placement.vectors_to_population(forces)
-        u = np.asarray(self.predictor(f, np.asarray(load_nodes), geometry=self.geometry),
-                       dtype=np.float64)
+        u = np.asarray(self.predictor(f, np.asarray(load_nodes), geometry=self.geometry,
+                                      rest=rest), dtype=np.float64)
         single = u.ndim == 2
         u = u[None] if single else u
         n_cases, n_t = u.shape[:2]

@@ -59,6 +59,13 @@ def check_load_nodes(load_nodes, loadable) -> None:
                       "fixed or too close to it): extrapolating", stacklevel=3)
 
 
+LINEAR_BASE_ONLY = (
+    "this model predicts what a liver's small-strain base misses (config linear_base = {}), "
+    "not a whole field: a whole field needs the base of the liver's own mesh (fem_sim linear) "
+    "added to it (call with rest=True), which `make patient LIVER=... MODEL=... K=0` does for a "
+    "new liver")
+
+
 class Predictor:
     """Jitted surrogate: forces (and load nodes, material) -> node displacements in mm.
 
@@ -84,6 +91,9 @@ class Predictor:
             cfg = meta["config"]
             hidden = tuple(int(w) for w in cfg["hidden"])
             dropout = float(cfg["dropout"])
+            # a population model of what each liver's small-strain base misses
+            # (surrogate/population_basis.py): its field is that rest, never a whole field
+            self.linear_base = int(cfg.get("linear_base", 0))
             self.force_norm_max = float(meta["training_range"]["force_norm_max"])
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"{d / 'model.json'}: incomplete or malformed ({exc!r})") from None
@@ -122,7 +132,13 @@ class Predictor:
         """(k, n_output_nodes, 3) the modes of a basis design, None for a node-wise one."""
         return self.runtime.modes
 
-    def __call__(self, forces, load_nodes, nodes=None, material=None, geometry=None):
+    def __call__(self, forces, load_nodes, nodes=None, material=None, geometry=None,
+                 rest: bool = False):
+        """The displacement field, mm; ``rest``: what the small-strain base misses, of a model
+        trained on it (config ``linear_base``), which gives nothing else.
+        """
+        if self.linear_base and not rest:
+            raise ValueError(LINEAR_BASE_ONLY.format(self.linear_base))
         forces, load_nodes, single = _check_loads(forces, load_nodes, self.spec.n_loads)
         if self.linear_part is not None and geometry is not None:
             raise ValueError("geometry: this model's small-strain part is of its own liver's "

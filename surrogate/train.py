@@ -153,7 +153,7 @@ def _load(data_dir, run: Path, cfg: dict, say) -> Dataset:
             f"(simulation {', '.join(map(str, ds.missing_sims[:10]))}"
             f"{' ...' if len(ds.missing_sims) > 10 else ''}): `python -m data_spec validate "
             f"{data_dir}` says how to make them")
-    DESIGNS[cfg["design"]].check(ds)
+    DESIGNS[cfg["design"]].check(ds, cfg)
     return ds
 
 

@@ -298,21 +298,30 @@ def test_fine_tuning_moves_the_network_towards_the_patient_and_leaves_noise_alon
 
 
 @pytest.mark.dataset
-def test_adapting_to_none_or_more_simulations_than_there_are_is_a_clear_error(capsys):
-    """adapt --sims 0, or more simulations than the patient's data holds: a one-line error
-    naming the data, what was asked and what there is, before the liver is placed."""
+def test_adapting_to_none_or_more_simulations_than_there_are_is_a_clear_error(capsys,
+                                                                              tmp_path):
+    """adapt --sims 0 without the small-strain responses, or more simulations than the
+    patient's data holds: a one-line error naming the data, what was asked and what there
+    is, before the liver is placed."""
     from surrogate.__main__ import main
 
     d = Path(generated_dataset("LIVERFEM_TEST_PATIENT"))
     info = json.loads((d / "run" / "adaptation.json").read_text())
     done = np.unique(load_dataset(d / "data").sample_sim).size
-    for sims, said in ((0, "at least one FE simulation"),
-                       (done + 1, f"{done} simulations with converged load steps, fewer than "
-                                  f"the {done + 1} asked")):
-        assert main(["adapt", info["population_model"], str(d / "data"), "--liver",
+    bare = tmp_path / "data"   # the patient's data without its small-strain responses
+    bare.mkdir()
+    for p in (d / "data").iterdir():
+        if p.name != "linear.h5":
+            (bare / p.name).symlink_to(p.resolve())
+    for data, sims, said in (
+            (bare, 0, "at least one FE simulation of the patient (--sims 0; the data has "
+                      f"{done} with converged load steps), or at --sims 0 its small-strain"),
+            (d / "data", done + 1, f"{done} simulations with converged load steps, fewer than "
+                                   f"the {done + 1} asked")):
+        assert main(["adapt", info["population_model"], str(data), "--liver",
                      "/nonexistent.obj", "--run", "/nonexistent-run", "--sims", str(sims)]) != 0
         err = capsys.readouterr().err
-        assert said in err and str(d / "data") in err, err
+        assert said in err and str(data) in err, err
 
 
 @pytest.mark.dataset
@@ -428,3 +437,51 @@ def test_a_models_linear_part_is_added_to_its_network_at_its_load_nodes(tmp_path
         np.testing.assert_array_equal(z["nodes"], lf.green_nodes)
         np.testing.assert_array_equal(z["green"],
                                       lf.green[:, :, np.searchsorted(lf.output_nodes, out)])
+
+
+@pytest.mark.dataset
+def test_a_patient_model_from_its_small_strain_base_and_the_populations_rest(tmp_path):
+    """make test's patient at K = 0 (no nonlinear simulation used): a population model of
+    what each liver's base misses, trained on make test's three livers, added to the
+    patient's own base; the distilled patient model gives the teacher's fields on the
+    held-out simulations (within a fifth of its error), and a model of whole fields is
+    refused as the rest."""
+    import os
+
+    from surrogate.config import get_config
+    from surrogate.evaluate import place
+    from surrogate.patient import adapt
+    from surrogate.train import train_and_evaluate
+
+    d = Path(generated_dataset("LIVERFEM_TEST_PATIENT"))
+    info = json.loads((d / "run" / "adaptation.json").read_text())
+    livers = os.environ.get("LIVERFEM_TEST_LIVERS")
+    assert livers, "LIVERFEM_TEST_LIVERS not set: make test sets it"
+    rest_run = tmp_path / "rest"
+    train_and_evaluate(livers, rest_run, get_config(
+        "population_linear", folds=3, evaluate_folds=1, epochs=40, hidden=[64, 64],
+        ensemble=1, modes=16), log_fn=lambda m: None)
+    out = adapt(info["population_model"], d / "data", info["liver"], tmp_path / "patient",
+                sims=0, saved=d / "placement.npz", rest=rest_run / "model",
+                log_fn=lambda m: None)
+    assert out["fe_simulations"] == [] and out["correction"] is None
+    ds = load_dataset(d / "data")
+    held = np.setdiff1d(np.unique(ds.sample_sim), info["fe_simulations"])
+    smp = sims_samples(ds, held)
+    true = sample_fields(ds, smp)
+    population, rest = (load_predictor(p) for p in (info["population_model"],
+                                                    rest_run / "model"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        placement, _ = place(population, info["liver"], None, d / "placement.npz")
+    teacher = Teacher(population, placement, ds, linear=LinearBase(ds), rest=rest)
+    over = teacher.base(ds, smp)
+    assert np.abs(over - LinearBase(ds).samples(ds, smp)).max() > 0   # the rest is added
+    student = field_mee(predictor_fields(load_predictor(tmp_path / "patient" / "model"), ds,
+                                         smp), true)
+    teacher_mee = field_mee(over, true)
+    print(f"held-out MEE: base + rest {teacher_mee:.3f} mm, its patient model {student:.3f}")
+    assert abs(student - teacher_mee) < 0.2 * teacher_mee + 0.01, (student, teacher_mee)
+    with pytest.raises(ValueError, match="not a model of a small-strain base's rest"):
+        adapt(info["population_model"], d / "data", info["liver"], tmp_path / "p2", sims=0,
+              saved=d / "placement.npz", rest=info["population_model"], log_fn=lambda m: None)
