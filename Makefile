@@ -203,7 +203,9 @@ truth: setup
 # ADAPT: more options of surrogate adapt (ADAPT=--tune fine-tunes the population network);
 # ORDER=1: the small-strain responses without their second-order terms (docs/load_expansion.md);
 # REST: a population model of what each liver's small-strain base misses (config
-# population_linear, docs/scene4_real.md), added to the patient's base.
+# population_linear, docs/scene4_real.md), added to the patient's base. K=0: the patient's
+# small-strain responses (and REST) alone; one FE simulation is still solved (the scene
+# needs one: it names the mesh and the dataset), none adapts the model.
 K ?= 40
 HELD ?= 0
 FRAME ?=
@@ -217,7 +219,8 @@ GREEN ?= 1
 PATIENT ?= runs/patient/$(basename $(notdir $(LIVER)))
 patient: setup
 	@test -n "$(LIVER)" -a -n "$(MODEL)" || { echo "make patient: LIVER=file MODEL=run [K=40] [PSCENE=scene] [PATIENT=dir]"; exit 2; }
-	$(TPY) -m surrogate truth-scene $(MODEL) $(LIVER) --scene $(PSCENE) --sims $$(($(K) + $(HELD))) \
+	$(TPY) -m surrogate truth-scene $(MODEL) $(LIVER) --scene $(PSCENE) \
+	    --sims $$(($(K) + $(HELD) > 0 ? $(K) + $(HELD) : 1)) \
 	    $(if $(FRAME),--frame $(FRAME)) --out $(PATIENT)/scene.toml \
 	    --placement $(PATIENT)/placement.npz
 	$(MPIRUN) $(SPY) -m fem_sim generate $(PATIENT)/scene.toml --out $(PATIENT)/data

@@ -173,6 +173,7 @@ def curve(liver: Path, a) -> tuple[dict, dict]:
 
     model = Path(a.model) / "model"
     pred = load_predictor(model)
+    rest = load_predictor(Path(a.rest) / "model") if a.rest else None
     t = time.perf_counter()
     placement, _ = place(pred, liver, None)
     placing = time.perf_counter() - t
@@ -181,7 +182,7 @@ def curve(liver: Path, a) -> tuple[dict, dict]:
     sims = np.unique(ds.sample_sim)
     held = sims[-HELD:]
     path = a.results / liver.stem / "k.json"
-    key = made_by(model, data)
+    key = made_by(model, data, Path(a.rest) / "model" if a.rest else None)
     done = json.loads(path.read_text()) if path.exists() else {}
     if done.get("made_by") != key:   # another population model, adaptation or truth
         done = {"made_by": key}
@@ -189,7 +190,7 @@ def curve(liver: Path, a) -> tuple[dict, dict]:
         if str(k) not in done:
             done[str(k)] = held_out_errors(pred, placement, ds, sims[:k], held,
                                            run=a.results / liver.stem / f"run_K{k}",
-                                           tune=a.tune, log_fn=lambda m: None)
+                                           tune=a.tune, rest=rest, log_fn=lambda m: None)
             path.write_text(json.dumps(done, indent=1))
         print(f"[{liver.stem}] K={k}: {done[str(k)]}", flush=True)
     return ({"liver": liver.stem, "nodes": int(ds.points[0].shape[0]), "points": done,
@@ -241,9 +242,9 @@ def minutes(c: dict, k: int, start: float) -> float:
             + c.get("linear_seconds", 0.0) + sum(p["adapt_seconds"].values())) / 60
 
 
-def made_by(model: Path, data: Path) -> str:
-    """A digest of what a K's errors depend on: the population model's files, the
-    adaptation's code and the truth's simulations.
+def made_by(model: Path, data: Path, rest: Path | None = None) -> str:
+    """A digest of what a K's errors depend on: the population model's files (and the base's
+    rest model's), the adaptation's code and the truth's simulations.
     """
     from data_spec.linear_fields import linear_fields_path, read_linear_fields
     from data_spec.views import dataset_fingerprint
@@ -253,7 +254,7 @@ def made_by(model: Path, data: Path) -> str:
         lf = read_linear_fields(linear_fields_path(data))
         h.update(f"order {lf.order} green {lf.green is not None}".encode())
     code = [ROOT / "surrogate" / n for n in ("patient.py", "tuning.py", "linear_base.py")]
-    for f in [*sorted(model.glob("*")), *code]:
+    for f in [*sorted(model.glob("*")), *(sorted(rest.glob("*")) if rest else []), *code]:
         h.update(f.read_bytes())
     return h.hexdigest()[:16]
 
@@ -268,7 +269,7 @@ def end_to_end(liver: Path, a, k: int = 40) -> dict:
     t = time.time()
     subprocess.run(["make", "--no-print-directory", "patient", f"LIVER={liver}",
                     f"MODEL={a.model}", f"K={k}", f"PATIENT={out}", f"ORDER={a.order}",
-                    f"GREEN={int(a.green)}"],
+                    f"GREEN={int(a.green)}", *([f"REST={a.rest}"] if a.rest else [])],
                    cwd=ROOT, check=True,
                    stdout=subprocess.DEVNULL)
     end = time.time()
@@ -321,21 +322,22 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
 
     order_note = ("; at `--order 2`, as here, plus its second-order term, damped and gated: "
                   "docs/load_expansion.md" if a.order == 2 else "")
+    keys = ["population", "corrected", "linear", *(["linear_rest"] if a.rest else []),
+            "linear_corrected", "patient_model", "scratch", "tuned", "tuned_corrected"]
+    n_main = len(keys) - 2
     rows = []
     for k in ks:
         for c in curves:
             p = c["points"][str(k)]
-            cells = [f"{p.get(key, float('nan')):.3f}" if key in p else "" for key in
-                     ("population", "corrected", "linear", "linear_corrected",
-                      "patient_model", "scratch", "tuned", "tuned_corrected")]
+            cells = [f"{p.get(key, float('nan')):.3f}" if key in p else "" for key in keys]
             adapt = f"{sum(p['adapt_seconds'].values()):.0f}" if "adapt_seconds" in p else ""
             tuning = p.get("tuning") or {}
             if tuning.get("steps"):
-                cells[6] += f" ({tuning['steps']} steps)"
+                cells[n_main] += f" ({tuning['steps']} steps)"
             cells.append(f"{tuning['seconds']:.0f}" if "seconds" in tuning else "")
             wall = "" if start is None else f"{minutes(c, k, start):.1f}"
-            rows.append(f"| {k} | {c['liver']} | {' | '.join(cells[:6])} | {adapt} | {wall} | "
-                        f"{' | '.join(cells[6:])} |")
+            rows.append(f"| {k} | {c['liver']} | {' | '.join(cells[:n_main])} | {adapt} | "
+                        f"{wall} | {' | '.join(cells[n_main:])} |")
     med = {k: np.median([mee(c, k) for c in curves]) for k in ks}
     names = ", ".join(c["liver"] for c in curves)
     lines = [
@@ -353,8 +355,14 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
         "(`fem_sim linear`: the body linearised at u = 0, one factorisation, a back-solve "
         f"per load, scaled by the load fraction{order_note}), no nonlinear simulation "
         "needed; linear + corrected: plus the same correction fitted on its residuals (the liver's "
-        "stiffening). Patient model: the linear + corrected teacher (at K = 0 the linear "
-        f"responses alone) on {SYNTHETIC} drawn loads and the K simulations, distilled into "
+        "stiffening)."
+        + (f" Linear + rest: plus the population model of what each liver's small-strain "
+           f"base misses (`{Path(a.rest).relative_to(ROOT)}`, config population_linear, "
+           "docs/scene4_real.md), placed as the population model; it is the base the "
+           "correction corrects and the teacher distils." if a.rest else "")
+        + " Patient model: the linear + corrected teacher (at K = 0 the linear "
+        f"responses{' and the rest' if a.rest else ''} alone) on {SYNTHETIC} drawn loads "
+        "and the K simulations, distilled into "
         "the exported one-liver model (`make patient`). Scratch: the reduced basis trained on "
         "the same K simulations alone. Adaptation: the seconds of correcting and distilling "
         "(placing the liver and the FE simulations not included). Minutes: from the liver "
@@ -368,10 +376,12 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
         "(surrogate.tuning; how many Adam steps, chosen by cross-validation over them, in "
         "brackets); tuned + corrected: the correction fitted on the tuned network's "
         "out-of-fold residuals; tuning s: the seconds of both.", "",
-        "| K | liver | population MEE mm | corrected MEE mm | linear MEE mm | linear + "
+        "| K | liver | population MEE mm | corrected MEE mm | linear MEE mm | "
+        + ("linear + rest MEE mm | " if a.rest else "") + "linear + "
         "corrected MEE mm | patient model MEE mm | scratch MEE mm | adaptation s | minutes | "
         "tuned MEE mm | tuned + corrected MEE mm | tuning s |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|", *rows, "",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if a.rest else ""),
+        *rows, "",
         "Median over the livers (patient model; at K = 0 the small-strain responses alone, "
         "distilled): "
         + ", ".join(f"K = {k}: {med[k]:.3f} mm" for k in ks) + ".", ""]
@@ -473,6 +483,9 @@ def main() -> int:
                     help="the small-strain responses' order (make patient's ORDER, default 2)")
     ap.add_argument("--no-green", dest="green", action="store_false",
                     help="no Green's function in the patient model (make patient's GREEN=0)")
+    ap.add_argument("--rest", default=None, metavar="RUN",
+                    help="a population model of the small-strain base's rest (config "
+                    "population_linear) added to each patient's base (make patient's REST)")
     ap.add_argument("--no-end-to-end", dest="e2e", action="store_false",
                     help="keep the end-to-end times of docs/patient.json")
     a = ap.parse_args()

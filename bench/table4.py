@@ -629,7 +629,9 @@ def real_liver_rows(path: Path) -> tuple[list[str], list[str]]:
     for d in r["designs"]:
         m = d["metrics"]
         net, pl = m["network"], m["per_liver_mee"]
-        ms = f"{d['ms_own']:.2f} / {d['ms_big']:.2f}" if "ms_big" in d else "not exported"
+        ms = (f"{d['ms_own']:.2f} / {d['ms_big']:.2f}" if "ms_big" in d else
+              "over the liver's own base (make patient)" if "base_alone" in d else
+              "not exported")
         lines.append(
             f"| 4, real livers | ours | {design_label(d['config'])} | {m['n_simulations']:,} "
             f"| {d.get('nodes', '')} | {net['mae_x']:.3f} / {net['mae_y']:.3f} / "
@@ -644,6 +646,13 @@ def real_liver_rows(path: Path) -> tuple[list[str], list[str]]:
                              "livers)", validation, design))
     lines += [_unseen_row(f"ours, unseen liver `{u['liver']}`", [u], design)
               for u in un if u["frame"] != "scene"]
+    rest = next((d for d in r["designs"] if "base_alone" in d), None)
+    if rest is not None and all("over_base" in u for u in un):
+        label = design_label(rest["config"])
+        lines.append(_unseen_row(f"ours, the {len(validation)} validation livers (mean over "
+                                 "livers)", [u["over_base"] for u in validation], label))
+        lines += [_unseen_row(f"ours, unseen liver `{u['liver']}`", [u["over_base"]], label)
+                  for u in un if u["frame"] != "scene"]
     w = r.get("written", {})
     note = (f"- Scene 4 on real livers (`scene4_livers.toml`, rows written at commit "
             f"{w.get('commit', 'unknown')}, {w.get('date', 'date unknown')} by "

@@ -68,3 +68,21 @@ def test_a_directory_without_a_scene_is_named(tmp_path):
 
     with pytest.raises(ValueError, match=f"{tmp_path}: no scene.toml"):
         population_linear_fields(tmp_path, progress=False)
+
+
+def test_the_command_takes_one_form_or_says_which(tmp_path):
+    """fem_sim linear with neither SCENE --out nor --population, or with both: exit 2 and a
+    line naming the two forms; --population refuses the one-liver options."""
+    import subprocess
+    import sys
+
+    def run(*args):
+        return subprocess.run([sys.executable, "-m", "fem_sim", "linear", *args],
+                              capture_output=True, text=True)
+
+    for args in ((), ("scene.toml", "--out", "d", "--population", "d")):
+        r = run(*args)
+        assert r.returncode == 2 and "give SCENE --out DIR, or --population DATA" in r.stderr
+    _two_livers(tmp_path)
+    r = run("--population", str(tmp_path), "--green")
+    assert r.returncode == 2 and "--population takes the simulations' loads only" in r.stderr
