@@ -659,12 +659,16 @@ def real_liver_rows(path: Path) -> tuple[list[str], list[str]]:
             f"bench/scene4_real.py): {r['livers']} CT-segmented livers, {r['sims']:,} of the "
             f"scene's {r.get('scene_sims', r['sims']):,} simulations, the first of 10 folds by "
             "liver held out, "
-            + ("both designs on the same folds" if len(r["designs"]) > 1 else
+            + ("the designs on the same folds" if len(r["designs"]) > 1 else
                "the population basis only (the node-wise network is not trained on them yet)")
             + "; the unseen livers are the scene's 15 validation livers and the SOFA liver, "
             "each with an FE truth on its own mesh fixed where the exported population basis's "
             "placement puts the template's fixed region. Per liver, the pictures and the time "
-            "from a liver file to a predictor: docs/scene4_real.md.")
+            "from a liver file to a predictor: docs/scene4_real.md."
+            + (f" `{rest['config']}` learns what each liver's small-strain base misses (the "
+               "base of the liver's own mesh, `fem_sim linear`, added to its field): a model "
+               "for a liver that is meshed and factorised once (make patient), not for "
+               "predict-liver's seconds." if rest is not None else ""))
     return lines, [note]
 
 

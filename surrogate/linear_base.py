@@ -188,37 +188,6 @@ class PopulationLinearBase:
         return case_base(lf, self.order, int(ds.sample_sim[s]), [ds.sample_fraction[s]])[0]
 
 
-def heldout_base(data: str | Path, run: str | Path, order: int = 2) -> dict:
-    """The small-strain base alone (no network) on the held-out livers of a population run's
-    evaluated folds (``RUN/config.json``: its folds and seed), in metrics.json's terms: its
-    MEE beside the naive model's (each fold's training mean displacement), per liver.
-    """
-    import json
-
-    from surrogate.data import kfold_groups, load_dataset
-    from surrogate.metrics import displacement_metrics
-    from surrogate.train import per_liver, training_mean, training_samples
-
-    cfg = json.loads((Path(run) / "config.json").read_text())
-    ds = load_dataset(data)
-    base = PopulationLinearBase(ds, order)
-    folds = kfold_groups(ds, cfg["folds"], cfg["seed"])[:cfg.get("evaluate_folds") or None]
-    P, T, N, G = [], [], [], []
-    for held in folds:
-        mean = training_mean(ds, training_samples(ds, held, cfg))
-        for s in held:
-            t = np.asarray(ds.targets[ds.sample_offset[s]:ds.sample_offset[s + 1]], np.float64)
-            P.append(base.sample(ds, s))
-            T.append(t)
-            N.append(np.broadcast_to(mean, t.shape))
-            G.append(np.full(len(t), ds.sample_geo[s]))
-    pred, true, naive, geo = (np.concatenate(a) for a in (P, T, N, G))
-    m, m_naive = displacement_metrics(pred, true), displacement_metrics(naive, true)
-    return {"network": m, "naive": m_naive, "skill": m["mee"] / m_naive["mee"],
-            "per_liver_mee": per_liver(pred, true, naive, geo), "order": order,
-            "evaluated_folds": len(folds)}
-
-
 def liver_base_metrics(data: str | Path, order: int = 2) -> dict:
     """The small-strain base alone against the FE fields of a one-liver dataset ``data``
     (its ``linear.h5``): the displacement metrics over every done load step.
