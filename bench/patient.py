@@ -310,6 +310,20 @@ def sources_lines(found: list[dict]) -> list[str]:
         "correction misses).", ""]
 
 
+def _rest_lines(curves: list[dict]) -> list[str]:
+    """The sentence on what the population's rest adds to each liver's small-strain base."""
+    p0 = [c["points"]["0"] for c in curves]
+    if not all("linear_rest" in p for p in p0):
+        return []
+    lin, rest = [p["linear"] for p in p0], [p["linear_rest"] for p in p0]
+    lower = sum(r < x for r, x in zip(rest, lin))
+    return [f"The population's rest over each liver's small-strain base (linear + rest against "
+            f"linear, no FE simulation of the liver used): median {np.median(rest):.3f} against "
+            f"{np.median(lin):.3f} mm over the livers, lower on {lower} of {len(curves)}; "
+            + ", ".join(f"{c['liver']} {r:.3f} / {x:.3f}" for c, r, x in zip(curves, rest, lin))
+            + " mm.", ""]
+
+
 def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
     # the FE start-up (meshing, MPI, the forms, the ranks' uneven end) as make patient spent
     # it: its FE step's wall seconds less its simulations' own solves over the ranks
@@ -340,13 +354,14 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
                         f"{wall} | {' | '.join(cells[n_main:])} |")
     med = {k: np.median([mee(c, k) for c in curves]) for k in ks}
     names = ", ".join(c["liver"] for c in curves)
+    model = Path(a.model).resolve().relative_to(ROOT)
     lines = [
         (f"Design livers {names}: training livers of the scene whose simulations the "
-         f"population model `{Path(a.model).relative_to(ROOT)}` was not trained on (trained "
+         f"population model `{model}` was not trained on (trained "
          "as the shipped one on the scene's dataset less them; the PCA is the scene's, which "
          "has their shapes), to choose the adaptation's settings on" if a.design else
          f"Validation livers {names} (never seen by the "
-         f"population model `{Path(a.model).relative_to(ROOT)}`, its PCA or any design "
+         f"population model `{model}`, its PCA or any design "
          "choice)") + "; FE truth on each liver's own mesh with the model's boundary condition "
         f"(scene 4's settings: P2 at 16 mm, one random 0.4 N force, 10 load steps); MEE on "
         f"its last {HELD} simulations, never used to adapt. Population: the model placed as "
@@ -357,7 +372,8 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
         "needed; linear + corrected: plus the same correction fitted on its residuals (the liver's "
         "stiffening)."
         + (f" Linear + rest: plus the population model of what each liver's small-strain "
-           f"base misses (`{Path(a.rest).relative_to(ROOT)}`, config population_linear, "
+           f"base misses (`{Path(a.rest).resolve().relative_to(ROOT)}`, config "
+           "population_linear, "
            "docs/scene4_real.md), placed as the population model; it is the base the "
            "correction corrects and the teacher distils." if a.rest else "")
         + " Patient model: the linear + corrected teacher (at K = 0 the linear "
@@ -382,9 +398,9 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
         "tuned MEE mm | tuned + corrected MEE mm | tuning s |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if a.rest else ""),
         *rows, "",
-        "Median over the livers (patient model; at K = 0 the small-strain responses alone, "
-        "distilled): "
-        + ", ".join(f"K = {k}: {med[k]:.3f} mm" for k in ks) + ".", ""]
+        "Median over the livers (patient model; at K = 0 the small-strain responses"
+        + (" and the population's rest" if a.rest else "") + " alone, distilled): "
+        + ", ".join(f"K = {k}: {med[k]:.3f} mm" for k in ks) + ".", "", *_rest_lines(curves)]
     tuned = {k: [np.median([c["points"][str(k)][key] for c in curves])
                  for key in ("corrected", "tuned", "tuned_corrected")] for k in ks
              if k and all("tuned" in c["points"][str(k)] for c in curves)}
@@ -486,6 +502,8 @@ def main() -> int:
     ap.add_argument("--rest", default=None, metavar="RUN",
                     help="a population model of the small-strain base's rest (config "
                     "population_linear) added to each patient's base (make patient's REST)")
+    ap.add_argument("--report-only", action="store_true",
+                    help="rewrite the report from its JSON (docs/patient.json), nothing run")
     ap.add_argument("--no-end-to-end", dest="e2e", action="store_false",
                     help="keep the end-to-end times of docs/patient.json")
     a = ap.parse_args()
@@ -505,14 +523,19 @@ def main() -> int:
         ap.error(f"--livers: {unknown} are not {'training' if a.design else 'validation'} "
                  f"livers of {SCENE.name}")
     a.results = RESULTS.with_name("patient_design") if a.design else RESULTS
+    md = ROOT / "docs" / ("patient_design.md" if a.design else "patient.md")
+    title = "A new patient's model: the design livers" if a.design else "A new patient's model"
+    if a.report_only:
+        out = json.loads(md.with_suffix(".json").read_text())
+        write_report(md, title, report(out["curves"], out["make_patient"], a, out["sources"]),
+                     out)
+        return 0
     if a.design:
         a.model = str(design_model(a.livers, a))
     curves, found = map(list, zip(*(curve(files[n], a) for n in a.livers)))
-    md = ROOT / "docs" / ("patient_design.md" if a.design else "patient.md")
     saved = md.with_suffix(".json")
     e2e = None if a.design else end_to_end(files[a.livers[0]], a, a.sources_k) if a.e2e else (
         json.loads(saved.read_text()).get("make_patient") if saved.exists() else None)
-    title = "A new patient's model: the design livers" if a.design else "A new patient's model"
     write_report(md, title, report(curves, e2e, a, found),
                  {"curves": curves, "make_patient": e2e, "sources": found})
     return 0
