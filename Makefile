@@ -203,9 +203,10 @@ truth: setup
 # ADAPT: more options of surrogate adapt (ADAPT=--tune fine-tunes the population network);
 # ORDER=1: the small-strain responses without their second-order terms (docs/load_expansion.md);
 # REST: a population model of what each liver's small-strain base misses (config
-# population_linear, docs/scene4_real.md), added to the patient's base. K=0: the patient's
-# small-strain responses (and REST) alone; one FE simulation is still solved (the scene
-# needs one: it names the mesh and the dataset), none adapts the model.
+# population_linear, docs/scene4_real.md), added to the patient's base (a MODEL of that config
+# is its own REST). K=0: the patient's small-strain responses (and REST) alone; one FE
+# simulation is still solved (the scene needs one: it names the mesh and the dataset), none
+# adapts the model.
 K ?= 40
 HELD ?= 0
 FRAME ?=

@@ -514,7 +514,7 @@ def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | 
     corrected (its network first fine-tuned with ``tune``) with the first ``sims`` FE
     simulations of ``data`` (None: all; 0 with the patient's small-strain responses: those
     alone) and distilled; ``rest``: the model directory of a population model of the
-    base's rest (:class:`Teacher`).
+    base's rest (:class:`Teacher`), ``model_dir`` itself when it is one.
     Writes and returns ``run/adaptation.json`` (what was used, the correction's setting,
     seconds per step).
     """
@@ -530,7 +530,9 @@ def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | 
     if pred.shape_model is None:
         raise ValueError(f"{model_dir}: not a population model (no shape model): a patient "
                          "model adapts a model trained on a population of livers")
-    rest_pred = None if rest is None else _rest_model(rest, pred, model_dir)
+    # a population model of the bases' rest is its own rest (and places the liver as well)
+    rest_pred = pred if rest is None and pred.linear_base else \
+        None if rest is None else _rest_model(rest, pred, model_dir)
     placement, found = place(pred, liver, frame, saved)
     # --tune adapts the population network, so it keeps the population model as the base
     teacher = Teacher(pred, placement, ds, linear=linear, rest=rest_pred)
@@ -542,7 +544,8 @@ def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | 
             "liver": str(Path(liver).resolve()), "data": str(Path(data).resolve()),
             "placement_residual_mm": placement.residual, "warnings": list(found),
             "base": "population model" if teacher.linear is None else
-                    f"small-strain responses ({teacher.linear.path})",
+                    f"small-strain responses ({teacher.linear.path})"
+                    + ("" if rest_pred is None else " and the population's rest of them"),
             "tuning": teacher.tuning,
             **adapted(teacher, ds, used, run, synthetic=synthetic, seed=seed, log_fn=log_fn,
                       **overrides)}

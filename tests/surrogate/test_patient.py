@@ -482,6 +482,11 @@ def test_a_patient_model_from_its_small_strain_base_and_the_populations_rest(tmp
     teacher_mee = field_mee(over, true)
     print(f"held-out MEE: base + rest {teacher_mee:.3f} mm, its patient model {student:.3f}")
     assert abs(student - teacher_mee) < 0.2 * teacher_mee + 0.01, (student, teacher_mee)
+    # the rest model as the population model: it places the liver and is its own rest
+    own = adapt(rest_run / "model", d / "data", info["liver"], tmp_path / "own", sims=0,
+                log_fn=lambda m: None)
+    assert own["base"].endswith("and the population's rest of them")
+    assert out["base"].endswith("and the population's rest of them")
     with pytest.raises(ValueError, match="not a model of a small-strain base's rest"):
         adapt(info["population_model"], d / "data", info["liver"], tmp_path / "p2", sims=0,
               saved=d / "placement.npz", rest=info["population_model"], log_fn=lambda m: None)
