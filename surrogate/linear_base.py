@@ -142,9 +142,10 @@ class LinearBase:
                 np.repeat(np.arange(n), rep), self._at(np.repeat(rows, rep), lam))
 
 
-def case_base(lf, order: int, case: int, lam) -> np.ndarray:
+def case_base(lf, order: int, case: int, lam, ratio: np.ndarray | None = None) -> np.ndarray:
     """(len(lam), n_out, 3) mm: the series of file ``lf``'s response to ``case`` to ``order``
-    (1 or 2) at the fractions ``lam``, at the file's output nodes.
+    (1 or 2) at the fractions ``lam``, at the file's output nodes (``ratio``: the file's
+    |u2| / |u1| per row when the caller keeps it).
     """
     r = int(lf.rows([case])[0])
     if order > lf.order:
@@ -152,9 +153,10 @@ def case_base(lf, order: int, case: int, lam) -> np.ndarray:
                          "asked: rerun fem_sim linear with --order 2")
     lam = np.asarray(lam, np.float64)
     n = lam.size
+    ratio = _ratio(lf) if ratio is None else ratio
     one, two = series_terms(np.repeat(lf.displacement[r:r + 1], n, axis=0),
                             None if order == 1 else np.repeat(lf.second_order[r:r + 1], n, 0),
-                            np.full(n, _ratio(lf)[r]), lam)
+                            np.full(n, ratio[r]), lam)
     return one + two
 
 
@@ -180,12 +182,13 @@ class PopulationLinearBase:
                 raise ValueError(f"{path}: responses of order {lf.order}, the config's "
                                  f"linear_base asks {self.order}: rerun fem_sim linear "
                                  "--population --order 2")
-            self.files[g] = lf
+            self.files[g] = (lf, _ratio(lf))   # the ratio once per liver, not per sample
 
     def sample(self, ds: Dataset, s: int) -> np.ndarray:
         """(n_out, 3) mm: sample ``s``'s base on its own liver's output nodes."""
-        lf = self.files[int(ds.sample_geo[s])]
-        return case_base(lf, self.order, int(ds.sample_sim[s]), [ds.sample_fraction[s]])[0]
+        lf, ratio = self.files[int(ds.sample_geo[s])]
+        return case_base(lf, self.order, int(ds.sample_sim[s]), [ds.sample_fraction[s]],
+                         ratio)[0]
 
 
 def liver_base_metrics(data: str | Path, order: int = 2) -> dict:
