@@ -55,9 +55,14 @@ def link_shards(data: Path, view: Path, n: int, shards=None) -> None:
 
 
 def _link_scene(data: Path, view: Path) -> None:
-    """Links in ``view`` to ``data``'s scene copy and liver files."""
+    """Links in ``view`` to ``data``'s scene copy and liver files, and to its livers'
+    small-strain responses when it has them (``fem_sim linear --population``: rows of
+    simulations the view leaves out are never read).
+    """
     view.mkdir(parents=True, exist_ok=True)
-    for name in ("scene.toml", "geometry"):
+    for name in ("scene.toml", "geometry", "linear"):
+        if name == "linear" and not (data / name).is_dir():
+            continue
         if not (view / name).exists():
             (view / name).symlink_to((data / name).resolve())
 

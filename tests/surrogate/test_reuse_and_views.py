@@ -159,7 +159,11 @@ def test_a_view_without_some_livers_links_the_other_livers_simulations(tmp_path,
         sorted(f"sim_{i:06d}.{e}" for i in (1, 3) for e in ("h5", "xdmf"))
     assert (view / "scene.toml").read_text() == "the scene"
     assert (view / "geometry").resolve() == (data / "geometry").resolve()
+    assert not (view / "linear").exists()   # the data has no small-strain responses
     assert len(list((data / "sims").iterdir())) == 8   # nothing moved
+    (data / "linear").mkdir()   # fem_sim linear --population: a view made then links them
+    assert (views.without(data, ["g1"], tmp_path / "view2") / "linear").resolve() == \
+        (data / "linear").resolve()
     # made again without another liver: the earlier view's links follow
     views.without(data, ["g3"], view)
     assert sorted(p.name for p in (view / "sims").iterdir()) == \
