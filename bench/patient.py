@@ -4,14 +4,15 @@
         [--ks 0 5 10 20 40 80] [--design] [--order 1] [--no-green] [--no-tune]
 
 For each validation liver (never seen by the population model, its PCA or any design choice):
-its FE truth with the population model's boundary condition, K_MAX + HELD simulations
-(resumable, under bench/results/patient/); then for every K the MEE on the last HELD
-simulations of the placed population model alone, the corrected one, the liver's
-small-strain responses (``fem_sim linear``) alone and corrected, the exported patient
-model (``surrogate adapt`` on the first K, :mod:`surrogate.patient`), the reduced basis
-trained on the same K simulations from scratch, with the adaptation's seconds, and the
-population network fine-tuned on them (``--tune``), alone and corrected; and the wall
-time of ``make patient`` end to end at K = 40 on the first liver, on two cores.
+its FE truth with the population model's boundary condition, HELD + K_MAX simulations
+(resumable, under bench/results/patient/: a larger K only adds simulations); then for every
+K the MEE on the first HELD simulations (the same for every K) of the placed population
+model alone, the corrected one, the liver's small-strain responses (``fem_sim linear``)
+alone and corrected, the exported patient model (``surrogate adapt`` on the K training
+simulations, :mod:`surrogate.patient`), the reduced basis trained on the same K simulations
+from scratch, with the adaptation's seconds, and the population network fine-tuned on them
+(``--tune``), alone and corrected; and the wall time of ``make patient`` end to end at K = 40
+on the first liver, on two cores.
 
 ``--design``: the same on training livers (default Amos-005, LiTS-12, LiTS-16), with a
 population model trained as the shipped one on scene 4's dataset less their simulations
@@ -44,6 +45,7 @@ DESIGN_OVERRIDES = {"folds": 10, "evaluate_folds": 1}   # as bench/scene4_real.p
 DESIGN_LIVERS = ["Amos-005", "LiTS-12", "LiTS-16"]
 KS = (0, 5, 10, 20, 40, 80)
 HELD = 10
+TRUTH_SIMS = HELD + max(KS)   # the truth scene's simulations, solved up to HELD + the K asked
 SOURCES_K = 40  # the K at which the error's sources are measured (the largest K if less)
 GOAL_MM = 0.5   # the issue's goal: this MEE within GOAL_MINUTES on two cores
 GOAL_MINUTES = 5.0
@@ -118,20 +120,32 @@ REJECTED = [
     "the cost, so halving the fields per simulation buys a sixth more simulations.", ""]
 
 
+def split(ds, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """(the K = ``k`` training simulations, the held-out ones) of a liver's truth ``ds``: the
+    first HELD are held out and the next ``k`` train, so a larger K adds simulations to the
+    truth without changing what is held out.
+    """
+    sims = np.unique(ds.sample_sim)
+    return sims[HELD:HELD + k], sims[:HELD]
+
+
 def truth(pred, liver: Path, a) -> Path:
-    """The liver's FE truth with the model's boundary condition, K_MAX + HELD simulations."""
+    """The liver's FE truth with the model's boundary condition: a scene of TRUTH_SIMS
+    simulations, the first HELD + the largest K solved.
+    """
     from surrogate.evaluate import truth_scene
 
     d = a.results / liver.stem
     d.mkdir(parents=True, exist_ok=True)
-    n = max(a.ks) + HELD
-    text = truth_scene(pred, SCENE, liver, n, None)
+    n = HELD + max(a.ks)
+    text = truth_scene(pred, SCENE, liver, TRUTH_SIMS, None)
     scene = d / "scene.toml"
     if not scene.exists() or scene.read_text() != text:
         shutil.rmtree(d / "data", ignore_errors=True)
         (d / "generation.json").unlink(missing_ok=True)
         scene.write_text(text)
-    generate_chunks(scene, d / "data", n, ranks=a.np, chunk=n)
+    if not (a.no_new_fe and (d / "data" / "sims").is_dir()):
+        generate_chunks(scene, d / "data", n, ranks=a.np, chunk=n)
     linear(scene, d / "data", d / "linear.json", a.order, a.green)
     return d / "data"
 
@@ -179,25 +193,27 @@ def curve(liver: Path, a) -> tuple[dict, dict]:
     placing = time.perf_counter() - t
     data = truth(pred, liver, a)
     ds = load_dataset(data)
-    sims = np.unique(ds.sample_sim)
-    held = sims[-HELD:]
     path = a.results / liver.stem / "k.json"
     key = made_by(model, data, Path(a.rest) / "model" if a.rest else None)
     done = json.loads(path.read_text()) if path.exists() else {}
     if done.get("made_by") != key:   # another population model, adaptation or truth
         done = {"made_by": key}
-    for k in a.ks:
-        if str(k) not in done:
-            done[str(k)] = held_out_errors(pred, placement, ds, sims[:k], held,
-                                           run=a.results / liver.stem / f"run_K{k}",
-                                           tune=a.tune, rest=rest, log_fn=lambda m: None)
+    ks = [k for k in a.ks if HELD + k <= np.unique(ds.sample_sim).size]   # --no-new-fe
+    for k in ks:
+        train, held = split(ds, k)
+        used = shards_digest(data, np.concatenate([held, train]))
+        if done.get(str(k), {}).get("shards") != used:
+            done[str(k)] = {**held_out_errors(pred, placement, ds, train, held,
+                                              run=a.results / liver.stem / f"run_K{k}",
+                                              tune=a.tune, rest=rest, log_fn=lambda m: None),
+                            "shards": used}
             path.write_text(json.dumps(done, indent=1))
         print(f"[{liver.stem}] K={k}: {done[str(k)]}", flush=True)
     return ({"liver": liver.stem, "nodes": int(ds.points[0].shape[0]), "points": done,
-             "fe_seconds": fe_seconds(data, a.np, a.ks), "place_seconds": placing,
+             "fe_seconds": fe_seconds(data, a.np, ks), "place_seconds": placing,
              "linear_seconds": json.loads((data.parent / "linear.json").read_text())["seconds"]},
-            {"liver": liver.stem, "k": a.sources_k,
-             **sources(pred, placement, ds, a.sources_k)})
+            {"liver": liver.stem, "k": min(a.sources_k, ks[-1]),
+             **sources(pred, placement, ds, min(a.sources_k, ks[-1]))})
 
 
 def sources(pred, placement, ds, k: int) -> dict:
@@ -208,24 +224,41 @@ def sources(pred, placement, ds, k: int) -> dict:
     from surrogate.patient import Teacher, fit_teacher, sample_fields, sims_samples
     from surrogate.patient_errors import error_sources
 
-    sims = np.unique(ds.sample_sim)
-    train, held = sims_samples(ds, sims[:k]), sims_samples(ds, sims[-HELD:])
-    teacher = fit_teacher(Teacher(pred, placement, ds), ds, sims[:k])
+    train_sims, held_sims = split(ds, k)
+    train, held = sims_samples(ds, train_sims), sims_samples(ds, held_sims)
+    teacher = fit_teacher(Teacher(pred, placement, ds), ds, train_sims)
     f, x = ds.forces[held, 0], ds.load_points[held, 0]
     return error_sources(
         sample_fields(ds, train), ds.load_points[train, 0], sample_fields(ds, held), x,
         teacher.population(f, x), teacher(f, x), ds.sample_sim[held])
 
 
-def fe_seconds(data: Path, ranks: int, ks=KS) -> dict:
-    """For each K, the first K simulations' own solve seconds (the shards' records) over
-    ``ranks`` ranks: what make patient's FE takes at that K, meshing and start-up aside.
+def fe_seconds(data: Path, ranks: int, ks=KS, first: int = HELD) -> dict:
+    """For each K, the own solve seconds (the shards' records) of the K training simulations
+    (those after the ``first`` held out) over ``ranks`` ranks: what make patient's FE takes at
+    that K, meshing and start-up aside; at K = 0 one simulation's (make patient solves one: a
+    patient dataset is made of simulations).
     """
     from data_spec import list_shards, read_shard
 
     t = [float(read_shard(p).stats.info.get("total_wall_time", np.nan))
-         for p in list_shards(data)]
-    return {str(k): sum(t[:k]) / ranks for k in ks if k}
+         for p in list_shards(data)][first:]
+    return {str(k): sum(t[:max(k, 1)]) / ranks for k in ks}
+
+
+def shards_digest(data: Path, sims) -> str:
+    """A digest of the shards of simulations ``sims`` of ``data`` (their names and checksums)."""
+    import h5py
+
+    from data_spec import list_shards
+
+    h = hashlib.sha256()
+    want = {int(s) for s in sims}
+    for shard in list_shards(data):
+        if int(shard.stem.split("_")[1]) in want:
+            with h5py.File(shard, "r") as f:
+                h.update(f"{shard.name} {f.attrs.get('checksum', '')}\n".encode())
+    return h.hexdigest()[:16]
 
 
 def minutes(c: dict, k: int, start: float) -> float:
@@ -243,13 +276,13 @@ def minutes(c: dict, k: int, start: float) -> float:
 
 
 def made_by(model: Path, data: Path, rest: Path | None = None) -> str:
-    """A digest of what a K's errors depend on: the population model's files (and the base's
-    rest model's), the adaptation's code and the truth's simulations.
+    """A digest of what every K's errors depend on but the simulations (:func:`shards_digest`
+    keys each K on those it uses): the population model's files (and the base's rest model's),
+    the adaptation's code and the truth's small-strain responses.
     """
     from data_spec.linear_fields import linear_fields_path, read_linear_fields
-    from data_spec.views import dataset_fingerprint
 
-    h = hashlib.sha256(dataset_fingerprint(data).encode())
+    h = hashlib.sha256()
     if linear_fields_path(data).exists():
         lf = read_linear_fields(linear_fields_path(data))
         h.update(f"order {lf.order} green {lf.green is not None}".encode())
@@ -276,8 +309,8 @@ def end_to_end(liver: Path, a, k: int = 40) -> dict:
     placed = (out / "scene.toml").stat().st_mtime
     solved = max(f.stat().st_mtime for f in (out / "data").rglob("*") if f.is_file())
     return {"total": end - t, "place": placed - t, "fe": solved - placed,
-            "solves": fe_seconds(out / "data", a.np, [k])[str(k)], "adapt": end - solved, "k": k,
-            "liver": liver.stem}
+            "solves": fe_seconds(out / "data", a.np, [k], first=0)[str(k)],
+            "adapt": end - solved, "k": k, "liver": liver.stem}
 
 
 def sources_lines(found: list[dict]) -> list[str]:
@@ -321,7 +354,30 @@ def _rest_lines(curves: list[dict]) -> list[str]:
             f"linear, no FE simulation of the liver used): median {np.median(rest):.3f} against "
             f"{np.median(lin):.3f} mm over the livers, lower on {lower} of {len(curves)}; "
             + ", ".join(f"{c['liver']} {r:.3f} / {x:.3f}" for c, r, x in zip(curves, rest, lin))
-            + " mm.", ""]
+            + " mm.", "", *_weight_lines(curves)]
+
+
+def _weight_lines(curves: list[dict]) -> list[str]:
+    """The sentence on the rest's weight fitted on the K simulations (linear + rest at it
+    against at weight 1, the same held-out simulations)."""
+    ks = sorted({int(k) for c in curves for k, p in c["points"].items()
+                 if isinstance(p, dict) and "linear_rest_weighted" in p})
+    if not ks:
+        return []
+    parts = []
+    for k in ks:
+        have = [c for c in curves if "linear_rest_weighted" in c["points"].get(str(k), {})]
+        w = [c["points"][str(k)]["linear_rest_weighted"] for c in have]
+        one = [c["points"]["0"]["linear_rest"] for c in have]
+        weights = [c["points"][str(k)]["rest_weight"] for c in have]
+        parts.append(f"K = {k}: median {np.median(w):.3f} against {np.median(one):.3f} mm, "
+                     f"lower on {sum(x < y - 1e-9 for x, y in zip(w, one))}, higher on "
+                     f"{sum(x > y + 1e-9 for x, y in zip(w, one))} of {len(have)} (weights "
+                     + ", ".join(f"{c['liver']} {v:.2f}" for c, v in zip(have, weights)) + ")")
+    return ["The rest's weight fitted on the K simulations (least squares, clipped to [0, 1]; "
+            "the linear + corrected and patient model columns use it), linear + rest at that "
+            "weight against at weight 1 on the held-out simulations: " + "; ".join(parts)
+            + ".", ""]
 
 
 def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
@@ -341,7 +397,7 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
     n_main = len(keys) - 2
     rows = []
     for k in ks:
-        for c in curves:
+        for c in (c for c in curves if str(k) in c["points"]):
             p = c["points"][str(k)]
             cells = [f"{p.get(key, float('nan')):.3f}" if key in p else "" for key in keys]
             adapt = f"{sum(p['adapt_seconds'].values()):.0f}" if "adapt_seconds" in p else ""
@@ -352,7 +408,7 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
             wall = "" if start is None else f"{minutes(c, k, start):.1f}"
             rows.append(f"| {k} | {c['liver']} | {' | '.join(cells[:n_main])} | {adapt} | "
                         f"{wall} | {' | '.join(cells[n_main:])} |")
-    med = {k: np.median([mee(c, k) for c in curves]) for k in ks}
+    med = {k: [mee(c, k) for c in curves if str(k) in c["points"]] for k in ks}
     names = ", ".join(c["liver"] for c in curves)
     model = Path(a.model).resolve().relative_to(ROOT)
     lines = [
@@ -364,9 +420,10 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
          f"population model `{model}`, its PCA or any design "
          "choice)") + "; FE truth on each liver's own mesh with the model's boundary condition "
         f"(scene 4's settings: P2 at 16 mm, one random 0.4 N force, 10 load steps); MEE on "
-        f"its last {HELD} simulations, never used to adapt. Population: the model placed as "
+        f"its first {HELD} simulations, never used to adapt (the K training simulations are the "
+        "next K). Population: the model placed as "
         "predict-liver places it. Corrected: plus the kernel ridge correction fitted on the "
-        "first K simulations. Linear: the liver's small-strain response on its own mesh "
+        "K training simulations. Linear: the liver's small-strain response on its own mesh "
         "(`fem_sim linear`: the body linearised at u = 0, one factorisation, a back-solve "
         f"per load, scaled by the load fraction{order_note}), no nonlinear simulation "
         "needed; linear + corrected: plus the same correction fitted on its residuals (the liver's "
@@ -383,8 +440,9 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
         "the same K simulations alone. Adaptation: the seconds of correcting and distilling "
         "(placing the liver and the FE simulations not included). Minutes: from the liver "
         "file to the patient model on two cores, by parts: placing the liver (this run's), the FE "
-        "start-up as `make patient` spent it (below), the first K simulations' own solve "
-        "seconds over the two ranks (the shards' records), the small-strain responses "
+        "start-up as `make patient` spent it (below), the K simulations' own solve "
+        "seconds over the two ranks (the shards' records; at K = 0 one simulation's, which "
+        "make patient solves as well), the small-strain responses "
         "(`fem_sim linear` with its start-up and meshing, this run's) and the adaptation. "
         "Tuned "
         "(`surrogate adapt --tune`, not the default): the population network fine-tuned "
@@ -400,10 +458,12 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
         *rows, "",
         "Median over the livers (patient model; at K = 0 the small-strain responses"
         + (" and the population's rest" if a.rest else "") + " alone, distilled): "
-        + ", ".join(f"K = {k}: {med[k]:.3f} mm" for k in ks) + ".", "", *_rest_lines(curves)]
+        + ", ".join(f"K = {k}: {np.median(m):.3f} mm" + ("" if len(m) == len(curves) else
+                                                           f" ({len(m)} livers)")
+                    for k, m in med.items()) + ".", "", *_rest_lines(curves)]
     tuned = {k: [np.median([c["points"][str(k)][key] for c in curves])
                  for key in ("corrected", "tuned", "tuned_corrected")] for k in ks
-             if k and all("tuned" in c["points"][str(k)] for c in curves)}
+             if k and all("tuned" in c["points"].get(str(k), {}) for c in curves)}
     lower = {k: sum(c["points"][str(k)]["tuned_corrected"] < c["points"][str(k)]["corrected"]
                     for c in curves) for k in tuned}
     if tuned:
@@ -416,8 +476,11 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
                               for k, n in lower.items())
                   + f" ({sum(lower.values())} of {len(curves) * len(lower)} points).", ""]
 
+    def mine(c) -> list[int]:   # the K values the liver has
+        return [k for k in ks if str(k) in c["points"]]
+
     def reached(c) -> str:   # the least K within GOAL_MM, its FE seconds (and minutes)
-        k = next((k for k in ks if mee(c, k) <= GOAL_MM), None)
+        k = next((k for k in mine(c) if mee(c, k) <= GOAL_MM), None)
         if k is None:
             return f"{c['liver']}: not reached"
         wall = "" if start is None else f", {minutes(c, k, start):.1f} min"
@@ -431,12 +494,14 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
               + ".", "", "FE seconds on two ranks against K (the same records): "
               + "; ".join(f"{c['liver']}: " + ", ".join(f"{v:.0f}" for v in
                                                          c["fe_seconds"].values())
-                          for c in curves) + f" (K = {', '.join(map(str, ks[1:]))}).",
+                          for c in curves)
+              + f" (K = {', '.join(map(str, ks))}, as far as each liver has; at K = 0 one "
+              "simulation).",
               ""]
     if start is not None:
         best = []
         for c in curves:
-            within = [k for k in ks if minutes(c, k, start) <= GOAL_MINUTES]
+            within = [k for k in mine(c) if minutes(c, k, start) <= GOAL_MINUTES]
             k = min(within, key=lambda k: mee(c, k)) if within else None
             best.append(f"{c['liver']}: none" if k is None else
                         f"{c['liver']}: {mee(c, k):.3f} mm (K = {k}, "
@@ -463,7 +528,9 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict]) -> str:
 
 def design_model(names: list[str], a) -> Path:
     """The population model for the design livers ``names``: the shipped one's config
-    trained on scene 4's dataset less their simulations (reused when done).
+    trained on scene 4's dataset less their simulations (reused when done); with ``a.rest``,
+    the population model of the small-strain base's rest trained so too, ``a.rest`` then
+    naming it.
     """
     from data_spec import read_geometry
     from data_spec.shards import geometry_path
@@ -476,6 +543,9 @@ def design_model(names: list[str], a) -> Path:
     view = without(DATA, [ids[n] for n in names], a.results / "data")
     run = a.results / "run_population_basis"
     train_or_reuse(view, run, "population_basis", DESIGN_OVERRIDES)
+    if a.rest:
+        a.rest = str(a.results / "run_population_linear")
+        train_or_reuse(view, Path(a.rest), "population_linear", DESIGN_OVERRIDES)
     return run
 
 
@@ -501,14 +571,21 @@ def main() -> int:
                     help="no Green's function in the patient model (make patient's GREEN=0)")
     ap.add_argument("--rest", default=None, metavar="RUN",
                     help="a population model of the small-strain base's rest (config "
-                    "population_linear) added to each patient's base (make patient's REST)")
+                    "population_linear) added to each patient's base (make patient's REST; "
+                    "with --design, any value: the design livers' own is trained)")
     ap.add_argument("--report-only", action="store_true",
                     help="rewrite the report from its JSON (docs/patient.json), nothing run")
+    ap.add_argument("--no-new-fe", action="store_true",
+                    help="solve no new FE simulation: each liver's K values are those its "
+                    "truth has simulations for")
     ap.add_argument("--no-end-to-end", dest="e2e", action="store_false",
                     help="keep the end-to-end times of docs/patient.json")
     a = ap.parse_args()
     a.ks = sorted(set(a.ks))
     a.sources_k = min(SOURCES_K, a.ks[-1])
+    if a.ks[-1] > TRUTH_SIMS - HELD:
+        ap.error(f"--ks {a.ks}: at most {TRUTH_SIMS - HELD} (the truth scene's "
+                 f"{TRUTH_SIMS} simulations less the {HELD} held out)")
     if a.ks[0] != 0 or a.sources_k not in a.ks or a.sources_k == 0:
         ap.error(f"--ks {a.ks}: expected 0 and {a.sources_k} among them (the population "
                  "model alone, and where the error's sources are measured)")
