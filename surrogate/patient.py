@@ -14,6 +14,10 @@ the patient's mesh, with their second-order terms when ``fem_sim linear --order 
 them: :mod:`surrogate.linear_base`); a dataset without them falls back on the placed
 population model.
 
+With the population model of the base's rest (``--rest``), the rest's weight over the
+base is first fitted to the K simulations (least squares, within [0, 1]: a liver whose own
+base is already close takes less of it; :func:`fit_rest_weight`).
+
 The correction (:class:`Correction`) is the residual of the FE fields against the base,
 regressed on the load by kernel ridge regression (with ``tune``: against
 that model with its network first fine-tuned on the K simulations, :mod:`surrogate.tuning`,
@@ -152,6 +156,8 @@ MIN_GAIN = 0.01                              # a kept correction lowers the held
                                              # ridged fit of noise scrapes a few 1e-4)
 CV_STEPS = 4                                 # load steps per simulation the setting is
                                              # chosen on
+REST_WEIGHT = True                           # fit the rest's weight on the K simulations
+REST_MIN_SIMS = 2                            # with at least this many
 
 
 def _take(cases: tuple, idx) -> tuple:
@@ -335,6 +341,7 @@ class Teacher:
                              f": run fem_sim linear --order {rest.linear_base} on its scene")
         self.out = np.asarray(ds.out_nodes[0])
         self.linear = linear   # the patient's small-strain responses: the base when given
+        self.rest_weight = 1.0   # of the rest over the base (fit_rest_weight)
         self.correction: Correction | None = None
         self.tuning: dict | None = None
         self.out_of_fold: np.ndarray | None = None   # (samples, n_out, 3) mm, once tuned
@@ -371,10 +378,12 @@ class Teacher:
         return np.concatenate(out) if out else np.zeros((0, self.out.size, 3))
 
     def over_base(self, base: np.ndarray, forces, points) -> np.ndarray:
-        """The small-strain ``base`` of the cases plus the population's rest, when given."""
-        if self.rest is None:
+        """The small-strain ``base`` of the cases plus the population's rest (times its
+        weight), when given.
+        """
+        if self.rest is None or self.rest_weight == 0.0:
             return base
-        return base + self.population(forces, points, placed=self.rest)
+        return base + self.rest_weight * self.population(forces, points, placed=self.rest)
 
     def base(self, ds: Dataset, samples: np.ndarray) -> np.ndarray:
         """(samples, n_out, 3) mm: what the correction corrects for the samples of ``ds``:
@@ -408,9 +417,25 @@ def sims_samples(ds: Dataset, sims) -> np.ndarray:
     return np.flatnonzero(np.isin(ds.sample_sim, np.asarray(sims)))
 
 
+def fit_rest_weight(teacher: Teacher, ds: Dataset, smp: np.ndarray, fields) -> float:
+    """The weight of the population's rest over the patient's small-strain base that fits
+    the FE ``fields`` of the samples ``smp`` best (least squares over every node, clipped to
+    [0, 1]: the rest, or less of it where the liver's base needs less), kept in the teacher;
+    1 with fewer than REST_MIN_SIMS simulations or without a rest.
+    """
+    if teacher.rest is None or np.unique(ds.sample_sim[smp]).size < REST_MIN_SIMS:
+        return teacher.rest_weight
+    rest = teacher.population(ds.forces[smp, 0], ds.load_points[smp, 0], placed=teacher.rest)
+    miss = np.asarray(fields, np.float64) - teacher.linear.samples(ds, smp)
+    fit = float(np.sum(miss * rest) / max(float(np.sum(rest * rest)), 1e-300))
+    teacher.rest_weight = float(np.clip(fit, 0.0, 1.0))
+    return teacher.rest_weight
+
+
 def fit_teacher(teacher: Teacher, ds: Dataset, sims, tune: bool = False) -> Teacher:
     """The teacher fitted on the FE simulations ``sims`` of the patient: its network
-    fine-tuned on them (``tune``), then the correction of what is left, fitted on the tuned
+    fine-tuned on them (``tune``), or the weight of the population's rest over its base
+    (:func:`fit_rest_weight`), then the correction of what is left, fitted on the tuned
     network's out-of-fold residuals.
     """
     smp = sims_samples(ds, sims)
@@ -418,6 +443,8 @@ def fit_teacher(teacher: Teacher, ds: Dataset, sims, tune: bool = False) -> Teac
     fields = sample_fields(ds, smp)
     if tune:
         teacher.tune(ds, smp, fields)
+    elif REST_WEIGHT:
+        fit_rest_weight(teacher, ds, smp, fields)
     # the correction learns the residual of a load the network was not tuned on: out of fold
     u = teacher.out_of_fold if teacher.out_of_fold is not None else teacher.base(ds, smp)
     r = (fields - u).reshape(smp.size, -1)
@@ -547,6 +574,7 @@ def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | 
                     f"small-strain responses ({teacher.linear.path})"
                     + ("" if rest_pred is None else " and the population's rest of them"),
             "tuning": teacher.tuning,
+            "rest_weight": None if rest_pred is None else teacher.rest_weight,
             **adapted(teacher, ds, used, run, synthetic=synthetic, seed=seed, log_fn=log_fn,
                       **overrides)}
     fitting = "tuning_and_correction" if tune else "correction"
@@ -656,7 +684,8 @@ def held_out_errors(pred, placement, ds: Dataset, train_sims, held_sims, *, run:
     on ``train_sims`` (``tuned``), and that corrected (``tuned_corrected``; not with
     ``tune`` False); the reduced basis trained on ``train_sims`` alone. With ``rest`` (a
     loaded population model of the base's rest), the responses plus it (``linear_rest``)
-    are the teacher's base. With the seconds of each step.
+    are the teacher's base, the rest at the weight fitted on ``train_sims``
+    (``linear_rest_weighted``, the weight ``rest_weight``). With the seconds of each step.
     """
     smp = sims_samples(ds, held_sims)
     true = sample_fields(ds, smp)
@@ -681,6 +710,9 @@ def held_out_errors(pred, placement, ds: Dataset, train_sims, held_sims, *, run:
             out["linear_rest"] = field_mee(teacher.base(ds, smp), true)
         if len(train_sims):
             fit_teacher(teacher, ds, train_sims)
+            if rest is not None:   # the rest at its weight fitted on the K simulations
+                out["rest_weight"] = teacher.rest_weight
+                out["linear_rest_weighted"] = field_mee(teacher.base(ds, smp), true)
             out["linear_corrected"] = field_mee(teacher(f, x, teacher.base(ds, smp)), true)
         fitted = time.perf_counter() - start
     info = adapted(teacher, ds, train_sims, run, synthetic=synthetic, log_fn=log_fn)

@@ -19,6 +19,7 @@ from surrogate.patient import (
     Teacher,
     field_mee,
     fit_correction,
+    fit_rest_weight,
     predictor_fields,
     sample_fields,
     sims_samples,
@@ -440,6 +441,35 @@ def test_a_models_linear_part_is_added_to_its_network_at_its_load_nodes(tmp_path
 
 
 @pytest.mark.dataset
+def test_the_rests_weight_is_the_least_squares_fit_of_the_bases_miss_clipped_to_0_1():
+    """FE = base + c x rest: the fitted weight is c inside [0, 1], its clip outside; one
+    simulation, or no rest, leaves the weight at 1 (nothing to check it on)."""
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(3)
+    sims, steps, n = 4, 3, 25
+    base, rest = rng.normal(size=(2, sims * steps, n, 3))
+    ds = SimpleNamespace(sample_sim=np.repeat(np.arange(sims), steps),
+                         forces=rng.normal(size=(sims * steps, 1, 3)),
+                         load_points=rng.normal(size=(sims * steps, 1, 3)))
+
+    def teacher(with_rest=True):
+        return SimpleNamespace(rest=object() if with_rest else None, rest_weight=1.0,
+                               linear=SimpleNamespace(samples=lambda d, smp: base[smp]),
+                               population=lambda f, x, placed=None: rest[:len(f)])
+
+    smp = np.arange(sims * steps)
+    noise = 1e-3 * rng.normal(size=base.shape)
+    for c, want in ((0.4, 0.4), (0.0, 0.0), (1.7, 1.0), (-0.5, 0.0)):
+        t = teacher()
+        assert fit_rest_weight(t, ds, smp, base + c * rest + noise) == pytest.approx(want,
+                                                                                abs=2e-3)
+        assert t.rest_weight == pytest.approx(want, abs=2e-3)
+    one = np.flatnonzero(ds.sample_sim == 0)
+    assert fit_rest_weight(teacher(), ds, one, base[one] + 0.4 * rest[one]) == 1.0
+    assert fit_rest_weight(teacher(False), ds, smp, base + 0.4 * rest) == 1.0
+
+
 def test_a_patient_model_from_its_small_strain_base_and_the_populations_rest(tmp_path):
     """make test's patient at K = 0 (no nonlinear simulation used): a population model of
     what each liver's base misses, trained on make test's three livers, added to the
