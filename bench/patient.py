@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from data_spec.views import dataset_fingerprint
 from fem_sim.batch.chunked import generate_chunks
 from liverviz.report import ROOT, write_report
 from surrogate.patient import SYNTHETIC
@@ -220,7 +221,7 @@ def curve(liver: Path, a) -> tuple[dict, dict]:
     ks = [k for k in a.ks if HELD + k <= np.unique(ds.sample_sim).size]   # --no-new-fe
     for k in ks:
         train, held = split(ds, k)
-        used = shards_digest(data, np.concatenate([held, train]))
+        used = dataset_fingerprint(data, np.concatenate([held, train]))
         if done.get(str(k), {}).get("shards") != used:
             done[str(k)] = {**held_out_errors(pred, placement, ds, train, held,
                                               run=a.results / liver.stem / f"run_K{k}",
@@ -265,21 +266,6 @@ def fe_seconds(data: Path, ranks: int, ks=KS, first: int = HELD) -> dict:
     return {str(k): sum(t[:max(k, 1)]) / ranks for k in ks}
 
 
-def shards_digest(data: Path, sims) -> str:
-    """A digest of the shards of simulations ``sims`` of ``data`` (their names and checksums)."""
-    import h5py
-
-    from data_spec import list_shards
-
-    h = hashlib.sha256()
-    want = {int(s) for s in sims}
-    for shard in list_shards(data):
-        if int(shard.stem.split("_")[1]) in want:
-            with h5py.File(shard, "r") as f:
-                h.update(f"{shard.name} {f.attrs.get('checksum', '')}\n".encode())
-    return h.hexdigest()[:16]
-
-
 def minutes(c: dict, k: int, start: float) -> float:
     """Wall minutes from the liver file to the patient model at K = ``k`` on two cores, by
     parts: placing, ``start`` seconds of FE start-up (meshing, MPI, the forms), the first
@@ -295,8 +281,8 @@ def minutes(c: dict, k: int, start: float) -> float:
 
 
 def made_by(model: Path, data: Path, rest: Path | None = None) -> str:
-    """A digest of what every K's errors depend on but the simulations (:func:`shards_digest`
-    keys each K on those it uses): the population model's files (and the base's rest model's),
+    """A digest of what every K's errors depend on but the simulations (each K is keyed on the
+    fingerprint of those it uses): the population model's files (and the base's rest model's),
     the adaptation's code and the truth's small-strain responses.
     """
     from data_spec.linear_fields import linear_fields_path, read_linear_fields

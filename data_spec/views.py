@@ -18,10 +18,10 @@ def shard_count(data: str | Path) -> int:
     return len(list((Path(data) / "sims").glob("sim_*.h5")))
 
 
-def dataset_fingerprint(data: str | Path) -> str:
+def dataset_fingerprint(data: str | Path, sims=None) -> str:
     """A digest of which simulations a dataset directory holds: each shard's name and the
     checksum it carries (a dataset made again, with the same count of shards on other meshes,
-    has another fingerprint).
+    has another fingerprint); ``sims``: of those simulations' shards only.
     """
     import hashlib
 
@@ -30,7 +30,10 @@ def dataset_fingerprint(data: str | Path) -> str:
     from data_spec.shards import list_shards
 
     h = hashlib.sha256()
+    want = None if sims is None else {int(i) for i in sims}
     for shard in list_shards(data):
+        if want is not None and int(shard.stem.split("_")[1]) not in want:
+            continue
         try:
             with h5py.File(shard, "r") as f:
                 mark = str(f.attrs.get("checksum", ""))
