@@ -57,51 +57,48 @@ def trained(data: Path, a) -> list[dict]:
     """Both designs' cross-validation (and the exported population basis with its latency)."""
     from surrogate.config import get_config
     from surrogate.designs import DESIGNS as REGISTRY
-    from surrogate.evaluate import heldout_base, heldout_floor
+    from surrogate.evaluate import heldout_floor
     from surrogate.latency import timed
-    from surrogate.train import train_or_reuse
 
     rows = []
     for config, overrides in (d for d in DESIGNS if d[0] in a.designs):
         run, cfg = RESULTS / f"run_{config}", get_config(config)
-        if cfg["linear_base"]:   # each liver's small-strain base first (resumable)
-            linear_bases(data, ranks=a.np, order=cfg["linear_base"])
-        t = time.perf_counter()
-        m = train_or_reuse(data, run, config, overrides)
-        print(f"[{config}] skill {m['skill']:.3f} ({time.perf_counter() - t:.0f} s)",
-              flush=True)
-        row = {"config": config, "overrides": overrides, "metrics": m,
-               "run": str(run.relative_to(ROOT))}
-        if cfg["linear_base"]:   # the base alone on the same held-out livers
-            row["base_alone"] = heldout_base(data, run, cfg["linear_base"])
-        elif (run / "model" / "model.json").exists():   # a whole field per call
-            row.update(timed(run / "model", a.calls, LATENCY_NODES))
-        if REGISTRY[cfg["design"]].on_template and not cfg["linear_base"]:
-            row["floor"] = heldout_floor(data, run)
+        row = _trained_row(data, a, config, overrides, run)
+        if not cfg["linear_base"]:   # over a base the field needs the liver's own base
+            if (run / "model" / "model.json").exists():   # a whole field per call
+                row.update(timed(run / "model", a.calls, LATENCY_NODES))
+            if REGISTRY[cfg["design"]].on_template:
+                row["floor"] = heldout_floor(data, run)
         rows.append(row)
     return rows
+
+
+def _trained_row(data: Path, a, config: str, overrides: dict, run: Path) -> dict:
+    """One design trained (or reused) in ``run``: its metrics, and for a design over each
+    liver's small-strain base (made first, resumable) the base alone on the same held-out
+    livers."""
+    from surrogate.config import get_config
+    from surrogate.evaluate import heldout_base
+    from surrogate.train import train_or_reuse
+
+    cfg = get_config(config)
+    if cfg["linear_base"]:
+        linear_bases(data, ranks=a.np, order=cfg["linear_base"])
+    t = time.perf_counter()
+    m = train_or_reuse(data, run, config, overrides)
+    print(f"[{run.name}] skill {m['skill']:.3f} ({time.perf_counter() - t:.0f} s)", flush=True)
+    row = {"config": config, "overrides": overrides, "metrics": m,
+           "run": str(run.relative_to(ROOT))}
+    if cfg["linear_base"]:
+        row["base_alone"] = heldout_base(data, run, cfg["linear_base"])
+    return row
 
 
 def every_fold(data: Path, a) -> list[dict]:
     """The population designs cross-validated over all 10 folds (each liver held out once;
     no final fit), the small-strain base alone on the same folds."""
-    from surrogate.config import get_config
-    from surrogate.evaluate import heldout_base
-    from surrogate.train import train_or_reuse
-
-    rows = []
-    for config, overrides in EVERY_FOLD:
-        run, cfg = RESULTS / f"run_{config}_every_fold", get_config(config)
-        if cfg["linear_base"]:
-            linear_bases(data, ranks=a.np, order=cfg["linear_base"])
-        m = train_or_reuse(data, run, config, overrides)
-        print(f"[{config}, every fold] skill {m['skill']:.3f}", flush=True)
-        row = {"config": config, "overrides": overrides, "metrics": m,
-               "run": str(run.relative_to(ROOT))}
-        if cfg["linear_base"]:
-            row["base_alone"] = heldout_base(data, run, cfg["linear_base"])
-        rows.append(row)
-    return rows
+    return [_trained_row(data, a, config, overrides, RESULTS / f"run_{config}_every_fold")
+            for config, overrides in EVERY_FOLD]
 
 
 def _every_fold_lines(out: dict) -> list[str]:

@@ -710,10 +710,11 @@ def held_out_errors(pred, placement, ds: Dataset, train_sims, held_sims, *, run:
             out["linear_rest"] = field_mee(teacher.base(ds, smp), true)
         if len(train_sims):
             fit_teacher(teacher, ds, train_sims)
+            base = teacher.base(ds, smp)
             if rest is not None:   # the rest at its weight fitted on the K simulations
                 out["rest_weight"] = teacher.rest_weight
-                out["linear_rest_weighted"] = field_mee(teacher.base(ds, smp), true)
-            out["linear_corrected"] = field_mee(teacher(f, x, teacher.base(ds, smp)), true)
+                out["linear_rest_weighted"] = field_mee(base, true)
+            out["linear_corrected"] = field_mee(teacher(f, x, base), true)
         fitted = time.perf_counter() - start
     info = adapted(teacher, ds, train_sims, run, synthetic=synthetic, log_fn=log_fn)
     out["patient_model"] = field_mee(predictor_fields(load_predictor_of(run), ds, smp), true)

@@ -440,7 +440,6 @@ def test_a_models_linear_part_is_added_to_its_network_at_its_load_nodes(tmp_path
                                       lf.green[:, :, np.searchsorted(lf.output_nodes, out)])
 
 
-@pytest.mark.dataset
 def test_the_rests_weight_is_the_least_squares_fit_of_the_bases_miss_clipped_to_0_1():
     """FE = base + c x rest: the fitted weight is c inside [0, 1], its clip outside; one
     simulation, or no rest, leaves the weight at 1 (nothing to check it on)."""
@@ -470,6 +469,7 @@ def test_the_rests_weight_is_the_least_squares_fit_of_the_bases_miss_clipped_to_
     assert fit_rest_weight(teacher(False), ds, smp, base + 0.4 * rest) == 1.0
 
 
+@pytest.mark.dataset
 def test_a_patient_model_from_its_small_strain_base_and_the_populations_rest(tmp_path):
     """make test's patient at K = 0 (no nonlinear simulation used): a population model of
     what each liver's base misses, trained on make test's three livers, added to the
