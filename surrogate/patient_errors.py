@@ -72,3 +72,21 @@ def error_sources(train_true, train_points, held_true, held_points, held_populat
         "nearest_load_mm": float(np.median(near)),
         "worse_than_population": int((per_sim > per_pop).sum()), "simulations": int(sims.size),
     }
+
+
+def per_simulation(pred: np.ndarray, true: np.ndarray, sims: np.ndarray) -> dict:
+    """Each simulation's error and size: ``pred`` and ``true`` (cases, nodes, 3) mm, the
+    cases' simulations ``sims`` (cases,), each simulation's load steps in order. Returns lists
+    over the simulations (ascending): ``sim``, ``mee_mm`` (the node MEE averaged over its load
+    steps), ``peak_mm`` (the largest node displacement of its last load step) and
+    ``mean_mm`` (its mean node displacement over its load steps).
+    """
+    sims = np.asarray(sims)
+    err = _node_mee(np.asarray(pred), np.asarray(true))
+    size = np.linalg.norm(np.asarray(true), axis=-1)
+    order = np.unique(sims)
+    last = [np.flatnonzero(sims == s)[-1] for s in order]
+    return {"sim": order.tolist(),
+            "mee_mm": [float(err[sims == s].mean()) for s in order],
+            "peak_mm": [float(size[i].max()) for i in last],
+            "mean_mm": [float(size[sims == s].mean()) for s in order]}

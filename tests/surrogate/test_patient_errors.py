@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from surrogate.patient_errors import error_sources, projection_floor
+from surrogate.patient_errors import error_sources, per_simulation, projection_floor
 
 
 def _fields(rng, n, nodes=50):
@@ -51,3 +51,21 @@ def test_error_sources_on_a_made_up_patient():
     assert out["corrected_mm"] < out["population_mm"]
     assert out["spearman_displacement"] == pytest.approx(1.0)   # error = 0.1 x displacement
     assert -1.0 <= out["spearman_nearest_load"] <= 1.0
+
+
+def test_per_simulation_takes_each_simulations_mean_error_and_its_last_steps_peak():
+    """Two simulations of two load steps on two nodes, every number by hand."""
+    true = np.zeros((4, 2, 3))
+    true[0, 0, 0], true[1, 0, 0], true[1, 1, 1] = 1.0, 2.0, 4.0     # sim 5: steps 0, 1
+    true[2, 1, 2], true[3, 1, 2] = 3.0, 6.0                          # sim 2: steps 2, 3
+    pred = true.copy()
+    pred[1, 0, 0] += 0.4               # sim 5, step 1: node errors 0.4, 0 -> MEE 0.2
+    pred[3, :, 0] += [0.3, 0.1]        # sim 2, step 3: node errors 0.3, 0.1 -> MEE 0.2
+    pred[2, 1, 2] -= 0.6               # sim 2, step 2: node errors 0, 0.6 -> MEE 0.3
+    out = per_simulation(pred, true, np.array([5, 5, 2, 2]))
+    assert out["sim"] == [2, 5]
+    assert out["mee_mm"] == pytest.approx([(0.3 + 0.2) / 2, (0.0 + 0.2) / 2])
+    # the last step's largest node displacement: sim 2 node 1 (6), sim 5 node 1 (4)
+    assert out["peak_mm"] == pytest.approx([6.0, 4.0])
+    # mean over both steps and both nodes: sim 2 (0 + 3 + 0 + 6) / 4, sim 5 (1 + 0 + 2 + 4) / 4
+    assert out["mean_mm"] == pytest.approx([9 / 4, 7 / 4])
