@@ -468,72 +468,129 @@ def best_design(b: dict) -> dict:
 def shortfall(k: int, r: dict) -> list[str]:
     """Why a row is short of the paper's skill and what would close the gap, from its numbers
     (nothing when it is not short)."""
-    p, m = PAPER[k], r["metrics"]
-    paper = float(p["skill"].split("/")[-1])  # scene 4: the median liver
-    ours = compared_skill(m)
-    out = []
-    if ours > paper:
-        per = (f" ({r['sims'] / POPULATION:.0f} per liver against the paper's "
-               f"{p['sims'] // POPULATION})" if k == 4 else "")
-        at = r.get("skill_at_paper_size", float("nan"))
-        # the curve's skill is pooled over the held-out simulations, nearest the paper's mean
-        # over livers for scene 4
-        pooled = float(p["skill"].split("/")[0])
-        verdict = ("more simulations would close the gap" if at <= 1.1 * pooled else
-                   "more simulations alone would not close the gap")
-        full = [b for b in r.get("beyond", []) if at_paper_size(k, b)]
-        if full:  # measured at the paper's size: the measurement, not the curve
-            best = best_design(full[0])
-            s = compared_skill(best["metrics"])
-            verdict = (f"measured at the paper's {full[0]['sims']:,} simulations (past the "
-                       f"budget, below), {design_label(best['config'], best.get('variant'))} "
-                       f"has skill {s:.3f}: "
-                       + ("more simulations close the gap" if s <= paper else
-                          "more simulations alone do not close it"))
-        if k == 4:  # measured on 204 livers
-            verdict += (" (the population basis gains more from more livers than from more "
-                        "simulations per liver: docs/livers_or_loads.md)")
-        out.append(f"- Scene {k} is short of the paper (skill {ours:.3f} against {paper:.3f}): "
-                   f"it has {r['sims']:,} of the paper's {p['sims']:,} simulations{per}; its "
-                   f"learning curve (pooled skill) extrapolates to {_f(at)} at the paper's "
-                   f"size against the paper's {p['skill']}: {verdict}.")
+    paper = float(PAPER[k]["skill"].split("/")[-1])  # scene 4: the median liver
+    out = [_short_of_paper(k, r, paper)] if compared_skill(r["metrics"]) > paper else []
     for d in [r, *r.get("side_by_side", [])]:
         u = d.get("unseen")
         if u and u["skill"] > 0.5:
-            how = "worse than" if u["skill"] > 1 else "only somewhat better than"
-            out.append(
-                f"- The unseen liver is predicted {how} the naive model by `{d['config']}` "
-                f"(skill {u['skill']:.2f}): it lies beyond the population (the warnings above), "
-                "where a network told its own shape coefficients extrapolates; predict-liver "
-                f"tells it a shape inside the population instead (`--shape "
-                f"{u.get('shape_rule', 'own')}`, docs/shape_rule.md), which is not the liver's "
-                "own (docs/unseen_liver.md: the placements and the mean shape).")
-            rows = [(e["config"], e["unseen"]) for e in [r, *r.get("side_by_side", [])]
-                    if e.get("unseen")]
-            if "fixed_extent_mm" in u and all(v.get("best_scale", 1.0) < 0.9 for _, v in rows):
-                ext = " x ".join(f"{v:.0f}" for v in u["fixed_extent_mm"])
-                tmpl = " x ".join(f"{v:.0f}" for v in u["template_fixed_extent_mm"])
-                most = " x ".join(f"{v:.0f}" for v in u["population_fixed_extent_max_mm"])
-                each = "; ".join(f"`{c}` {v['best_scale']:.2f} (MEE {v['mee_best_scale']:.3f} "
-                                 f"mm with it against {v['network']['mee']:.3f})"
-                                 for c, v in rows)
-                out.append(
-                    "- Much of that error is the displacement's size: every design predicts "
-                    "the unseen liver too soft. The one scale that fits each prediction best to "
-                    f"the FE fields: {each}. The placement stretches the template's fixed "
-                    "region to "
-                    f"{ext} mm (extent along x, y, z) from the template's {tmpl} mm; the "
-                    f"training livers' largest extents are {most} mm. The FE truth is clamped "
-                    "where the models assume, but over a patch of a size they never saw "
-                    "(docs/unseen_liver.md weighs the clamp's size: the same liver clamped by "
-                    "a patch of the template's size, the models placed the same way).")
-            out.append(
-                "- What would fix it: a population whose shapes span such livers (real "
-                "segmented livers beside the phantoms), and registering the volume and not only "
-                "the surface (or with the vena cava as a landmark), so that no template "
-                "tetrahedron folds and the fixed region keeps its size.")
-            break
+            return out + _unseen_shortfall(r, d, u)
     return out
+
+
+def _short_of_paper(k: int, r: dict, paper: float) -> str:
+    """The note on a row whose skill is above the paper's: its size and its learning curve's
+    verdict (or the measurement at the paper's size)."""
+    p = PAPER[k]
+    per = (f" ({r['sims'] / POPULATION:.0f} per liver against the paper's "
+           f"{p['sims'] // POPULATION})" if k == 4 else "")
+    at = r.get("skill_at_paper_size", float("nan"))
+    # the curve's skill is pooled over the held-out simulations, nearest the paper's mean
+    # over livers for scene 4
+    pooled = float(p["skill"].split("/")[0])
+    verdict = ("more simulations would close the gap" if at <= 1.1 * pooled else
+               "more simulations alone would not close the gap")
+    full = [b for b in r.get("beyond", []) if at_paper_size(k, b)]
+    if full:  # measured at the paper's size: the measurement, not the curve
+        best = best_design(full[0])
+        s = compared_skill(best["metrics"])
+        verdict = (f"measured at the paper's {full[0]['sims']:,} simulations (past the "
+                   f"budget, below), {design_label(best['config'], best.get('variant'))} "
+                   f"has skill {s:.3f}: "
+                   + ("more simulations close the gap" if s <= paper else
+                      "more simulations alone do not close it"))
+    if k == 4:  # measured on 204 livers
+        verdict += (" (the population basis gains more from more livers than from more "
+                    "simulations per liver: docs/livers_or_loads.md)")
+    return (f"- Scene {k} is short of the paper (skill {compared_skill(r['metrics']):.3f} "
+            f"against {paper:.3f}): it has {r['sims']:,} of the paper's {p['sims']:,} "
+            f"simulations{per}; its learning curve (pooled skill) extrapolates to {_f(at)} at "
+            f"the paper's size against the paper's {p['skill']}: {verdict}.")
+
+
+def _unseen_shortfall(r: dict, d: dict, u: dict) -> list[str]:
+    """The notes on an unseen liver predicted little better than the naive model: why, how
+    much of it is the displacement's size, and what would fix it."""
+    how = "worse than" if u["skill"] > 1 else "only somewhat better than"
+    out = [f"- The unseen liver is predicted {how} the naive model by `{d['config']}` "
+           f"(skill {u['skill']:.2f}): it lies beyond the population (the warnings above), "
+           "where a network told its own shape coefficients extrapolates; predict-liver "
+           f"tells it a shape inside the population instead (`--shape "
+           f"{u.get('shape_rule', 'own')}`, docs/shape_rule.md), which is not the liver's "
+           "own (docs/unseen_liver.md: the placements and the mean shape)."]
+    rows = [(e["config"], e["unseen"]) for e in [r, *r.get("side_by_side", [])]
+            if e.get("unseen")]
+    if "fixed_extent_mm" in u and all(v.get("best_scale", 1.0) < 0.9 for _, v in rows):
+        ext = " x ".join(f"{v:.0f}" for v in u["fixed_extent_mm"])
+        tmpl = " x ".join(f"{v:.0f}" for v in u["template_fixed_extent_mm"])
+        most = " x ".join(f"{v:.0f}" for v in u["population_fixed_extent_max_mm"])
+        each = "; ".join(f"`{c}` {v['best_scale']:.2f} (MEE {v['mee_best_scale']:.3f} "
+                         f"mm with it against {v['network']['mee']:.3f})" for c, v in rows)
+        out.append(
+            "- Much of that error is the displacement's size: every design predicts "
+            "the unseen liver too soft. The one scale that fits each prediction best to "
+            f"the FE fields: {each}. The placement stretches the template's fixed "
+            "region to "
+            f"{ext} mm (extent along x, y, z) from the template's {tmpl} mm; the "
+            f"training livers' largest extents are {most} mm. The FE truth is clamped "
+            "where the models assume, but over a patch of a size they never saw "
+            "(docs/unseen_liver.md weighs the clamp's size: the same liver clamped by "
+            "a patch of the template's size, the models placed the same way).")
+    return out + [
+        "- What would fix it: a population whose shapes span such livers (real "
+        "segmented livers beside the phantoms), and registering the volume and not only "
+        "the surface (or with the vena cava as a landmark), so that no template "
+        "tetrahedron folds and the fixed region keeps its size."]
+
+
+def _scene_rows(k: int, r: dict) -> tuple[list[str], list[str]]:
+    """A scene's rows of the table (the paper's, each design's, past the budget) and notes."""
+    p = PAPER[k]
+    lines = [f"| {k} | paper | {p['design']} | {p['sims']:,} | | n/a | {p['mee']:.3f} "
+             f"| {p['naive']:.3f} | {p['skill']} | n/a | {p['lt3']:.2f} | n/a | | | "
+             "| GPU: 2-5 ms |"]
+    notes = []
+    gen = (f"{r['generation_seconds'] / 60:.0f} min ({r['sim_seconds']:.1f} s/sim)")
+    for d in [r, *r.get("side_by_side", [])]:
+        lines += design_rows(k, r, d, gen if d is r else "")
+        if d.get("unseen"):
+            notes.append(unseen_note(k, d))
+        if d is not r:
+            notes.append(f"- Scene {k}, {design_label(d['config'], d.get('variant'))} "
+                         f"beside `{r['config']}`: the same "
+                         f"data and folds ({d['overrides']}). Run: `{d['run']}`."
+                         + floor_note(d))
+    if k == 1 and not r.get("side_by_side"):
+        notes.append("- Scene 1's node-wise network beside the reduced basis, same scene "
+                     "and folds: docs/realtime.md.")
+    notes += [_scene_note(k, r), *shortfall(k, r)]
+    for b in r.get("beyond", []):
+        who = (f"ours, {b['sims']:,} sims (the paper's size, past the budget)"
+               if at_paper_size(k, b) else f"ours, {b['sims']:,} sims (past the budget)")
+        rb = {**r, "sims": b["sims"]}
+        for d in [b, *b["side_by_side"]]:
+            lines += design_rows(k, rb, d, f"{b['generation_seconds'] / 60:.0f} min more"
+                                 if d is b else "", who)
+        notes.append(beyond_note(k, r, b))
+    return lines, notes
+
+
+def _scene_note(k: int, r: dict) -> str:
+    """A scene's note: its file, run, size, configuration and learning curve."""
+    p = PAPER[k]
+    curve = ", ".join(f"{c['train_sims']:.0f} ({c['folds']} folds of {c['sims']}): "
+                      f"{c['skill']:.3f}" for c in r["curve"])
+    w = r.get("written", {})
+    return (f"- Scene {k} (`{r['file']}`, row written at commit "
+            f"{w.get('commit', 'unknown')}, {w.get('date', 'date unknown')}): {r['sims']} "
+            f"of the paper's {p['sims']:,} simulations"
+            + (f" (budget {r['budget_minutes']:g} min, generation stopping at half of it)"
+               if "budget_minutes" in r else "")
+            + f"; config `{r['config']}` with {r['overrides']}. Learning "
+            f"curve (training simulations per fold: skill) {curve}; power-law slope "
+            f"{_f(r['curve_slope'], '{:.2f}')}, extrapolated skill at the paper's "
+            f"{p['sims'] * (PAPER_FOLDS - 1) // PAPER_FOLDS:,} training simulations "
+            f"(10 folds of {p['sims']:,}): {_f(r['skill_at_paper_size'])}. "
+            f"Run: `{r['run']}`.")
 
 
 def write_report(rows: dict, a) -> None:
@@ -553,48 +610,9 @@ def write_report(rows: dict, a) -> None:
              cols, "|" + "---|" * (cols.count("|") - 1)]
     notes = []
     for k in sorted(rows):
-        r, p = rows[k], PAPER[k]
-        lines.append(f"| {k} | paper | {p['design']} | {p['sims']:,} | | n/a | {p['mee']:.3f} "
-                     f"| {p['naive']:.3f} | {p['skill']} | n/a | {p['lt3']:.2f} | n/a | | | "
-                     "| GPU: 2-5 ms |")
-        gen = (f"{r['generation_seconds'] / 60:.0f} min ({r['sim_seconds']:.1f} s/sim)")
-        for d in [r, *r.get("side_by_side", [])]:
-            lines += design_rows(k, r, d, gen if d is r else "")
-            if d.get("unseen"):
-                notes.append(unseen_note(k, d))
-            if d is not r:
-                notes.append(f"- Scene {k}, {design_label(d['config'], d.get('variant'))} "
-                             f"beside `{r['config']}`: the same "
-                             f"data and folds ({d['overrides']}). Run: `{d['run']}`."
-                             + floor_note(d))
-        if k == 1 and not r.get("side_by_side"):
-            notes.append("- Scene 1's node-wise network beside the reduced basis, same scene "
-                         "and folds: docs/realtime.md.")
-        curve = ", ".join(f"{c['train_sims']:.0f} ({c['folds']} folds of {c['sims']}): "
-                          f"{c['skill']:.3f}" for c in r["curve"])
-        w = r.get("written", {})
-        notes.append(f"- Scene {k} (`{r['file']}`, row written at commit "
-                     f"{w.get('commit', 'unknown')}, {w.get('date', 'date unknown')}): "
-                     f"{r['sims']} "
-                     f"of the paper's {p['sims']:,} "
-                     "simulations" + (f" (budget {r['budget_minutes']:g} min, generation "
-                                      "stopping at half of it)" if "budget_minutes" in r
-                                      else "")
-                     + f"; config `{r['config']}` with {r['overrides']}. Learning "
-                     f"curve (training simulations per fold: skill) {curve}; power-law slope "
-                     f"{_f(r['curve_slope'], '{:.2f}')}, extrapolated skill at the paper's "
-                     f"{p['sims'] * (PAPER_FOLDS - 1) // PAPER_FOLDS:,} training simulations "
-                     f"(10 folds of {p['sims']:,}): {_f(r['skill_at_paper_size'])}. "
-                     f"Run: `{r['run']}`.")
-        notes += shortfall(k, r)
-        for b in r.get("beyond", []):
-            who = (f"ours, {b['sims']:,} sims (the paper's size, past the budget)"
-                   if at_paper_size(k, b) else f"ours, {b['sims']:,} sims (past the budget)")
-            rb = {**r, "sims": b["sims"]}
-            for d in [b, *b["side_by_side"]]:
-                lines += design_rows(k, rb, d, f"{b['generation_seconds'] / 60:.0f} min more"
-                                     if d is b else "", who)
-            notes.append(beyond_note(k, r, b))
+        scene_lines, scene_notes = _scene_rows(k, rows[k])
+        lines += scene_lines
+        notes += scene_notes
     real, real_notes = real_liver_rows(ROOT / "docs" / "scene4_real.json")
     lines += real
     notes += real_notes
