@@ -197,7 +197,30 @@ def data_verdict(full: dict, runs: dict) -> str:
     power law of the training simulations, extrapolated (and said to be); then the two
     thinned trainings of about the same size paired liver by liver, the fewer livers' skill
     also brought to the other's count of simulations by its curve."""
-    out, slopes, gaps = [], {}, []
+    slopes: dict[str, float] = {}
+    out = _curve_lines(full, runs, slopes)
+    gaps: list[float] = []
+    out += _paired_lines(runs, slopes, gaps)
+    if gaps and max(gaps) < 0.03:
+        out.append(f"At the same count of simulations the two ways are within "
+                   f"{100 * max(gaps):.0f} %: up to 7 per liver, one more simulation is worth "
+                   "about as much on a new liver as on a liver already there, so with every "
+                   "CT liver of the folder in use, more loads per liver is the lever left." + (
+                       "" if any(s.startswith("rms_grown_") for s in runs) else
+                       " How far it goes is open: on phantoms, from 8 to 16 simulations per "
+                       "liver, docs/livers_or_loads.md measured the MEE 3-4 % lower only "
+                       "(twice the livers: 9-11 %), so the loads' curve may flatten past 7; "
+                       "`--grow` measures it."))
+    out += [_grown_line(full, runs[slug], slopes)
+            for slug in sorted(s for s in runs if s.startswith("rms_grown_"))]
+    if not out:
+        return ""
+    return "More livers or more loads, on the same held-out livers: " + " ".join(out)
+
+
+def _curve_lines(full: dict, runs: dict, slopes: dict) -> list[str]:
+    """Each thinned curve's power law and its extrapolations; its slope into slopes."""
+    out = []
     curves = {"livers (7 simulations each)": ("rms_livers_quarter", "rms_livers_half"),
               "simulations per liver (every liver)": ("rms_sims_2", "rms_sims_4")}
     for what, slugs in curves.items():
@@ -212,6 +235,13 @@ def data_verdict(full: dict, runs: dict) -> str:
                        f"twice as many would give {full['skill'] * 2 ** slope:.3f}, and the "
                        f"paper's mean liver skill {PAPER_MEAN} would take {need:.1f} times the "
                        "training simulations (extrapolations, not measurements).")
+    return out
+
+
+def _paired_lines(runs: dict, slopes: dict, gaps: list) -> list[str]:
+    """The thinned trainings of about the same size paired liver by liver; the relative gap
+    between the livers' curve and the loads' measurement into gaps."""
+    out = []
     for livers, sims in DATA_PAIRS:
         if livers in runs and sims in runs:
             (la, sa), (lb, sb) = trained_on(runs[livers]), trained_on(runs[sims])
@@ -225,41 +255,32 @@ def data_verdict(full: dict, runs: dict) -> str:
                 text += f"; at {sb:.0f} simulations the livers' curve says {at:.3f}"
                 gaps.append(abs(at / runs[sims]["skill"] - 1))
             out.append(text + ".")
-    if gaps and max(gaps) < 0.03:
-        out.append(f"At the same count of simulations the two ways are within "
-                   f"{100 * max(gaps):.0f} %: up to 7 per liver, one more simulation is worth "
-                   "about as much on a new liver as on a liver already there, so with every "
-                   "CT liver of the folder in use, more loads per liver is the lever left." + (
-                       "" if any(s.startswith("rms_grown_") for s in runs) else
-                       " How far it goes is open: on phantoms, from 8 to 16 simulations per "
-                       "liver, docs/livers_or_loads.md measured the MEE 3-4 % lower only "
-                       "(twice the livers: 9-11 %), so the loads' curve may flatten past 7; "
-                       "`--grow` measures it."))
-    for slug in sorted(s for s in runs if s.startswith("rms_grown_")):
-        g, (_, sims) = runs[slug], trained_on(runs[slug])
-        won, n, folds_won, n_folds = paired(full, g)
-        text = (f"Measured past the end of the curves, the scene grown to "
-                f"{g['n_simulations']:,} simulations ({sims:.0f} training simulations a "
-                f"fold): pooled skill {g['skill']:.3f}, mean / median liver "
-                f"{g['per_liver_mee']['skill_mean']:.3f} / "
-                f"{g['per_liver_mee']['skill_median']:.3f}")
-        if "rms_sims_2" in slopes:
-            at = full["skill"] * (sims / trained_on(full)[1]) ** slopes["rms_sims_2"]
-            text += f" (the loads' curve said {at:.3f})"
-        past = np.log(g["skill"] / full["skill"]) / np.log(sims / trained_on(full)[1])
-        text += (f": from the shipped size to this one the skill goes as "
-                 f"simulations^{past:.2f}; lower than the shipped row on {won} of {n} held-out "
-                 f"livers, {folds_won} of {n_folds} folds.")
-        if "rms_sims_2" in slopes and past > slopes["rms_sims_2"] / 2:
-            text += (f" Past 7 per liver the loads' curve flattens: "
-                     f"{g['n_simulations'] / full['n_simulations']:.0f} times the FE time buys "
-                     f"{100 * (1 - g['skill'] / full['skill']):.0f} % of pooled skill, so the "
-                     "shipped scene keeps 7 per liver, and more loads on these livers is not "
-                     "the way to the paper's skill.")
-        out.append(text)
-    if not out:
-        return ""
-    return "More livers or more loads, on the same held-out livers: " + " ".join(out)
+    return out
+
+
+def _grown_line(full: dict, g: dict, slopes: dict) -> str:
+    """The scene grown past the curves' end against the shipped row and the loads' curve."""
+    _, sims = trained_on(g)
+    won, n, folds_won, n_folds = paired(full, g)
+    text = (f"Measured past the end of the curves, the scene grown to "
+            f"{g['n_simulations']:,} simulations ({sims:.0f} training simulations a "
+            f"fold): pooled skill {g['skill']:.3f}, mean / median liver "
+            f"{g['per_liver_mee']['skill_mean']:.3f} / "
+            f"{g['per_liver_mee']['skill_median']:.3f}")
+    if "rms_sims_2" in slopes:
+        at = full["skill"] * (sims / trained_on(full)[1]) ** slopes["rms_sims_2"]
+        text += f" (the loads' curve said {at:.3f})"
+    past = np.log(g["skill"] / full["skill"]) / np.log(sims / trained_on(full)[1])
+    text += (f": from the shipped size to this one the skill goes as "
+             f"simulations^{past:.2f}; lower than the shipped row on {won} of {n} held-out "
+             f"livers, {folds_won} of {n_folds} folds.")
+    if "rms_sims_2" in slopes and past > slopes["rms_sims_2"] / 2:
+        text += (f" Past 7 per liver the loads' curve flattens: "
+                 f"{g['n_simulations'] / full['n_simulations']:.0f} times the FE time buys "
+                 f"{100 * (1 - g['skill'] / full['skill']):.0f} % of pooled skill, so the "
+                 "shipped scene keeps 7 per liver, and more loads on these livers is not "
+                 "the way to the paper's skill.")
+    return text
 
 
 def ensemble_verdict(five: dict, ten: dict) -> str:

@@ -682,29 +682,13 @@ def test_a_guess_worse_than_the_last_state_is_given_up_before_newton(monkeypatch
     starts from the last state, the first one (the linear guess from u = 0) is cut back;
     without the guard Newton iterates from the spoilt guess. Both reach the unspoilt answer.
     Without the relaxation (several ranks) there is no guard."""
-    from fem_sim.solver.predictors import StepPredictor
     from fem_sim.solver.results import StepFailure
 
-    g = make_phantom(0, 20.0)
-    node = int(np.argmax(g.points[:, 0]))
-    cons = [Constraint(g.regions["vena_cava"])]
-    load = [NodalLoad([node], [[0.0, -0.3, -0.3]])]
+    g, cons, load = _guarded_case()
     fractions = np.linspace(0.1, 1.0, 10)
     ref = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, settings={"rtol": 1e-10},
                        prefix="gg_ref_").solve(MAT, cons, load, fractions)
-    predict = StepPredictor.predict
-    spoilt = {"calls": 0, "order": None}
-
-    def spoil(self, states, lam, extrapolate=True):
-        predict(self, states, lam, extrapolate)
-        spoilt["calls"] += 1
-        if spoilt["calls"] == spoilt_call and extrapolate:
-            spoilt["order"] = self.order
-            push = np.full(self.eqs.u.x.array.size, 0.5)
-            push[self.eqs.cons.local] = 0.0
-            self.eqs.u.x.array[:] += push
-
-    monkeypatch.setattr(StepPredictor, "predict", spoil)
+    spoilt = _spoil_a_guess(monkeypatch, spoilt_call)
     runs, given_up = {}, []
     for guard in (10.0, 0.0):
         spoilt["calls"] = 0
@@ -731,7 +715,40 @@ def test_a_guess_worse_than_the_last_state_is_given_up_before_newton(monkeypatch
             for k in range(fractions.size):
                 assert np.abs(s.displacement[k] - ref.displacement[k]).max() <= \
                     1e-8 * np.abs(ref.displacement[-1]).max(), (guard, k)
-    # The bound's premise, by hand: from a converged state at lam, |R(u, lam + h)| = h |f|.
+
+
+def _guarded_case():
+    """The guard's phantom, its fixed region and a nodal force of |f| = 0.3 sqrt(2) N."""
+    g = make_phantom(0, 20.0)
+    node = int(np.argmax(g.points[:, 0]))
+    return g, [Constraint(g.regions["vena_cava"])], [NodalLoad([node], [[0.0, -0.3, -0.3]])]
+
+
+def _spoil_a_guess(monkeypatch, call: int) -> dict:
+    """The predictor's guess at its call-th extrapolating call pushed by 0.5 mm on every free
+    node; the dict counts the calls and records the predictor's order at the spoilt one."""
+    from fem_sim.solver.predictors import StepPredictor
+
+    predict = StepPredictor.predict
+    spoilt = {"calls": 0, "order": None}
+
+    def spoil(self, states, lam, extrapolate=True):
+        predict(self, states, lam, extrapolate)
+        spoilt["calls"] += 1
+        if spoilt["calls"] == call and extrapolate:
+            spoilt["order"] = self.order
+            push = np.full(self.eqs.u.x.array.size, 0.5)
+            push[self.eqs.cons.local] = 0.0
+            self.eqs.u.x.array[:] += push
+
+    monkeypatch.setattr(StepPredictor, "predict", spoil)
+    return spoilt
+
+
+def test_from_a_converged_state_the_residual_at_a_larger_load_is_the_load_increment():
+    """The guess guard's premise, by hand: from a converged state at lam, |R(u, lam + h)| =
+    h |f| to Newton's tolerance (R = internal - lam f, the internal forces balancing lam f)."""
+    g, cons, load = _guarded_case()
     p = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, settings={"rtol": 1e-10},
                      prefix="gg_bound_")
     p.solve(MAT, cons, load, [0.1])
