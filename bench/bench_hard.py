@@ -32,9 +32,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fem_sim import Constraint, NodalLoad, OgdenMaterial, OgdenProblem
-from liverviz.report import ROOT, capture
-
-SOFA = ROOT.parent / "shared" / "data" / "livers" / "sofa_liver.vtk"
+from liverviz.report import ROOT, SOFA, capture
 
 NOMINAL = np.array([0.0, 0.0, -0.4])  # N
 C1, M1 = 4.1e-3, 10.06

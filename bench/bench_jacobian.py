@@ -27,9 +27,7 @@ from petsc4py import PETSc
 from fem_sim import Constraint, NodalLoad, OgdenMaterial, OgdenProblem
 from fem_sim.solver import ldlt, pardiso
 from fem_sim.solver.assembly import DolfinxAssembler
-from liverviz.report import ROOT
-
-SOFA = ROOT.parent / "shared" / "data" / "livers" / "sofa_liver.vtk"
+from liverviz.report import SOFA
 
 
 def load_mesh(kind: str, h: float):

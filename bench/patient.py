@@ -35,7 +35,7 @@ import numpy as np
 
 from data_spec.views import dataset_fingerprint
 from fem_sim.batch.chunked import generate_chunks
-from liverviz.report import ROOT, write_report
+from liverviz.report import ROOT, SOFA, write_report
 from surrogate.patient import SYNTHETIC
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
@@ -50,6 +50,7 @@ TRUTH_SIMS = HELD + max(KS)   # the truth scene's simulations, solved up to HELD
 SOURCES_K = 40  # the K at which the error's sources are measured (the largest K if less)
 GOAL_MM = 0.5   # the issue's goal: this MEE within GOAL_MINUTES on two cores
 GOAL_MINUTES = 5.0
+FRAMES = {SOFA.stem: "auto"}   # a liver file not in the scene's frame: predict-liver's --frame
 BIG_PEAK_MM = 30.0   # a held-out simulation's FE peak displacement counted as a large one
 # what was measured and rejected (Amos-054, K = 40, the population model of 663 simulations)
 REJECTED = [
@@ -150,16 +151,17 @@ DESIGN_REJECTED = [
     "are measured with it.", ""]
 
 
-def truth(pred, liver: Path, a) -> Path:
-    """The liver's FE truth with the model's boundary condition: a scene of TRUTH_SIMS
-    simulations, the first HELD + the largest K solved.
+def truth(pred, liver: Path, a, frame: str | None = None) -> Path:
+    """The liver's FE truth with the model's boundary condition (the liver file in
+    ``frame``, predict-liver's --frame): a scene of TRUTH_SIMS simulations, the first HELD +
+    the largest K solved.
     """
     from surrogate.evaluate import truth_scene
 
     d = a.results / liver.stem
     d.mkdir(parents=True, exist_ok=True)
     n = HELD + max(a.ks)
-    text = truth_scene(pred, SCENE, liver, TRUTH_SIMS, None)
+    text = truth_scene(pred, SCENE, liver, TRUTH_SIMS, frame)
     scene = d / "scene.toml"
     if not scene.exists() or scene.read_text() != text:
         shutil.rmtree(d / "data", ignore_errors=True)
@@ -210,9 +212,10 @@ def curve(liver: Path, a) -> tuple[dict, dict]:
     pred = load_predictor(model)
     rest = load_predictor(Path(a.rest) / "model") if a.rest else None
     t = time.perf_counter()
-    placement, _ = place(pred, liver, None)
+    frame = FRAMES.get(liver.stem)
+    placement, _ = place(pred, liver, frame)
     placing = time.perf_counter() - t
-    data = truth(pred, liver, a)
+    data = truth(pred, liver, a, frame)
     ds = load_dataset(data)
     path = a.results / liver.stem / "k.json"
     key = made_by(model, data, Path(a.rest) / "model" if a.rest else None)
@@ -323,7 +326,8 @@ def end_to_end(liver: Path, a, k: int = 40) -> dict:
     t = time.time()
     subprocess.run(["make", "--no-print-directory", "patient", f"LIVER={liver}",
                     f"MODEL={a.model}", f"K={k}", f"PATIENT={out}", f"ORDER={a.order}",
-                    f"GREEN={int(a.green)}", *([f"REST={a.rest}"] if a.rest else [])],
+                    f"GREEN={int(a.green)}", *([f"REST={a.rest}"] if a.rest else []),
+                    *([f"FRAME={FRAMES[liver.stem]}"] if liver.stem in FRAMES else [])],
                    cwd=ROOT, check=True,
                    stdout=subprocess.DEVNULL)
     end = time.time()
@@ -468,23 +472,24 @@ def _weight_lines(curves: list[dict]) -> list[str]:
             + ".", ""]
 
 
-def report(curves: list[dict], e2e: dict | None, a, found: list[dict], md: Path) -> str:
-    # the FE start-up (meshing, MPI, the forms, the ranks' uneven end) as make patient spent
-    # it: its FE step's wall seconds less its simulations' own solves over the ranks
-    start = max(0.0, e2e["fe"] - e2e["solves"]) if e2e and "solves" in e2e else None
-    ks = a.ks
+def _mee(c: dict, k: int) -> float:
+    """The patient model's MEE at K = k (none at K = 0 without the small-strain responses:
+    the population model's)."""
+    return c["points"][str(k)].get("patient_model", c["points"][str(k)]["population"])
 
-    def mee(c, k):   # the patient model's MEE (none at K = 0 without the small-strain
-        #              responses: the population model's)
-        return c["points"][str(k)].get("patient_model", c["points"][str(k)]["population"])
 
-    order_note = ("; at `--order 2`, as here, plus its second-order term, damped and gated: "
-                  "docs/load_expansion.md" if a.order == 2 else "")
+def _ks_of(c: dict, ks) -> list[int]:
+    """The K values of ``ks`` the liver has."""
+    return [k for k in ks if str(k) in c["points"]]
+
+
+def _table_rows(curves: list[dict], a, start: float | None) -> tuple[list[str], list[str]]:
+    """The table's header and rows, one per liver and K."""
     keys = ["population", "corrected", "linear", *(["linear_rest"] if a.rest else []),
             "linear_corrected", "patient_model", "scratch", "tuned", "tuned_corrected"]
     n_main = len(keys) - 2
     rows = []
-    for k in ks:
+    for k in a.ks:
         for c in (c for c in curves if str(k) in c["points"]):
             p = c["points"][str(k)]
             cells = [f"{p.get(key, float('nan')):.3f}" if key in p else "" for key in keys]
@@ -496,16 +501,31 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict], md: Path)
             wall = "" if start is None else f"{minutes(c, k, start):.1f}"
             rows.append(f"| {k} | {c['liver']} | {' | '.join(cells[:n_main])} | {adapt} | "
                         f"{wall} | {' | '.join(cells[n_main:])} |")
-    med = {k: [mee(c, k) for c in curves if str(k) in c["points"]] for k in ks}
-    names = ", ".join(c["liver"] for c in curves)
+    head = ["| K | liver | population MEE mm | corrected MEE mm | linear MEE mm | "
+            + ("linear + rest MEE mm | " if a.rest else "") + "linear + "
+            "corrected MEE mm | patient model MEE mm | scratch MEE mm | adaptation s | minutes | "
+            "tuned MEE mm | tuned + corrected MEE mm | tuning s |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if a.rest else "")]
+    return head, rows
+
+
+def _intro(curves: list[dict], a) -> str:
+    """The paragraph naming the livers and every column."""
+    order_note = ("; at `--order 2`, as here, plus its second-order term, damped and gated: "
+                  "docs/load_expansion.md" if a.order == 2 else "")
+    names = ", ".join(c["liver"] for c in curves if c["liver"] not in FRAMES)
+    other = [c["liver"] for c in curves if c["liver"] in FRAMES]
     model = Path(a.model).resolve().relative_to(ROOT)
-    lines = [
+    return (
         (f"Design livers {names}: training livers of the scene whose simulations the "
          f"population model `{model}` was not trained on (trained "
          "as the shipped one on the scene's dataset less them; the PCA is the scene's, which "
          "has their shapes), to choose the adaptation's settings on" if a.design else
-         f"Validation livers {names} (never seen by the "
-         f"population model `{model}`, its PCA or any design "
+         f"Validation livers {names}"
+         + (f" and {', '.join(other)} (another source's liver, in another frame: placed "
+            "by the best rigid fit, predict-liver's and make patient's FRAME=auto)"
+            if other else "")
+         + f" (never seen by the population model `{model}`, its PCA or any design "
          "choice)") + "; FE truth on each liver's own mesh with the model's boundary condition "
         f"(scene 4's settings: P2 at 16 mm, one random 0.4 N force, 10 load steps); MEE on "
         f"its first {HELD} simulations, never used to adapt (the K training simulations are the "
@@ -537,79 +557,103 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict], md: Path)
         "on the K simulations "
         "(surrogate.tuning; how many Adam steps, chosen by cross-validation over them, in "
         "brackets); tuned + corrected: the correction fitted on the tuned network's "
-        "out-of-fold residuals; tuning s: the seconds of both.", "",
-        "| K | liver | population MEE mm | corrected MEE mm | linear MEE mm | "
-        + ("linear + rest MEE mm | " if a.rest else "") + "linear + "
-        "corrected MEE mm | patient model MEE mm | scratch MEE mm | adaptation s | minutes | "
-        "tuned MEE mm | tuned + corrected MEE mm | tuning s |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if a.rest else ""),
-        *rows, "",
-        "Median over the livers (patient model; at K = 0 the small-strain responses"
-        + (" and the population's rest" if a.rest else "") + " alone, distilled): "
-        + ", ".join(f"K = {k}: {np.median(m):.3f} mm" + ("" if len(m) == len(curves) else
-                                                           f" ({len(m)} livers)")
-                    for k, m in med.items()) + ".", "", *_rest_lines(curves)]
+        "out-of-fold residuals; tuning s: the seconds of both.")
+
+
+def _median_line(curves: list[dict], a) -> str:
+    """The patient model's median MEE over the livers at each K."""
+    med = {k: [_mee(c, k) for c in curves if str(k) in c["points"]] for k in a.ks}
+    return ("Median over the livers (patient model; at K = 0 the small-strain responses"
+            + (" and the population's rest" if a.rest else "") + " alone, distilled): "
+            + ", ".join(f"K = {k}: {np.median(m):.3f} mm" + ("" if len(m) == len(curves) else
+                                                               f" ({len(m)} livers)")
+                        for k, m in med.items()) + ".")
+
+
+def _tuned_lines(curves: list[dict], ks) -> list[str]:
+    """The sentence on fine-tuning the population network, when it was measured."""
     tuned = {k: [np.median([c["points"][str(k)][key] for c in curves])
                  for key in ("corrected", "tuned", "tuned_corrected")] for k in ks
              if k and all("tuned" in c["points"].get(str(k), {}) for c in curves)}
+    if not tuned:
+        return []
     lower = {k: sum(c["points"][str(k)]["tuned_corrected"] < c["points"][str(k)]["corrected"]
                     for c in curves) for k in tuned}
-    if tuned:
-        lines += ["Fine-tuning the population network (`--tune`), median over the livers, "
-                  "corrected / tuned / tuned + corrected: "
-                  + "; ".join(f"K = {k}: {a:.3f} / {b:.3f} / {c:.3f} mm" for k, (a, b, c)
-                              in tuned.items())
-                  + ". Tuned + corrected below corrected on "
-                  + ", ".join(f"{n} of {len(curves)} livers at K = {k}"
-                              for k, n in lower.items())
-                  + f" ({sum(lower.values())} of {len(curves) * len(lower)} points).", ""]
+    return ["Fine-tuning the population network (`--tune`), median over the livers, "
+            "corrected / tuned / tuned + corrected: "
+            + "; ".join(f"K = {k}: {a:.3f} / {b:.3f} / {c:.3f} mm" for k, (a, b, c)
+                        in tuned.items())
+            + ". Tuned + corrected below corrected on "
+            + ", ".join(f"{n} of {len(curves)} livers at K = {k}" for k, n in lower.items())
+            + f" ({sum(lower.values())} of {len(curves) * len(lower)} points).", ""]
 
-    def mine(c) -> list[int]:   # the K values the liver has
-        return [k for k in ks if str(k) in c["points"]]
 
+def _reached_lines(curves: list[dict], ks, start: float | None) -> list[str]:
+    """The least K within the goal per liver, and the FE seconds against K."""
     def reached(c) -> str:   # the least K within GOAL_MM, its FE seconds (and minutes)
-        k = next((k for k in mine(c) if mee(c, k) <= GOAL_MM), None)
+        k = next((k for k in _ks_of(c, ks) if _mee(c, k) <= GOAL_MM), None)
         if k is None:
             return f"{c['liver']}: not reached"
         wall = "" if start is None else f", {minutes(c, k, start):.1f} min"
         return f"{c['liver']}: {k} ({c['fe_seconds'].get(str(k), 0.0):.0f} s{wall})"
 
-    lines += ["Least K at which the patient model is within the goal's "
-              f"{GOAL_MM} mm, with the FE seconds of those K simulations on two ranks (their "
-              "own solve seconds over the ranks; meshing, start-up and adapting aside)"
-              + ("" if start is None else " and the minutes from the liver file")
-              + ": " + ", ".join(map(reached, curves))
-              + ".", "", "FE seconds on two ranks against K (the same records): "
-              + "; ".join(f"{c['liver']}: " + ", ".join(f"{v:.0f}" for v in
-                                                         c["fe_seconds"].values())
-                          for c in curves)
-              + f" (K = {', '.join(map(str, ks))}, as far as each liver has; at K = 0 one "
-              "simulation).",
-              ""]
-    if start is not None:
-        best = []
-        for c in curves:
-            within = [k for k in mine(c) if minutes(c, k, start) <= GOAL_MINUTES]
-            k = min(within, key=lambda k: mee(c, k)) if within else None
-            best.append(f"{c['liver']}: none" if k is None else
-                        f"{c['liver']}: {mee(c, k):.3f} mm (K = {k}, "
-                        f"{minutes(c, k, start):.1f} min)")
-        lines += [f"Within the goal's {GOAL_MINUTES:.0f} minutes on two cores (the minutes "
-                  "column), the least MEE each liver's patient model reaches: "
-                  + ", ".join(best) + ".", ""]
-    if e2e is not None:
-        first = curves[0]
-        check = ("" if start is None or first["liver"] != e2e.get("liver", first["liver"])
-                 or str(e2e["k"]) not in first["points"] else
-                 f" The minutes column puts the same liver at K = {e2e['k']} at "
-                 f"{minutes(first, e2e['k'], start):.1f} min (its start-up is this run's, "
-                 f"{start:.0f} s: meshing the liver, MPI and the forms on each rank, and the "
-                 "ranks' uneven end).")
-        lines += [f"`make patient` run end to end at K = {e2e['k']} on {curves[0]['liver']}, "
-                  f"each step a process of its own: {e2e['total'] / 60:.1f} min wall time on "
-                  f"two cores: placing the liver and writing its scene {e2e['place']:.0f} s, "
-                  f"meshing and {e2e['k']} FE simulations on two ranks {e2e['fe']:.0f} s, "
-                  f"adapting {e2e['adapt']:.0f} s." + check, ""]
+    return ["Least K at which the patient model is within the goal's "
+            f"{GOAL_MM} mm, with the FE seconds of those K simulations on two ranks (their "
+            "own solve seconds over the ranks; meshing, start-up and adapting aside)"
+            + ("" if start is None else " and the minutes from the liver file")
+            + ": " + ", ".join(map(reached, curves))
+            + ".", "", "FE seconds on two ranks against K (the same records): "
+            + "; ".join(f"{c['liver']}: " + ", ".join(f"{v:.0f}" for v in
+                                                       c["fe_seconds"].values())
+                        for c in curves)
+            + f" (K = {', '.join(map(str, ks))}, as far as each liver has; at K = 0 one "
+            "simulation).", ""]
+
+
+def _within_lines(curves: list[dict], ks, start: float | None) -> list[str]:
+    """The least MEE each liver's patient model reaches within the goal's minutes."""
+    if start is None:
+        return []
+    best = []
+    for c in curves:
+        within = [k for k in _ks_of(c, ks) if minutes(c, k, start) <= GOAL_MINUTES]
+        k = min(within, key=lambda k: _mee(c, k)) if within else None
+        best.append(f"{c['liver']}: none" if k is None else
+                    f"{c['liver']}: {_mee(c, k):.3f} mm (K = {k}, "
+                    f"{minutes(c, k, start):.1f} min)")
+    return [f"Within the goal's {GOAL_MINUTES:.0f} minutes on two cores (the minutes "
+            "column), the least MEE each liver's patient model reaches: "
+            + ", ".join(best) + ".", ""]
+
+
+def _e2e_lines(curves: list[dict], e2e: dict | None, start: float | None) -> list[str]:
+    """The sentence on make patient run end to end, checked against the minutes column."""
+    if e2e is None:
+        return []
+    first = curves[0]
+    check = ("" if start is None or first["liver"] != e2e.get("liver", first["liver"])
+             or str(e2e["k"]) not in first["points"] else
+             f" The minutes column puts the same liver at K = {e2e['k']} at "
+             f"{minutes(first, e2e['k'], start):.1f} min (its start-up is this run's, "
+             f"{start:.0f} s: meshing the liver, MPI and the forms on each rank, and the "
+             "ranks' uneven end).")
+    return [f"`make patient` run end to end at K = {e2e['k']} on {first['liver']}, "
+            f"each step a process of its own: {e2e['total'] / 60:.1f} min wall time on "
+            f"two cores: placing the liver and writing its scene {e2e['place']:.0f} s, "
+            f"meshing and {e2e['k']} FE simulations on two ranks {e2e['fe']:.0f} s, "
+            f"adapting {e2e['adapt']:.0f} s." + check, ""]
+
+
+def report(curves: list[dict], e2e: dict | None, a, found: list[dict], md: Path) -> str:
+    """docs/patient.md's body after the header."""
+    # the FE start-up (meshing, MPI, the forms, the ranks' uneven end) as make patient spent
+    # it: its FE step's wall seconds less its simulations' own solves over the ranks
+    start = max(0.0, e2e["fe"] - e2e["solves"]) if e2e and "solves" in e2e else None
+    head, rows = _table_rows(curves, a, start)
+    lines = [_intro(curves, a), "", *head, *rows, "", _median_line(curves, a), "",
+             *_rest_lines(curves), *_tuned_lines(curves, a.ks),
+             *_reached_lines(curves, a.ks, start), *_within_lines(curves, a.ks, start),
+             *_e2e_lines(curves, e2e, start)]
     lines += _size_lines(curves, md) + sources_lines(found) + (DESIGN_REJECTED if a.design
                                                                else REJECTED)
     return "\n".join(lines)
@@ -637,13 +681,13 @@ def design_model(names: list[str], a) -> Path:
     return run
 
 
-def main() -> int:
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--model", default=str(MODEL), help="the population model's run")
     ap.add_argument("--livers", nargs="+", default=None,
-                    help="validation livers of the scene (default: Amos-054 LiTS-100 LiTS-67); "
-                    "with --design, training livers (default: "
-                    f"{' '.join(DESIGN_LIVERS)})")
+                    help="validation livers of the scene (default: Amos-054 LiTS-100 LiTS-67) "
+                    f"or {SOFA.stem} (placed by the best rigid fit); with --design, training "
+                    f"livers (default: {' '.join(DESIGN_LIVERS)})")
     ap.add_argument("--design", action="store_true",
                     help="training livers, with a population model trained without their "
                     "simulations: docs/patient_design.md, the settings' playground")
@@ -668,6 +712,13 @@ def main() -> int:
                     "truth has simulations for")
     ap.add_argument("--no-end-to-end", dest="e2e", action="store_false",
                     help="keep the end-to-end times of docs/patient.json")
+    return ap
+
+
+def _arguments() -> tuple[argparse.Namespace, dict]:
+    """The checked arguments (the K values, the livers of the scene; a.results where the
+    livers' runs go) and the livers' files by name."""
+    ap = _parser()
     a = ap.parse_args()
     a.ks = sorted(set(a.ks))
     a.sources_k = min(SOURCES_K, a.ks[-1])
@@ -683,13 +734,20 @@ def main() -> int:
     g = load_scene(SCENE)["geometry"]
     a.livers = a.livers or (DESIGN_LIVERS if a.design else ["Amos-054", "LiTS-100", "LiTS-67"])
     files = {f.stem: f for f in (training_files(g) if a.design else validation_files(g))}
+    if not a.design and SOFA.exists():   # seen by no training run either
+        files[SOFA.stem] = SOFA
     unknown = [n for n in a.livers if n not in files]
     if unknown:
         ap.error(f"--livers: {unknown} are not {'training' if a.design else 'validation'} "
-                 f"livers of {SCENE.name}")
+                 f"livers of {SCENE.name}" + ("" if a.design else f" (nor {SOFA.stem})"))
     a.results = RESULTS.with_name("patient_design") if a.design else RESULTS
     if a.design and a.rest:   # the design livers' own (design_model trains it)
         a.rest = str(a.results / "run_population_linear")
+    return a, files
+
+
+def main() -> int:
+    a, files = _arguments()
     md = ROOT / "docs" / ("patient_design.md" if a.design else "patient.md")
     title = "A new patient's model: the design livers" if a.design else "A new patient's model"
     if a.report_only:

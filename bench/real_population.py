@@ -22,10 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from fem_sim.batch.chunked import mpirun_env
-from liverviz.report import ROOT, header
+from liverviz.report import ROOT, SOFA, header
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
-SOFA = ROOT.parent / "shared" / "data" / "livers" / "sofa_liver.vtk"
 RESULTS = ROOT / "bench" / "results" / "real_population"
 
 

@@ -33,12 +33,11 @@ import time
 
 import numpy as np
 
-from liverviz.report import ROOT, commit, write_report
+from liverviz.report import ROOT, SOFA, commit, write_report
 
 DATA = ROOT / "runs" / "data" / "scene4_livers"
 MODEL = ROOT / "bench" / "results" / "scene4_real" / "run_population_basis" / "model"
 RESULTS = ROOT / "bench" / "results" / "registration_speed"
-SOFA = ROOT.parent / "shared" / "data" / "livers" / "sofa_liver.vtk"
 
 
 def ways():

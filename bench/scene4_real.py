@@ -36,10 +36,9 @@ from pathlib import Path
 import numpy as np
 
 from fem_sim.batch.chunked import generate_chunks, linear_bases
-from liverviz.report import ROOT, commit, write_report
+from liverviz.report import ROOT, SOFA, commit, write_report
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
-SOFA = ROOT.parent / "shared" / "data" / "livers" / "sofa_liver.vtk"
 RESULTS = ROOT / "bench" / "results" / "scene4_real"
 LATENCY_NODES = 15400
 # the designs on the same folds: (config, overrides); node-wise with table4's budget

@@ -39,7 +39,7 @@ import numpy as np
 
 from data_spec.views import extension, first
 from fem_sim.batch.chunked import generate_chunks
-from liverviz.report import ROOT, commit, header, put_section
+from liverviz.report import ROOT, SOFA, commit, header, put_section
 from surrogate.evaluate import evaluate_liver, heldout_floor, place, truth_scene
 from surrogate.latency import timed, timed_placed
 from surrogate.train import train_or_reuse
@@ -84,7 +84,7 @@ PAPER = {1: {"sims": 400, "mee": 0.239, "naive": 3.066, "skill": "0.078", "lt3":
 # The liver no training run may use: scene 4's model is evaluated on FE simulations of it. Its
 # file is in LPS (right lobe toward -x, dome toward +z, vena-cava notch toward +y), the frame
 # predict-liver assumes by default.
-UNSEEN = ROOT.parent / "shared" / "data" / "livers" / "sofa_liver.vtk"
+UNSEEN = SOFA
 UNSEEN_SIMS = 60
 CURVE = (1.0, 0.5, 0.25)
 PAPER_FOLDS = 10

@@ -38,9 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from liverviz.report import ROOT, header
+from liverviz.report import ROOT, SOFA, header
 
-SOFA = ROOT.parent / "shared" / "data" / "livers" / "sofa_liver.vtk"
 RESULTS = ROOT / "bench" / "results" / "tradeoff_fem"
 DOCS = ROOT / "docs"
 FORCE = [0.0, 0.0, -0.4]  # N

@@ -28,6 +28,8 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+# the SOFA liver beside the clone (../shared/data/livers): no training run sees it
+SOFA = ROOT.parent / "shared" / "data" / "livers" / "sofa_liver.vtk"
 
 
 def _cpu() -> str:
