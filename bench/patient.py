@@ -521,12 +521,9 @@ def _intro(curves: list[dict], a) -> str:
          f"population model `{model}` was not trained on (trained "
          "as the shipped one on the scene's dataset less them; the PCA is the scene's, which "
          "has their shapes), to choose the adaptation's settings on" if a.design else
-         f"Validation livers {names}"
-         + (f" and {', '.join(other)} (another source's liver, in another frame: placed "
-            "by the best rigid fit, predict-liver's and make patient's FRAME=auto)"
-            if other else "")
-         + f" (never seen by the population model `{model}`, its PCA or any design "
-         "choice)") + "; FE truth on each liver's own mesh with the model's boundary condition "
+         _named(names, other) + f", none seen by the population model `{model}`, its PCA "
+         "or any design choice")
+        + "; FE truth on each liver's own mesh with the model's boundary condition "
         f"(scene 4's settings: P2 at 16 mm, one random 0.4 N force, 10 load steps); MEE on "
         f"its first {HELD} simulations, never used to adapt (the K training simulations are the "
         "next K). Population: the model placed as "
@@ -558,6 +555,18 @@ def _intro(curves: list[dict], a) -> str:
         "(surrogate.tuning; how many Adam steps, chosen by cross-validation over them, in "
         "brackets); tuned + corrected: the correction fitted on the tuned network's "
         "out-of-fold residuals; tuning s: the seconds of both.")
+
+
+def _named(names: str, other: list[str]) -> str:
+    """The validation livers ``names`` and the other livers ``other``, as the report names
+    them."""
+    who = [f"validation livers {names}"] if names else []
+    if other:
+        who.append(f"the liver{'s' if len(other) > 1 else ''} {', '.join(other)}, of another "
+                   "source and frame, placed by the best rigid fit (predict-liver's --frame "
+                   "auto, make patient's FRAME=auto)")
+    text = " and ".join(who)
+    return text[:1].upper() + text[1:]
 
 
 def _median_line(curves: list[dict], a) -> str:
