@@ -70,7 +70,11 @@ def commit() -> str:
 
 
 def header(title: str, argv: list[str] | None = None) -> str:
-    argv = sys.argv if argv is None else argv
+    # the command as typed (``-m module`` kept, not the module's path), paths in the clone
+    # relative to it
+    argv = sys.orig_argv[1:] if argv is None else argv
+    argv = [os.path.relpath(a, ROOT) if Path(a).is_absolute() and ROOT in Path(a).parents
+            else a for a in argv]
     exe = Path(sys.executable)
     exe = os.path.relpath(exe, ROOT) if ROOT in exe.parents else exe.name  # .venv-*/bin/python
     cmd = " ".join(shlex.quote(a) for a in [exe, *argv])
