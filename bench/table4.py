@@ -637,27 +637,31 @@ def write_report(rows: dict, a) -> None:
             print(f"{a.realtime_md}: {text.splitlines()[-1]}", flush=True)
 
 
-def real_liver_rows(path: Path) -> tuple[list[str], list[str]]:
-    """Scene 4's rows on real livers (bench/scene4_real.py writes them beside its report,
-    docs/scene4_real.md) and their note; nothing when that report is not there."""
-    if not path.exists():
-        return [], []
-    r = json.loads(path.read_text())
-    lines, un = [], r["unseen"]
-    for d in r["designs"]:
-        m = d["metrics"]
-        net, pl = m["network"], m["per_liver_mee"]
-        ms = (f"{d['ms_own']:.2f} / {d['ms_big']:.2f}" if "ms_big" in d else
-              "over the liver's own base (make patient)" if "base_alone" in d else
-              "not exported")
-        lines.append(
-            f"| 4, real livers | ours | {design_label(d['config'])} | {m['n_simulations']:,} "
+def _real_row(scene: str, d: dict, ms: str) -> str:
+    """A design's row on real livers (docs/scene4_real.json's), cross-validated by liver."""
+    m = d["metrics"]
+    net, pl = m["network"], m["per_liver_mee"]
+    return (f"| {scene} | ours | {design_label(d['config'])} | {m['n_simulations']:,} "
             f"| {d.get('nodes', '')} | {net['mae_x']:.3f} / {net['mae_y']:.3f} / "
             f"{net['mae_z']:.3f} | {pl['median']:.3f} (median liver) | {m['naive']['mee']:.3f}"
             f" | {pl['skill_mean']:.3f} / {pl['skill_median']:.3f} | "
             f"{net['pct_ee_lt_1mm']:.2f} | {net['pct_ee_lt_3mm']:.2f} | {net['corr_x']:.4f} / "
             f"{net['corr_y']:.4f} / {net['corr_z']:.4f} | {fe_error(2, 16.0)} | | "
             f"{m['total_seconds'] / 60:.0f} min | {ms} |")
+
+
+def real_liver_rows(path: Path) -> tuple[list[str], list[str]]:
+    """Scene 4's rows on real livers (bench/scene4_real.py writes them beside its report,
+    docs/scene4_real.md) and their note; nothing when that report is not there."""
+    if not path.exists():
+        return [], []
+    r = json.loads(path.read_text())
+    un = r["unseen"]
+    lines = [_real_row("4, real livers", d, (
+        f"{d['ms_own']:.2f} / {d['ms_big']:.2f}" if "ms_big" in d else
+        "over the liver's own base (make patient)" if "base_alone" in d else "not exported"))
+        for d in r["designs"]]
+    lines += [_real_row("4, real livers, all 10 folds", d, "") for d in r.get("every_fold", [])]
     design = design_label(r["designs"][0]["config"])
     validation = [u for u in un if u["frame"] == "scene"]
     lines.append(_unseen_row(f"ours, the {len(validation)} validation livers (mean over "
@@ -676,7 +680,9 @@ def real_liver_rows(path: Path) -> tuple[list[str], list[str]]:
             f"{w.get('commit', 'unknown')}, {w.get('date', 'date unknown')} by "
             f"bench/scene4_real.py): {r['livers']} CT-segmented livers, {r['sims']:,} of the "
             f"scene's {r.get('scene_sims', r['sims']):,} simulations, the first of 10 folds by "
-            "liver held out, "
+            "liver held out"
+            + (" (the population designs also over all 10 folds, each liver held out once: "
+               "the rows so marked)" if r.get("every_fold") else "") + ", "
             + ("the designs on the same folds" if len(r["designs"]) > 1 else
                "the population basis only (the node-wise network is not trained on them yet)")
             + "; the unseen livers are the scene's 15 validation livers and the SOFA liver, "
