@@ -35,7 +35,7 @@ import numpy as np
 
 from data_spec.views import dataset_fingerprint
 from fem_sim.batch.chunked import generate_chunks
-from liverviz.report import ROOT, SOFA, write_report
+from liverviz.report import ROOT, SOFA, SOFA_FRAME, write_report
 from surrogate.patient import SYNTHETIC
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
@@ -50,7 +50,7 @@ TRUTH_SIMS = HELD + max(KS)   # the truth scene's simulations, solved up to HELD
 SOURCES_K = 40  # the K at which the error's sources are measured (the largest K if less)
 GOAL_MM = 0.5   # the goal: this MEE within GOAL_MINUTES on two cores
 GOAL_MINUTES = 5.0
-FRAMES = {SOFA.stem: "auto"}   # a liver file not in the scene's frame: predict-liver's --frame
+FRAMES = {SOFA.stem: SOFA_FRAME}   # a liver file not in the scene's frame: predict-liver's --frame
 BIG_PEAK_MM = 30.0   # a held-out simulation's FE peak displacement counted as a large one
 # what was measured and rejected (Amos-054, K = 40, the population model of 663 simulations)
 REJECTED = [

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from fem_sim.batch.chunked import generate_chunks, linear_bases
-from liverviz.report import ROOT, SOFA, commit, write_report
+from liverviz.report import ROOT, SOFA, SOFA_FRAME, commit, write_report
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
 RESULTS = ROOT / "bench" / "results" / "scene4_real"
@@ -128,7 +128,7 @@ def unseen_livers(scene) -> list[tuple[Path, str | None]]:
     from data_spec.livers import validation_files
 
     out = [(f, None) for f in validation_files(scene["geometry"])]
-    return out + ([(SOFA, "auto")] if SOFA.exists() else [])
+    return out + ([(SOFA, SOFA_FRAME)] if SOFA.exists() else [])
 
 
 def truth(pred, liver: Path, frame, a) -> Path:

@@ -30,6 +30,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 # the SOFA liver beside the clone (../shared/data/livers): no training run sees it
 SOFA = ROOT.parent / "shared" / "data" / "livers" / "sofa_liver.vtk"
+# its frame for predict-liver (--frame) and make patient (FRAME): not the scenes' (LPS), so
+# the best rigid fit
+SOFA_FRAME = "auto"
 
 
 def _cpu() -> str:

@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from data_spec import OgdenMaterial, load_scene
+from liverviz.report import SOFA
 
 ROOT = Path(__file__).resolve().parents[2]
-SOFA = ROOT.parent / "shared" / "data" / "livers" / "sofa_liver.vtk"
 SCENES = sorted((ROOT / "data_spec" / "scenes").glob("scene*.toml"))
 MESH_SIZE = 16.0  # mm: ~600 (phantom) and ~1,300 (real liver) nodes: many cases in minutes
 NOMINAL = OgdenMaterial((4.1e-3,), (10.06,), 200 * 4.1e-3 / 2)

@@ -1,7 +1,6 @@
 """Phantom and surface import: volumes, closedness, orientation, fixed region on the surface."""
 
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,8 +20,7 @@ from fem_sim.geometry.quality import flat_tetrahedra, mean_ratio, mesh_problems
 from fem_sim.geometry.repair import mesh_surface_file
 from fem_sim.geometry.source import GeometryError
 from fem_sim.geometry.surfaces import clean_surface, read_vtk_polydata
-
-SOFA = Path(__file__).resolve().parents[3] / "shared" / "data" / "livers" / "sofa_liver.vtk"
+from liverviz.report import SOFA
 
 
 def surface_volume(points, tris):

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from liverviz.report import SOFA
 from surrogate import load_predictor
 from surrogate.__main__ import main
 from surrogate.config import get_config
@@ -20,7 +21,6 @@ from surrogate.train import train_and_evaluate
 from tests.surrogate.conftest import generated_dataset
 
 DATA = os.environ.get("LIVERFEM_TEST_DATASET4")
-SOFA = Path(__file__).parents[3] / "shared" / "data" / "livers" / "sofa_liver.vtk"
 pytestmark = pytest.mark.dataset
 
 
