@@ -36,7 +36,7 @@ MPIRUN := mpirun -n $(NP)
 .PHONY: help setup setup-system setup-solver setup-trainer demo test test-solver test-trainer \
         test-extremes extremes-doc \
         dataset train population table4 bench bench-solver bench-throughput bench-inference \
-        bench-population truth evaluate patient scene4-real bench-patient tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
+        bench-population truth evaluate patient liver scene4-real bench-patient tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
         bench-viewer docs-manipulator viewer \
         clean lock-trainer
 
@@ -52,6 +52,7 @@ help:
 	@echo "make truth RUN=... LIVER=... SCENE=... OUT=...   FE truth of a liver a model never saw"
 	@echo "make evaluate RUN=... DATA=... [LIVER=...]   a model against a dataset it never saw"
 	@echo "make patient LIVER=... MODEL=... [K=40]   a new patient's own model (docs/patient.md)"
+	@echo "make liver LIVER=... MODEL=... AT=\"X Y Z FX FY FZ\"   a new liver over its own Green's function, seconds"
 	@echo "make tradeoff-fem   FEM speed/accuracy price list -> docs/tradeoff_fem.md (long, resumable)"
 	@echo "make tradeoff-surrogate   surrogate price list + error budget -> docs/ (long, resumable)"
 	@echo "make table4   the paper's Table 4, scenes 1-4 -> docs/table4.md (long, resumable)"
@@ -230,6 +231,24 @@ patient: setup
 	$(TPY) -m surrogate adapt $(MODEL) $(PATIENT)/data --liver $(LIVER) --run $(PATIENT)/run \
 	    --sims $(K) --synthetic $(SYNTHETIC) $(if $(FRAME),--frame $(FRAME)) \
 	    --placement $(PATIENT)/placement.npz $(if $(REST),--rest $(REST)) $(ADAPT)
+
+# A new liver in seconds (surrogate/over_green.py): MODEL, a population model of what each
+# liver's linear response misses (config population_green), placed on the liver file LIVER;
+# the liver meshed as the population's livers were and fixed where the placement puts the
+# template's fixed region (truth-scene), its small-strain Green's function from one
+# factorisation (fem_sim linear --green), and predict-liver --base on its own mesh with the
+# force AT = "X Y Z FX FY FZ" (mm, N; the liver file's frame). No FE simulation, no training.
+AT ?=
+LIVER_DIR ?= runs/liver/$(basename $(notdir $(LIVER)))
+liver: setup
+	@test -n "$(LIVER)" -a -n "$(MODEL)" -a -n "$(AT)" || { echo "make liver: LIVER=file MODEL=run AT=\"X Y Z FX FY FZ\" [PSCENE=scene] [FRAME=...] [LIVER_DIR=dir]"; exit 2; }
+	$(TPY) -m surrogate truth-scene $(MODEL) $(LIVER) --scene $(PSCENE) --sims 1 \
+	    $(if $(FRAME),--frame $(FRAME)) --out $(LIVER_DIR)/scene.toml \
+	    --placement $(LIVER_DIR)/placement.npz
+	$(SPY) -m fem_sim linear $(LIVER_DIR)/scene.toml --out $(LIVER_DIR)/data --green
+	$(TPY) -m surrogate predict-liver $(MODEL) $(LIVER) --base $(LIVER_DIR)/data \
+	    --placement $(LIVER_DIR)/placement.npz $(if $(FRAME),--frame $(FRAME)) \
+	    --force $(AT) --out $(LIVER_DIR)/prediction
 
 # Scene 4 on real livers (long, resumable): both designs cross-validated by liver, the livers
 # never seen against FE -> docs/scene4_real.md (then make table4 T4=--report-only puts its

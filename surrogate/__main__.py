@@ -74,6 +74,12 @@ def _add_predict_liver(sub) -> None:
                    "own, range, radius, hull or outside (docs/shape_rule.md); default: the "
                    "design's")
     p.add_argument("--no-picture", action="store_true", help="no PNG (no OpenGL needed)")
+    p.add_argument("--base", metavar="DATA",
+                   help="the liver's own mesh and small-strain Green's function (fem_sim "
+                   "linear --green on its truth-scene, as make liver runs it): the whole field "
+                   "on that mesh, of a model of the rest over it (config population_green)")
+    p.add_argument("--placement", help="with --base: the placement file truth-scene "
+                   "--placement wrote (read when it holds this liver, frame and model)")
 
 
 def _add_evaluate(sub) -> None:
@@ -141,6 +147,10 @@ def _fail(command: str, message: str) -> int:
 
 
 def _predict_liver(args) -> int:
+    if args.base and (not args.force or args.no_center):
+        return _fail("predict-liver", "--base needs --force (the manipulator shows the placed "
+                     "population model, without --base) and a centred placement (no "
+                     "--no-center: the liver's mesh is placed as truth-scene placed it)")
     if not args.force:  # no force given: the manipulator opens on the placed liver
         from surrogate.viewer import main as viewer
 

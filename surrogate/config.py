@@ -105,6 +105,11 @@ CONFIGS = {
 # population basis learns only what the base misses (the stiffening beyond second order), and
 # a prediction adds the base of the liver's own mesh (docs/scene4_real.md).
 CONFIGS["population_linear"] = {**CONFIGS["population_basis"], "linear_base": 2}
+# The same over each liver's linear response alone (order 1): linear in the force, so the
+# liver's Green's function (fem_sim linear --green: one factorisation) gives the base of any
+# nodal load at run time, and a new liver gets whole fields without an FE simulation or a
+# training (make liver, surrogate/over_green.py; docs/scene4_real.md).
+CONFIGS["population_green"] = {**CONFIGS["population_basis"], "linear_base": 1}
 
 
 # key -> (check, what is expected): every value is checked before training starts.

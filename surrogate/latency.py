@@ -149,3 +149,31 @@ def timed_placed(pred, placement, n_nodes: int, calls: int) -> float:
             placed(g, at)
             times.append(time.perf_counter() - t)
     return 1e3 * float(np.median(times[5:]))
+
+
+def timed_over_green(pred, data, placement, n_nodes: int, calls: int) -> dict:
+    """Median ms per call of :class:`surrogate.over_green.OverGreen` (the rest model ``pred``
+    placed on the liver of ``data`` over its Green's function): at the mesh's own nodes
+    (``ms_own``, their count ``nodes``) and at ``n_nodes`` points drawn inside its
+    tetrahedra (``ms_big``: a finer mesh to show); the same load node every call, the force
+    changing.
+    """
+    from surrogate.over_green import OverGreen
+
+    model = OverGreen(pred, data, placement)
+    g = model.geometry
+    rng = np.random.default_rng(0)
+    cells = g.cells[rng.integers(0, g.cells.shape[0], n_nodes)]
+    points = np.einsum("nk,nkd->nd", rng.dirichlet(np.ones(4), n_nodes), g.points[cells])
+    big = OverGreen(pred, data, placement, nodes=points)
+    at = model.green_nodes[:1]
+    out = {"nodes": int(model.output_nodes.size)}
+    for key, m in (("ms_own", model), ("ms_big", big)):
+        times = []
+        for i in range(calls + 5):
+            f = np.array([[0.0, 0.0, -0.4 * (1.0 - 1e-4 * (i % 100))]])
+            t = time.perf_counter()
+            m(f, at)
+            times.append(time.perf_counter() - t)
+        out[key] = 1e3 * float(np.median(times[5:]))
+    return out

@@ -457,8 +457,18 @@ def main(args) -> int:
           file=sys.stderr, flush=True)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # reported below, once
-        pred = predict_liver(predictor, points, triangles, spec[:, 3:], at=asked,
-                             center=not args.no_center, frame=args.frame, shape=args.shape)
+        if args.base:   # the liver's own mesh and Green's function (make liver)
+            from surrogate.over_green import predict_over_green
+
+            try:
+                pred = predict_over_green(predictor, args.base, args.liver, spec[:, 3:], asked,
+                                          frame=args.frame, saved=args.placement,
+                                          shape=args.shape)[0]
+            except (OSError, ValueError) as exc:
+                return fail(f"--base {args.base}: {exc}")
+        else:
+            pred = predict_liver(predictor, points, triangles, spec[:, 3:], at=asked,
+                                 center=not args.no_center, frame=args.frame, shape=args.shape)
     pred.warnings = said + pred.warnings
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

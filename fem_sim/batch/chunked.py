@@ -85,7 +85,8 @@ def linear_bases(data: str | Path, *, ranks: int = 2, order: int = 2,
     """The small-strain bases of a dataset from any environment (``fem_sim linear`` in the
     solver's): of every liver of the population dataset ``data`` on ``ranks`` ranks (each
     liver's file skipped when whole), or with ``scene``, of the one-liver dataset ``data`` of
-    that scene (``data/linear.h5``, kept when it holds the scene's simulations at ``order``).
+    that scene (``data/linear.h5``, kept when it holds the scene's simulations to ``order``:
+    a file of order 2 serves order 1).
     """
     data = Path(data)
     solver_python = str(solver_python or ROOT / ".venv-solver" / "bin" / "python")
@@ -100,7 +101,7 @@ def linear_bases(data: str | Path, *, ranks: int = 2, order: int = 2,
     path = linear_fields_path(data)
     if path.exists():
         lf, sc = read_linear_fields(path), load_scene(scene)
-        if lf.scene_hash == sc.hash and lf.order == order \
+        if lf.scene_hash == sc.hash and lf.order >= order \
                 and lf.case_index.size >= sc.n_simulations:
             return
     subprocess.run([solver_python, "-m", "fem_sim", "linear", str(scene), "--out", str(data),

@@ -128,7 +128,8 @@ def _liver_shards(data: Path) -> dict:
 
 
 def _liver_file_done(path: Path, shards: list, order: int) -> bool:
-    """Whether ``path`` holds this liver's responses of these simulations at ``order``."""
+    """Whether ``path`` holds this liver's responses of these simulations to ``order`` (a
+    file of order 2 holds the first-order responses too)."""
     from data_spec.linear_fields import read_linear_fields
 
     if not path.exists():
@@ -137,7 +138,7 @@ def _liver_file_done(path: Path, shards: list, order: int) -> bool:
         lf = read_linear_fields(path)
     except (OSError, ValueError, KeyError):
         return False
-    return lf.order == order and set(lf.case_index.tolist()) == {s.sim_index for s in shards}
+    return lf.order >= order and set(lf.case_index.tolist()) == {s.sim_index for s in shards}
 
 
 def _one_liver(data: Path, gid: str, shards: list, order: int) -> Path:

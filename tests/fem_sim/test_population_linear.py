@@ -56,6 +56,8 @@ def test_each_liver_is_linearised_under_its_own_loads(tmp_path):
         np.testing.assert_allclose(lf.displacement[row], small, atol=1e-4 * np.abs(small).max())
         assert np.abs(lf.second_order[row]).max() > 0
     assert population_linear_fields(tmp_path, order=2, progress=False) == []
+    # a file of order 2 holds the first-order responses: order 1 redoes nothing
+    assert population_linear_fields(tmp_path, order=1, progress=False) == []
     scene = write_test_scene(tmp_path, n_simulations=4)
     write_shard(tmp_path, synthetic_shard(livers[1], 3, scene_name=scene.name,
                                           scene_hash=scene.hash))

@@ -1,0 +1,149 @@
+"""A new liver's whole field in seconds: the population model of what each liver's linear
+response misses (config ``population_green``: ``linear_base = 1``) placed on the liver, over
+the liver's own small-strain Green's function.
+
+``fem_sim linear SCENE --out DATA --green`` on the liver's scene (``surrogate truth-scene``:
+the liver meshed as the population's livers were, fixed where the model's placement puts the
+template's fixed region) factorises the tangent of the liver's own mesh at rest once and
+back-solves a unit force at each surface node along each axis. Any nodal force's linear
+response is then green[node] . force (exact in small strain, :class:`LinearPart`), and the
+placed network adds what the Ogden law does beyond it. No FE simulation, no training: what
+``make liver`` builds and ``predict-liver --base DATA`` calls.
+
+A model over a second-order base (``population_linear``) cannot be used so: its base needs a
+solve per load (the second-order term is not linear in the force); ``make patient`` distils
+it instead. numpy and scipy; no dolfinx.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from liverreg.morph import interpolation_matrix
+from surrogate.predictor import LinearPart
+
+
+class OverGreen:
+    """The rest model ``predictor`` placed by ``placement`` on the liver of ``data`` (a
+    one-liver dataset directory holding its mesh, ``geometry/``, and ``linear.h5`` with the
+    Green's function): displacements in mm at the mesh's output nodes, or at the points
+    ``nodes`` (n, 3) mm inside the liver (a finer mesh to show: the linear part interpolated
+    from the mesh's nodes), in the liver's frame, for nodal forces in N at mesh node ids.
+
+        model = OverGreen(load_predictor("RUN/model"), "LIVER/data", placement)
+        at = model.load_nodes([[120.0, 100.0, 190.0]])     # once per grasped point
+        u = model([[0.0, 0.0, -0.4]], at)                   # (n_out, 3) mm, every frame
+    """
+
+    def __init__(self, predictor, data, placement, shape: str | None = None, nodes=None):
+        from data_spec import read_geometry
+        from data_spec.linear_fields import linear_fields_path, read_linear_fields
+        from data_spec.shards import geometry_path
+        from surrogate.predict_liver import PlacedModel
+
+        path = linear_fields_path(data)
+        if predictor.linear_base != 1:
+            raise ValueError(
+                "the model is not one of the rest over a liver's linear response (config "
+                f"linear_base = {predictor.linear_base}, 1 expected: population_green); "
+                + ("a second-order base needs a solve per load: make patient distils it"
+                   if predictor.linear_base else "predict-liver places it without a base"))
+        if not path.exists():
+            raise ValueError(f"{path}: missing; run `fem_sim linear {Path(data) / 'scene.toml'}"
+                             f" --out {data} --green` (make liver does)")
+        lf = read_linear_fields(path)
+        if lf.green is None:
+            raise ValueError(f"{path}: no Green's function; run fem_sim linear with --green")
+        self.geometry = g = read_geometry(geometry_path(data, lf.geometry_id))
+        self.output_nodes = np.asarray(lf.output_nodes)
+        self.green_nodes = np.asarray(lf.green_nodes)
+        self.fixed_nodes = np.setdiff1d(g.surface_nodes, self.green_nodes)
+        at = g.points[self.output_nodes] if nodes is None else np.asarray(nodes, np.float64)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")   # the placement's warnings are said by place()
+            self.placed = PlacedModel(predictor, nodes=at, placement=placement, shape=shape)
+        self.linear = LinearPart(self.green_nodes, lf.green, g.points, self.output_nodes)
+        self._to_nodes = None if nodes is None else \
+            interpolation_matrix(g.points[self.output_nodes], at).tocsr()
+        self._template_of: dict[bytes, np.ndarray] = {}
+
+    @property
+    def points(self) -> np.ndarray:
+        """(n, 3) mm: the liver's mesh nodes (its frame)."""
+        return self.geometry.points
+
+    def load_nodes(self, at) -> np.ndarray:
+        """Mesh node ids under the points ``at`` (..., 3) mm: the nearest surface nodes off
+        the fixed region (where the Green's function has a unit response).
+        """
+        from scipy.spatial import cKDTree
+
+        at = np.asarray(at, dtype=np.float64)
+        ids = cKDTree(self.points[self.green_nodes]).query(at.reshape(-1, 3))[1]
+        return self.green_nodes[ids].reshape(at.shape[:-1])
+
+    def _template_nodes(self, load_nodes: np.ndarray) -> np.ndarray:
+        """The registered template's surface nodes under the mesh nodes ``load_nodes``, kept
+        per node set (a pull at the same point every frame looks them up once).
+        """
+        key = load_nodes.tobytes() + str(load_nodes.shape).encode()
+        if key not in self._template_of:
+            self._template_of[key] = self.placed.load_nodes(self.points[load_nodes])
+        return self._template_of[key]
+
+    def __call__(self, forces, load_nodes) -> np.ndarray:
+        """(n_out, 3), or (n_cases, n_out, 3) for forces (n_cases, n_loads, 3), mm: the
+        linear response of the liver's own mesh plus the placed network's rest.
+        """
+        forces = np.asarray(forces, dtype=np.float64)
+        load_nodes = np.asarray(load_nodes, dtype=np.int64)
+        single = forces.ndim == 2
+        f, n = (forces[None], load_nodes.reshape(1, -1)) if single else \
+            (forces, load_nodes.reshape(forces.shape[0], -1))
+        if f.ndim != 3 or f.shape[2] != 3 or n.shape != f.shape[:2]:
+            raise ValueError(f"forces (n_loads, 3) or (n_cases, n_loads, 3) with load_nodes of "
+                             f"their first dimensions, got {forces.shape} and "
+                             f"{load_nodes.shape}")
+        if n.size and (n.min() < 0 or n.max() >= self.points.shape[0]):
+            raise ValueError(f"load_nodes: expected mesh node ids in [0, {self.points.shape[0]})")
+        u = self.linear(f, n)
+        if self._to_nodes is not None:   # all cases in one sparse product
+            k = u.shape[0]
+            u = (self._to_nodes @ u.transpose(1, 0, 2).reshape(u.shape[1], -1))
+            u = u.reshape(-1, k, 3).transpose(1, 0, 2)
+        u = u + self.placed(f, self._template_nodes(n), rest=True)
+        return u[0] if single else u
+
+
+def predict_over_green(predictor, data, liver, forces, at, *, frame: str | None = None,
+                       saved=None, shape: str | None = None):
+    """predict-liver over the liver's own Green's function: (the
+    :class:`~surrogate.predict_liver.LiverPrediction` on the liver's own mesh, the model).
+    ``forces`` (n_loads, 3) N act at the mesh's surface nodes nearest to ``at`` (n_loads, 3)
+    mm, both in the liver file's frame; the placement is ``surrogate.evaluate.place``'s
+    (``saved``: the file truth-scene --placement wrote, read when it holds this liver).
+    """
+    from surrogate.evaluate import place
+    from surrogate.predict_liver import LiverPrediction
+
+    placement, found = place(predictor, liver, frame, saved)
+    model = OverGreen(predictor, data, placement, shape)
+    g = model.geometry
+    if model.output_nodes.size != g.n_nodes:
+        raise ValueError(f"{data}: its scene predicts {model.output_nodes.size} of the mesh's "
+                         f"{g.n_nodes} nodes; predict-liver writes the whole liver (a scene "
+                         "with [output] nodes = \"all\", as truth-scene writes it)")
+    forces = np.asarray(forces, dtype=np.float64).reshape(-1, 3)
+    nodes = model.load_nodes(np.asarray(at, dtype=np.float64).reshape(-1, 3))
+    u = np.zeros_like(g.points)
+    u[model.output_nodes] = model(forces, nodes)
+    return LiverPrediction(
+        points=g.points, cells=g.cells, triangles=g.surface_triangles,
+        fixed_nodes=model.fixed_nodes, displacement=u, load_nodes=nodes, forces=forces,
+        coefficients=placement.coefficients, shape_told=model.placed.shape_told,
+        shape_rule=model.placed.shape_rule, residual=placement.residual,
+        offset=placement.offset, rotation=placement.rotation, frame=placement.frame,
+        inverted=placement.inverted, warnings=found), model

@@ -1,0 +1,132 @@
+"""A new liver over its own Green's function (``make liver``, :mod:`surrogate.over_green`):
+make test's patient liver (Amos-004, outside the three-liver population) with its Green's
+function from ``make patient``'s ``fem_sim linear --green``, and a population model of the
+rest over each liver's linear response trained on the three livers."""
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from surrogate import load_predictor
+from surrogate.data import load_dataset
+from surrogate.patient import field_mee, sample_fields, sims_samples
+from tests.surrogate.conftest import generated_dataset
+
+pytestmark = pytest.mark.dataset
+
+
+@pytest.fixture(scope="module")
+def patient():
+    """(patient directory, its adaptation.json, the three-liver population's rest model)."""
+    import os
+    import tempfile
+
+    from surrogate.config import get_config
+    from surrogate.train import train_and_evaluate
+
+    d = Path(generated_dataset("LIVERFEM_TEST_PATIENT"))
+    livers = os.environ.get("LIVERFEM_TEST_LIVERS")
+    assert livers, "LIVERFEM_TEST_LIVERS not set: make test sets it"
+    run = Path(tempfile.mkdtemp()) / "green"
+    train_and_evaluate(livers, run, get_config(
+        "population_green", folds=3, evaluate_folds=1, epochs=40, hidden=[64, 64],
+        ensemble=1, modes=16), log_fn=lambda m: None)
+    return d, json.loads((d / "run" / "adaptation.json").read_text()), run
+
+
+def _placed(pred, d, info):
+    from surrogate.evaluate import place
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return place(pred, info["liver"], None, d / "placement.npz")[0]
+
+
+def test_the_greens_function_gives_each_loads_own_linear_solve_and_the_rest_is_added(patient):
+    """The linear part of each FE simulation's load, contracted from the unit responses, is
+    the response fem_sim linear solved for that load itself (another right-hand side of the
+    same factorisation: they agree to the solves' tolerance, 1e-6 relative), and the model's
+    field is that response plus the placed network's rest, to float32."""
+    from surrogate.linear_base import LinearBase
+    from surrogate.over_green import OverGreen
+
+    d, info, run = patient
+    rest = load_predictor(run / "model")
+    model = OverGreen(rest, d / "data", _placed(rest, d, info))
+    ds = load_dataset(d / "data")
+    lb = LinearBase(ds)
+    sims = np.unique(ds.sample_sim)
+    rows = lb.lf.rows(sims)
+    forces, nodes = lb.lf.forces[rows], lb.lf.load_nodes[rows]
+    solved = lb.lf.displacement[rows][:, lb.columns].astype(np.float64)
+    green = model.linear(forces, nodes)[:, np.searchsorted(model.output_nodes, ds.out_nodes[0])]
+    scale = np.abs(solved).max()
+    assert np.abs(green - solved).max() < 1e-4 * scale, np.abs(green - solved).max() / scale
+    u = model(forces, nodes)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        placed = model.placed(forces, model.placed.load_nodes(model.points[nodes]), rest=True)
+    assert np.abs(placed).max() > 0
+    np.testing.assert_allclose(u, model.linear(forces, nodes) + placed, rtol=0,
+                               atol=1e-5 * np.abs(u).max())
+
+
+def test_a_new_liver_over_its_greens_function_beats_the_placed_population_model(patient,
+                                                                                tmp_path):
+    """On the patient's FE simulations (none trained on), the model over the liver's own
+    Green's function is far closer to FE than the population basis placed alone, and the
+    command writes the whole liver with the model's field at the load."""
+    from surrogate.__main__ import main
+    from surrogate.over_green import OverGreen
+    from surrogate.predict_liver import PlacedModel
+
+    d, info, run = patient
+    rest, population = load_predictor(run / "model"), load_predictor(info["population_model"])
+    ds = load_dataset(d / "data")
+    smp = sims_samples(ds, np.unique(ds.sample_sim))
+    true = sample_fields(ds, smp)
+    out = np.asarray(ds.out_nodes[0])
+    model = OverGreen(rest, d / "data", _placed(rest, d, info))
+    ours = model(ds.forces[smp], ds.load_nodes[smp])[:, np.searchsorted(model.output_nodes,
+                                                                          out)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        placed = PlacedModel(population, nodes=ds.points[0],
+                             placement=_placed(population, d, info))
+        alone = placed(ds.forces[smp], placed.load_nodes(ds.load_points[smp]))[:, out]
+    print(f"MEE over the Green's function {field_mee(ours, true):.3f} mm, population model "
+          f"alone {field_mee(alone, true):.3f} mm")
+    assert field_mee(ours, true) < 0.5 * field_mee(alone, true)
+    s = smp[-1]   # a simulation's last load step through the command
+    at, f = ds.load_points[s, 0], ds.forces[s, 0]
+    o = tmp_path / "prediction"
+    assert main(["predict-liver", str(run), info["liver"], "--base", str(d / "data"),
+                 "--placement", str(d / "placement.npz"), "--force", *map(str, at),
+                 *map(str, f), "--out", str(o), "--no-picture"]) == 0
+    summary = json.loads((o / "prediction.json").read_text())
+    assert summary["load_nodes"] == [int(ds.load_nodes[s, 0])]
+    assert np.isclose(summary["max_displacement_mm"],
+                      np.linalg.norm(model(f[None], ds.load_nodes[s]), axis=1).max(), rtol=1e-5)
+    assert (o / "liver_deformed.vtu").exists()
+
+
+def test_a_model_without_a_linear_rest_is_refused_naming_what_to_run(patient, capsys,
+                                                                     tmp_path):
+    """Models over no base or a second-order one cannot use the Green's function alone: each
+    refused with what to do instead; a dataset without the function names fem_sim linear."""
+    from surrogate.__main__ import main
+    from surrogate.over_green import OverGreen
+
+    d, info, run = patient
+    population = load_predictor(info["population_model"])
+    with pytest.raises(ValueError, match="predict-liver places it without a base"):
+        OverGreen(population, d / "data", _placed(population, d, info))
+    rest = load_predictor(run / "model")
+    with pytest.raises(ValueError, match="linear.h5: missing; run `fem_sim linear"):
+        OverGreen(rest, d, _placed(rest, d, info))
+    assert main(["predict-liver", str(run), info["liver"], "--base", str(d / "data"),
+                 "--out", str(tmp_path / "nothing")]) == 2
+    assert "--base needs --force" in capsys.readouterr().err
