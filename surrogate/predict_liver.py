@@ -420,6 +420,10 @@ def _checked_request(args, fail):
         return fail(f"--out: {exc}" if isinstance(exc, OSError) else exc)
     if predictor.shape_model is None:
         return fail(f"{args.run}: {_no_population(predictor)}")
+    if predictor.linear_base and not args.base:
+        from surrogate.predictor import LINEAR_BASE_ONLY
+
+        return fail(f"{args.run}: {LINEAR_BASE_ONLY.format(predictor.linear_base)}")
     L = predictor.spec.n_loads
     if len(args.force) != L:
         return fail(f"--force: the model takes {L} force(s), got {len(args.force)} (each "

@@ -62,8 +62,10 @@ def check_load_nodes(load_nodes, loadable) -> None:
 LINEAR_BASE_ONLY = (
     "this model predicts what a liver's small-strain base misses (config linear_base = {}), "
     "not a whole field: a whole field needs the base of the liver's own mesh (fem_sim linear) "
-    "added to it (call with rest=True), which `make patient LIVER=... MODEL=<this run> K=0` "
-    "does for a new liver")
+    "added to it (call with rest=True), which `make liver LIVER=... MODEL=<this run> AT=...` "
+    "does for a new liver over its linear response (linear_base = 1: "
+    "surrogate.over_green.OverGreen) and `make patient LIVER=... MODEL=<this run> K=0` over "
+    "the second-order one")
 
 
 class Predictor:

@@ -116,7 +116,8 @@ def test_a_new_liver_over_its_greens_function_beats_the_placed_population_model(
 def test_a_model_without_a_linear_rest_is_refused_naming_what_to_run(patient, capsys,
                                                                      tmp_path):
     """Models over no base or a second-order one cannot use the Green's function alone: each
-    refused with what to do instead; a dataset without the function names fem_sim linear."""
+    refused with what to do instead; a dataset without the function names fem_sim linear,
+    and predict-liver of the rest model without --base names make liver."""
     from surrogate.__main__ import main
     from surrogate.over_green import OverGreen
 
@@ -130,3 +131,6 @@ def test_a_model_without_a_linear_rest_is_refused_naming_what_to_run(patient, ca
     assert main(["predict-liver", str(run), info["liver"], "--base", str(d / "data"),
                  "--out", str(tmp_path / "nothing")]) == 2
     assert "--base needs --force" in capsys.readouterr().err
+    assert main(["predict-liver", str(run), info["liver"], "--force", "0", "0", "0", "0", "0",
+                 "-0.4", "--out", str(tmp_path / "nothing"), "--no-picture"]) == 2
+    assert "make liver LIVER=... MODEL=<this run>" in capsys.readouterr().err
