@@ -129,7 +129,8 @@ def _liver_shards(data: Path) -> dict:
 
 def _liver_file_done(path: Path, shards: list, order: int) -> bool:
     """Whether ``path`` holds this liver's responses of these simulations to ``order`` (a
-    file of order 2 holds the first-order responses too)."""
+    file of order 2 holds the first-order responses too).
+    """
     from data_spec.linear_fields import read_linear_fields
 
     if not path.exists():
