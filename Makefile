@@ -236,8 +236,9 @@ patient: setup
 # liver's linear response misses (config population_green), placed on the liver file LIVER;
 # the liver meshed as the population's livers were and fixed where the placement puts the
 # template's fixed region (truth-scene), its small-strain Green's function from one
-# factorisation (fem_sim linear --green), and predict-liver --base on its own mesh with the
-# force AT = "X Y Z FX FY FZ" (mm, N; the liver file's frame). No FE simulation, no training.
+# factorisation (fem_sim linear --green, one process: the factorisation's threads take the
+# cores), and predict-liver --base on its own mesh with the force AT = "X Y Z FX FY FZ" (mm,
+# N; the liver file's frame). No FE simulation, no training.
 AT ?=
 LIVER_DIR ?= runs/liver/$(basename $(notdir $(LIVER)))
 liver: setup
@@ -245,14 +246,16 @@ liver: setup
 	$(TPY) -m surrogate truth-scene $(MODEL) $(LIVER) --scene $(PSCENE) --sims 1 \
 	    $(if $(FRAME),--frame $(FRAME)) --out $(LIVER_DIR)/scene.toml \
 	    --placement $(LIVER_DIR)/placement.npz
-	$(SPY) -m fem_sim linear $(LIVER_DIR)/scene.toml --out $(LIVER_DIR)/data --green
+	env -u OMP_NUM_THREADS -u OPENBLAS_NUM_THREADS \
+	    $(SPY) -m fem_sim linear $(LIVER_DIR)/scene.toml --out $(LIVER_DIR)/data --green
 	$(TPY) -m surrogate predict-liver $(MODEL) $(LIVER) --base $(LIVER_DIR)/data \
 	    --placement $(LIVER_DIR)/placement.npz $(if $(FRAME),--frame $(FRAME)) \
 	    --force $(AT) --out $(LIVER_DIR)/prediction
 
-# Scene 4 on real livers (long, resumable): both designs cross-validated by liver, the livers
-# never seen against FE -> docs/scene4_real.md (then make table4 T4=--report-only puts its
-# rows into docs/table4.md); a new patient against K with its model -> docs/patient.md.
+# Scene 4 on real livers (long, resumable): the designs cross-validated by liver, the livers
+# never seen against FE (and make liver timed on each) -> docs/scene4_real.md (then make
+# table4 T4=--report-only puts its rows into docs/table4.md); a new patient against K with
+# its model -> docs/patient.md.
 scene4-real: setup
 	$(TPY) bench/scene4_real.py --np $(NP)
 
