@@ -695,8 +695,9 @@ def real_liver_rows(path: Path) -> tuple[list[str], list[str]]:
             + (f" {' and '.join(f'`{c}`' for c in rests)} learn what each liver's small-"
                "strain base misses (the base of the liver's own mesh, `fem_sim linear`, added "
                "to its field): over the linear response a new liver's model is its Green's "
-               "function from one factorisation (make liver: seconds, no FE simulation); over "
-               "the second-order term a patient model (make patient: minutes)."
+               "function from one factorisation (make liver: no FE simulation, no training; its "
+               "seconds in docs/scene4_real.md); over the second-order term a patient model "
+               "(make patient: minutes)."
                if rests else ""))
     return lines, [note]
 

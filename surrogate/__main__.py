@@ -161,7 +161,15 @@ def _predict_liver(args) -> int:
                       + (["--no-center"] if args.no_center else []))
     from surrogate.predict_liver import main as predict_liver
 
-    return predict_liver(args)
+    over = None
+    if args.base:   # the liver's own mesh and Green's function (make liver)
+        from surrogate.over_green import predict_over_green
+
+        def over(predictor, forces, at):
+            return predict_over_green(predictor, args.base, args.liver, forces, at,
+                                      frame=args.frame, saved=args.placement,
+                                      shape=args.shape)[0]
+    return predict_liver(args, over)
 
 
 def _train_config(args, scene):

@@ -444,8 +444,11 @@ def _checked_request(args, fail):
     return predictor, spec, points, triangles, said
 
 
-def main(args) -> int:
-    """The ``predict-liver`` subcommand (arguments parsed by surrogate.__main__)."""
+def main(args, over=None) -> int:
+    """The ``predict-liver`` subcommand (arguments parsed by surrogate.__main__); ``over``:
+    the prediction over the liver's own base, ``over(predictor, forces, at)`` -> its
+    :class:`LiverPrediction` (``--base``: :func:`surrogate.over_green.predict_over_green`).
+    """
     import sys
 
     def fail(msg):
@@ -461,13 +464,9 @@ def main(args) -> int:
           file=sys.stderr, flush=True)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # reported below, once
-        if args.base:   # the liver's own mesh and Green's function (make liver)
-            from surrogate.over_green import predict_over_green
-
+        if over is not None:   # the liver's own mesh and Green's function (make liver)
             try:
-                pred = predict_over_green(predictor, args.base, args.liver, spec[:, 3:], asked,
-                                          frame=args.frame, saved=args.placement,
-                                          shape=args.shape)[0]
+                pred = over(predictor, spec[:, 3:], asked)
             except (OSError, ValueError) as exc:
                 return fail(f"--base {args.base}: {exc}")
         else:
