@@ -95,8 +95,9 @@ class OverGreen:
         return self._template_of[key]
 
     def __call__(self, forces, load_nodes) -> np.ndarray:
-        """(n_out, 3), or (n_cases, n_out, 3) for forces (n_cases, n_loads, 3), mm: the
-        linear response of the liver's own mesh plus the placed network's rest.
+        """(n, 3), or (n_cases, n, 3) for forces (n_cases, n_loads, 3), mm at the output
+        nodes (or the ``nodes`` given): the linear response of the liver's own mesh plus the
+        placed network's rest.
         """
         forces = np.asarray(forces, dtype=np.float64)
         load_nodes = np.asarray(load_nodes, dtype=np.int64)
