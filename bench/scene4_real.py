@@ -109,7 +109,8 @@ def every_fold(data: Path, a) -> list[dict]:
 
 def _kept(rows: list[dict], old: dict) -> list[dict]:
     """Rows of the previous report, each marked with the commit that measured it (a design
-    not trained again: ``--designs`` leaves it out)."""
+    not trained again, a liver whose file is not here); a row already marked keeps its
+    mark."""
     commit_was = old.get("written", {}).get("commit", "unknown")
     return [{"kept_from": commit_was, **d} for d in rows]
 
@@ -213,16 +214,11 @@ def kept_rows(old: dict, now: dict) -> list[dict]:
     design = {d["config"]: d["metrics"]["skill"] for d in old.get("designs", [])}
     same = abs(design.get("population_basis", -1.0)
                - now["designs"][0]["metrics"]["skill"]) < 1e-9
-    rows = [dict(u) for u in old.get("unseen", []) if u["liver"] not in here]
+    rows = _kept([u for u in old.get("unseen", []) if u["liver"] not in here], old)
     if rows and not same:
         print(f"[unseen] {', '.join(u['liver'] for u in rows)}: not on this machine and the "
               "population basis changed: left out", flush=True)
         return []
-    for u in rows:
-        u.setdefault("kept_from", old.get("written", {}).get("commit", "unknown"))
-        if "over_base" in u:   # the one rest design of an older report: the order-2 base's
-            u["over"] = {"population_linear": {"order": 2, "over_base": u.pop("over_base"),
-                                               "base_alone": u.pop("base_alone")}}
     return rows
 
 
