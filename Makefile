@@ -36,7 +36,7 @@ MPIRUN := mpirun -n $(NP)
 .PHONY: help setup setup-system setup-solver setup-trainer demo test test-solver test-trainer \
         test-extremes extremes-doc \
         dataset train population table4 bench bench-solver bench-throughput bench-inference \
-        bench-population truth evaluate patient liver scene4-real bench-patient tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
+        bench-population truth evaluate patient patient-args liver liver-args scene4-real bench-patient tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
         bench-viewer docs-manipulator viewer \
         clean lock-trainer
 
@@ -219,8 +219,11 @@ SYNTHETIC ?= 600
 ORDER ?= 2
 GREEN ?= 1
 PATIENT ?= runs/patient/$(basename $(notdir $(LIVER)))
-patient: setup
-	@test -n "$(LIVER)" -a -n "$(MODEL)" || { echo "make patient: LIVER=file MODEL=run [K=40] [PSCENE=scene] [PATIENT=dir]"; exit 2; }
+patient-args:
+	@$(SYS_PY) scripts/make_args.py patient LIVER="$(LIVER)" MODEL="$(MODEL)" K="$(K)" \
+	    HELD="$(HELD)" SYNTHETIC="$(SYNTHETIC)" ORDER="$(ORDER)" GREEN="$(GREEN)" \
+	    PSCENE="$(PSCENE)" FRAME="$(FRAME)"
+patient: patient-args setup
 	$(TPY) -m surrogate truth-scene $(MODEL) $(LIVER) --scene $(PSCENE) \
 	    --sims $$(($(K) + $(HELD) > 0 ? $(K) + $(HELD) : 1)) \
 	    $(if $(FRAME),--frame $(FRAME)) --out $(PATIENT)/scene.toml \
@@ -241,8 +244,10 @@ patient: setup
 # N; the liver file's frame). No FE simulation, no training.
 AT ?=
 LIVER_DIR ?= runs/liver/$(basename $(notdir $(LIVER)))
-liver: setup
-	@test -n "$(LIVER)" -a -n "$(MODEL)" -a -n "$(AT)" || { echo "make liver: LIVER=file MODEL=run AT=\"X Y Z FX FY FZ\" [PSCENE=scene] [FRAME=...] [LIVER_DIR=dir]"; exit 2; }
+liver-args:
+	@$(SYS_PY) scripts/make_args.py liver LIVER="$(LIVER)" MODEL="$(MODEL)" AT="$(AT)" \
+	    PSCENE="$(PSCENE)" FRAME="$(FRAME)"
+liver: liver-args setup
 	$(TPY) -m surrogate truth-scene $(MODEL) $(LIVER) --scene $(PSCENE) --sims 1 \
 	    $(if $(FRAME),--frame $(FRAME)) --out $(LIVER_DIR)/scene.toml \
 	    --placement $(LIVER_DIR)/placement.npz

@@ -45,6 +45,28 @@ def check_writable(directory: str | Path) -> None:
         raise OSError(f"{d}: cannot create files there ({exc.strerror or exc})") from None
 
 
+def out_problem(path: str | Path, flag: str = "--out", directory: bool = False) -> str | None:
+    """Why ``path`` cannot be written as a file (``directory``: made as a directory), None
+    when it can: checked before any work and creating nothing (a probe file in the nearest
+    existing ancestor, removed). The message names ``flag`` and what was expected.
+    """
+    path = Path(path)
+    want = "a directory (created if missing)" if directory else "a file to write"
+    if path.exists() and path.is_dir() != directory:
+        return f"{flag} {path} is {'a file' if directory else 'a directory'}; expected {want}"
+    parent = next(p for p in [path if directory else path.parent, *path.absolute().parents]
+                  if p.exists())
+    if not parent.is_dir():
+        return f"{flag} {path}: {parent} is a file, not a directory; expected {want}"
+    probe = parent / f".write-probe{TMP_MARK}{os.getpid()}"
+    try:
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        return f"{flag} {path}: cannot create files in {parent} ({exc.strerror or exc})"
+    return None
+
+
 def write_text_atomic(final: str | Path, text: str) -> None:
     with atomic_path(final) as tmp:
         tmp.write_text(text)

@@ -72,7 +72,28 @@ def wrong_environment(command: str) -> str | None:
             "liverfem-surrogate")
 
 
+def _mesh_parser(sub) -> None:
+    from data_spec.checks import positive_number, scale_factor
+
+    me = sub.add_parser("mesh", help="repair and mesh one liver surface (CT segmentations: "
+                        "holes, crossing triangles, pieces) into a data_spec geometry file, "
+                        "with its repair report and a picture")
+    me.add_argument("liver", help="surface file: .obj .stl .ply .vtk .vtp")
+    me.add_argument("--mesh-size", type=positive_number, required=True, metavar="H",
+                    help="mm")
+    me.add_argument("--out", required=True, help="geometry file to write (.h5)")
+    me.add_argument("--scale-to-mm", type=scale_factor, default=1.0,
+                    help="multiply the file's coordinates by this (1000 for metres; > 0: a "
+                    "negative scale would mirror the liver)")
+    me.add_argument("--keep-largest", action="store_true",
+                    help="keep the largest piece of a file holding several large ones (by "
+                    "default refused: two livers, or a liver in parts)")
+    me.add_argument("--no-picture", action="store_true")
+
+
 def _parser() -> argparse.ArgumentParser:
+    from data_spec.checks import count, positive_number
+
     parser = argparse.ArgumentParser(prog="python3 -m fem_sim", epilog=EPILOG,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -99,17 +120,9 @@ def _parser() -> argparse.ArgumentParser:
     ph.add_argument("--spread", type=float, default=1.0, metavar="S",
                     help="an anatomical phantom's shape ranges widened by S about their "
                          "centres (default 1: the population's)")
-    ph.add_argument("--mesh-size", type=float, default=16.0, metavar="H",
+    ph.add_argument("--mesh-size", type=positive_number, default=16.0, metavar="H",
                     help="target edge length, mm (default 16, the shipped scenes')")
-    me = sub.add_parser("mesh", help="repair and mesh one liver surface (CT segmentations: "
-                        "holes, crossing triangles, pieces) into a data_spec geometry file, "
-                        "with its repair report and a picture")
-    me.add_argument("liver", help="surface file: .obj .stl .ply .vtk .vtp")
-    me.add_argument("--mesh-size", type=float, required=True, metavar="H", help="mm")
-    me.add_argument("--out", required=True, help="geometry file to write (.h5)")
-    me.add_argument("--scale-to-mm", type=float, default=1.0,
-                    help="multiply the file's coordinates by this (1000 for metres)")
-    me.add_argument("--no-picture", action="store_true")
+    _mesh_parser(sub)
     li = sub.add_parser("linear", help="small-strain responses of a one-liver scene (its "
                         "liver linearised at u = 0) under its simulations' loads and N drawn "
                         "ones: DIR/linear.h5, what a patient model learns from")
@@ -118,7 +131,7 @@ def _parser() -> argparse.ArgumentParser:
     li.add_argument("--population", metavar="DATA",
                     help="instead: every liver of the population dataset DATA under its own "
                     "simulations' loads, DATA/linear/<geometry id>.h5 (ranks share livers)")
-    li.add_argument("--synthetic", type=int, default=0, metavar="N",
+    li.add_argument("--synthetic", type=count, default=0, metavar="N",
                     help="loads drawn by the scene's rule beside its simulations' (default 0)")
     li.add_argument("--order", type=int, default=1, choices=(1, 2),
                     help="2: each response's second-order term in the load too (default 1)")
@@ -172,7 +185,7 @@ def main(argv: list[str] | None = None) -> int:
         from fem_sim.geometry.mesh_command import run
 
         return run(args.liver, args.mesh_size, args.out, args.scale_to_mm,
-                   picture=not args.no_picture)
+                   picture=not args.no_picture, keep_largest=args.keep_largest)
     from fem_sim.batch.summary import summary
 
     return summary(args.directory, png=args.png)
@@ -208,6 +221,7 @@ def _linear(args) -> int:
 def _phantom(args, parser) -> int:
     from pathlib import Path
 
+    from data_spec.atomic import out_problem
     from data_spec.geometry import write_geometry
     from fem_sim.geometry.errors import GeometryError
     from fem_sim.geometry.phantom import make_phantom
@@ -215,6 +229,8 @@ def _phantom(args, parser) -> int:
     out = Path(args.out)
     if out.suffix not in (".h5", ".hdf5"):
         parser.error(f"--out {out}: expected a .h5 data_spec geometry file")
+    if out_problem(out):
+        parser.error(out_problem(out))
     try:
         g = make_phantom(args.seed, args.mesh_size, args.variety, args.spread)
     except (ValueError, GeometryError) as exc:

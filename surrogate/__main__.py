@@ -217,13 +217,18 @@ def _train(args) -> int:
 
 
 def _truth_scene(args) -> int:
+    from data_spec.atomic import out_problem
     from surrogate.evaluate import truth_scene
     from surrogate.predictor import load_predictor
     from surrogate.viewer import model_dir
 
     out = Path(args.out)
-    if out.is_dir():
-        return _fail("truth-scene", f"--out {out} is a directory; expected a .toml file")
+    why = next(filter(None, [out_problem(out, "--out"), args.placement
+                             and out_problem(args.placement, "--placement")]), None)
+    if why:   # before the registration
+        return _fail("truth-scene", why)
+    if args.sims < 1:
+        return _fail("truth-scene", f"--sims {args.sims}: expected a whole number >= 1")
     try:
         pred = load_predictor(model_dir(Path(args.run)))
         if pred.shape_model is None:

@@ -403,21 +403,16 @@ def _checked_request(args, fail):
     """
     import sys
 
-    from data_spec.atomic import check_writable
+    from data_spec.atomic import out_problem
     from surrogate.predictor import load_predictor
 
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        return fail(f"--out {out} is a file; expected a directory (it is created if missing)")
-    parent = next(p for p in [out, *out.absolute().parents] if p.exists())
+    why = out_problem(args.out, "--out", directory=True)   # nothing created for --out
+    if why:
+        return fail(why)
     try:
-        if parent.is_dir():
-            check_writable(parent)  # a probe file there, removed: nothing created for --out
-        else:
-            raise OSError(f"{parent}: not a directory")
         predictor = load_predictor(Path(args.run) / "model")
     except (OSError, ValueError) as exc:
-        return fail(f"--out: {exc}" if isinstance(exc, OSError) else exc)
+        return fail(exc)
     if predictor.shape_model is None:
         return fail(f"{args.run}: {_no_population(predictor)}")
     if predictor.linear_base and not args.base:

@@ -17,28 +17,32 @@ def _outputs(out: Path) -> tuple[Path, Path]:
 
 
 def run(liver: str, mesh_size: float, out: str, scale_to_mm: float = 1.0,
-        picture: bool = True) -> int:
-    from data_spec.atomic import write_text_atomic
+        picture: bool = True, keep_largest: bool = False) -> int:
+    from data_spec.atomic import out_problem, write_text_atomic
     from data_spec.geometry import write_geometry
     from fem_sim.geometry.errors import GeometryError
     from fem_sim.geometry.repair import edges_of, mesh_liver_surface, read_any_surface
 
     out = Path(out)
-    if out.suffix not in (".h5", ".hdf5"):
-        print(f"liverfem-sim mesh: --out {out}: expected a .h5 data_spec geometry file",
-              file=sys.stderr)
+    report_path, png = _outputs(out)
+    why = (f"--out {out}: expected a .h5 data_spec geometry file"
+           if out.suffix not in (".h5", ".hdf5") else
+           next(filter(None, (out_problem(p) for p in (out, report_path, png))), None))
+    if why:   # before any work: a bad --out is not found after the meshing
+        print(f"liverfem-sim mesh: {why}", file=sys.stderr)
         return 2
     try:
         points, tris = read_any_surface(liver)
-        g, report = mesh_liver_surface(points, tris, mesh_size, str(liver), scale_to_mm)
+        g, report = mesh_liver_surface(points, tris, mesh_size, str(liver), scale_to_mm,
+                                       keep_largest=keep_largest)
     except (GeometryError, ValueError) as exc:
         print(f"liverfem-sim mesh: {exc}", file=sys.stderr)
         return 2
-    out.parent.mkdir(parents=True, exist_ok=True)
     write_geometry(out, g)
-    report_path, png = _outputs(out)
     write_text_atomic(report_path, json.dumps(report.to_dict(), indent=1))
     print(report.summary())
+    for msg in report.warnings:
+        print(f"warning: {msg}", file=sys.stderr)
     if picture:
         from fem_sim.geometry.quality import dihedral_angles
         from liverviz.repair_picture import repair_picture

@@ -90,10 +90,11 @@ def enclosed_volume(points, tris) -> float:
     return float(np.einsum("ij,ij->", x[:, 0], np.cross(x[:, 1], x[:, 2])) / 6.0)
 
 
-def largest_piece(points, tris, drop_flat: bool = False) -> tuple[np.ndarray, np.ndarray, list]:
-    """(points, triangles, triangles of each dropped piece): duplicate vertices merged,
-    degenerate triangles dropped (``drop_flat``: also those of near-zero area), the largest
-    connected piece kept and renumbered.
+def split_pieces(points, tris, drop_flat: bool = False,
+                 source: str = "surface") -> list[tuple[np.ndarray, np.ndarray]]:
+    """Every connected piece (points, triangles renumbered), the most triangles first:
+    duplicate vertices merged, degenerate triangles dropped (``drop_flat``: also those of
+    near-zero area); GeometryError naming ``source`` when no triangle is left.
     """
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
@@ -105,28 +106,82 @@ def largest_piece(points, tris, drop_flat: bool = False) -> tuple[np.ndarray, np
     tris = inv[tris]
     tris = tris[(tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2])
                 & (tris[:, 0] != tris[:, 2])]
-    if drop_flat:
+    if drop_flat and len(tris):
         a = np.linalg.norm(np.cross(pts[tris[:, 1]] - pts[tris[:, 0]],
                                     pts[tris[:, 2]] - pts[tris[:, 0]]), axis=1)
         tris = tris[a > 1e-12 * a.max()]
+    if len(tris) == 0:
+        raise GeometryError(f"{source}: no triangle with three distinct vertices (every face "
+                            "repeats a vertex, or two vertices coincide): not a surface")
     e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]]])
     g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(pts),) * 2)
     label = connected_components(g, directed=False)[1][tris[:, 0]]
-    sizes = np.bincount(label)
-    keep = int(sizes.argmax())
-    dropped = sorted((int(s) for i, s in enumerate(sizes) if s and i != keep), reverse=True)
-    tris = tris[label == keep]
-    used = np.unique(tris)
-    renum = np.full(len(pts), -1)
-    renum[used] = np.arange(used.size)
-    return pts[used], renum[tris], dropped
+    out = []
+    for k in np.argsort(-np.bincount(label), kind="stable"):
+        piece = tris[label == k]
+        if len(piece) == 0:
+            continue
+        used = np.unique(piece)
+        renum = np.full(len(pts), -1)
+        renum[used] = np.arange(used.size)
+        out.append((pts[used], renum[piece]))
+    return out
+
+
+def largest_piece(points, tris, drop_flat: bool = False,
+                  source: str = "surface") -> tuple[np.ndarray, np.ndarray, list]:
+    """(points, triangles, triangles of each dropped piece): the piece of
+    :func:`split_pieces` with the most triangles.
+    """
+    parts = split_pieces(points, tris, drop_flat, source)
+    return parts[0][0], parts[0][1], [len(t) for _, t in parts[1:]]
+
+
+def orient_consistently(tris) -> tuple[np.ndarray, int]:
+    """(triangles, how many were turned): each triangle turned, where needed, to run every
+    manifold edge opposite to its neighbour there, the larger part of each connected piece
+    kept as it faced (a file half of whose triangles face inward is one surface, and its
+    enclosed volume is only right once they agree).
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import breadth_first_order, connected_components
+
+    tris = np.asarray(tris, dtype=np.int64)
+    n = len(tris)
+    directed = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+    owner = np.tile(np.arange(n), 3)
+    _, inv, counts = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True,
+                               return_counts=True)
+    inv = inv.ravel()
+    order = np.argsort(inv, kind="stable")
+    starts = np.r_[0, np.cumsum(counts)[:-1]][counts == 2]
+    first, second = order[starts], order[starts + 1]   # the two uses of each manifold edge
+    a, b = owner[first], owner[second]
+    turn = (directed[first, 0] == directed[second, 0]).astype(np.int8)  # same way: one turns
+    _, once = np.unique(np.sort(np.column_stack([a, b]), axis=1), axis=0, return_index=True)
+    a, b, turn = a[once], b[once], turn[once]   # two triangles sharing two edges: one link
+    graph = coo_matrix((turn + 1, (a, b)), shape=(n, n)).tocsr()
+    graph = graph + graph.T
+    parity = np.zeros(n, dtype=np.int8)
+    n_parts, part = connected_components(graph, directed=False)
+    for k in range(n_parts):
+        nodes, pred = breadth_first_order(graph, int(np.flatnonzero(part == k)[0]),
+                                          directed=False, return_predecessors=True)
+        rel = np.asarray(graph[nodes[1:], pred[nodes[1:]]]).ravel() - 1
+        for node, p, r in zip(nodes[1:], pred[nodes[1:]], rel):
+            parity[node] = parity[p] ^ r
+        if 2 * parity[nodes].sum() > nodes.size:
+            parity[nodes] ^= 1
+    out = tris.copy()
+    out[parity == 1] = out[parity == 1][:, [0, 2, 1]]
+    return out, int(parity.sum())
 
 
 def clean_surface(points, tris, source: str = "surface") -> tuple[np.ndarray, np.ndarray]:
     """Largest closed component, outward orientation, no duplicates or degenerate triangles."""
     if len(tris) == 0:
         raise GeometryError(f"{source}: empty surface")
-    pts, tris, dropped = largest_piece(points, tris, drop_flat=True)
+    pts, tris, dropped = largest_piece(points, tris, drop_flat=True, source=source)
     if dropped:
         log.warning("%s: %d separate surface pieces; kept the largest (%d triangles), dropped "
                     "pieces of %s triangles", source, len(dropped) + 1, len(tris),

@@ -1,0 +1,63 @@
+"""Issue 81: ``make patient K=-1`` / ``K=abc`` and ``make liver AT="1 2 3"`` were refused only
+by their last step, after minutes of FE work (the Makefile's arithmetic turned a bad K into
+``--sims 1``). Their variables are checked first, each named with what it takes."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).parents[2]
+LIVER = ROOT.parent / "shared" / "data" / "livers" / "real" / "Amos-004.obj"
+
+
+@pytest.fixture
+def run(tmp_path):
+    """A directory that looks like a trained run (its model/model.json)."""
+    (tmp_path / "run" / "model").mkdir(parents=True)
+    (tmp_path / "run" / "model" / "model.json").write_text("{}")
+    return tmp_path / "run"
+
+
+def _make(*args):
+    if shutil.which("make") is None:
+        pytest.skip("no make here")
+    return subprocess.run(["make", "--no-print-directory", "-C", str(ROOT), *args],
+                          capture_output=True, text=True, timeout=60)
+
+
+@pytest.mark.parametrize("k", ["-1", "abc", "1.5"])
+def test_make_patient_refuses_a_bad_k_before_any_work(run, k):
+    proc = _make("patient", f"LIVER={LIVER}", f"MODEL={run}", f"K={k}")
+    assert proc.returncode == 2
+    assert f"make patient: K='{k}': expected a whole number >= 0" in proc.stderr
+    assert "truth-scene" not in proc.stdout + proc.stderr   # no step ran
+
+
+def test_make_liver_refuses_a_bad_at_and_names_every_wrong_variable(run, tmp_path):
+    proc = _make("liver", f"LIVER={tmp_path / 'none.obj'}", f"MODEL={tmp_path}", "AT=1 2 3")
+    assert proc.returncode == 2
+    for said in ("LIVER=", "no such file", "MODEL=", "no model/model.json",
+                 "AT='1 2 3': expected six finite numbers"):
+        assert said in proc.stderr
+    assert "truth-scene" not in proc.stdout + proc.stderr
+
+
+def test_right_variables_pass_the_check():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("make_args", ROOT / "scripts" / "make_args.py")
+    make_args = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(make_args)
+    scene = str(ROOT / "data_spec" / "scenes" / "scene4_livers.toml")
+    model = str(ROOT / "tests")   # not a run
+    assert make_args.problems("liver", {"LIVER": str(LIVER), "MODEL": model, "PSCENE": scene,
+                                        "AT": "1 2 3 0 0 -0.4"}) == [
+        f"make liver: MODEL={model!r}: not a trained run: no model/model.json in it (surrogate "
+        "train writes one)"]
+    assert make_args.problems("patient", {"LIVER": str(LIVER), "MODEL": model, "PSCENE": scene,
+                                          "K": "0", "HELD": "6", "SYNTHETIC": "600",
+                                          "ORDER": "2", "GREEN": "1", "FRAME": "auto"})[1:] == []
