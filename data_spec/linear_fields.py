@@ -104,6 +104,19 @@ def write_linear_fields(path: str | Path, lf: LinearFields) -> Path:
     return Path(path)
 
 
+def liver_of(path: str | Path) -> str:
+    """The geometry id a small-strain file is of (its attributes only: a Green's function
+    may be large); ValueError naming the file when it is not one.
+    """
+    try:
+        with h5py.File(path, "r") as f:
+            if f.attrs.get("format") == FORMAT:
+                return str(f.attrs["geometry_id"])
+    except (OSError, KeyError) as exc:
+        raise ValueError(f"{path}: cannot be read (truncated or corrupt?): {exc}") from None
+    raise ValueError(f"{path}: not a small-strain response file")
+
+
 def read_linear_fields(path: str | Path) -> LinearFields:
     """The file at ``path``; ValueError naming it when it is not one."""
     with h5py.File(path, "r") as f:
@@ -117,3 +130,96 @@ def read_linear_fields(path: str | Path) -> LinearFields:
             geometry_id=str(f.attrs["geometry_id"]), seconds=float(f.attrs["seconds"]),
             **{k: f[k][()] if k in f else None for k in ("second_order", "green_nodes",
                                                           "green")})
+
+
+def _shape_problems(lf: LinearFields) -> list[str]:
+    """The arrays' shapes against each other, and their finiteness."""
+    n, n_out = lf.case_index.size, lf.output_nodes.size
+    want = {"load_nodes": (n, None), "forces": (n, None, 3), "displacement": (n, n_out, 3),
+            "second_order": (n, n_out, 3)}
+    if lf.green is not None:
+        want["green_nodes"] = (None,) if lf.green_nodes is None else (lf.green_nodes.size,)
+        want["green"] = (want["green_nodes"][0], 3, n_out, 3)
+    p = []
+    for name, shape in want.items():
+        a = getattr(lf, name)
+        if a is None:
+            continue
+        if a.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, a.shape)):
+            p.append(f"'{name}' has shape {a.shape}, expected {shape} (None: any)")
+        elif a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+            p.append(f"'{name}' contains NaN or inf")
+    return p
+
+
+def _dataset_problems(lf: LinearFields, directory: Path, geometry_id: str | None) -> list[str]:
+    """The file against the dataset that holds it: its scene (the hash the file was made for
+    among those the dataset's scene accepts), its liver (named as the file is, a geometry
+    file of the dataset, node ids within it).
+    """
+    from data_spec.grown import accepted_hashes
+    from data_spec.scene import SceneError, load_scene
+    from data_spec.shards import geometry_path
+
+    p = []
+    copy = directory / "scene.toml"
+    made_for = f"scene {lf.scene_name!r} (hash {lf.scene_hash[:12]})"
+    if not copy.exists():
+        p.append(f"made for {made_for}, but {copy} is missing: which scene the dataset holds "
+                 "is unknown (rerun fem_sim linear with the dataset's scene)")
+    else:
+        try:
+            scene = load_scene(copy)
+            if lf.scene_hash not in accepted_hashes(scene, directory):
+                p.append(f"made for {made_for}, but {directory} holds scene {scene.name!r} (hash "
+                         f"{scene.hash[:12]}): another scene's responses; rerun fem_sim linear "
+                         "with the dataset's scene")
+        except (SceneError, ValueError) as exc:
+            p.append(f"{copy} is not a valid scene ({exc})")
+    if geometry_id is not None and lf.geometry_id != geometry_id:
+        p.append(f"named for liver {geometry_id} but holds liver {lf.geometry_id}")
+    geo = geometry_path(directory, lf.geometry_id)
+    try:
+        with h5py.File(geo, "r") as g:
+            n_nodes = int(g["points"].shape[0])
+    except (OSError, KeyError) as exc:
+        return p + [f"its liver {lf.geometry_id} has no readable geometry file {geo} ({exc})"]
+    for name in ("load_nodes", "output_nodes", "green_nodes"):
+        ids = getattr(lf, name)
+        if ids is not None and ids.size and (ids.min() < 0 or ids.max() >= n_nodes):
+            p.append(f"'{name}' has node ids outside [0, {n_nodes}) of liver {lf.geometry_id}")
+    return p
+
+
+def linear_file_problems(directory: str | Path, geometry_id: str | None = None) -> list[str]:
+    """Everything wrong with the small-strain file of the dataset ``directory`` (with
+    ``geometry_id``: that liver's file of a population), each naming the file: unreadable or
+    truncated, arrays of inconsistent shapes or not finite, made for another scene or liver.
+    """
+    directory = Path(directory)
+    path = linear_fields_path(directory, geometry_id)
+    try:
+        lf = read_linear_fields(path)
+    except (OSError, KeyError, ValueError) as exc:
+        return [f"{path}: cannot be read (truncated or corrupt?): {exc}"]
+    return [f"{path}: {msg}" for msg in _shape_problems(lf)
+            + _dataset_problems(lf, directory, geometry_id)]
+
+
+def read_dataset_linear(directory: str | Path, geometry_id: str | None = None) -> LinearFields:
+    """The small-strain file of the dataset ``directory`` (with ``geometry_id``: that liver's,
+    of a population), checked against the dataset: ValueError naming the file and both scenes
+    (or livers) when it was made for another, or is not whole.
+    """
+    directory = Path(directory)
+    path = linear_fields_path(directory, geometry_id)
+    if not path.exists():
+        raise ValueError(f"{path}: missing (fem_sim linear writes it)")
+    try:
+        lf = read_linear_fields(path)
+    except (OSError, KeyError) as exc:
+        raise ValueError(f"{path}: cannot be read (truncated or corrupt?): {exc}") from None
+    problems = _shape_problems(lf) + _dataset_problems(lf, directory, geometry_id)
+    if problems:
+        raise ValueError(f"{path}: " + "; ".join(problems))
+    return lf

@@ -197,6 +197,18 @@ def _scene_problems(path: Path, shard_hashes: set[str]) -> list[str]:
     return []
 
 
+def _linear_problems(directory: Path) -> list[str]:
+    """The dataset's small-strain files (``linear.h5``, ``linear/<geometry id>.h5``): readable,
+    whole and of this dataset's scene and livers.
+    """
+    from data_spec.linear_fields import linear_fields_path, linear_file_problems
+
+    p = linear_file_problems(directory) if linear_fields_path(directory).exists() else []
+    for path in sorted((directory / "linear").glob("*.h5")):
+        p += linear_file_problems(directory, path.stem)
+    return p
+
+
 def validate_dataset(directory: str | Path, complete: bool = True) -> list[str]:
     """Every problem of a dataset directory (empty list if valid). ``complete``: every
     simulation of its scene must have a shard (False: a subset, such as held-out simulations
@@ -206,7 +218,11 @@ def validate_dataset(directory: str | Path, complete: bool = True) -> list[str]:
     if not directory.is_dir():
         return [f"{directory}: not a directory"]
     shards = list_shards(directory)
-    if not shards:
+    if not shards:   # a liver's small-strain responses alone (make liver's directory)
+        from data_spec.linear_fields import linear_fields_path
+
+        if linear_fields_path(directory).exists():
+            return _linear_problems(directory)
         return [f"{directory}: no shards found (expected {directory}/sims/sim_*.h5)"]
     problems: list[str] = []
     cache: dict = {}
@@ -224,6 +240,7 @@ def validate_dataset(directory: str | Path, complete: bool = True) -> list[str]:
                  if not x.with_suffix(".h5").exists()]
     if complete:
         problems += _missing_problems(directory, shards)
+    problems += _linear_problems(directory)
     for tmp in leftover_temporaries(directory):
         problems.append(f"{tmp}: leftover temporary file of an interrupted writer")
     return problems

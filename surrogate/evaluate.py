@@ -183,7 +183,7 @@ def _base_of(pred, data: Path):
     """The small-strain responses of ``data``'s liver when ``pred`` models their rest (its
     linear.h5, ``fem_sim linear --order 2``), else None; ValueError naming the file missing.
     """
-    from data_spec.linear_fields import linear_fields_path, read_linear_fields
+    from data_spec.linear_fields import linear_fields_path, read_dataset_linear
 
     if not getattr(pred, "linear_base", 0):
         return None
@@ -192,7 +192,7 @@ def _base_of(pred, data: Path):
         raise ValueError(f"{path}: missing; the model predicts the rest of each liver's "
                          f"small-strain base: run `fem_sim linear {data}/scene.toml --out {data} "
                          f"--order {pred.linear_base}` first")
-    return read_linear_fields(path)
+    return read_dataset_linear(data)
 
 
 def _scale_fit(pred_all, true_all) -> dict:

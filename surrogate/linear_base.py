@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from data_spec.linear_fields import linear_fields_path, read_linear_fields
+from data_spec.linear_fields import linear_fields_path, read_dataset_linear, read_linear_fields
 from surrogate.data import Dataset
 
 R_MAX = 1.0   # a load's second term is kept while |u2| / |u1| is below this
@@ -56,8 +56,8 @@ class LinearBase:
     """
 
     def __init__(self, ds: Dataset, path: str | Path | None = None):
-        path = Path(path) if path else linear_fields_path(ds.directory)
-        self.path, self.lf = path, read_linear_fields(path)
+        self.path = Path(path) if path else linear_fields_path(ds.directory)
+        self.lf = read_linear_fields(path) if path else read_dataset_linear(ds.directory)
         out = np.asarray(ds.out_nodes[0])
         have = self.lf.output_nodes
         where = np.searchsorted(have, out)
@@ -174,7 +174,7 @@ class PopulationLinearBase:
             if not path.exists():
                 raise ValueError(f"{path}: no small-strain responses of liver {gid}: run "
                                  f"`fem_sim linear --population {ds.directory} --order 2`")
-            lf = read_linear_fields(path)
+            lf = read_dataset_linear(ds.directory, gid)
             if not np.array_equal(lf.output_nodes, np.asarray(ds.out_nodes[g])):
                 raise ValueError(f"{path}: its output nodes are not the dataset's liver {gid}'s: "
                                  "rerun fem_sim linear --population")
@@ -198,7 +198,7 @@ def liver_base_metrics(data: str | Path, order: int = 2) -> dict:
     from data_spec.shards import list_shards, read_shard
     from surrogate.metrics import displacement_metrics
 
-    lf = read_linear_fields(linear_fields_path(data))
+    lf = read_dataset_linear(data)
     P, T = [], []
     for sh in (s for s in map(read_shard, list_shards(data)) if s.n_done):
         fr = np.asarray(sh.load_fractions[:sh.n_done])

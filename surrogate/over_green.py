@@ -40,7 +40,7 @@ class OverGreen:
 
     def __init__(self, predictor, data, placement, shape: str | None = None, nodes=None):
         from data_spec import read_geometry
-        from data_spec.linear_fields import linear_fields_path, read_linear_fields
+        from data_spec.linear_fields import linear_fields_path, read_dataset_linear
         from data_spec.shards import geometry_path
         from surrogate.predict_liver import PlacedModel
 
@@ -54,7 +54,7 @@ class OverGreen:
         if not path.exists():
             raise ValueError(f"{path}: missing; run `fem_sim linear {Path(data) / 'scene.toml'}"
                              f" --out {data} --green` (make liver does)")
-        lf = read_linear_fields(path)
+        lf = read_dataset_linear(data)   # of the directory's scene and liver
         if lf.green is None:
             raise ValueError(f"{path}: no Green's function; run fem_sim linear with --green")
         self.geometry = g = read_geometry(geometry_path(data, lf.geometry_id))
@@ -130,6 +130,7 @@ def predict_over_green(predictor, data, liver, forces, at, *, frame: str | None 
     from surrogate.evaluate import place
     from surrogate.predict_liver import LiverPrediction
 
+    model_data_of(data, liver)
     placement, found = place(predictor, liver, frame, saved)
     model = OverGreen(predictor, data, placement, shape)
     g = model.geometry
@@ -148,3 +149,29 @@ def predict_over_green(predictor, data, liver, forces, at, *, frame: str | None 
         shape_rule=model.placed.shape_rule, residual=placement.residual,
         offset=placement.offset, rotation=placement.rotation, frame=placement.frame,
         inverted=placement.inverted, warnings=found), model
+
+
+# The liver file's surface against the mesh of a --base directory: the mesh's surface nodes lie
+# on the file's surface (its repair and chords move them a millimetre or two; its vertices are a
+# few mm apart), another liver's are centimetres away.
+SAME_LIVER_MM = 5.0
+
+
+def model_data_of(data, liver) -> None:
+    """ValueError naming both when the liver mesh of the directory ``data`` (``fem_sim linear``
+    of a truth scene) is not the liver of the file ``liver``: the median distance of its
+    surface nodes to the file's surface vertices beyond :data:`SAME_LIVER_MM`.
+    """
+    from data_spec import read_geometry
+    from data_spec.linear_fields import linear_fields_path, liver_of
+    from data_spec.shards import geometry_path
+    from surrogate.predict_liver import read_liver_surface, surface_distances
+
+    g = read_geometry(geometry_path(data, liver_of(linear_fields_path(data))))
+    points, triangles = read_liver_surface(liver)
+    d = float(np.median(surface_distances(points, triangles, g.points[g.surface_nodes])))
+    if d > SAME_LIVER_MM:
+        raise ValueError(f"{data} holds the mesh of another liver than {liver} ({g.description}"
+                         f"): its surface lies {d:.1f} mm from the file's (median, at most "
+                         f"{SAME_LIVER_MM:g} for the same liver); make liver builds the "
+                         "directory of this one")

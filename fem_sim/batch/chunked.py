@@ -96,12 +96,14 @@ def linear_bases(data: str | Path, *, ranks: int = 2, order: int = 2,
         subprocess.run(cmd, check=True, cwd=ROOT, env=mpirun_env(oversubscribe=False))
         return
     from data_spec import load_scene
-    from data_spec.linear_fields import linear_fields_path, read_linear_fields
+    from data_spec.linear_fields import linear_fields_path, read_dataset_linear
 
-    path = linear_fields_path(data)
-    if path.exists():
-        lf, sc = read_linear_fields(path), load_scene(scene)
-        if lf.scene_hash == sc.hash and lf.order >= order \
+    if linear_fields_path(data).exists():
+        try:
+            lf, sc = read_dataset_linear(data), load_scene(scene)
+        except ValueError:   # another scene's, or not whole: made again
+            lf = None
+        if lf is not None and lf.scene_hash == sc.hash and lf.order >= order \
                 and lf.case_index.size >= sc.n_simulations:
             return
     subprocess.run([solver_python, "-m", "fem_sim", "linear", str(scene), "--out", str(data),

@@ -38,14 +38,9 @@ from fem_sim.geometry.source import n_geometries
 
 def _cases(scene, scene_file: str, g, fixed: np.ndarray, synthetic: int) -> list:
     """The scene's simulations and ``synthetic`` drawn cases, all of one material."""
-    if synthetic < 0:
-        raise ValueError(f"--synthetic must be >= 0, got {synthetic}")
     table = cs.material_table(scene)
     eligible = None if scene.cases else cs.eligible_load_nodes(scene, g, fixed)
     indices = [*range(scene.n_simulations), *range(SYNTHETIC_FIRST, SYNTHETIC_FIRST + synthetic)]
-    if scene.cases and synthetic:
-        raise ValueError(f"{scene_file}: [[cases]] lists its loads; drawn cases need the "
-                         "scene's load rule ([loads] without [[cases]])")
     out = [cs.make_case(scene, i, g, fixed, table, eligible) for i in indices]
     materials = {c.material for c in out}
     if len(materials) > 1:
@@ -62,6 +57,57 @@ def _green_nodes(g, fixed: np.ndarray) -> np.ndarray:
     return np.setdiff1d(g.surface_nodes, fixed)
 
 
+def _checked_request(scene_file: str, out: Path, synthetic: int, order: int,
+                     green: bool):
+    """The scene, every argument checked before any meshing: ``out`` writable and not a
+    dataset of another scene (its responses are of the dataset's own scene); ValueError or
+    SceneError naming the flag, the file or the key.
+    """
+    from data_spec.atomic import out_problem
+    from data_spec.grown import same_but_size
+    from data_spec.shards import list_shards
+
+    if order not in (1, 2):
+        raise ValueError(f"--order must be 1 or 2, got {order}")
+    if synthetic < 0:
+        raise ValueError(f"--synthetic must be >= 0, got {synthetic}")
+    scene = load_scene(scene_file)
+    if green and scene["loads"]["kind"] != "nodal":
+        raise ValueError(f"{scene_file}: loads.kind = {scene['loads']['kind']!r}; --green gives "
+                         "the responses to unit nodal forces, of a scene of nodal loads")
+    if n_geometries(scene) != 1:
+        raise ValueError(f"{scene_file}: [geometry] has {n_geometries(scene)} livers; small-"
+                         "strain responses are of one liver (a patient's scene)")
+    if scene.cases and synthetic:
+        raise ValueError(f"{scene_file}: [[cases]] lists its loads; drawn cases need the "
+                         "scene's load rule ([loads] without [[cases]])")
+    why = out_problem(out, "--out", directory=True)
+    if why:
+        raise ValueError(why)
+    copy = out / "scene.toml"
+    if copy.exists() and list_shards(out):
+        old = load_scene(copy)
+        if not same_but_size(scene, old):
+            raise ValueError(
+                f"--out {out} holds a dataset of scene {old.name!r} (hash {old.hash[:12]}), not "
+                f"of {scene_file} ({scene.name!r}, hash {scene.hash[:12]}): small-strain "
+                f"responses are of the dataset's own scene (give {copy}), or use a new --out")
+    return scene
+
+
+def _record_scene(scene_file: str, out: Path) -> None:
+    """``out/scene.toml``: the scene the responses are of, so that a reader can tell (a
+    dataset of fem_sim generate keeps its own; a directory without shards takes this one).
+    """
+    from data_spec.atomic import write_text_atomic
+    from data_spec.scene import dataset_copy_text
+    from data_spec.shards import list_shards
+
+    copy = out / "scene.toml"
+    if not (copy.exists() and list_shards(out)):
+        write_text_atomic(copy, dataset_copy_text(scene_file))
+
+
 def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
                   order: int = 1, green: bool = False) -> Path:
     """``out/linear.h5`` for the one-liver scene ``scene_file`` (its liver meshed and checked
@@ -73,15 +119,7 @@ def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
     from fem_sim.solver.problem import OgdenProblem
 
     scene_file, out = str(scene_file), Path(out)
-    if order not in (1, 2):
-        raise ValueError(f"--order must be 1 or 2, got {order}")
-    scene = load_scene(scene_file)
-    if green and scene["loads"]["kind"] != "nodal":
-        raise ValueError(f"{scene_file}: loads.kind = {scene['loads']['kind']!r}; --green gives "
-                         "the responses to unit nodal forces, of a scene of nodal loads")
-    if n_geometries(scene) != 1:
-        raise ValueError(f"{scene_file}: [geometry] has {n_geometries(scene)} livers; small-"
-                         "strain responses are of one liver (a patient's scene)")
+    scene = _checked_request(scene_file, out, synthetic, order, green)
     livers = _scene_livers(scene, out, progress=False)
     ids, fixed = _write_livers(scene, scene_file, livers, out)
     g, fixed = livers[0], fixed[0]
@@ -106,6 +144,7 @@ def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
     if green:   # the same factorisation (kept by solve_recurring)
         gf = problem.unit_responses(cases[0].material, [Constraint(fixed)],
                                     gnodes)[:, :, nodes]
+    _record_scene(scene_file, out)
     return write_linear_fields(linear_fields_path(out), LinearFields(
         case_index=np.array([c.index for c in cases], np.int64),
         load_nodes=np.stack([c.load_nodes for c in cases]),
@@ -121,23 +160,27 @@ def _liver_shards(data: Path) -> dict:
 
     out: dict = {}
     for path in list_shards(data):
-        sh = read_shard(path)
+        try:
+            sh = read_shard(path)
+        except (OSError, KeyError, ValueError) as exc:
+            raise ValueError(f"{path}: cannot be read (truncated or corrupt?): {exc}; `python -m "
+                             f"data_spec validate {data}` lists every problem, `fem_sim "
+                             f"generate {data}/scene.toml --out {data}` redoes it") from None
         if sh.status == "ok":
             out.setdefault(sh.geometry_id, []).append(sh)
     return out
 
 
-def _liver_file_done(path: Path, shards: list, order: int) -> bool:
-    """Whether ``path`` holds this liver's responses of these simulations to ``order`` (a
-    file of order 2 holds the first-order responses too).
+def _liver_file_done(data: Path, gid: str, shards: list, order: int) -> bool:
+    """Whether liver ``gid``'s file of the dataset ``data`` holds its responses of these
+    simulations to ``order`` (a file of order 2 holds the first-order responses too), made
+    for this dataset's scene and liver.
     """
-    from data_spec.linear_fields import read_linear_fields
+    from data_spec.linear_fields import read_dataset_linear
 
-    if not path.exists():
-        return False
     try:
-        lf = read_linear_fields(path)
-    except (OSError, ValueError, KeyError):
+        lf = read_dataset_linear(data, gid)
+    except ValueError:
         return False
     return lf.order >= order and set(lf.case_index.tolist()) == {s.sim_index for s in shards}
 
@@ -190,10 +233,17 @@ def population_linear_fields(data: str | Path, order: int = 2, progress: bool = 
         raise ValueError(f"--order must be 1 or 2, got {order}")
     if not (data / "scene.toml").exists():
         raise ValueError(f"{data}: no scene.toml: not a dataset directory of fem_sim generate")
-    livers = _liver_shards(data) if world.rank == 0 else None
-    livers = world.bcast(livers, root=0)   # collective: every rank the same list
-    todo = [gid for gid in sorted(livers) if not _liver_file_done(
-        linear_fields_path(data, gid), livers[gid], order)]
+    livers = None
+    if world.rank == 0:
+        try:
+            livers = _liver_shards(data)
+        except ValueError as exc:
+            livers = str(exc)
+    livers = world.bcast(livers, root=0)   # collective: every rank the same list, or error
+    if isinstance(livers, str):
+        raise ValueError(livers)
+    todo = [gid for gid in sorted(livers) if not _liver_file_done(data, gid, livers[gid],
+                                                                  order)]
     mine, written = todo[world.rank::world.size], []
     bar = None
     if progress and world.rank == 0:

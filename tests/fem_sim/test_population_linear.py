@@ -58,6 +58,9 @@ def test_each_liver_is_linearised_under_its_own_loads(tmp_path):
     assert population_linear_fields(tmp_path, order=2, progress=False) == []
     # a file of order 2 holds the first-order responses: order 1 redoes nothing
     assert population_linear_fields(tmp_path, order=1, progress=False) == []
+    from data_spec.grown import record_size
+
+    record_size(tmp_path, 3)   # the dataset grows as generate grows it: its earlier size kept
     scene = write_test_scene(tmp_path, n_simulations=4)
     write_shard(tmp_path, synthetic_shard(livers[1], 3, scene_name=scene.name,
                                           scene_hash=scene.hash))

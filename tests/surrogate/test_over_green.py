@@ -134,3 +134,30 @@ def test_a_model_without_a_linear_rest_is_refused_naming_what_to_run(patient, ca
     assert main(["predict-liver", str(run), info["liver"], "--force", "0", "0", "0", "0", "0",
                  "-0.4", "--out", str(tmp_path / "nothing"), "--no-picture"]) == 2
     assert "make liver LIVER=... MODEL=<this run>" in capsys.readouterr().err
+
+
+def test_another_livers_directory_or_scene_is_refused_naming_both(patient, capsys, tmp_path):
+    """Issue 81: predict-liver --base of another liver's directory (or a linear.h5 of another
+    scene) was silently wrong: OverGreen took whatever geometry the file named."""
+    import shutil
+
+    import h5py
+
+    from surrogate.__main__ import main
+    from surrogate.over_green import OverGreen
+    from surrogate.predict_liver import read_liver_surface
+
+    d, info, run = patient
+    other = str(Path(info["liver"]).with_name("LiTS-12.obj"))
+    at = read_liver_surface(other)[0][0]   # a point on the other liver's surface
+    force = ["--force", *map(str, at), "0", "0", "-0.4", "--no-picture"]
+    assert main(["predict-liver", str(run), other, "--base", str(d / "data"), *force,
+                 "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"holds the mesh of another liver than {other}" in err and "Traceback" not in err
+    data = shutil.copytree(d / "data", tmp_path / "data")
+    with h5py.File(data / "linear.h5", "r+") as f:
+        f.attrs["scene_hash"] = "0" * 64
+    rest = load_predictor(run / "model")
+    with pytest.raises(ValueError, match="another scene's responses"):
+        OverGreen(rest, data, _placed(rest, d, info))
