@@ -247,10 +247,13 @@ def _truth_scene(args) -> int:
 
 def _evaluate(args) -> int:
     from data_spec import validate_dataset
+    from data_spec.atomic import out_problem
     from surrogate.evaluate import evaluate_liver, evaluate_own, place
     from surrogate.predictor import load_predictor
     from surrogate.viewer import model_dir
 
+    if args.out and out_problem(args.out, "--out"):   # before the evaluation, not after
+        return _fail("evaluate", out_problem(args.out, "--out"))
     problems = validate_dataset(args.data, complete=False)  # held-out subsets are fine
     if problems:
         return _fail("evaluate", f"{args.data}: not a valid dataset: " + "; ".join(problems[:5]))
@@ -269,6 +272,7 @@ def _evaluate(args) -> int:
         return _fail("evaluate", str(exc))
     text = json.dumps(result, indent=1)
     if args.out:
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         Path(args.out).write_text(text)
     print(f"MEE {result['network']['mee']:.3f} mm, naive {result['naive']['mee']:.3f} mm, "
           f"skill {result['skill']:.3f} on {result['sims']} simulations")

@@ -84,6 +84,7 @@ def _staged_against_plain(livers, n: int) -> str:
 def run(scene_file, out, n_max: int = 40, overlap_livers: int | None = None,
         compare_plain: int = 0, progress: bool = True) -> int:
     from data_spec import geometry_path, write_geometry
+    from data_spec.atomic import out_problem
     from fem_sim.geometry.population import (
         report,
         save_population,
@@ -92,6 +93,10 @@ def run(scene_file, out, n_max: int = 40, overlap_livers: int | None = None,
     )
 
     out = Path(out)
+    if out_problem(out, "--out", directory=True):   # before the meshing and registration
+        print(f"fem_sim population: {out_problem(out, '--out', directory=True)}",
+              file=sys.stderr)
+        return 2
     read = _livers(scene_file)
     if isinstance(read, int):
         return read

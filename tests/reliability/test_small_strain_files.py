@@ -126,3 +126,16 @@ def test_a_truncated_shard_is_named_by_linear_population(tmp_path):
     proc = _linear("--population", d)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     assert f"{shard}: cannot be read" in proc.stderr and "data_spec validate" in proc.stderr
+
+
+@pytest.mark.parametrize("command", [
+    ["-m", "fem_sim", "population", str(SCENES / "ci_scene4.toml"), "--out"],
+    ["-m", "fem_sim", "phantom", "0", "--out"]])
+def test_population_and_phantom_refuse_an_out_under_a_file_first(tmp_path, command):
+    pytest.importorskip("gmsh", reason="fem_sim runs in the solver environment")
+    (tmp_path / "file").write_text("x")
+    out = tmp_path / "file" / ("d" if "population" in command else "l.h5")
+    proc = subprocess.run([sys.executable, *command, str(out)], capture_output=True, text=True,
+                          timeout=120, cwd=ROOT)
+    assert proc.returncode == 2 and "is a file, not a directory" in proc.stderr, proc.stderr
+    assert "Traceback" not in proc.stderr
