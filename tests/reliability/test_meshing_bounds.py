@@ -39,7 +39,7 @@ def _refused(proc, *said):
 
 
 def _write_obj(path: Path, points, tris) -> Path:
-    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in np.asarray(points, float)]
+    lines = [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in np.asarray(points, float)]
     lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in np.asarray(tris)]
     path.write_text("\n".join(lines) + "\n")
     return path

@@ -492,3 +492,17 @@ def test_a_force_off_the_liver_is_said_or_refused_before_the_registration(run, t
     err = capsys.readouterr().err
     assert "--out" in err and "is a file; expected a directory" in err
     assert "registering" not in err
+
+
+def test_two_livers_in_one_file_are_refused_naming_both_volumes(tmp_path):
+    """Issue 81: predict-liver kept the larger of two livers in one file without a word."""
+    from surrogate.predict_liver import LiverFileError, read_liver_surface
+
+    p, t = read_liver_surface(SOFA)
+    q = p + [np.ptp(p[:, 0]) + 10.0, 0.0, 0.0]
+    lines = [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in np.concatenate([p, q])]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in np.concatenate([t, t + len(p)])]
+    (tmp_path / "two.obj").write_text("\n".join(lines) + "\n")
+    with pytest.raises(LiverFileError, match=r"2 separate pieces: the largest encloses (\d+) mL, "
+                                             r"the next \1 mL.*--keep-largest"):
+        read_liver_surface(tmp_path / "two.obj")
