@@ -60,7 +60,6 @@ def test_a_mesh_size_that_loses_the_liver_is_refused_with_one_that_keeps_it(tmp_
     report = json.loads((tmp_path / "out" / "liver.repair.json").read_text())
     assert abs(report["volume_change"]) <= MESH_BOUNDS["volume"]
     assert report["mesh_distance_mm"] <= MESH_BOUNDS["max_mm"]
-    assert report["mean_distance_mm"] <= MESH_BOUNDS["mean_mm"]
     assert report["nodes"] >= MESH_BOUNDS["nodes"]
     sofa = _mesh(tmp_path, REAL.parent / "sofa_liver.vtk", "--mesh-size", "16")
     assert sofa.returncode == 0, sofa.stderr
