@@ -310,7 +310,8 @@ def made_by(model: Path, data: Path, rest: Path | None = None) -> str:
     if linear_fields_path(data).exists():
         lf = read_linear_fields(linear_fields_path(data))
         h.update(f"order {lf.order} green {lf.green is not None}".encode())
-    code = [ROOT / "surrogate" / n for n in ("patient.py", "tuning.py", "linear_base.py")]
+    code = [*sorted((ROOT / "surrogate" / "patient").glob("*.py")),
+            *(ROOT / "surrogate" / n for n in ("tuning.py", "linear_base.py"))]
     for f in [*sorted(model.glob("*")), *(sorted(rest.glob("*")) if rest else []), *code]:
         h.update(f.read_bytes())
     return h.hexdigest()[:16]

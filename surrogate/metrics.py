@@ -42,3 +42,17 @@ def metrics_table(rows: dict[str, dict]) -> str:
                          f"{v:.3f}" if not k.startswith("corr") else f"{v:.4f}")
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def mee(pred, true=0.0) -> float:
+    """Mean Euclidean error (mm): the mean over every node of every case of |pred - true|,
+    fields whose consecutive triples are (x, y, z) ((..., 3), or rows of nodes x 3).
+    """
+    d = np.asarray(pred, dtype=np.float64) - np.asarray(true, dtype=np.float64)
+    return float(np.linalg.norm(d.reshape(-1, 3), axis=1).mean())
+
+
+def case_mee(pred, true) -> np.ndarray:
+    """(cases,) the mean Euclidean error of each case of fields (cases, nodes, 3) mm."""
+    d = np.asarray(pred, dtype=np.float64) - np.asarray(true, dtype=np.float64)
+    return np.linalg.norm(d, axis=-1).mean(axis=1)

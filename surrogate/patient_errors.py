@@ -22,10 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-
-def _node_mee(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(cases,) the mean Euclidean node error of fields (cases, nodes, 3)."""
-    return np.linalg.norm(a - b, axis=-1).mean(axis=1)
+from surrogate.metrics import case_mee
 
 
 def projection_floor(train: np.ndarray, held: np.ndarray) -> float:
@@ -36,7 +33,7 @@ def projection_floor(train: np.ndarray, held: np.ndarray) -> float:
     basis, _ = np.linalg.qr(train.reshape(len(train), -1).T)
     flat = held.reshape(len(held), -1)
     projected = (flat @ basis) @ basis.T
-    return float(_node_mee(projected.reshape(held.shape), held).mean())
+    return float(case_mee(projected.reshape(held.shape), held).mean())
 
 
 def error_sources(train_true, train_points, held_true, held_points, held_population,
@@ -52,7 +49,7 @@ def error_sources(train_true, train_points, held_true, held_points, held_populat
     from scipy.stats import spearmanr
 
     held_sims = np.asarray(held_sims)
-    pop, cor = _node_mee(held_population, held_true), _node_mee(held_corrected, held_true)
+    pop, cor = case_mee(held_population, held_true), case_mee(held_corrected, held_true)
     size = np.linalg.norm(held_true, axis=-1).mean(axis=1)
     sims = np.unique(held_sims)
     per_sim = np.array([cor[held_sims == s].mean() for s in sims])
@@ -82,7 +79,7 @@ def per_simulation(pred: np.ndarray, true: np.ndarray, sims: np.ndarray) -> dict
     ``mean_mm`` (its mean node displacement over its load steps).
     """
     sims = np.asarray(sims)
-    err = _node_mee(np.asarray(pred), np.asarray(true))
+    err = case_mee(np.asarray(pred), np.asarray(true))
     size = np.linalg.norm(np.asarray(true), axis=-1)
     order = np.unique(sims)
     last = [np.flatnonzero(sims == s)[-1] for s in order]

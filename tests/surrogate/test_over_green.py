@@ -12,7 +12,8 @@ import pytest
 
 from surrogate import load_predictor
 from surrogate.data import load_dataset
-from surrogate.patient import field_mee, sample_fields, sims_samples
+from surrogate.metrics import mee as field_mee
+from surrogate.patient import sample_fields, sims_samples
 from tests.surrogate.conftest import generated_dataset
 
 pytestmark = pytest.mark.dataset
