@@ -23,6 +23,7 @@ from data_spec import list_shards, read_geometry, read_shard
 from data_spec.scene_writer import liver_scene
 from data_spec.shards import geometry_path
 from data_spec.views import shard_count
+from surrogate.metrics import mee
 
 _PLACED: dict = {}  # (liver, its mtime, frame, the shape model's digest) -> placement, warnings
 
@@ -203,7 +204,7 @@ def _scale_fit(pred_all, true_all) -> dict:
     return {"best_scale": scale,
             "truth_mean_mm": float(np.linalg.norm(true_all, axis=1).mean()),
             "predicted_mean_mm": float(np.linalg.norm(pred_all, axis=1).mean()),
-            "mee_best_scale": float(np.linalg.norm(scale * pred_all - true_all, axis=1).mean())}
+            "mee_best_scale": mee(scale * pred_all, true_all)}
 
 
 def _placement_facts(pred, placement, shape, population_data) -> dict:
@@ -394,7 +395,7 @@ def worst_case_picture(pred, data: Path, placement, png: Path, title: str = "",
     shards = [sh for sh in map(read_shard, list_shards(data)) if sh.n_done]
     g = read_geometry(geometry_path(data, shards[0].geometry_id))
     fields = [_placed_fields(pred, placement, shape, g.points, [sh])[:2] for sh in shards]
-    errors = [float(np.linalg.norm(p - t, axis=1).mean()) for p, t in fields]
+    errors = [mee(p, t) for p, t in fields]
     worst = int(np.argmax(errors))
     sh, (p, t) = shards[worst], fields[worst]
     n_out = sh.output_nodes.size

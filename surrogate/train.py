@@ -24,7 +24,7 @@ from surrogate import engine
 from surrogate.data import Dataset, kfold_groups, load_dataset, training_samples
 from surrogate.designs import DESIGNS
 from surrogate.export import export_model
-from surrogate.metrics import displacement_metrics, metrics_table
+from surrogate.metrics import displacement_metrics, mee, metrics_table
 from surrogate.nodewise import example_index
 from surrogate.plots import error_plots
 
@@ -212,9 +212,7 @@ def _result(ds: Dataset, cfg: dict, cv: dict) -> dict:
               "train_livers": float(np.mean([n for n, _ in cv["trained_on"]])),
               "train_simulations": float(np.mean([n for _, n in cv["trained_on"]])),
               # each evaluated fold's own MEE and skill (the spread of the held-out sets)
-              "per_fold": [{"mee": float(np.linalg.norm(p - y, axis=1).mean()),
-                            "skill": float(np.linalg.norm(p - y, axis=1).mean()
-                                           / np.linalg.norm(n - y, axis=1).mean())}
+              "per_fold": [{"mee": mee(p, y), "skill": mee(p, y) / mee(n, y)}
                            for p, y, n in zip(cv["pred"], cv["true"], cv["naive"])],
               "training_seconds": seconds,
               "training_examples_per_s": cv["examples"] / seconds if seconds else 0.0}

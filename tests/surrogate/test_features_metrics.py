@@ -134,3 +134,14 @@ def test_config_names_exactly_the_registered_designs():
     assert all(DESIGNS[n].name == n for n in DESIGNS)
     with pytest.raises(ValueError, match="design: expected 'nodewise' or 'basis'"):
         get_config("small", design="graph")
+
+
+def test_the_one_mee_helper_by_hand():
+    """|(3, 4, 0)| = 5 and |(0, 0, 1)| = 1: MEE 3 whatever the fields' layout (cases x nodes
+    x 3, or rows of nodes x 3); each case's own mean apart."""
+    from surrogate.metrics import case_mee, mee
+
+    err = np.array([[[3.0, 4.0, 0.0], [0.0, 0.0, 1.0]], [[0.0, 0.0, 2.0], [0.0, 0.0, 4.0]]])
+    assert mee(err) == pytest.approx((5 + 1 + 2 + 4) / 4)
+    assert mee(err.reshape(2, -1)) == mee(err) == mee(err + 7.0, np.full_like(err, 7.0))
+    np.testing.assert_allclose(case_mee(err, 0.0 * err), [3.0, 3.0])
