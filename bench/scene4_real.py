@@ -42,6 +42,7 @@ import numpy as np
 
 from fem_sim.batch.chunked import generate_chunks, linear_bases
 from liverviz.report import ROOT, SOFA, SOFA_FRAME, commit, write_report
+from surrogate.small_strain import base_of
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
 RESULTS = ROOT / "bench" / "results" / "scene4_real"
@@ -70,7 +71,7 @@ def trained(data: Path, a) -> list[dict]:
     for config, overrides in (d for d in DESIGNS if d[0] in a.designs):
         run, cfg = RESULTS / f"run_{config}", get_config(config)
         row = _trained_row(data, a, config, overrides, run)
-        if not cfg["linear_base"]:   # over a base the field needs the liver's own base
+        if base_of(cfg["linear_base"]).whole:   # over a base the field needs the liver's own
             if (run / "model" / "model.json").exists():   # a whole field per call
                 row.update(timed(run / "model", a.calls, LATENCY_NODES))
             if REGISTRY[cfg["design"]].on_template:
@@ -87,16 +88,16 @@ def _trained_row(data: Path, a, config: str, overrides: dict, run: Path) -> dict
     from surrogate.evaluate import heldout_base
     from surrogate.train import train_or_reuse
 
-    cfg = get_config(config)
-    if cfg["linear_base"]:
-        linear_bases(data, ranks=a.np, order=cfg["linear_base"])
+    kind = base_of(get_config(config)["linear_base"])
+    if not kind.whole:
+        linear_bases(data, ranks=a.np, order=kind.order)
     t = time.perf_counter()
     m = train_or_reuse(data, run, config, overrides)
     print(f"[{run.name}] skill {m['skill']:.3f} ({time.perf_counter() - t:.0f} s)", flush=True)
     row = {"config": config, "overrides": overrides, "metrics": m,
            "run": str(run.relative_to(ROOT))}
-    if cfg["linear_base"]:
-        row["base_alone"] = heldout_base(data, run, cfg["linear_base"])
+    if not kind.whole:
+        row["base_alone"] = heldout_base(data, run, kind.order)
     return row
 
 
@@ -183,7 +184,7 @@ def unseen(data: Path, a) -> list[dict]:
     pred = load_predictor(RESULTS / "run_population_basis" / "model")
     models = {c: RESULTS / f"run_{c}" / "model" for c, _ in DESIGNS[1:]}
     rests = {c: load_predictor(m) for c, m in models.items() if (m / "model.json").exists()}
-    rests = {c: p for c, p in rests.items() if p.linear_base}
+    rests = {c: p for c, p in rests.items() if not p.base.whole}
     out = []
     for liver, frame in unseen_livers(load_scene(SCENE)):
         t = time.perf_counter()  # file to predictor: read, register, place, first call
@@ -198,7 +199,7 @@ def unseen(data: Path, a) -> list[dict]:
                seconds, "truth": str((RESULTS / "unseen" / liver.stem).relative_to(ROOT)),
                "ms_placed": timed_placed(pred, placement, LATENCY_NODES, a.calls), **m,
                "over": {c: _over_base(p, fe, placement, found, data, liver, frame, a)
-                        for c, p in sorted(rests.items(), key=lambda kv: kv[1].linear_base)}}
+                        for c, p in sorted(rests.items(), key=lambda kv: kv[1].base.order)}}
         out.append(row)
         print(f"[unseen {liver.stem}] MEE {m['network']['mee']:.3f} mm, skill "
               f"{m['skill']:.3f}, {seconds:.1f} s file to predictor", flush=True)
@@ -231,14 +232,14 @@ def _over_base(pred, fe: Path, placement, found, data: Path, liver: Path, frame,
     from surrogate.latency import timed_over_green
     from surrogate.linear_base import liver_base_metrics
 
-    linear_bases(fe, scene=fe.parent / "scene.toml", order=pred.linear_base)
+    linear_bases(fe, scene=fe.parent / "scene.toml", order=pred.base.order)
     m = evaluate_liver(pred, fe, placement, found, population_data=data)
-    alone = liver_base_metrics(fe, pred.linear_base)
+    alone = liver_base_metrics(fe, pred.base.order)
     keep = {"naive": m["naive"], "sims": m["sims"]}
-    row = {"order": pred.linear_base,
+    row = {"order": pred.base.order,
            "over_base": {"network": m["network"], "skill": m["skill"], **keep},
            "base_alone": {"network": alone, "skill": alone["mee"] / m["naive"]["mee"], **keep}}
-    if pred.linear_base == 1:
+    if pred.base.from_green:
         made = make_liver(liver, frame, fe, a)
         row["make_liver_s"] = made
         row.update(timed_over_green(pred, RESULTS / "make_liver" / liver.stem / "data",

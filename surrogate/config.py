@@ -9,6 +9,7 @@ from __future__ import annotations
 import copy
 
 from data_spec.checks import is_int, is_num
+from surrogate.small_strain import BASES
 
 BASE = {
     "design": "nodewise",      # "nodewise": the paper's MLP per node; "basis": a reduced basis
@@ -21,9 +22,9 @@ BASE = {
                                # the liver (template place, offset and distance to the fixed
                                # region; surrogate/population_basis.py)
     "linear_base": 0,          # population_basis: learn the FE fields less each liver's
-                               # small-strain base of this order (1: linear, 2: with its second-
-                               # order term; 0: none; fem_sim linear --population; a prediction
-                               # adds it back: surrogate/linear_base.py)
+                               # small-strain base of this order (the kinds of
+                               # surrogate/small_strain.py: 0 none, 1 linear, 2 second order;
+                               # fem_sim linear --population builds it)
     "ensemble": 1,             # basis designs: networks trained on the same modes from other
                                # initialisations and batch orders; their coefficients averaged
                                # (one mode product per call whatever their number)
@@ -125,7 +126,8 @@ CHECKS = {
                     "null or a finite number >= 0"),
     "load_context": (lambda v: isinstance(v, bool), "true or false"),
     "shared_loads": (lambda v: isinstance(v, bool), "true or false"),
-    "linear_base": (lambda v: v in (0, 1, 2) and not isinstance(v, bool), "0, 1 or 2"),
+    "linear_base": (lambda v: v in BASES and not isinstance(v, bool),
+                    ", ".join(f"{k} ({b.name})" for k, b in BASES.items())),
     "ensemble": (lambda v: is_int(v) and v >= 1, "an integer >= 1"),
     "shape_inputs": (lambda v: v == "all" or is_int(v) and v >= 0, "'all' or an integer >= 0"),
     "batch_size": (lambda v: is_int(v) and v >= 1, "an integer >= 1"),

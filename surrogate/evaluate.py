@@ -174,7 +174,7 @@ def _placed_fields(pred, placement, shape, points, shards, base=None):
             at = np.broadcast_to(points[sh.load_nodes], forces.shape)
             u = placed(forces, placed.load_nodes(at), rest=base is not None)[:, sh.output_nodes]
             if base is not None:
-                u = u + case_base(base, pred.linear_base, sh.sim_index, fr)
+                u = u + case_base(base, pred.base.order, sh.sim_index, fr)
             P.append(u.reshape(-1, 3))
             T.append(np.asarray(sh.displacement[:sh.n_done]).reshape(-1, 3))
     return np.concatenate(P), np.concatenate(T), placed
@@ -186,13 +186,13 @@ def _base_of(pred, data: Path):
     """
     from data_spec.linear_fields import linear_fields_path, read_dataset_linear
 
-    if not getattr(pred, "linear_base", 0):
+    if pred.base.whole:
         return None
     path = linear_fields_path(data)
     if not path.exists():
+        command = pred.base.liver_command(Path(data) / "scene.toml", data)
         raise ValueError(f"{path}: missing; the model predicts the rest of each liver's "
-                         f"small-strain base: run `fem_sim linear {data}/scene.toml --out {data} "
-                         f"--order {pred.linear_base}` first")
+                         f"small-strain base: run `{command}` first")
     return read_dataset_linear(data)
 
 

@@ -18,6 +18,7 @@ import numpy as np
 
 from data_spec.linear_fields import linear_fields_path, read_dataset_linear, read_linear_fields
 from surrogate.data import Dataset
+from surrogate.small_strain import green_product
 
 R_MAX = 1.0   # a load's second term is kept while |u2| / |u1| is below this
 
@@ -106,8 +107,7 @@ class LinearBase:
         if np.any(nodes[at] != load_nodes):
             raise ValueError(f"{self.path}: no unit response at node(s) "
                              f"{load_nodes[nodes[at] != load_nodes][:5].tolist()}")
-        return np.einsum("scnd,sc->snd", g[at], np.asarray(forces, np.float64).reshape(-1, 3),
-                         dtype=np.float64)
+        return green_product(g, at[:, None], np.asarray(forces, np.float64).reshape(-1, 1, 3))
 
     def terms(self, rows: np.ndarray, lam: np.ndarray) -> tuple:
         """The base's two terms for the file's ``rows`` at fractions ``lam``, each

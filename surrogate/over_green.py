@@ -1,5 +1,6 @@
 """A new liver's whole field in seconds: the population model of what each liver's linear
-response misses (config ``population_green``: ``linear_base = 1``) placed on the liver, over
+response misses (config ``population_green``: the base ``linear`` of
+:mod:`surrogate.small_strain`) placed on the liver, over
 the liver's own small-strain Green's function.
 
 ``fem_sim linear SCENE --out DATA --green`` on the liver's scene (``surrogate truth-scene``:
@@ -45,15 +46,13 @@ class OverGreen:
         from surrogate.predict_liver import PlacedModel
 
         path = linear_fields_path(data)
-        if predictor.linear_base != 1:
-            raise ValueError(
-                "the model is not one of the rest over a liver's linear response (config "
-                f"linear_base = {predictor.linear_base}, 1 expected: population_green); "
-                + ("a second-order base needs a solve per load: make patient distils it"
-                   if predictor.linear_base else "predict-liver places it without a base"))
+        refusal = predictor.base.over_green_refusal()
+        if refusal:
+            raise ValueError(refusal)
         if not path.exists():
-            raise ValueError(f"{path}: missing; run `fem_sim linear {Path(data) / 'scene.toml'}"
-                             f" --out {data} --green` (make liver does)")
+            raise ValueError(f"{path}: missing; run `"
+                             f"{predictor.base.liver_command(Path(data) / 'scene.toml', data)}"
+                             "` (make liver does)")
         lf = read_dataset_linear(data)   # of the directory's scene and liver
         if lf.green is None:
             raise ValueError(f"{path}: no Green's function; run fem_sim linear with --green")

@@ -180,14 +180,16 @@ class PopulationBasis(Basis):
         the dataset), else None.
         """
         from surrogate.linear_base import PopulationLinearBase
+        from surrogate.small_strain import base_of
 
-        if not cfg.get("linear_base"):
+        kind = base_of(cfg.get("linear_base", 0))
+        if kind.whole:
             return None
         if getattr(ds, "_linear_base", None) is None:
             ds._linear_base = {}
-        if cfg["linear_base"] not in ds._linear_base:
-            ds._linear_base[cfg["linear_base"]] = PopulationLinearBase(ds, cfg["linear_base"])
-        return ds._linear_base[cfg["linear_base"]]
+        if kind.order not in ds._linear_base:
+            ds._linear_base[kind.order] = PopulationLinearBase(ds, kind.order)
+        return ds._linear_base[kind.order]
 
     def check(self, ds: Dataset, cfg: dict | None = None) -> None:
         self.maps(ds)

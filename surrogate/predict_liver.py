@@ -436,10 +436,8 @@ def _checked_request(args, fail):
         return fail(exc)
     if predictor.shape_model is None:
         return fail(f"{args.run}: {_no_population(predictor)}")
-    if predictor.linear_base and not args.base:
-        from surrogate.predictor import LINEAR_BASE_ONLY
-
-        return fail(f"{args.run}: {LINEAR_BASE_ONLY.format(predictor.linear_base)}")
+    if not (predictor.base.whole or args.base):
+        return fail(f"{args.run}: {predictor.base.rest_only()}")
     L = predictor.spec.n_loads
     if len(args.force) != L:
         return fail(f"--force: the model takes {L} force(s), got {len(args.force)} (each "

@@ -16,6 +16,7 @@ import numpy as np
 
 from surrogate.features import FeatureSpec, static_node_features
 from surrogate.model_files import read_meta
+from surrogate.small_strain import base_of, green_product
 
 # Inference precisions: float32 (as trained), or the weights and activations cast to 16 bits.
 PRECISIONS = ("float32", "bfloat16", "float16")
@@ -59,15 +60,6 @@ def check_load_nodes(load_nodes, loadable) -> None:
                       "fixed or too close to it): extrapolating", stacklevel=3)
 
 
-LINEAR_BASE_ONLY = (
-    "this model predicts what a liver's small-strain base misses (config linear_base = {}), "
-    "not a whole field: a whole field needs the base of the liver's own mesh (fem_sim linear) "
-    "added to it (call with rest=True), which `make liver LIVER=... MODEL=<this run> AT=...` "
-    "does for a new liver over its linear response (linear_base = 1: "
-    "surrogate.over_green.OverGreen) and `make patient LIVER=... MODEL=<this run> K=0` over "
-    "the second-order one")
-
-
 class Predictor:
     """Jitted surrogate: forces (and load nodes, material) -> node displacements in mm.
 
@@ -95,7 +87,7 @@ class Predictor:
             dropout = float(cfg["dropout"])
             # a population model of what each liver's small-strain base misses
             # (surrogate/population_basis.py): its field is that rest, never a whole field
-            self.linear_base = int(cfg.get("linear_base", 0))
+            self.base = base_of(int(cfg.get("linear_base", 0)))
             self.force_norm_max = float(meta["training_range"]["force_norm_max"])
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"{d / 'model.json'}: incomplete or malformed ({exc!r})") from None
@@ -137,10 +129,10 @@ class Predictor:
     def __call__(self, forces, load_nodes, nodes=None, material=None, geometry=None,
                  rest: bool = False):
         """The displacement field, mm; ``rest``: what the small-strain base misses, of a model
-        trained on it (config ``linear_base``), which gives nothing else.
+        trained on it (``self.base``, :mod:`surrogate.small_strain`), which gives nothing else.
         """
-        if self.linear_base and not rest:
-            raise ValueError(LINEAR_BASE_ONLY.format(self.linear_base))
+        if not (self.base.whole or rest):
+            raise ValueError(self.base.rest_only())
         forces, load_nodes, single = _check_loads(forces, load_nodes, self.spec.n_loads)
         if self.linear_part is not None and geometry is not None:
             raise ValueError("geometry: this model's small-strain part is of its own liver's "
@@ -277,10 +269,9 @@ class LinearPart:
         """(n_cases, n_out or len(nodes), 3) mm for forces (n_cases, L, 3) N at load_nodes
         (n_cases, L).
         """
-        g = self.green[self.row[load_nodes]]          # (cases, L, 3, n_out, 3)
-        if nodes is not None:
-            g = g[:, :, :, np.searchsorted(self.output_nodes, np.asarray(nodes))]
-        return np.einsum("slcnd,slc->snd", g, forces, dtype=np.float64)
+        columns = None if nodes is None else \
+            np.searchsorted(self.output_nodes, np.asarray(nodes))
+        return green_product(self.green, self.row[load_nodes], forces, columns)
 
 
 def _read_linear_part(d: Path, meta: dict, points, output_nodes) -> LinearPart | None:

@@ -42,7 +42,7 @@ def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | 
         raise ValueError(f"{model_dir}: not a population model (no shape model): a patient "
                          "model adapts a model trained on a population of livers")
     # a population model of the bases' rest is its own rest (and places the liver as well)
-    rest_pred = pred if rest is None and pred.linear_base else \
+    rest_pred = pred if rest is None and not pred.base.whole else \
         None if rest is None else _rest_model(rest, pred, model_dir)
     placement, found = place(pred, liver, frame, saved)
     # --tune adapts the population network, so it keeps the population model as the base
@@ -76,9 +76,9 @@ def _rest_model(rest, pred, model_dir):
     from surrogate.predictor import load_predictor
 
     out = load_predictor(rest)
-    if not out.linear_base:
-        raise ValueError(f"--rest {rest}: not a model of a small-strain base's rest (config "
-                         "linear_base = 0); train config population_linear")
+    if out.base.whole:
+        raise ValueError(f"--rest {rest}: not a model of a small-strain base's rest (base "
+                         f"{out.base.name!r}); train config population_linear")
     if out.shape_model is None or \
             shape_model_digest(out.shape_model) != shape_model_digest(pred.shape_model):
         raise ValueError(f"--rest {rest}: another template or shape model than {model_dir}'s: "

@@ -24,8 +24,9 @@ class Teacher:
 
     def __init__(self, pred, placement, ds: Dataset, shape: str | None = None,
                  linear: LinearBase | None = None, rest=None):
-        """``rest``: a population model of what each liver's small-strain base misses (config
-        ``linear_base``), placed as ``pred`` and added to ``linear``, the patient's own base.
+        """``rest``: a population model of what each liver's small-strain base misses (its
+        ``base``, :mod:`surrogate.small_strain`), placed as ``pred`` and added to ``linear``,
+        the patient's own base.
         """
         from surrogate.predict_liver import PlacedModel
 
@@ -35,11 +36,11 @@ class Teacher:
                                       shape=shape)
             self.rest = None if rest is None else PlacedModel(
                 rest, nodes=ds.points[0], placement=placement, shape=shape)
-        if rest is not None and (linear is None or linear.order < rest.linear_base):
+        if rest is not None and (linear is None or not rest.base.served_by(linear.order)):
             raise ValueError(f"the population model of the base's rest was trained over a "
-                             f"small-strain base of order {rest.linear_base}; the patient's "
+                             f"small-strain base of order {rest.base.order}; the patient's "
                              f"is {'missing' if linear is None else f'of order {linear.order}'}"
-                             f": run fem_sim linear --order {rest.linear_base} on its scene")
+                             f": run fem_sim linear --order {rest.base.order} on its scene")
         self.out = np.asarray(ds.out_nodes[0])
         self.linear = linear   # the patient's small-strain responses: the base when given
         self.rest_weight = 1.0   # of the rest over the base (fit_rest_weight)

@@ -50,7 +50,18 @@ def test_error_sources_on_a_made_up_patient():
     assert out["worse_than_population"] == 1 and out["simulations"] == 4
     assert out["corrected_mm"] < out["population_mm"]
     assert out["spearman_displacement"] == pytest.approx(1.0)   # error = 0.1 x displacement
-    assert -1.0 <= out["spearman_nearest_load"] <= 1.0
+    # each held-out simulation's load placed farther from the training loads the larger its
+    # displacement (so its error): the error follows the distance, rank for rank; placed
+    # nearer instead, it follows it in reverse
+    rank = np.argsort(np.argsort([np.linalg.norm(true[sims == s], axis=-1).mean()
+                                  for s in range(4)]))
+    train_points = np.zeros((8, 3))
+    for sign in (1.0, -1.0):
+        points = np.zeros((12, 3))
+        points[:, 0] = 100.0 + sign * 10.0 * rank[sims]
+        out = error_sources(train, train_points, true, points, population, corrected, sims)
+        assert out["spearman_nearest_load"] == pytest.approx(sign)
+        assert out["nearest_load_mm"] == pytest.approx(100.0 + sign * 15.0)   # median of 4
 
 
 def test_per_simulation_takes_each_simulations_mean_error_and_its_last_steps_peak():

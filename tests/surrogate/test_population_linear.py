@@ -61,7 +61,7 @@ def test_a_population_model_of_the_bases_rest(tmp_path):
     assert rest["network"]["mee"] < 0.1 * plain["network"]["mee"], (rest["network"],
                                                                     plain["network"])
     pred = load_predictor(tmp_path / "rest" / "model")
-    assert pred.linear_base == 2
+    assert pred.base.name == "second_order" and pred.base.order == 2
     with pytest.raises(ValueError, match="small-strain base misses.*make patient"):
         pred([[0.0, 0.0, -0.4]], pred.shape_model.loadable_nodes[:1])
     sm = pred.shape_model   # the template itself: shape coefficients 0
