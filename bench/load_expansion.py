@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from data_spec.linear_fields import linear_fields_path
-from fem_sim.batch.chunked import generate_chunks
+from fem_sim.batch.chunked import liver_truth
 from liverviz.report import ROOT, write_report
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
@@ -59,17 +59,9 @@ def truth(model: Path, liver: Path, n: int, ranks: int) -> Path:
     from surrogate.evaluate import truth_scene
     from surrogate.predictor import load_predictor
 
-    d = RESULTS / liver.stem
-    d.mkdir(parents=True, exist_ok=True)
-    text = truth_scene(load_predictor(model / "model"), SCENE, liver, n, None)
-    scene = d / "scene.toml"
-    if not scene.exists() or scene.read_text() != text:
-        shutil.rmtree(d / "data", ignore_errors=True)
-        for stale in ("linear.json", "patient.json"):
-            (d / stale).unlink(missing_ok=True)
-        scene.write_text(text)
-    generate_chunks(scene, d / "data", n, ranks=ranks, chunk=n)
-    return d / "data"
+    return liver_truth(RESULTS / liver.stem,
+                       truth_scene(load_predictor(model / "model"), SCENE, liver, n, None), n,
+                       ranks=ranks, stale=("linear.json", "patient.json"))
 
 
 # the variants compared: (order, Green's function) by key; "2" is the truth's own directory

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from data_spec.views import dataset_fingerprint
-from fem_sim.batch.chunked import generate_chunks
+from fem_sim.batch.chunked import generate_chunks, liver_truth
 from liverviz.report import ROOT, SOFA, SOFA_FRAME, write_report
 from surrogate.patient import SYNTHETIC
 
@@ -158,19 +158,13 @@ def truth(pred, liver: Path, a, frame: str | None = None) -> Path:
     """
     from surrogate.evaluate import truth_scene
 
-    d = a.results / liver.stem
-    d.mkdir(parents=True, exist_ok=True)
-    n = HELD + max(a.ks)
-    text = truth_scene(pred, SCENE, liver, TRUTH_SIMS, frame)
-    scene = d / "scene.toml"
-    if not scene.exists() or scene.read_text() != text:
-        shutil.rmtree(d / "data", ignore_errors=True)
-        (d / "generation.json").unlink(missing_ok=True)
-        scene.write_text(text)
-    if not (a.no_new_fe and (d / "data" / "sims").is_dir()):
-        generate_chunks(scene, d / "data", n, ranks=a.np, chunk=n)
-    linear(scene, d / "data", d / "linear.json", a.order, a.green)
-    return d / "data"
+    d, n = a.results / liver.stem, HELD + max(a.ks)
+    data = liver_truth(d, truth_scene(pred, SCENE, liver, TRUTH_SIMS, frame), n,
+                       generate=False)   # the scene; another one's truth emptied
+    if not (a.no_new_fe and (data / "sims").is_dir()):
+        generate_chunks(d / "scene.toml", data, n, ranks=a.np, chunk=n)
+    linear(d / "scene.toml", data, d / "linear.json", a.order, a.green)
+    return data
 
 
 def linear(scene: Path, data: Path, record: Path, order: int = 1, green: bool = False) -> dict:

@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_sim.batch.chunked import generate_chunks, linear_bases
+from fem_sim.batch.chunked import generate_chunks, linear_bases, liver_truth
 from liverviz.report import ROOT, SOFA, SOFA_FRAME, commit, write_report
 from surrogate.small_strain import base_of
 
@@ -158,16 +158,9 @@ def truth(pred, liver: Path, frame, a) -> Path:
     """The liver's FE truth with the model's boundary condition (resumable)."""
     from surrogate.evaluate import truth_scene
 
-    d = RESULTS / "unseen" / liver.stem
-    d.mkdir(parents=True, exist_ok=True)
-    text = truth_scene(pred, SCENE, liver, a.unseen_sims, frame)
-    scene = d / "scene.toml"
-    if not scene.exists() or scene.read_text() != text:  # another model's placement
-        shutil.rmtree(d / "data", ignore_errors=True)
-        (d / "generation.json").unlink(missing_ok=True)
-        scene.write_text(text)
-    generate_chunks(scene, d / "data", a.unseen_sims, ranks=a.np, chunk=a.unseen_sims)
-    return d / "data"
+    return liver_truth(RESULTS / "unseen" / liver.stem,
+                       truth_scene(pred, SCENE, liver, a.unseen_sims, frame), a.unseen_sims,
+                       ranks=a.np)
 
 
 def unseen(data: Path, a) -> list[dict]:

@@ -30,7 +30,6 @@ from __future__ import annotations
 import argparse
 import json
 import re
-import shutil
 import sys
 import time
 from pathlib import Path
@@ -38,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from data_spec.views import extension, first
-from fem_sim.batch.chunked import generate_chunks
+from fem_sim.batch.chunked import generate_chunks, liver_truth
 from liverviz.report import ROOT, SOFA, commit, header, put_section
 from surrogate.evaluate import evaluate_liver, heldout_floor, place, truth_scene
 from surrogate.latency import timed, timed_placed
@@ -138,17 +137,9 @@ def unseen_truth(scene_file: Path, liver: Path, pred, a, name: str,
                  sims: int = UNSEEN_SIMS) -> Path:
     """The FE truth of the unseen liver under ``RESULTS / name`` (resumable), fixed where the
     model's placement puts the template's fixed region."""
-    d = RESULTS / name
-    d.mkdir(parents=True, exist_ok=True)
-    text = truth_scene(pred, scene_file, liver, sims, a.unseen_frame)
-    scene = d / "scene.toml"
-    if not scene.exists() or scene.read_text() != text:
-        if (d / "data").exists():  # another placement's truth: not this one's
-            shutil.rmtree(d / "data")
-        (d / "generation.json").unlink(missing_ok=True)
-        scene.write_text(text)
-    generate(scene, d / "data", sims, float("inf"), a)
-    return d / "data"
+    return liver_truth(RESULTS / name, truth_scene(pred, scene_file, liver, sims,
+                                                   a.unseen_frame),
+                       sims, ranks=a.np, solver_python=a.solver_python, chunk=a.chunk)
 
 
 def unseen(scene_file: Path, base: Path, model_dir: Path, a) -> dict | None:

@@ -23,6 +23,32 @@ from data_spec.views import shard_count
 ROOT = Path(__file__).resolve().parents[2]
 
 
+def liver_truth(directory: str | Path, scene_text: str, n: int, *, ranks: int = 2,
+                solver_python: str | Path | None = None, chunk: int | None = None,
+                stale: tuple = (), generate: bool = True) -> Path:
+    """The FE truth of a liver a model never saw, in ``directory`` (resumable): the scene
+    ``scene_text`` (``surrogate truth-scene``'s: the model's boundary condition) kept as
+    ``directory/scene.toml``, its first ``n`` simulations in ``directory/data``. A directory
+    holding the truth of another scene (another placement, another model) is emptied first:
+    its data, its generation record and the files ``stale`` names. ``generate`` False: only
+    the scene (what is there is kept). Returns the data directory.
+    """
+    import shutil
+
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    scene = d / "scene.toml"
+    if not scene.exists() or scene.read_text() != scene_text:
+        shutil.rmtree(d / "data", ignore_errors=True)
+        for name in ("generation.json", *stale):
+            (d / name).unlink(missing_ok=True)
+        scene.write_text(scene_text)
+    if generate:
+        generate_chunks(scene, d / "data", n, ranks=ranks, solver_python=solver_python,
+                        chunk=chunk or n)
+    return d / "data"
+
+
 def mpirun_env(oversubscribe: bool = True, **extra: str) -> dict:
     """The environment of an ``mpirun`` child: this process's, one BLAS and OpenMP thread
     per rank (the ranks take the cores), Open MPI allowed to run as root (a container's
