@@ -123,13 +123,13 @@ def run(part: int, parts: int) -> None:
 def meshfix_alone(liver: Path) -> float:
     """The volume change of MeshFix's own repair (holes and crossings at once), against the
     input with its holes patched: the alternative to the segmentation route."""
-    from fem_sim.geometry.repair import RepairReport, _defects, _meshfix, read_any_surface
+    from fem_sim.geometry.repair import RepairReport, measure_defects, meshfix, read_any_surface
     from fem_sim.geometry.surfaces import enclosed_volume, largest_piece
 
     r = RepairReport(file=liver.name, mesh_size=0.0)
     p, t, _ = largest_piece(*read_any_surface(liver))
-    _defects(p, t, r)
-    return abs(enclosed_volume(*_meshfix(p, t))) / 1e3 / r.volume_before_ml - 1.0
+    measure_defects(p, t, r)
+    return abs(enclosed_volume(*meshfix(p, t))) / 1e3 / r.volume_before_ml - 1.0
 
 
 def _stats(values) -> str:

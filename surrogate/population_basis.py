@@ -21,6 +21,8 @@ so they compare with the node-wise design's on the same held-out livers.
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from liverreg.morph import interpolation_matrix
@@ -139,6 +141,24 @@ class PopulationBasisRuntime(BasisRuntime):
         return self._ctx
 
 
+class PerDataset:
+    """Values computed once per dataset and dropped with it: kept by the object that computes
+    them, not as attributes put on the dataset (a Dataset is not hashable: keyed by its id,
+    with a finalizer that drops the entry when the dataset goes).
+    """
+
+    def __init__(self):
+        self._values: dict = {}
+
+    def get(self, ds: Dataset, key, make):
+        """The value of ``key`` for ``ds``, ``make()`` the first time."""
+        k = (id(ds), key)
+        if k not in self._values:
+            self._values[k] = make()
+            weakref.finalize(ds, self._values.pop, k, None)
+        return self._values[k]
+
+
 class PopulationBasis(Basis):
     """The design's entry in the registry (:data:`surrogate.designs.DESIGNS`); the model and
     its export are the reduced basis' (modes on the template's nodes).
@@ -154,6 +174,9 @@ class PopulationBasis(Basis):
     shape_rule = "outside"
     on_template = True  # its modes, and the liver it is exported with, are the template's
     takes = Basis.takes | {"shape_inputs", "load_context", "shape_noise", "linear_base"}
+
+    def __init__(self):
+        self._per_dataset = PerDataset()   # each dataset's template fields and bases
 
     def scene_problem(self, varies_geometry: bool) -> str | None:
         """Why a scene cannot take the design (None when it can)."""
@@ -171,9 +194,7 @@ class PopulationBasis(Basis):
         """The dataset's TemplateFields, built once and kept with the dataset (so they live
         and die with it).
         """
-        if getattr(ds, "_template_fields", None) is None:
-            ds._template_fields = TemplateFields(ds)
-        return ds._template_fields
+        return self._per_dataset.get(ds, "maps", lambda: TemplateFields(ds))
 
     def base(self, ds: Dataset, cfg: dict):
         """The dataset's small-strain base when the config learns the rest of it (kept with
@@ -185,11 +206,8 @@ class PopulationBasis(Basis):
         kind = base_of(cfg.get("linear_base", 0))
         if kind.whole:
             return None
-        if getattr(ds, "_linear_base", None) is None:
-            ds._linear_base = {}
-        if kind.order not in ds._linear_base:
-            ds._linear_base[kind.order] = PopulationLinearBase(ds, kind.order)
-        return ds._linear_base[kind.order]
+        return self._per_dataset.get(ds, ("base", kind.order),
+                                     lambda: PopulationLinearBase(ds, kind.order))
 
     def check(self, ds: Dataset, cfg: dict | None = None) -> None:
         self.maps(ds)
