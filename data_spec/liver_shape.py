@@ -37,6 +37,12 @@ def shape_figures(points, volume_ml: float) -> dict:
             "fill": volume_ml * 1e3 / box if box > 0 else float("inf")}
 
 
+def surface_volume_ml(points, triangles) -> float:
+    """ML enclosed by a closed triangle surface (divergence theorem; either facing)."""
+    x = np.asarray(points, dtype=np.float64)[np.asarray(triangles)]
+    return abs(float(np.einsum("ij,ij->", x[:, 0], np.cross(x[:, 1], x[:, 2])))) / 6e3
+
+
 def unlike_a_liver(points, volume_ml: float, where: str) -> str | None:
     """A warning naming ``where`` and every figure far outside the livers' range (None when
     the surface is plausibly a liver).

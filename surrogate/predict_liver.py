@@ -453,6 +453,10 @@ def _checked_request(args, fail):
     said, refused = _force_points(spec, points, triangles, args.liver)
     if refused:
         return fail(refused)
+    from data_spec.liver_shape import surface_volume_ml, unlike_a_liver
+
+    unlike = unlike_a_liver(points, surface_volume_ml(points, triangles), str(args.liver))
+    said += [unlike] if unlike else []
     for msg in said:
         print(f"warning: {msg}", file=sys.stderr)
     return predictor, spec, points, triangles, said
