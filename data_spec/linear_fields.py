@@ -104,19 +104,6 @@ def write_linear_fields(path: str | Path, lf: LinearFields) -> Path:
     return Path(path)
 
 
-def liver_of(path: str | Path) -> str:
-    """The geometry id a small-strain file is of (its attributes only: a Green's function
-    may be large); ValueError naming the file when it is not one.
-    """
-    try:
-        with h5py.File(path, "r") as f:
-            if f.attrs.get("format") == FORMAT:
-                return str(f.attrs["geometry_id"])
-    except (OSError, KeyError) as exc:
-        raise ValueError(f"{path}: cannot be read (truncated or corrupt?): {exc}") from None
-    raise ValueError(f"{path}: not a small-strain response file")
-
-
 def read_linear_fields(path: str | Path) -> LinearFields:
     """The file at ``path``; ValueError naming it when it is not one."""
     with h5py.File(path, "r") as f:
@@ -191,19 +178,28 @@ def _dataset_problems(lf: LinearFields, directory: Path, geometry_id: str | None
     return p
 
 
-def linear_file_problems(directory: str | Path, geometry_id: str | None = None) -> list[str]:
-    """Everything wrong with the small-strain file of the dataset ``directory`` (with
-    ``geometry_id``: that liver's file of a population), each naming the file: unreadable or
-    truncated, arrays of inconsistent shapes or not finite, made for another scene or liver.
+def _checked(directory: Path, geometry_id: str | None) -> tuple:
+    """(the dataset's small-strain file (None when it cannot be read), everything wrong with
+    it, each naming the file).
     """
-    directory = Path(directory)
     path = linear_fields_path(directory, geometry_id)
+    if not path.exists():
+        return None, [f"{path}: missing (fem_sim linear writes it)"]
     try:
         lf = read_linear_fields(path)
     except (OSError, KeyError, ValueError) as exc:
-        return [f"{path}: cannot be read (truncated or corrupt?): {exc}"]
-    return [f"{path}: {msg}" for msg in _shape_problems(lf)
-            + _dataset_problems(lf, directory, geometry_id)]
+        return None, [f"{path}: cannot be read (truncated or corrupt?): {exc}"]
+    return lf, [f"{path}: {msg}" for msg in _shape_problems(lf)
+                + _dataset_problems(lf, directory, geometry_id)]
+
+
+def linear_file_problems(directory: str | Path, geometry_id: str | None = None) -> list[str]:
+    """Everything wrong with the small-strain file of the dataset ``directory`` (with
+    ``geometry_id``: that liver's file of a population), each naming the file: missing,
+    unreadable or truncated, arrays of inconsistent shapes or not finite, made for another
+    scene or liver.
+    """
+    return _checked(Path(directory), geometry_id)[1]
 
 
 def read_dataset_linear(directory: str | Path, geometry_id: str | None = None) -> LinearFields:
@@ -211,15 +207,7 @@ def read_dataset_linear(directory: str | Path, geometry_id: str | None = None) -
     of a population), checked against the dataset: ValueError naming the file and both scenes
     (or livers) when it was made for another, or is not whole.
     """
-    directory = Path(directory)
-    path = linear_fields_path(directory, geometry_id)
-    if not path.exists():
-        raise ValueError(f"{path}: missing (fem_sim linear writes it)")
-    try:
-        lf = read_linear_fields(path)
-    except (OSError, KeyError) as exc:
-        raise ValueError(f"{path}: cannot be read (truncated or corrupt?): {exc}") from None
-    problems = _shape_problems(lf) + _dataset_problems(lf, directory, geometry_id)
+    lf, problems = _checked(Path(directory), geometry_id)
     if problems:
-        raise ValueError(f"{path}: " + "; ".join(problems))
+        raise ValueError("; ".join(problems))
     return lf

@@ -1,6 +1,7 @@
 """Whether a surface is plausibly a liver: its volume, its extents along its principal axes
-and how much of their box it fills, against the range of real livers. Said as a warning with
-the figures (a phantom or an animal organ may be meant), never a refusal.
+and how much of their box it fills, against the range of real livers (said as a warning with
+the figures: a phantom or an animal organ may be meant); and whether a file's pieces are one
+liver and its specks (refused otherwise: two livers, or a liver in parts).
 
 numpy only, for both environments.
 """
@@ -21,6 +22,23 @@ LIVER_RANGE = {
     "fill": (0.195, 0.396),
 }
 FAR = 1.5   # "far outside": below min / FAR or above max * FAR
+# A file's pieces beside the largest: specks are dropped (reported); a piece enclosing more
+# than this fraction of the largest one's volume is refused (two livers, a liver in parts).
+PIECE_FRACTION = 0.05
+
+
+def pieces_problem(where: str, volumes_ml, option: str) -> str | None:
+    """Why a file's pieces (the volumes they enclose, mL, the largest first) are not one
+    liver and its specks, naming both largest volumes and ``option``, what meshes the largest
+    anyway (None when every other piece is a speck).
+    """
+    if len(volumes_ml) < 2 or volumes_ml[1] <= PIECE_FRACTION * volumes_ml[0]:
+        return None
+    first, second = volumes_ml[0], volumes_ml[1]
+    return (f"{where}: {len(volumes_ml)} separate pieces: the largest encloses {first:.0f} mL, "
+            f"the next {second:.0f} mL ({second / first:.0%} of it, beyond "
+            f"{PIECE_FRACTION:.0%}): two livers, or a liver in parts? To mesh the largest "
+            f"alone: {option}")
 
 
 def shape_figures(points, volume_ml: float) -> dict:

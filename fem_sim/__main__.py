@@ -229,8 +229,9 @@ def _phantom(args, parser) -> int:
     out = Path(args.out)
     if out.suffix not in (".h5", ".hdf5"):
         parser.error(f"--out {out}: expected a .h5 data_spec geometry file")
-    if out_problem(out):
-        parser.error(out_problem(out))
+    why = out_problem(out)
+    if why:
+        parser.error(why)
     try:
         g = make_phantom(args.seed, args.mesh_size, args.variety, args.spread)
     except (ValueError, GeometryError) as exc:

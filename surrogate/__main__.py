@@ -252,8 +252,9 @@ def _evaluate(args) -> int:
     from surrogate.predictor import load_predictor
     from surrogate.viewer import model_dir
 
-    if args.out and out_problem(args.out, "--out"):   # before the evaluation, not after
-        return _fail("evaluate", out_problem(args.out, "--out"))
+    why = args.out and out_problem(args.out, "--out")
+    if why:   # before the evaluation, not after
+        return _fail("evaluate", why)
     problems = validate_dataset(args.data, complete=False)  # held-out subsets are fine
     if problems:
         return _fail("evaluate", f"{args.data}: not a valid dataset: " + "; ".join(problems[:5]))

@@ -39,24 +39,13 @@ class OverGreen:
         u = model([[0.0, 0.0, -0.4]], at)                   # (n_out, 3) mm, every frame
     """
 
-    def __init__(self, predictor, data, placement, shape: str | None = None, nodes=None):
-        from data_spec import read_geometry
-        from data_spec.linear_fields import linear_fields_path, read_dataset_linear
-        from data_spec.shards import geometry_path
+    def __init__(self, predictor, data, placement, shape: str | None = None, nodes=None,
+                 green=None):
+        """``green``: :func:`green_of` ``(predictor, data)`` when the caller has read it."""
         from surrogate.predict_liver import PlacedModel
 
-        path = linear_fields_path(data)
-        refusal = predictor.base.over_green_refusal()
-        if refusal:
-            raise ValueError(refusal)
-        if not path.exists():
-            raise ValueError(f"{path}: missing; run `"
-                             f"{predictor.base.liver_command(Path(data) / 'scene.toml', data)}"
-                             "` (make liver does)")
-        lf = read_dataset_linear(data)   # of the directory's scene and liver
-        if lf.green is None:
-            raise ValueError(f"{path}: no Green's function; run fem_sim linear with --green")
-        self.geometry = g = read_geometry(geometry_path(data, lf.geometry_id))
+        lf, g = green or green_of(predictor, data)
+        self.geometry = g
         self.output_nodes = np.asarray(lf.output_nodes)
         self.green_nodes = np.asarray(lf.green_nodes)
         self.fixed_nodes = np.setdiff1d(g.surface_nodes, self.green_nodes)
@@ -118,6 +107,29 @@ class OverGreen:
         return u[0] if single else u
 
 
+def green_of(predictor, data) -> tuple:
+    """(the small-strain file of the directory ``data``, its liver's geometry): ValueError
+    naming what to run when ``predictor`` is not a model over a liver's linear response, or
+    the file is missing, of another scene or liver, or holds no Green's function.
+    """
+    from data_spec import read_geometry
+    from data_spec.linear_fields import linear_fields_path, read_dataset_linear
+    from data_spec.shards import geometry_path
+
+    path = linear_fields_path(data)
+    refusal = predictor.base.over_green_refusal()
+    if refusal:
+        raise ValueError(refusal)
+    if not path.exists():
+        raise ValueError(f"{path}: missing; run `"
+                         f"{predictor.base.liver_command(Path(data) / 'scene.toml', data)}"
+                         "` (make liver does)")
+    lf = read_dataset_linear(data)   # of the directory's scene and liver
+    if lf.green is None:
+        raise ValueError(f"{path}: no Green's function; run fem_sim linear with --green")
+    return lf, read_geometry(geometry_path(data, lf.geometry_id))
+
+
 def predict_over_green(predictor, data, liver, forces, at, *, frame: str | None = None,
                        saved=None, shape: str | None = None):
     """predict-liver over the liver's own Green's function: (the
@@ -129,9 +141,10 @@ def predict_over_green(predictor, data, liver, forces, at, *, frame: str | None 
     from surrogate.evaluate import place
     from surrogate.predict_liver import LiverPrediction
 
-    model_data_of(data, liver)
+    green = green_of(predictor, data)   # read once, checked before the registration
+    same_liver(data, green[1], liver)
     placement, found = place(predictor, liver, frame, saved)
-    model = OverGreen(predictor, data, placement, shape)
+    model = OverGreen(predictor, data, placement, shape, green=green)
     g = model.geometry
     if model.output_nodes.size != g.n_nodes:
         raise ValueError(f"{data}: its scene predicts {model.output_nodes.size} of the mesh's "
@@ -156,17 +169,13 @@ def predict_over_green(predictor, data, liver, forces, at, *, frame: str | None 
 SAME_LIVER_MM = 5.0
 
 
-def model_data_of(data, liver) -> None:
-    """ValueError naming both when the liver mesh of the directory ``data`` (``fem_sim linear``
-    of a truth scene) is not the liver of the file ``liver``: the median distance of its
-    surface nodes to the file's surface vertices beyond :data:`SAME_LIVER_MM`.
+def same_liver(data, g, liver) -> None:
+    """ValueError naming both when ``g``, the liver mesh of the directory ``data``
+    (``fem_sim linear`` of a truth scene), is not the liver of the file ``liver``: the median
+    distance of its surface nodes to the file's surface vertices beyond :data:`SAME_LIVER_MM`.
     """
-    from data_spec import read_geometry
-    from data_spec.linear_fields import linear_fields_path, liver_of
-    from data_spec.shards import geometry_path
     from surrogate.predict_liver import read_liver_surface, surface_distances
 
-    g = read_geometry(geometry_path(data, liver_of(linear_fields_path(data))))
     points, triangles = read_liver_surface(liver)
     d = float(np.median(surface_distances(points, triangles, g.points[g.surface_nodes])))
     if d > SAME_LIVER_MM:

@@ -89,25 +89,21 @@ def read_liver_surface(path, scale_to_mm: float = 1.0) -> tuple[np.ndarray, np.n
     return _checked(path, np.asarray(surf.points, dtype=np.float64) * scale_to_mm, faces[:, 1:])
 
 
-# A second body enclosing more than this fraction of the largest one's volume is refused (two
-# livers in one file, a liver in parts), as fem_sim mesh refuses it; specks are dropped.
-PIECE_FRACTION = 0.05
-
-
 def _largest_body(path, surf, scale_to_mm: float):
     """The connected body of ``surf`` enclosing the most volume; LiverFileError naming both
-    volumes when another encloses more than :data:`PIECE_FRACTION` of it.
+    volumes when another is more than a speck, as fem_sim mesh refuses it
+    (:func:`data_spec.liver_shape.pieces_problem`).
     """
-    bodies = sorted((b.extract_surface(algorithm="dataset_surface") for b in
-                     surf.split_bodies()), key=lambda b: -abs(b.volume))
-    ml = [abs(b.volume) * scale_to_mm**3 / 1e3 for b in bodies[:2]]
-    if len(bodies) > 1 and ml[1] > PIECE_FRACTION * ml[0]:
-        raise LiverFileError(
-            f"{path}: {len(bodies)} separate pieces: the largest encloses {ml[0]:.0f} mL, the "
-            f"next {ml[1]:.0f} mL: two livers, or a liver in parts? Mesh the largest alone "
-            "(fem_sim mesh FILE --mesh-size 16 --keep-largest --out LIVER.h5) and give "
-            "LIVER.h5")
-    return bodies[0]
+    from data_spec.liver_shape import pieces_problem
+
+    bodies = [b.extract_surface(algorithm="dataset_surface") for b in surf.split_bodies()]
+    ml = [abs(b.volume) * scale_to_mm**3 / 1e3 for b in bodies]
+    order = np.argsort(ml)[::-1]
+    why = pieces_problem(str(path), [ml[i] for i in order], "fem_sim mesh FILE --mesh-size "
+                         "16 --keep-largest --out LIVER.h5, then predict-liver on LIVER.h5")
+    if why:
+        raise LiverFileError(why)
+    return bodies[order[0]]
 
 
 def _checked(path, points, triangles):

@@ -93,9 +93,9 @@ def run(scene_file, out, n_max: int = 40, overlap_livers: int | None = None,
     )
 
     out = Path(out)
-    if out_problem(out, "--out", directory=True):   # before the meshing and registration
-        print(f"fem_sim population: {out_problem(out, '--out', directory=True)}",
-              file=sys.stderr)
+    why = out_problem(out, "--out", directory=True)
+    if why:   # before the meshing and registration
+        print(f"fem_sim population: {why}", file=sys.stderr)
         return 2
     read = _livers(scene_file)
     if isinstance(read, int):

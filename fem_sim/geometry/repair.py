@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from data_spec.geometry import Geometry, signed_volumes
+from data_spec.liver_shape import pieces_problem
 from data_spec.units import span_problem
 from fem_sim.geometry.errors import GeometryError
 from fem_sim.geometry.regions import default_vena_cava
@@ -58,9 +59,6 @@ BOUNDS = {"volume": 0.02, "distance_mm": 10.0}
 # tried and dropped: a coarse input's few vertices sit on corners the repair rounds (a 60 mm
 # box: 3 mm on average), and a thin part taken off weighs on a mean over the area.
 MESH_BOUNDS = {"volume": 0.05, "max_mm": 20.0, "nodes": 100}
-# A file's pieces beside the largest: specks are dropped (reported); a piece enclosing more
-# than this fraction of the largest one's volume is refused (two livers, a liver in parts).
-PIECE_FRACTION = 0.05
 DECIMATE_EDGE = 0.6  # the decimated surface's target edge, in mesh sizes
 
 
@@ -441,8 +439,8 @@ def _largest_piece(points, tris, report: RepairReport, flag: str,
                    keep_largest: bool) -> tuple[np.ndarray, np.ndarray]:
     """The piece enclosing the most volume (each measured with its triangles facing as their
     neighbours), as it is in the file; the others reported, and refused (GeometryError naming
-    both volumes and the option that keeps the largest) when one encloses more than
-    :data:`PIECE_FRACTION` of it.
+    both volumes and the option that keeps the largest) when one is more than a speck
+    (:func:`data_spec.liver_shape.pieces_problem`).
     """
     from fem_sim.geometry.surfaces import enclosed_volume, orient_consistently, split_pieces
 
@@ -453,15 +451,12 @@ def _largest_piece(points, tris, report: RepairReport, flag: str,
         ml = abs(enclosed_volume(closed, np.concatenate([turned, patch])))
         parts.append((ml / 1e3, p, t))
     parts.sort(key=lambda x: -x[0])
-    (kept_ml, p, t), rest = parts[0], parts[1:]
+    (_, p, t), rest = parts[0], parts[1:]
     report.pieces_dropped = [len(x[2]) for x in rest]
     report.pieces_dropped_ml = [x[0] for x in rest]
-    if rest and rest[0][0] > PIECE_FRACTION * kept_ml and not keep_largest:
-        raise GeometryError(
-            f"{report.file}: {len(parts)} separate pieces: the largest encloses {kept_ml:.0f} "
-            f"mL, the next {rest[0][0]:.0f} mL ({rest[0][0] / kept_ml:.0%} of it, beyond "
-            f"{PIECE_FRACTION:.0%}): two livers, or a liver in parts? To mesh the largest "
-            f"alone: {_option(flag, 'keep')}")
+    why = pieces_problem(report.file, [x[0] for x in parts], _option(flag, "keep"))
+    if why and not keep_largest:
+        raise GeometryError(why)
     return p, t
 
 
