@@ -16,26 +16,22 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from pathlib import Path
 
-import numpy as np
-import tradeoff_fem as tf  # a sibling driver: its liver, load and reference
+from fem_sim.batch.knob_run import (
+    BUDGET_CASES,
+    BUDGET_MESHES,
+    BUDGET_REFERENCE,
+    BUDGET_RESULTS,
+    BUDGET_RUNS,
+    DEFAULTS,
+    budget_npz,
+    mesh,
+    run_job,
+)
+from liverviz.report import ROOT
 
-RESULTS = tf.ROOT / "bench" / "results" / "budget_fem"
-SCENE = tf.ROOT / "data_spec" / "scenes" / "scene1_base.toml"
-N_CASES = 4
+SCENE = ROOT / "data_spec" / "scenes" / "scene1_base.toml"
 FIRST_INDEX = 100_000      # case indices of the budget: no dataset of the study reaches them
-REFERENCE = (2, 6.0)       # (degree, mesh size mm)
-# Meshes of the error budget: (degree, mesh size mm). P2 at 16 mm is the shipped scene 1.
-MESHES = [(2, 16.0), (1, 12.0), (1, 8.0), (2, 12.0)]
-
-
-def mesh_name(degree: int, h: float) -> str:
-    return f"p{degree}_h{h:g}"
-
-
-def npz_path(case: int, degree: int, h: float) -> Path:
-    return RESULTS / f"case{case}_{mesh_name(degree, h)}.npz"
 
 
 def cases() -> list[dict]:
@@ -43,71 +39,45 @@ def cases() -> list[dict]:
     from data_spec import load_scene
     from fem_sim.batch import cases as cs
 
-    f = RESULTS / "cases.json"
+    f = BUDGET_RESULTS / "cases.json"
     if f.exists():
         return json.loads(f.read_text())
     scene = load_scene(SCENE)
-    g, fixed = tf.mesh("phantom", 16.0)
+    g, fixed = mesh("phantom", 16.0)
     out = []
-    for k in range(N_CASES):
+    for k in range(BUDGET_CASES):
         c = cs.make_case(scene, FIRST_INDEX + k, g, fixed)
         out.append({"index": FIRST_INDEX + k, "point": g.points[c.load_nodes[0]].tolist(),
                     "force": c.forces[0].tolist()})
-    RESULTS.mkdir(parents=True, exist_ok=True)
+    BUDGET_RESULTS.mkdir(parents=True, exist_ok=True)
     f.write_text(json.dumps(out, indent=1))
     return out
 
 
-def vertices(degree: int, h: float) -> np.ndarray:
-    g, _ = tf.mesh("phantom", h)
-    return g.points
-
-
 def run(case: dict, k: int, degree: int, h: float, timeout: float) -> dict:
-    spec = {**tf.DEFAULTS, "liver": "phantom", "load": "nodal", "h": h, "degree": degree,
+    spec = {**DEFAULTS, "liver": "phantom", "load": "nodal", "h": h, "degree": degree,
             "load_point": case["point"], "force": case["force"]}
-    job = {"spec": spec, "out": str(npz_path(k, degree, h)),
-           "eval_meshes": [[d, s] for d, s in MESHES] if (degree, h) == REFERENCE else []}
-    return tf.run_job(__file__, job, timeout)
-
-
-def one(job: dict) -> dict:
-    """In a fresh process: solve, and save u at the own vertices (and, for the reference, at
-    the vertices of every budget mesh, concatenated in MESHES order)."""
-    ev = None
-    if job["eval_meshes"]:
-        ev = np.concatenate([vertices(d, s) for d, s in job["eval_meshes"]])
-    return tf.run_one(job["spec"], ev, Path(job["out"]))
+    job = {"spec": spec, "out": str(budget_npz(k, degree, h)),
+           "eval_meshes": (BUDGET_MESHES if (degree, h) == BUDGET_REFERENCE else [])}
+    return run_job(job, timeout)
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per run")
-    ap.add_argument("--one", help=argparse.SUPPRESS)
     a = ap.parse_args()
-    if a.one:
-        import logging
-
-        logging.getLogger().setLevel(logging.WARNING)
-        print(json.dumps(one(json.loads(a.one))))
-        return 0
     from tqdm import tqdm
 
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    log = RESULTS / "runs.jsonl"
-    done = set()
-    if log.exists():
-        done = {(r["case"], r["degree"], r["h"]) for r in map(json.loads, log.read_text()
-                                                                .splitlines()) if r}
-    todo = [(k, d, h) for k in range(N_CASES) for d, h in [REFERENCE, *MESHES]
+    BUDGET_RESULTS.mkdir(parents=True, exist_ok=True)
+    done = BUDGET_RUNS.records()
+    todo = [(k, d, h) for k in range(BUDGET_CASES)
+            for d, h in [BUDGET_REFERENCE, *BUDGET_MESHES]
             if (k, d, h) not in done]
     cs = cases()
     bar = tqdm(todo, desc="budget-fem", unit="run")
     for k, d, h in bar:
         bar.set_postfix_str(f"case {k} P{d} h={h:g}")
-        rec = run(cs[k], k, d, h, a.timeout)
-        with open(log, "a") as fh:
-            fh.write(json.dumps({"case": k, "degree": d, "h": h, **rec}) + "\n")
+        BUDGET_RUNS.add({"case": k, "degree": d, "h": h, **run(cs[k], k, d, h, a.timeout)})
     return 0
 
 

@@ -12,7 +12,6 @@ share the two cores); ``--report`` writes the report and the picture from what i
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import sys
 import time
@@ -20,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from liverviz.ledger import Ledger
 from liverviz.report import ROOT, header
 
 LIVERS = ROOT.parent / "shared" / "data" / "livers" / "real"
@@ -44,16 +44,9 @@ HXT = ["Gmsh's HXT tetrahedra inside a kept surface, measured against the Delaun
        ""]
 
 
-def done(path: Path) -> dict:
-    if not path.exists():
-        return {}
-    return {(r["liver"], r.get("h")): r for r in map(json.loads, path.read_text().splitlines())}
-
-
-def append(path: Path, record: dict) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("a") as f:
-        f.write(json.dumps(record) + "\n")
+def ledger(path: Path) -> Ledger:
+    """A part's records (meshes: by liver and size; simulations: by liver)."""
+    return Ledger(path, key=lambda r: (r["liver"], r.get("h")))
 
 
 def mesh_one(liver: Path, h: float) -> dict:
@@ -108,16 +101,17 @@ def simulate_one(liver: Path) -> dict:
 def run(part: int, parts: int) -> None:
     livers = sorted(LIVERS.glob("*.obj"))[part::parts]
     meshes, fe = RESULTS / f"meshes_{part}.jsonl", RESULTS / f"fe_{part}.jsonl"
-    have_m, have_f = done(meshes), done(fe)
+    meshes, fe = ledger(meshes), ledger(fe)
+    have_m, have_f = meshes.records(), fe.records()
     for k, liver in enumerate(livers, 1):
         for h in SIZES:
             if (liver.name, h) not in have_m:
                 r = mesh_one(liver, h)
-                append(meshes, r)
+                meshes.add(r)
                 print(f"[{part}] {k}/{len(livers)} {liver.name} {h:g} mm: "
                       f"{'ok' if r['ok'] else r['reason']}", flush=True)
         if (liver.name, None) not in have_f:
-            append(fe, simulate_one(liver))
+            fe.add(simulate_one(liver))
 
 
 def meshfix_alone(liver: Path) -> float:
@@ -242,8 +236,8 @@ def picture_grid(png: Path, names: list[str]) -> None:
 
 
 def report(md: Path) -> None:
-    rows = [r for f in sorted(RESULTS.glob("meshes_*.jsonl")) for r in done(f).values()]
-    fe = [r for f in sorted(RESULTS.glob("fe_*.jsonl")) for r in done(f).values()]
+    rows = [r for f in sorted(RESULTS.glob("meshes_*.jsonl")) for r in ledger(f).records().values()]
+    fe = [r for f in sorted(RESULTS.glob("fe_*.jsonl")) for r in ledger(f).records().values()]
     mf = [r["meshfix_volume_change"] for r in rows if "meshfix_volume_change" in r]
     lines = [header("Real livers in: every CT-segmented liver repaired, meshed and simulated")
              .rstrip(), "",

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from fem_sim.batch.chunked import mpirun_env
+from liverviz.ledger import Ledger
 from liverviz.report import ROOT, SOFA, header
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
@@ -43,8 +44,8 @@ def unseen_records(scene) -> list[dict]:
     path = RESULTS / "unseen.jsonl"
     # kept under what the preparation depends on (file, settings, code): a liver prepared
     # otherwise since is prepared again
-    done = {r.get("key"): r for r in map(json.loads, path.read_text().splitlines())} \
-        if path.exists() else {}
+    ledger = Ledger(path, key=lambda r: r.get("key"))
+    done = ledger.records()
     template, registrars, out = template_of(g), {}, []
     for f, frame in [(f, g["frame"]) for f in validation_files(g)] + [(SOFA, "auto")]:
         key = prepared_key(f, {**g, "frame": frame})
@@ -52,10 +53,7 @@ def unseen_records(scene) -> list[dict]:
             if frame not in registrars:  # the template meshed once, set up once per frame
                 registrars[frame] = Registrar(template, region_name(scene), frame)
             _, _, rec = prepare(f, registrars[frame], g["mesh_size"], g.get("fixed_area_min"))
-            done[key] = {**asdict(rec), "key": key}
-            path.parent.mkdir(parents=True, exist_ok=True)
-            with path.open("a") as fh:
-                fh.write(json.dumps(done[key]) + "\n")
+            done[key] = ledger.add({**asdict(rec), "key": key})
         out.append(done[key])
     return out
 
@@ -73,9 +71,9 @@ def preparation_runs(n_livers: int, repeats: int) -> list[dict]:
 
     from liverviz.report import commit
 
-    path, tag = RESULTS / "preparation.jsonl", commit()
-    done = [r for r in map(json.loads, path.read_text().splitlines())
-            if r["commit"] == tag and r["livers"] == n_livers] if path.exists() else []
+    ledger, tag = Ledger(RESULTS / "preparation.jsonl", key=lambda r: (
+        r["commit"], r["livers"], r["ranks"], r["repeat"])), commit()
+    done = [r for r in ledger if r["commit"] == tag and r["livers"] == n_livers]
     text = SCENE.read_text().replace('"../../../shared/data/livers/real"',
                                      f'"{(ROOT.parent / "shared/data/livers/real").resolve()}"')
     text = text.replace("pca_components = 27", f"pca_components = {n_livers - 1}\n"
@@ -96,10 +94,9 @@ def preparation_runs(n_livers: int, repeats: int) -> list[dict]:
                 seconds = time.perf_counter() - t0
             if res.returncode:
                 raise SystemExit(f"generate failed on {ranks} rank(s):\n{res.stderr[-2000:]}")
-            done.append({"commit": tag, "livers": n_livers, "ranks": ranks, "repeat": rep,
-                         "seconds": seconds, "line": res.stdout.strip().splitlines()[-1]})
-            with path.open("a") as fh:
-                fh.write(json.dumps(done[-1]) + "\n")
+            done.append(ledger.add({"commit": tag, "livers": n_livers, "ranks": ranks,
+                                    "repeat": rep, "seconds": seconds,
+                                    "line": res.stdout.strip().splitlines()[-1]}))
             print(f"[preparation] {ranks} rank(s), run {rep + 1}: {seconds:.0f} s", flush=True)
     return done
 

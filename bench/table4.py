@@ -38,6 +38,7 @@ import numpy as np
 
 from data_spec.views import extension, first
 from fem_sim.batch.chunked import generate_chunks, liver_truth
+from fem_sim.batch.knob_run import price_list_error
 from liverviz.report import ROOT, SOFA, commit, header, put_section
 from surrogate.evaluate import evaluate_liver, heldout_floor, place, truth_scene
 from surrogate.latency import timed, timed_placed
@@ -100,21 +101,6 @@ def generate(scene: Path, data: Path, n: int, budget_s: float, a) -> dict:
     """Shards 0..n-1 of the scene in chunks (resumable; :mod:`fem_sim.batch.chunked`)."""
     return generate_chunks(scene, data, n, ranks=a.np, solver_python=a.solver_python,
                            chunk=a.chunk, budget_s=budget_s)
-
-
-def fe_error(degree: int, h: float) -> str:
-    """Mean / max relative FE error of the scene's element on the phantom under a nodal
-    load (outside 2h of the load) against the converged answer, from docs/tradeoff_fem.md.
-    """
-    path = ROOT / "docs" / "tradeoff_fem.md"
-    if not path.exists():
-        return "n/a"
-    for line in path.read_text().splitlines():
-        c = [x.strip() for x in line.strip("|").split("|")]
-        if len(c) > 16 and c[:4] == ["phantom", "nodal", "mesh", f"P{degree}"] \
-                and c[4] == f"{h:g}" and c[6] == "200" and c[7] == "10":
-            return f"{c[18]} / {c[19]}"
-    return "not in the price list"
 
 
 def sim_seconds(data: Path) -> float:
@@ -201,7 +187,7 @@ class SceneRow:
             "scene": k, "file": self.scene_file.name, "config": self.name,
             "overrides": self.overrides, "sims": self.n, "budget_minutes": minutes,
             "generation_seconds": gen["seconds"], "sim_seconds": sim_seconds(self.data),
-            "fe_error": fe_error(scene["solver"]["degree"], scene["geometry"]["mesh_size"]),
+            "fe_error": price_list_error(scene["solver"]["degree"], scene["geometry"]["mesh_size"]),
             "curve": [], "written": {"commit": commit(), "date": time.strftime(
                 "%Y-%m-%d %H:%M UTC", time.gmtime())}}
 
@@ -637,7 +623,7 @@ def _real_row(scene: str, d: dict, ms: str) -> str:
             f"{net['mae_z']:.3f} | {pl['median']:.3f} (median liver) | {m['naive']['mee']:.3f}"
             f" | {pl['skill_mean']:.3f} / {pl['skill_median']:.3f} | "
             f"{net['pct_ee_lt_1mm']:.2f} | {net['pct_ee_lt_3mm']:.2f} | {net['corr_x']:.4f} / "
-            f"{net['corr_y']:.4f} / {net['corr_z']:.4f} | {fe_error(2, 16.0)} | | "
+            f"{net['corr_y']:.4f} / {net['corr_z']:.4f} | {price_list_error(2, 16.0)} | | "
             f"{m['total_seconds'] / 60:.0f} min | {ms} |")
 
 

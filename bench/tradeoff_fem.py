@@ -30,22 +30,28 @@ import argparse
 import json
 import os
 import platform
-import resource
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
+from fem_sim.batch.knob_run import (
+    C1,
+    DEFAULTS,
+    M1,
+    PATCH_RADIUS,
+    element_of,
+    key_of,
+    load_point,
+    run_job,
+    spec_of,
+)
+from liverviz.ledger import Ledger
 from liverviz.report import ROOT, SOFA, header
 
 RESULTS = ROOT / "bench" / "results" / "tradeoff_fem"
+RUNS = Ledger(RESULTS / "runs.jsonl", key="key")
 DOCS = ROOT / "docs"
-FORCE = [0.0, 0.0, -0.4]  # N
-PATCH_RADIUS = 15.0  # mm
-DEFAULTS = {"degree": 1, "steps": 10, "rtol": 1e-6, "factorization": "auto",
-            "linear_solver": "direct", "predictor": "hermite", "K_over_mu": 200.0}
 
 # Mesh sizes (mm): P1 from ~1k to ~30k vertices; P2 on the coarser ones; the reference is P2
 # on the finest mesh that fits in time and memory here.
@@ -57,37 +63,10 @@ SIZES = {
              "anp": [16.0, 12.0, 10.0, 8.0, 6.0, 5.0],
              "ref": 6.0, "default": 8.0, "kmu": []},  # K/mu sweep on the phantom only (time)
 }
-# Keys a liver's runs carry beyond DEFAULTS (they enter the run keys, so runs made under an
-# earlier definition are not reused): the real liver's fixed region is the surface triangles
-# whose centroid is within 25 mm of a point (see ``mesh``), no longer the surface nodes there.
-LIVER_KEYS = {"sofa": {"clamp": "triangles"}}
 # The references are solved tighter than the default tolerance (1e-9: their keys, and so
 # their reuse across studies, carry it).
 REF_RTOL = 1e-9
 TARGET = 0.02  # the accuracy the summary asks of each element: 2 % of the converged answer
-C1, M1 = 4.1e-3, 10.06  # the Ogden term of every run (MPa, -)
-
-
-def material(k_over_mu: float):
-    """The study's Ogden material at bulk-to-shear ratio ``k_over_mu`` (kappa = K/mu * c1/2,
-    as the scenes set it)."""
-    from fem_sim import OgdenMaterial
-
-    return OgdenMaterial((C1,), (M1,), k_over_mu * C1 / 2)
-
-
-def spec_of(liver: str, **kw) -> dict:
-    """A run of the study: the defaults, the liver's own keys, then ``kw``."""
-    return {**DEFAULTS, **LIVER_KEYS.get(liver, {}), "liver": liver, **kw}
-
-
-def element_of(spec: dict) -> str:
-    """P1, P2 or ANP (P1 with averaged nodal pressure, ``fem_sim/solver/anp.py``)."""
-    return "ANP" if spec.get("element") == "anp" else f"P{spec['degree']}"
-
-
-def key_of(spec: dict) -> str:
-    return json.dumps(spec, sort_keys=True)
 
 
 def _plan_meshes(add, liver: str, s: dict) -> None:
@@ -154,135 +133,6 @@ def plan(livers: list[str]) -> list[dict]:
     return runs
 
 
-# ----------------------------------------------------------------------------------------------
-# One run (in its own process)
-# ----------------------------------------------------------------------------------------------
-def mesh(liver: str, h: float):
-    if liver == "phantom":
-        from fem_sim.geometry.phantom import make_phantom
-
-        g = make_phantom(0, h)
-        return g, g.regions["vena_cava"]
-    from fem_sim.geometry.repair import mesh_surface_file
-
-    g = mesh_surface_file(SOFA, h)
-    # The default region (surface nodes within 25 mm of the most posterior surface node)
-    # moves with the mesh; the study fixes the same physical region on every mesh: the part of
-    # the surface within 25 mm of the most posterior point of the surface file itself. On a
-    # mesh it is the surface triangles whose centroid lies inside (all their vertices fixed),
-    # which covers about the region's area at every h. Fixing only the vertices inside the
-    # ball fixes just the triangles wholly inside: on a 16 mm mesh 13 nodes, a region far
-    # smaller than on a fine one, so every coarse mesh was too soft by its clamp alone.
-    from fem_sim.geometry.surfaces import clean_surface, read_vtk_polydata
-
-    pts, _ = clean_surface(*read_vtk_polydata(SOFA), str(SOFA))
-    top = pts[np.argmax(pts[:, 1])]
-    tri = g.surface_triangles
-    inside = np.linalg.norm(g.points[tri].mean(axis=1) - top, axis=1) <= 25.0
-    return g, np.unique(tri[inside])
-
-
-def load_point(liver: str) -> np.ndarray:
-    """The surface vertex of the coarsest mesh farthest from the fixed region: the same
-    physical point for every mesh of the liver."""
-    g, fixed = mesh(liver, 16.0)
-    surf = np.setdiff1d(g.surface_nodes, fixed)
-    d = np.linalg.norm(g.points[surf][:, None] - g.points[fixed][None], axis=2).min(axis=1)
-    return g.points[surf[np.argmax(d)]]
-
-
-def run_one(spec: dict, eval_points: np.ndarray | None, out_npz: Path) -> dict:
-    from mpi4py import MPI
-
-    from fem_sim import Constraint, NodalLoad, OgdenProblem, PatchLoad
-
-    t0 = time.perf_counter()
-    g, fixed = mesh(spec["liver"], spec["h"])
-    p_star = np.asarray(spec["load_point"])
-    if spec["load"] == "patch":
-        loads = [PatchLoad(p_star, spec.get("force", FORCE), PATCH_RADIUS)]
-        node = -1
-    else:
-        surf = np.setdiff1d(g.surface_nodes, fixed)
-        node = int(surf[np.argmin(np.linalg.norm(g.points[surf] - p_star, axis=1))])
-        loads = [NodalLoad([node], [spec.get("force", FORCE)])]
-    settings = {"rtol": spec["rtol"], "factorization": spec["factorization"],
-                "linear_solver": spec["linear_solver"], "predictor": spec["predictor"]}
-    if spec["linear_solver"] == "gamg":
-        settings.update(max_krylov=1000, krylov_rtol=1e-12)
-    kw = {"element": "anp"} if spec.get("element") == "anp" else {}
-    prob = OgdenProblem(MPI.COMM_WORLD, g.points, g.cells, degree=spec["degree"],
-                        settings=settings, **kw)
-    mat = material(spec["K_over_mu"])
-    setup = time.perf_counter() - t0
-    fractions = np.arange(1, spec["steps"] + 1) / spec["steps"]
-    t1 = time.perf_counter()
-    sol = prob.solve(mat, [Constraint(fixed)], loads, fractions)
-    secs = time.perf_counter() - t1
-    ev = eval_points if eval_points is not None else g.points
-    u_eval = prob.displacement_at(ev) if sol.status == "ok" else np.full(ev.shape, np.nan)
-    # A dataset solves many simulations on one problem: the later ones reuse PARDISO's
-    # analysis and the small-strain factorisation. One more here, timed apart (not for the
-    # references, which only give the errors).
-    later = {}
-    if sol.status == "ok" and spec["role"] != "reference":
-        t2 = time.perf_counter()
-        sol2 = prob.solve(mat, [Constraint(fixed)], loads, fractions)
-        later = {"seconds_later": time.perf_counter() - t2,
-                 "factorizations_later": sol2.factorizations, "status_later": sol2.status}
-        if sol2.status == "ok":
-            later["later_diff"] = float(np.abs(sol2.displacement[-1] - sol.displacement[-1]).max()
-                                        / np.abs(sol.displacement[-1]).max())
-    np.savez(out_npz, u=u_eval, points=ev, u_nodes=sol.displacement[-1] if sol.n_done else
-             np.zeros((0, 3)), nodes=g.points)
-    return {"status": sol.status, "reason": sol.failure_reason, "seconds": secs,
-            "setup_seconds": setup, "n_vertices": int(g.n_nodes),
-            "n_dofs": int(prob.disc.V.dofmap.index_map.size_global * 3),
-            "newton_iterations": sol.newton_iterations, "factorizations": sol.factorizations,
-            "chord_steps": sol.chord_steps, "cutbacks": sol.cutbacks,
-            "max_u": float(np.abs(sol.displacement[-1]).max()) if sol.n_done else None,
-            "load_node": node, "fixed_nodes": int(len(fixed)),
-            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, **later}
-
-
-# ----------------------------------------------------------------------------------------------
-# The study
-# ----------------------------------------------------------------------------------------------
-def read_jsonl(path: Path, key: str) -> dict[str, dict]:
-    """The records of a results file (one JSON object a line), by their ``key`` field."""
-    out = {}
-    if path.exists():
-        for line in path.read_text().splitlines():
-            if line.strip():
-                r = json.loads(line)
-                out[r[key]] = r
-    return out
-
-
-def results() -> dict[str, dict]:
-    return read_jsonl(RESULTS / "runs.jsonl", "key")
-
-
-def run_job(script: str, job: dict, timeout: float, threads: int = 1) -> dict:
-    """Run ``script --one JOB`` in a fresh process (a clean peak-memory figure; a crash costs
-    one run) on ``threads`` threads and return the JSON record it prints last, or why there is
-    none."""
-    t0 = time.perf_counter()
-    try:
-        proc = subprocess.run([sys.executable, script, "--one", json.dumps(job)],
-                              capture_output=True, text=True, timeout=timeout,
-                              env={**os.environ, "OPENBLAS_NUM_THREADS": str(threads),
-                                   "OMP_NUM_THREADS": str(threads)})
-        lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
-        record = (json.loads(lines[-1]) if proc.returncode == 0 and lines else
-                  {"status": "crashed", "reason": proc.stderr.strip()[-500:]})
-    except subprocess.TimeoutExpired:
-        record = {"status": "timeout", "reason": f"over {timeout:.0f} s"}
-    record["wall_seconds"] = time.perf_counter() - t0
-    record["threads"] = threads
-    return record
-
-
 def npz_name(key: str) -> Path:
     import hashlib
 
@@ -306,7 +156,7 @@ def study(livers: list[str], timeout: float, loads=("patch", "nodal"), threads: 
         if not f.exists():
             f.write_text(json.dumps(load_point(liver).tolist()))
         points[liver] = json.loads(f.read_text())
-    done = results()
+    done = RUNS.records()
     todo = [s for s in plan(livers) if key_of(s) not in done and s["load"] in loads]
     bar = tqdm(todo, desc="tradeoff-fem", unit="run")
     for spec in bar:
@@ -320,9 +170,8 @@ def study(livers: list[str], timeout: float, loads=("patch", "nodal"), threads: 
         else:
             job = {"spec": {**spec, "load_point": points[spec["liver"]]},
                    "eval": str(ref_npz) if ref_npz else None, "out": str(npz_name(key))}
-            record = run_job(__file__, job, timeout, threads)
-        with open(RESULTS / "runs.jsonl", "a") as fh:
-            fh.write(json.dumps({"key": key, "spec": spec, **record}) + "\n")
+            record = run_job(job, timeout, threads)
+        RUNS.add({"key": key, "spec": spec, **record})
 
 
 # ----------------------------------------------------------------------------------------------
@@ -558,11 +407,15 @@ def report() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    res = results()
+    res = RUNS.records()
     rows = _rows(res)
     lines = _intro(rows) + [_line(spec, rec, err, res) for spec, rec, err in rows]
     DOCS.mkdir(exist_ok=True)
     (DOCS / "tradeoff_fem.md").write_text("\n".join(lines) + "\n")
+    # the errors beside the report, for the reports that quote an element's (table4)
+    (DOCS / "tradeoff_fem.json").write_text("[\n" + ",\n".join(
+        json.dumps({"spec": spec, "element": element_of(spec), "errors": err})
+        for spec, _, err in rows if err) + "\n]\n")
     livers = sorted({s["liver"] for s, _, _ in rows})
     fig, axes = plt.subplots(1, max(1, len(livers)), figsize=(7 * max(1, len(livers)), 5.5),
                              squeeze=False)
@@ -582,19 +435,7 @@ def main() -> int:
                     help="only these runs (two processes can share the study)")
     ap.add_argument("--threads", type=int, default=1,
                     help="threads per run (OMP_NUM_THREADS, OPENBLAS_NUM_THREADS); one MPI rank")
-    ap.add_argument("--one", help=argparse.SUPPRESS)
     a = ap.parse_args()
-    if a.one:
-        import logging
-
-        logging.getLogger().setLevel(logging.WARNING)
-        job = json.loads(a.one)
-        ev = None
-        if job["eval"]:
-            with np.load(job["eval"]) as z:
-                ev = z["nodes"]
-        print(json.dumps(run_one(job["spec"], ev, Path(job["out"]))))
-        return 0
     livers = ["phantom", "sofa"] if a.liver == "both" else [a.liver]
     livers = [v for v in livers if v != "sofa" or SOFA.exists()]
     if not a.report:

@@ -40,10 +40,19 @@ import sys
 import time
 from pathlib import Path
 
-import budget_fem as bf  # a sibling driver (no dolfinx at import): the budget's cases, meshes
 import numpy as np
 
 from fem_sim.batch.chunked import mpirun_env
+from fem_sim.batch.knob_run import (
+    BUDGET_CASES,
+    BUDGET_MESHES,
+    BUDGET_REFERENCE,
+    BUDGET_RESULTS,
+    BUDGET_RUNS,
+    budget_npz,
+    mesh_name,
+)
+from liverviz.ledger import Ledger
 from liverviz.report import ROOT, header
 
 RESULTS = ROOT / "bench" / "results" / "tradeoff_surrogate"
@@ -55,7 +64,7 @@ N_TEST = 50          # held-out simulations: the last N_TEST of the learning-cur
 N_LEARN = 400        # largest training set of the learning curve
 N_BUDGET = 120       # simulations per mesh of the error budget (10 % held out for early stopping)
 N_KNOB = 100         # training simulations of the network-size and node-fraction rows
-LEARN_DATA = bf.mesh_name(2, 16.0)  # the shipped scene 1: P2 on a 16 mm mesh
+LEARN_DATA = mesh_name(2, 16.0)  # the shipped scene 1: P2 on a 16 mm mesh
 PAPER1 = [500, 300, 100, 50]
 NETS = {"paper scene 1": PAPER1, "paper scenes 2-3": [500, 500, 300, 100, 50],
         "paper scene 4": [500] * 5, "128x3": [128, 128, 128], "64x2": [64, 64],
@@ -75,7 +84,7 @@ def scene_text(degree: int, h: float, n: int) -> str:
             section = s
         key = s.split("=")[0].strip() if "=" in s and not s.startswith("#") else None
         if section == "[scene]" and key == "name":
-            line = f'name = "tradeoff_{bf.mesh_name(degree, h)}"'
+            line = f'name = "tradeoff_{mesh_name(degree, h)}"'
         elif section == "[scene]" and key == "n_simulations":
             line = f"n_simulations = {n}"
         elif section == "[geometry]" and key == "mesh_size":
@@ -89,8 +98,8 @@ def scene_text(degree: int, h: float, n: int) -> str:
 def datasets() -> dict[str, tuple[Path, Path]]:
     """name -> (scene file, dataset directory) of every dataset of the study."""
     out = {}
-    for degree, h in bf.MESHES:
-        name = bf.mesh_name(degree, h)
+    for degree, h in BUDGET_MESHES:
+        name = mesh_name(degree, h)
         n = N_LEARN + N_TEST if name == LEARN_DATA else N_BUDGET
         scene = RESULTS / "scenes" / f"{name}.toml"
         scene.parent.mkdir(parents=True, exist_ok=True)
@@ -141,13 +150,13 @@ def plan() -> list[dict]:
     for frac in (0.05, 0.1, 0.25, 1.0):
         add("node fraction", node_fraction=frac)
     add("surface only", n_train=N_LEARN, nodes="surface")
-    for degree, h in bf.MESHES:
-        add("error budget", data=bf.mesh_name(degree, h), n_train=N_BUDGET)
+    for degree, h in BUDGET_MESHES:
+        add("error budget", data=mesh_name(degree, h), n_train=N_BUDGET)
     return runs
 
 
-def read_jsonl(path: Path) -> dict[str, dict]:
-    return bf.tf.read_jsonl(path, "id")
+RUNS = Ledger(RESULTS / "runs.jsonl", key="id")
+LATENCIES = Ledger(RESULTS / "latency.jsonl", key="id")
 
 
 _DATA: dict[str, object] = {}
@@ -238,7 +247,7 @@ def latency(model_dir: Path, nodes, dtype: str, calls: int) -> float:
 def study(part: int, parts: int) -> None:
     from tqdm import tqdm
 
-    done = read_jsonl(RESULTS / "runs.jsonl")
+    done = RUNS.records()
     ready = {name for name, (scene, out) in datasets().items() if complete(scene, out)}
     todo = [r for i, r in enumerate(plan()) if i % parts == part and r["id"] not in done]
     waiting = [r["id"] for r in todo if r["data"] not in ready]
@@ -249,16 +258,14 @@ def study(part: int, parts: int) -> None:
     bar = tqdm(todo, desc=f"tradeoff-surrogate {part + 1}/{parts}", unit="training")
     for spec in bar:
         bar.set_postfix_str(spec["id"])
-        rec = train_one(spec)
-        with open(RESULTS / "runs.jsonl", "a") as fh:
-            fh.write(json.dumps(rec) + "\n")
+        RUNS.add(train_one(spec))
 
 
 def latencies() -> None:
     """Latency of every exported model (all nodes and surface nodes; float32, and 16 bits for
     the rows that have it). Run alone: other work on the cores inflates it."""
-    done = read_jsonl(RESULTS / "latency.jsonl")
-    for rec in read_jsonl(RESULTS / "runs.jsonl").values():
+    done = LATENCIES.records()
+    for rec in RUNS.records().values():
         spec = rec["spec"]
         if rec["id"] in done or spec["data"] != LEARN_DATA:
             continue
@@ -270,8 +277,7 @@ def latencies() -> None:
                 continue
             out[f"all_{dtype}"] = latency(model, None, dtype, LATENCY_CALLS)
             out[f"surface_{dtype}"] = latency(model, surface, dtype, LATENCY_CALLS)
-        with open(RESULTS / "latency.jsonl", "a") as fh:
-            fh.write(json.dumps(out) + "\n")
+        LATENCIES.add(out)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -290,39 +296,28 @@ def simulation_seconds(name: str, n: int) -> float:
     return float(np.mean(per) * n)
 
 
-def _fem_runs() -> dict:
-    """The budget's FE records by (case, degree, h)."""
-    fem = {}
-    path = bf.RESULTS / "runs.jsonl"
-    if path.exists():
-        for line in path.read_text().splitlines():
-            r = json.loads(line)
-            fem[(r["case"], r["degree"], r["h"])] = r
-    return fem
-
-
 @functools.cache
 def _ref_offsets(k: int) -> dict:
     """Where each mesh's vertices start in case k's reference values (MESHES order)."""
     sizes = []
-    for d2, h2 in bf.MESHES:
-        with np.load(bf.npz_path(k, d2, h2)) as z:
+    for d2, h2 in BUDGET_MESHES:
+        with np.load(budget_npz(k, d2, h2)) as z:
             sizes.append(z["nodes"].shape[0])
-    return dict(zip(bf.MESHES, np.cumsum([0, *sizes[:-1]])))
+    return dict(zip(BUDGET_MESHES, np.cumsum([0, *sizes[:-1]])))
 
 
 def _case_errors(k, case, degree, h, ds, predict, fem) -> dict | None:
     """FE, surrogate and total node errors of load case k on mesh (degree, h); None when a
     solve is missing."""
-    ref_rec, rec = fem.get((k, *bf.REFERENCE)), fem.get((k, degree, h))
+    ref_rec, rec = fem.get((k, *BUDGET_REFERENCE)), fem.get((k, degree, h))
     if not (ref_rec and rec and ref_rec["status"] == "ok" and rec["status"] == "ok"):
         return None
-    with np.load(bf.npz_path(k, degree, h)) as z:
+    with np.load(budget_npz(k, degree, h)) as z:
         u, pts = z["u_nodes"], z["nodes"]
     if pts.shape != ds.points[0].shape or not np.allclose(pts, ds.points[0]):
-        raise RuntimeError(f"{bf.mesh_name(degree, h)}: the budget's mesh is not the dataset's")
+        raise RuntimeError(f"{mesh_name(degree, h)}: the budget's mesh is not the dataset's")
     start = _ref_offsets(k)[(degree, h)]
-    with np.load(bf.npz_path(k, *bf.REFERENCE)) as z:
+    with np.load(budget_npz(k, *BUDGET_REFERENCE)) as z:
         u_ref = z["u"][start:start + pts.shape[0]]
         scale = np.abs(z["u_nodes"]).max()
         # Each mesh loads its node nearest to the case's point: how far apart the loaded
@@ -342,16 +337,16 @@ def budget() -> list[dict]:
     budget's load cases at full load, at the mesh's vertices outside EXCLUDE of the load."""
     from surrogate import load_predictor
 
-    fem = _fem_runs()
-    if not (bf.RESULTS / "cases.json").exists():
+    fem = BUDGET_RUNS.records()
+    if not (BUDGET_RESULTS / "cases.json").exists():
         return []
-    cases = json.loads((bf.RESULTS / "cases.json").read_text())
-    trained = {r["spec"]["data"]: r for r in read_jsonl(RESULTS / "runs.jsonl").values()
+    cases = json.loads((BUDGET_RESULTS / "cases.json").read_text())
+    trained = {r["spec"]["data"]: r for r in RUNS.records().values()
                if r["spec"]["group"] == "error budget" or "error budget" in
                r["spec"].get("also", [])}
     rows = []
-    for degree, h in sorted(bf.MESHES, key=lambda m: (m[0], -m[1])):  # P1 then P2, coarse first
-        name = bf.mesh_name(degree, h)
+    for degree, h in sorted(BUDGET_MESHES, key=lambda m: (m[0], -m[1])):  # P1 then P2, coarse first
+        name = mesh_name(degree, h)
         if name not in trained:
             continue
         ds, _ = dataset(name)
@@ -493,7 +488,7 @@ def _surface(rows, lat) -> list[str]:
 def _budget_section(b: list) -> list[str]:
     L = ["", "## Error budget: the FE mesh against the surrogate", "",
          f"For each mesh, a dataset of scene 1 on it ({N_BUDGET} simulations), the paper's "
-         f"scene-1 network trained on it, and {bf.N_CASES} new load cases drawn by scene "
+         f"scene-1 network trained on it, and {BUDGET_CASES} new load cases drawn by scene "
          "1's rule (`bench/budget_fem.py`), solved on that mesh "
          "and on the reference (P2 on a 6 mm mesh, as in `docs/tradeoff_fem.md`). At the "
          f"mesh's vertices more than {EXCLUDE:g} mm from the load point (a point load has no "
@@ -525,8 +520,8 @@ def report() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    runs = read_jsonl(RESULTS / "runs.jsonl")
-    lat = read_jsonl(RESULTS / "latency.jsonl")
+    runs = RUNS.records()
+    lat = LATENCIES.records()
     rows = [r for r in runs.values() if "all" in r]
     ds_note = ""
     if (RESULTS / "data" / LEARN_DATA).exists():
