@@ -40,19 +40,6 @@ RESULTS = ROOT / "bench" / "results" / "load_expansion"
 MODEL = ROOT / "bench" / "results" / "scene4_real" / "run_population_basis"
 DESIGN_LIVERS = ["Amos-005", "LiTS-12", "LiTS-16"]
 SYNTHETIC = 600   # make patient's drawn loads
-REJECTED = (
-    "Measured and rejected by hand on the same truths (the first K simulations to fit, the "
-    "last 10 held out): the two terms weighed by load fraction, the median over the K "
-    "simulations of each sample's least-squares weights of lam u1 and the damped second "
-    "term. Held-out MEE at K = 5 / 10 against the unweighed base: Amos-005 0.060 / 0.077 "
-    "against 0.055, LiTS-12 0.063 / 0.063 against 0.078, LiTS-16 0.089 / 0.091 against "
-    "0.086 mm: no better over the three, and one more thing fitted on few simulations. The "
-    "plain series lam u1 + lam^2 u2 without the damping and the gate: 0.099 / 0.064 / 0.243 "
-    "mm over all 20 simulations (LiTS-16 has two loads on thin parts whose linear response "
-    "reaches 86 and 168 mm, where R is 4.9 and 3.8 and the series is no guide); one scale of "
-    "the linear response fitted the same way (each simulation predicted from 10 others): "
-    "0.152 / 0.075 / 0.091, no better than the linear response (0.130 / 0.074 / 0.090).")
-
 
 def truth(model: Path, liver: Path, n: int, ranks: int) -> Path:
     """The liver's ``n`` FE simulations with the model's boundary condition (resumable)."""

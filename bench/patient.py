@@ -52,76 +52,6 @@ GOAL_MM = 0.5   # the issue's goal: this MEE within GOAL_MINUTES on two cores
 GOAL_MINUTES = 5.0
 FRAMES = {SOFA.stem: SOFA_FRAME}   # a liver file not in the scene's frame: predict-liver's --frame
 BIG_PEAK_MM = 30.0   # a held-out simulation's FE peak displacement counted as a large one
-# what was measured and rejected (Amos-054, K = 40, the population model of 663 simulations)
-REJECTED = [
-    "Measured and rejected, on Amos-054 at K = 40 with an earlier population model (663 "
-    "simulations): (1) reciprocity (Maxwell-Betti): each FE simulation gives the linear "
-    "response at its load point to any new load, which halves the error of the first load "
-    "step (median relative error 0.31 to 0.16) but, extrapolated to the full load, raises "
-    "the MEE from 0.91 to 1.04 mm at best: the loads go far beyond the linear range (up to "
-    "107 mm of displacement); the correction takes the same readings as inputs of its "
-    "regression instead (below). (2) One stiffness scale fitted before the correction: 0.91 to "
-    "1.00 mm on Amos-054, 0.42 to 0.30 mm on LiTS-100 at K = 10: not kept. (3) Settings "
-    "chosen on the held-out MEE instead of the squared error: at most 0.12 mm better (K = "
-    "80), at 4.5 times the seconds.", "",
-    "Measured and rejected by hand on two training livers, Amos-005 and LiTS-12 (50 FE "
-    "simulations each, the last 10 held out; the population model has seen 7 others of each), "
-    "the shipped population model, corrected MEE at K = 10 / 20 / 40 (the correction as "
-    "shipped: 0.520 / 0.461 / 0.413 and 0.456 / 0.446 / 0.351 mm): the kernel widened by a "
-    "term of the population field times the force's magnitude (a mismatch growing with the "
-    "load) 0.524 / 0.461 / 0.427 and 0.449 / 0.445 / 0.352; by the population field's "
-    "product times the load points' decay (a linear map of the population field varying over "
-    "the liver) 0.519 / 0.438 / 0.413 and 0.456 / 0.446 / 0.351; the load points' distance "
-    "replaced by that of the population's responses per newton 0.550 / 0.461 / 0.385 and "
-    "0.469 / 0.453 / 0.353; the load points' distance measured along the liver's surface "
-    "(shortest paths on its triangles' edges, a median 1.3 times the straight one) 0.528 / "
-    "0.461 / 0.415 and 0.449 / 0.437 / 0.360: within the cross-validation's own scatter, none "
-    "kept. An oracle "
-    "that fits each held-out field with the population's responses to the three unit "
-    "directions at its load point (its 3 weights from the truth itself) reaches 0.536 mm on "
-    "Amos-005 (0.504 with the best load point within 15 mm), above the correction's 0.413 at "
-    "K = 40: the error is not a wrong direction, stiffness or point of the load.", "",
-    "Kept, measured by hand on the same two training livers: the reciprocity readings "
-    "(surrogate.patient.Sensors) in the correction's kernel. Corrected MEE at K = 10 / 20 / 40 "
-    "(K = 10 and 20: the mean over the first K simulations and 3 random draws of K of the "
-    "first 40; the same 10 held out), without and with them: Amos-005 0.514 / 0.482 / 0.413 "
-    "and 0.509 / 0.438 / 0.367 mm, LiTS-12 0.445 / 0.394 / 0.351 and 0.419 / 0.338 / 0.259 "
-    "mm; lower on 16 of the 18 draws. Rejected beside it: readings from each simulation's "
-    "load step of the same force instead of its first (0.510 / 0.431 / 0.363 and 0.414 / "
-    "0.332 / 0.272: alike); a simulation's own reading kept in its cases (0.509 / 0.415 / "
-    "0.325 and 0.436 / 0.391 / 0.329: a reading a new load never has); the setting chosen "
-    "for each singular mode of the residual (K = 10 / 20 / 40 from the first K: 0.542 / "
-    "0.486 / 0.436 and 0.541 / 0.460 / 0.376, worse); the K loads chosen spread over the "
-    "liver (greedy in the kernel's variance, from the first 40) rather than drawn: 0.570 / "
-    "0.402 and 0.484 / 0.403 at K = 10 / 20 against draws' 0.545 / 0.498 and 0.438 / 0.398 "
-    "(mixed). Without the readings even the setting of least held-out error, picked on the "
-    "truth itself, reaches only 0.385 and 0.345 mm at K = 40: the choice of setting was not "
-    "what was missing.", "",
-    "Kept, measured by hand on the three design livers with the order-2 base and the exact "
-    "linear part (the truths of docs/load_expansion.md, 20 simulations each; 18 splits: K = 5 "
-    "from each quarter, K = 10 from each half, the other half held out): the correction kept "
-    "only when its nested cross-validated MEE (the setting chosen on the other simulations of "
-    "each fold, surrogate.patient._nested_mee) is below the base's, instead of the chosen "
-    "setting's own cross-validated MEE (the least of 1,680 noisy scores, biased low). Of the "
-    "8 corrections kept before, 2 are dropped: LiTS-12 K = 10 (0.101 -> 0.095 mm, right) and "
-    "LiTS-16 K = 5 (0.051 -> 0.053, wrong); over the 18 splits the corrections cost +0.016 mm "
-    "in all before and +0.012 after. The nested scores of the 6 kept (0.92-0.98 of the "
-    "base's) do not tell the helpful from the harmful: at K <= 10 on this base the correction "
-    "is within +-0.008 mm either way.", "",
-    "The distilled model's settings (RMS loss, 600 drawn loads; surrogate.patient.STUDENT and "
-    "SYNTHETIC) were chosen by hand on two training livers, Amos-005 and LiTS-12, each with 50 "
-    "FE simulations under the same model's boundary condition (the last 10 held out), at K = "
-    "10 and 40: patient-model MEE 0.618 / 0.436 mm (Amos-005) and 0.416 / 0.345 mm (LiTS-12) "
-    "with the squared loss and 300 drawn loads, 0.514 / 0.362 and 0.381 / 0.315 with RMS and "
-    "600; on Amos-005, RMS alone 0.591 / 0.426, 600 loads alone 0.513 / 0.372. They had been "
-    "tried on this report's validation livers first (the same direction), so the rows above "
-    "carry a little of that choice.", "",
-    "Measured and not kept: fewer load steps per patient simulation. On 28 simulations of "
-    "four large training livers (bench/stalls_big.toml, `fem_sim generate` as it is and with "
-    "[steps] n = 5), 5 output steps take 303 factorisations against 362 for 10 (0.84; the "
-    "same final states to 8e-7 mm): the solver's own increments, not the output steps, set "
-    "the cost, so halving the fields per simulation buys a sixth more simulations.", ""]
-
 
 def split(ds, k: int) -> tuple[np.ndarray, np.ndarray]:
     """(the K = ``k`` training simulations, the held-out ones) of a liver's truth ``ds``: the
@@ -131,24 +61,6 @@ def split(ds, k: int) -> tuple[np.ndarray, np.ndarray]:
     sims = np.unique(ds.sample_sim)
     return sims[HELD:HELD + k], sims[:HELD]
 
-
-# measured on the design livers with the population model as the base, and left behind by
-# the small-strain base
-DESIGN_REJECTED = [
-    "Measured and left behind, on these livers with the population model as the base (an "
-    "earlier population model, `--tune`): fine-tuning the population network on the K "
-    "simulations, median corrected / tuned / tuned + corrected 0.574 / 0.532 / 0.493 mm at "
-    "K = 5 and 0.362 / 0.424 / 0.324 mm at K = 40, against the small-strain base's "
-    "0.05-0.17 mm with no simulation: `--tune` stays an option, not the default.", "",
-    "Measured on these livers at K = 0 (linear + rest teacher, by hand), the distilled patient "
-    "model against the teacher's base on the held-out simulations (Amos-005 / LiTS-12 / "
-    "LiTS-16): the student's settings change little (600 drawn loads: 0.180 / 0.054 / 0.071 "
-    "mm; no weight decay 0.182 / 0.058 / 0.071; three networks 0.181 / 0.055 / 0.069; 128 "
-    "modes 0.179 / 0.053 / 0.069; the teacher 0.173 / 0.059 / 0.051), 1,800 drawn loads do "
-    "(0.160 / 0.053 / 0.058): what the student misses is the loads between the drawn ones. "
-    "They cost `fem_sim linear` 41 / 93 / 59 s instead of 19 / 49 / 32 s and the "
-    "distillation about twice its seconds; SYNTHETIC stays 600 until the validation livers "
-    "are measured with it.", ""]
 
 
 def truth(pred, liver: Path, a, frame: str | None = None) -> Path:
@@ -658,8 +570,7 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict], md: Path)
              *_rest_lines(curves), *_tuned_lines(curves, a.ks),
              *_reached_lines(curves, a.ks, start), *_within_lines(curves, a.ks, start),
              *_e2e_lines(curves, e2e, start)]
-    lines += _size_lines(curves, md) + sources_lines(found) + (DESIGN_REJECTED if a.design
-                                                               else REJECTED)
+    lines += _size_lines(curves, md) + sources_lines(found)
     return "\n".join(lines)
 
 

@@ -318,24 +318,9 @@ def main() -> int:
                "n_simulations", "train_livers", "train_simulations")} for s in runs},
            "variants": {s: over for s, _, over in variants}}
     text = report(runs, variants, a.folds, a.evaluate_folds, a.jobs)
-    text += "\n\n" + NOTES
     write_report(ROOT / "docs" / "real_knobs.md", "The population basis's knobs on real livers",
                  text, out)
     return 0
-
-
-NOTES = """\
-Measured and rejected by hand on the same folds of this dataset as meshed by gmsh's HXT
-algorithm (before the Delaunay mesher; not a command of this bench, their code is not kept): two
-more load contexts, each with the RMS loss: the liver's outward normal and its depth below the
-load (pooled skill 0.372 against 0.367 for the RMS loss alone on that dataset), and the
-linear-elastic unit response of the registered template under the load (linear tetrahedra, log
-compliance along the force, its mean displacement: 0.365, per-liver median 0.346 against 0.358,
-4 of 5 folds lower). That response correlates with the FE field's size (Spearman 0.85 with the
-mean displacement, against 0.64 for the distance to the fixed region), yet the network learns
-little from it: it already knows the field's size from the shape and the load's place. The
-held-out error is not in the amplitude: the best scale per held-out simulation takes the MEE
-down by a fifth only."""
 
 
 if __name__ == "__main__":

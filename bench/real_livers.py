@@ -20,28 +20,13 @@ from pathlib import Path
 import numpy as np
 
 from liverviz.ledger import Ledger
-from liverviz.report import ROOT, header
+from liverviz.report import ROOT, header, sections
 
 LIVERS = ROOT.parent / "shared" / "data" / "livers" / "real"
 RESULTS = ROOT / "bench" / "results" / "real_livers"
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_phantoms.toml"
 SIZES = (16.0, 8.0)
 
-
-# measured by hand on every 4th liver (40; 30 of them on a route that keeps its surface) at
-# 16 mm and not kept: the command that measured it is not kept
-HXT = ["Gmsh's HXT tetrahedra inside a kept surface, measured against the Delaunay ones "
-       "(`fem_sim.geometry.meshing.ALGORITHM_3D`) on every 4th liver at 16 mm (30 on a route "
-       "that keeps its surface) and not kept: smallest mean ratio median 0.109 against 0.037 "
-       "(worst 0.036 against 0.005), tetrahedra below 0.1 median 0 against 11 (of about "
-       "5,000), 1,961 nodes against 1,610 (median), but not reproducible: the same liver "
-       "meshed again in one process (1,913 then 1,920 nodes for Amos-001) or in a process "
-       "with another environment gave other tetrahedra (gmsh orders the surface's nodes for "
-       "HXT by their addresses in memory), where Delaunay gave the same mesh on 40 of 40. "
-       "Delaunay's worst tetrahedra (the tables' smallest mean ratios) are flat ones with "
-       "four nodes on the kept surface and two of its triangles as faces, which relocating "
-       "nodes cannot mend; taking each out (an edge flip of the surface) would: not done.",
-       ""]
 
 
 def ledger(path: Path) -> Ledger:
@@ -267,13 +252,12 @@ def report(md: Path) -> None:
                   "not kept: gmsh's reparametrisation after MeshFix (2 of 12 meshed), and "
                   "fTetWild (`pytetwild`) to regularise the surface first (10-60 s per liver; "
                   "gmsh then meshed 4 of 12).", ""]
-    lines += HXT
     lines += _fe_section(fe, {r["liver"] for r in rows if r["h"] == SIZES[0] and not r["ok"]})
     names = sorted({r["liver"] for r in rows if r["ok"] and r["h"] == SIZES[0]})
     if names:
         picture_grid(md.with_suffix(".png"), names[::max(1, len(names) // 18)][:18])
         lines += [f"![a grid of the meshed livers]({md.with_suffix('.png').name})", ""]
-    md.write_text("\n".join(lines))
+    md.write_text("\n".join(lines) + "\n" + sections(md))
     print(f"wrote {md}")
 
 

@@ -20,3 +20,18 @@ def test_a_section_is_appended_then_replaced_and_kept(tmp_path):
     put_section(md, "other", "x")
     assert sections(md).count("<!-- end ") == 2
     assert sections(tmp_path / "missing.md") == ""
+
+
+def test_write_report_keeps_the_measured_and_rejected_section(tmp_path):
+    """What was measured by hand and not kept lives in its report, not in the driver: the
+    driver's rewrite keeps it after the new body."""
+    from liverviz.report import write_report
+
+    md = tmp_path / "r.md"
+    write_report(md, "R", "body one", {"x": 1})
+    put_section(md, "measured-and-rejected", "HXT: not reproducible, not kept.")
+    write_report(md, "R", "body two", {"x": 2})
+    text = md.read_text()
+    assert "body one" not in text and "body two" in text
+    assert text.index("body two") < text.index("<!-- begin measured-and-rejected -->")
+    assert text.count("HXT: not reproducible") == 1
