@@ -42,6 +42,7 @@ import numpy as np
 
 from fem_sim.batch.chunked import generate_chunks, linear_bases, liver_truth
 from liverviz.report import ROOT, SOFA, SOFA_FRAME, commit, write_report
+from surrogate.reports import DesignRecord
 from surrogate.small_strain import base_of
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
@@ -281,24 +282,22 @@ def _scene():
 
 
 def _design_line(d: dict) -> str:
-    m = d["metrics"]
-    pl = m["per_liver_mee"]
-    ms = (f"{d['ms_big']:.2f}" if "ms_big" in d else "not exported" if "base_alone" not in d
-          else "over the liver's Green's function (make liver): below" if
-          d["base_alone"]["order"] == 1 else "a patient model (make patient)")
-    kept = f" (measured at {d['kept_from']})" if "kept_from" in d else ""
-    line = (f"| {d['config']}{kept} | {m['n_simulations']:,} | {m['skill']:.3f} | "
-            f"{pl['skill_mean']:.3f} / {pl['skill_median']:.3f} | {m['network']['mee']:.3f} | "
-            f"{pl['median']:.3f} | {m['naive']['mee']:.3f} | {m['network']['pct_ee_lt_3mm']:.2f}"
-            f" | {m['total_seconds'] / 60:.0f} min | {ms} |")
-    if "base_alone" not in d:
+    r = DesignRecord.from_json(d)
+    m = r.metrics
+    kept = f" (measured at {r.kept_from})" if r.kept_from else ""
+    line = (f"| {r.config}{kept} | {m['n_simulations']:,} | {m['skill']:.3f} | "
+            f"{r.per_liver_skill()} | {m['network']['mee']:.3f} | "
+            f"{m['per_liver_mee']['median']:.3f} | {m['naive']['mee']:.3f} | "
+            f"{m['network']['pct_ee_lt_3mm']:.2f} | {m['total_seconds'] / 60:.0f} min | "
+            f"{r.use_cell('{big:.2f}')} |")
+    if r.base is None:
         return line
-    b = d["base_alone"]
-    pb = b["per_liver_mee"]
-    return line + (f"\n| its small-strain base alone (order {b['order']}, no network) | 0 | "
-                   f"{b['skill']:.3f} | {pb['skill_mean']:.3f} / {pb['skill_median']:.3f} | "
-                   f"{b['network']['mee']:.3f} | {pb['median']:.3f} | {b['naive']['mee']:.3f} | "
-                   f"{b['network']['pct_ee_lt_3mm']:.2f} | | |")
+    b = DesignRecord(r.config, r.base_alone)
+    return line + (f"\n| its small-strain base alone ({r.base.name.replace('_', ' ')}, no network) | 0 | "
+                   f"{b.metrics['skill']:.3f} | {b.per_liver_skill()} | "
+                   f"{b.metrics['network']['mee']:.3f} | {b.metrics['per_liver_mee']['median']:.3f}"
+                   f" | {b.metrics['naive']['mee']:.3f} | "
+                   f"{b.metrics['network']['pct_ee_lt_3mm']:.2f} | | |")
 
 
 def _unseen_line(u: dict) -> str:
@@ -354,8 +353,8 @@ def _placed_calls(un: list[dict]) -> list[str]:
 
 def _rest_designs(out: dict) -> list[dict]:
     """The designs over each liver's small-strain base, by the base's order."""
-    return sorted((d for d in out["designs"] if "base_alone" in d),
-                  key=lambda d: d["base_alone"]["order"])
+    return sorted((d for d in out["designs"] if DesignRecord.from_json(d).base),
+                  key=lambda d: DesignRecord.from_json(d).base.order)
 
 
 def _over_base_text(out: dict) -> list[str]:
@@ -553,8 +552,9 @@ def main() -> int:
         out["worst"] = worst_picture(out["unseen"])
         out["written"] = {"commit": commit(), "date": time.strftime("%Y-%m-%d %H:%M UTC",
                                                                     time.gmtime())}
-    out["livers"] = len(shards_by_liver(data))  # the livers with simulations
-    out["prepared"] = len(json.loads((data / "geometry" / "livers.json").read_text()))
+    if not a.report_only:  # the livers with simulations, and those prepared
+        out["livers"] = len(shards_by_liver(data))
+        out["prepared"] = len(json.loads((data / "geometry" / "livers.json").read_text()))
     write_report(md, "Scene 4 on real livers", report(out), out)
     return 0
 

@@ -42,6 +42,7 @@ from fem_sim.batch.knob_run import price_list_error
 from liverviz.report import ROOT, SOFA, commit, header, put_section
 from surrogate.evaluate import evaluate_liver, heldout_floor, place, truth_scene
 from surrogate.latency import timed, timed_placed
+from surrogate.reports import DesignRecord, design_label
 from surrogate.train import train_or_reuse
 
 RESULTS = ROOT / "bench" / "results" / "table4"
@@ -280,16 +281,6 @@ def run_scene(k: int, a, rows: dict | None = None) -> dict:
 
 def _f(x, fmt="{:.3f}"):
     return "n/a" if x is None or (isinstance(x, float) and np.isnan(x)) else fmt.format(x)
-
-
-def design_label(config: str, variant: dict | None = None) -> str:
-    """The design's name, its config and the overrides that make it a variant of it."""
-    from surrogate.config import get_config
-    from surrogate.designs import DESIGNS
-
-    kind = DESIGNS[get_config(config)["design"]].label
-    knobs = "".join(f", {key} = {json.dumps(v)}" for key, v in (variant or {}).items())
-    return f"{kind} (`{config}`{knobs})"
 
 
 def design_rows(k: int, r: dict, d: dict, gen: str, who: str = "ours") -> list[str]:
@@ -634,11 +625,8 @@ def real_liver_rows(path: Path) -> tuple[list[str], list[str]]:
         return [], []
     r = json.loads(path.read_text())
     un = r["unseen"]
-    lines = [_real_row("4, real livers", d, (
-        f"{d['ms_own']:.2f} / {d['ms_big']:.2f}" if "ms_big" in d else "not exported" if
-        "base_alone" not in d else "over the liver's Green's function (make liver)" if
-        d["base_alone"]["order"] == 1 else "over the liver's own base (make patient)"))
-        for d in r["designs"]]
+    lines = [_real_row("4, real livers", d, DesignRecord.from_json(d).use_cell())
+             for d in r["designs"]]
     lines += [_real_row("4, real livers, all 10 folds", d, "") for d in r.get("every_fold", [])]
     design = design_label(r["designs"][0]["config"])
     validation = [u for u in un if u["frame"] == "scene"]

@@ -41,6 +41,13 @@ class SmallStrainBase:
         """Whether a liver's Green's function gives the base of any nodal load at run time."""
         return self.order == 1
 
+    @property
+    def use(self) -> str:
+        """How a user gets a whole field from a model over this base: the report's words."""
+        return ("placed on any liver (predict-liver)" if self.whole else
+                "over the liver's Green's function (make liver)" if self.from_green else
+                "over the liver's own base (make patient)")
+
     def served_by(self, order: int) -> bool:
         """Whether small-strain responses of ``order`` hold this base (order 2 holds 1)."""
         return order >= self.order

@@ -1,0 +1,76 @@
+"""The records the studies write and the report rows built from them, once: a design trained
+and evaluated (:class:`DesignRecord`), its label, and the cells every report shows of it.
+``bench/table4.py`` and ``bench/scene4_real.py`` read and write these; neither formats a
+design's row on its own, nor asks a base's order (:mod:`surrogate.small_strain` does).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+from surrogate.small_strain import SmallStrainBase, base_of
+
+
+def design_label(config: str, variant: dict | None = None) -> str:
+    """The design's name, its config and the overrides that make it a variant of it."""
+    from surrogate.config import get_config
+    from surrogate.designs import DESIGNS
+
+    kind = DESIGNS[get_config(config)["design"]].label
+    knobs = "".join(f", {key} = {json.dumps(v)}" for key, v in (variant or {}).items())
+    return f"{kind} (`{config}`{knobs})"
+
+
+@dataclasses.dataclass
+class DesignRecord:
+    """One design trained on a dataset and evaluated on held-out simulations: its config,
+    the trainer's metrics (``train_and_evaluate``'s), and what the study added (latency at
+    its own nodes and at 15.4k, its small-strain base alone, the run it was kept from).
+    """
+
+    config: str
+    metrics: dict
+    variant: dict | None = None
+    nodes: int | None = None
+    ms_own: float | None = None
+    ms_big: float | None = None
+    base_alone: dict | None = None
+    kept_from: str | None = None
+    extra: dict = dataclasses.field(default_factory=dict)
+
+    @classmethod
+    def from_json(cls, d: dict) -> DesignRecord:
+        names = {f.name for f in dataclasses.fields(cls)} - {"extra"}
+        return cls(**{k: v for k, v in d.items() if k in names},
+                   extra={k: v for k, v in d.items() if k not in names})
+
+    def to_json(self) -> dict:
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+             if f.name != "extra" and getattr(self, f.name) is not None}
+        return {**d, **self.extra}
+
+    @property
+    def base(self) -> SmallStrainBase | None:
+        """The small-strain base the design learns the rest of (None: a whole-field design)."""
+        return None if self.base_alone is None else base_of(self.base_alone["order"])
+
+    @property
+    def label(self) -> str:
+        return design_label(self.config, self.variant)
+
+    def use_cell(self, exported: str = "{own:.2f} / {big:.2f}") -> str:
+        """The latency cell: the exported model's ms, else how a whole field is had."""
+        if self.ms_big is not None:
+            return exported.format(own=self.ms_own, big=self.ms_big)
+        return "not exported" if self.base is None else self.base.use
+
+    def per_liver_skill(self) -> str:
+        """Mean / median over the held-out livers of each liver's skill."""
+        pl = self.metrics["per_liver_mee"]
+        return f"{pl['skill_mean']:.3f} / {pl['skill_median']:.3f}"
+
+
+def xyz(m: dict, key: str, fmt: str = "{:.3f}") -> str:
+    """``key``'s x / y / z values of a metrics dict (``mae`` or ``corr``)."""
+    return " / ".join(fmt.format(m[f"{key}_{c}"]) for c in "xyz")
