@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from data_spec.views import dataset_fingerprint
-from fem_sim.batch.chunked import generate_chunks, liver_truth
+from fem_sim.batch.chunked import generate_chunks
 from liverviz.report import ROOT, SOFA, SOFA_FRAME, write_report
 from surrogate.patient import SYNTHETIC
 
@@ -53,6 +53,7 @@ GOAL_MINUTES = 5.0
 FRAMES = {SOFA.stem: SOFA_FRAME}   # a liver file not in the scene's frame: predict-liver's --frame
 BIG_PEAK_MM = 30.0   # a held-out simulation's FE peak displacement counted as a large one
 
+
 def split(ds, k: int) -> tuple[np.ndarray, np.ndarray]:
     """(the K = ``k`` training simulations, the held-out ones) of a liver's truth ``ds``: the
     first HELD are held out and the next ``k`` train, so a larger K adds simulations to the
@@ -62,17 +63,15 @@ def split(ds, k: int) -> tuple[np.ndarray, np.ndarray]:
     return sims[HELD:HELD + k], sims[:HELD]
 
 
-
 def truth(pred, liver: Path, a, frame: str | None = None) -> Path:
     """The liver's FE truth with the model's boundary condition (the liver file in
     ``frame``, predict-liver's --frame): a scene of TRUTH_SIMS simulations, the first HELD +
     the largest K solved.
     """
-    from surrogate.evaluate import truth_scene
+    from surrogate.evaluate import unseen_truth
 
     d, n = a.results / liver.stem, HELD + max(a.ks)
-    data = liver_truth(d, truth_scene(pred, SCENE, liver, TRUTH_SIMS, frame), n,
-                       generate=False)   # the scene; another one's truth emptied
+    data = unseen_truth(pred, liver, d, SCENE, TRUTH_SIMS, frame=frame, solve=0)
     if not (a.no_new_fe and (data / "sims").is_dir()):
         generate_chunks(d / "scene.toml", data, n, ranks=a.np, chunk=n)
     linear(d / "scene.toml", data, d / "linear.json", a.order, a.green)

@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_sim.batch.chunked import generate_chunks, linear_bases, liver_truth
+from fem_sim.batch.chunked import generate_chunks, linear_bases
 from liverviz.report import ROOT, SOFA, SOFA_FRAME, commit, write_report
 from surrogate.reports import DesignRecord
 from surrogate.small_strain import base_of
@@ -155,22 +155,13 @@ def unseen_livers(scene) -> list[tuple[Path, str | None]]:
     return out + ([(SOFA, SOFA_FRAME)] if SOFA.exists() else [])
 
 
-def truth(pred, liver: Path, frame, a) -> Path:
-    """The liver's FE truth with the model's boundary condition (resumable)."""
-    from surrogate.evaluate import truth_scene
-
-    return liver_truth(RESULTS / "unseen" / liver.stem,
-                       truth_scene(pred, SCENE, liver, a.unseen_sims, frame), a.unseen_sims,
-                       ranks=a.np)
-
-
 def unseen(data: Path, a) -> list[dict]:
     """Each unseen liver: the exported population basis placed on it against its FE truth,
     and the seconds from its file to a ready predictor; with each population model of the
     small-strain base's rest (when trained), that model on the base of the liver's own mesh
     and the base alone (over the linear response: also ``make liver`` timed from the file)."""
     from data_spec import load_scene
-    from surrogate.evaluate import evaluate_liver, place
+    from surrogate.evaluate import evaluate_liver, place, unseen_truth
     from surrogate.latency import timed_placed
     from surrogate.predict_liver import PlacedModel, read_liver_surface
     from surrogate.predictor import load_predictor
@@ -187,12 +178,13 @@ def unseen(data: Path, a) -> list[dict]:
         placed([[0.0, 0.0, -0.4]], placed.load_nodes(points[:1]))
         seconds = time.perf_counter() - t
         placement, found = place(pred, liver, frame)
-        fe = truth(pred, liver, frame, a)
+        fe = unseen_truth(pred, liver, RESULTS / "unseen" / liver.stem, SCENE, a.unseen_sims,
+                          frame=frame, ranks=a.np)
         m = evaluate_liver(pred, fe, placement, found, population_data=data)
         row = {"liver": liver.stem, "frame": frame or "scene", "file_to_predictor_s":
                seconds, "truth": str((RESULTS / "unseen" / liver.stem).relative_to(ROOT)),
                "ms_placed": timed_placed(pred, placement, LATENCY_NODES, a.calls), **m,
-               "over": {c: _over_base(p, fe, placement, found, data, liver, frame, a)
+               "over": {c: _over_base(p, fe, data, liver, frame, a)
                         for c, p in sorted(rests.items(), key=lambda kv: kv[1].base.order)}}
         out.append(row)
         print(f"[unseen {liver.stem}] MEE {m['network']['mee']:.3f} mm, skill "
@@ -217,27 +209,21 @@ def kept_rows(old: dict, now: dict) -> list[dict]:
     return rows
 
 
-def _over_base(pred, fe: Path, placement, found, data: Path, liver: Path, frame, a) -> dict:
-    """The base of the truth's own mesh (fem_sim linear on its scene), alone and with the
-    population model of its rest, on the truth's simulations; over the linear response also
-    ``make liver`` from the liver file (its wall seconds, a fresh directory) and the calls'
-    latency over the Green's function it writes."""
-    from surrogate.evaluate import evaluate_liver
+def _over_base(pred, fe: Path, data: Path, liver: Path, frame, a) -> dict:
+    """A model of a base's rest on the truth's simulations, over the base of the truth's own
+    mesh, and the base alone; over the linear response also ``make liver`` from the liver
+    file (its wall seconds, a fresh directory) and the calls' latency over the Green's
+    function it writes."""
+    from surrogate.evaluate import evaluate_unseen, place
     from surrogate.latency import timed_over_green
-    from surrogate.linear_base import liver_base_metrics
 
-    linear_bases(fe, scene=fe.parent / "scene.toml", order=pred.base.order)
-    m = evaluate_liver(pred, fe, placement, found, population_data=data)
-    alone = liver_base_metrics(fe, pred.base.order)
-    keep = {"naive": m["naive"], "sims": m["sims"]}
-    row = {"order": pred.base.order,
-           "over_base": {"network": m["network"], "skill": m["skill"], **keep},
-           "base_alone": {"network": alone, "skill": alone["mee"] / m["naive"]["mee"], **keep}}
+    m = evaluate_unseen(pred, fe, liver, frame, population_data=data, ranks=a.np)
+    row = {"order": pred.base.order, "base_alone": m["base_alone"],
+           "over_base": {k: m[k] for k in ("network", "skill", "naive", "sims")}}
     if pred.base.from_green:
-        made = make_liver(liver, frame, fe, a)
-        row["make_liver_s"] = made
+        row["make_liver_s"] = make_liver(liver, frame, fe, a)
         row.update(timed_over_green(pred, RESULTS / "make_liver" / liver.stem / "data",
-                                    placement, LATENCY_NODES, a.calls))
+                                    place(pred, liver, frame)[0], LATENCY_NODES, a.calls))
     return row
 
 
@@ -293,7 +279,7 @@ def _design_line(d: dict) -> str:
     if r.base is None:
         return line
     b = DesignRecord(r.config, r.base_alone)
-    return line + (f"\n| its small-strain base alone ({r.base.name.replace('_', ' ')}, no network) | 0 | "
+    return line + (f"\n| its small-strain base alone ({r.base.words}, no network) | 0 | "
                    f"{b.metrics['skill']:.3f} | {b.per_liver_skill()} | "
                    f"{b.metrics['network']['mee']:.3f} | {b.metrics['per_liver_mee']['median']:.3f}"
                    f" | {b.metrics['naive']['mee']:.3f} | "

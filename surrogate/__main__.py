@@ -95,7 +95,9 @@ def _add_evaluate(sub) -> None:
     s.add_argument("--placement", help="keep the liver's placement in this .npz file (adapt "
                    "--placement reads it instead of placing the liver again)")
     e = sub.add_parser("evaluate", help="a trained model against a dataset it never trained "
-                       "on: of its own liver, or the FE truth of a liver it never saw")
+                       "on: of its own liver, or the FE truth of a liver it never saw (a "
+                       "model of a base's rest over the base of the truth's mesh, and the "
+                       "base alone)")
     e.add_argument("run", help="a run directory (or its model directory)")
     e.add_argument("data", help="a dataset directory written by fem_sim generate")
     e.add_argument("--liver", help="the liver file the dataset was solved on, for a "
@@ -248,7 +250,7 @@ def _truth_scene(args) -> int:
 def _evaluate(args) -> int:
     from data_spec import validate_dataset
     from data_spec.atomic import out_problem
-    from surrogate.evaluate import evaluate_liver, evaluate_own, place
+    from surrogate.evaluate import evaluate_own, evaluate_unseen
     from surrogate.predictor import load_predictor
     from surrogate.viewer import model_dir
 
@@ -263,10 +265,9 @@ def _evaluate(args) -> int:
         if pred.static is None and not args.liver:
             return _fail("evaluate", f"{args.run}: a model of a population: give --liver, the "
                          "file the dataset was solved on (its truth: truth-scene)")
-        if args.liver:
-            placement, found = place(pred, args.liver, args.frame)
-            result = evaluate_liver(pred, Path(args.data), placement, found,
-                                    population_data=args.population)
+        if args.liver:   # over the base of the truth's mesh for a model of a base's rest
+            result = evaluate_unseen(pred, Path(args.data), args.liver, args.frame,
+                                     population_data=args.population)
         else:
             result = evaluate_own(pred, Path(args.data))
     except (ValueError, OSError) as exc:

@@ -42,6 +42,11 @@ class SmallStrainBase:
         return self.order == 1
 
     @property
+    def words(self) -> str:
+        """Its name as a report says it ("second order")."""
+        return self.name.replace("_", " ")
+
+    @property
     def use(self) -> str:
         """How a user gets a whole field from a model over this base: the report's words."""
         return ("placed on any liver (predict-liver)" if self.whole else

@@ -171,3 +171,39 @@ def test_another_livers_directory_or_scene_is_refused_naming_both(patient, capsy
     rest = load_predictor(run / "model")
     with pytest.raises(ValueError, match="another scene's responses"):
         OverGreen(rest, data, _placed(rest, d, info))
+
+
+def test_the_evaluation_of_an_unseen_liver_adds_the_base_and_reports_it_alone(patient,
+                                                                              tmp_path):
+    """``surrogate.evaluate.evaluate_unseen`` (the evaluate command's, the benches') on the
+    patient's truth with the model of the rest over the linear response: its MEE is the MEE
+    of make liver's field (OverGreen, another code path) against the FE fields, and the base
+    alone's is that of each simulation's own linear solve (fem_sim linear's, read from the
+    file) scaled by the load fraction, against the same fields."""
+    import shutil
+
+    from surrogate.evaluate import evaluate_unseen
+    from surrogate.linear_base import LinearBase
+    from surrogate.over_green import OverGreen
+
+    d, info, run = patient
+    truth = tmp_path / "truth"   # a copy: the evaluation may build the base in it
+    shutil.copytree(d / "data", truth / "data")
+    shutil.copy(d / "scene.toml", truth / "scene.toml")
+    rest = load_predictor(run / "model")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        got = evaluate_unseen(rest, truth / "data", info["liver"], None)
+    ds = load_dataset(d / "data")
+    smp = sims_samples(ds, np.unique(ds.sample_sim))
+    true = sample_fields(ds, smp)
+    model = OverGreen(rest, d / "data", _placed(rest, d, info))
+    ours = model(ds.forces[smp], ds.load_nodes[smp])[
+        :, np.searchsorted(model.output_nodes, ds.out_nodes[0])]
+    assert np.isclose(got["network"]["mee"], field_mee(ours, true), rtol=1e-4)
+    lb = LinearBase(ds)
+    rows = lb.lf.rows(ds.sample_sim[smp])
+    solved = lb.lf.displacement[rows][:, lb.columns].astype(np.float64)
+    alone = ds.sample_fraction[smp][:, None, None] * solved
+    assert got["base_alone"]["order"] == 1
+    assert np.isclose(got["base_alone"]["network"]["mee"], field_mee(alone, true), rtol=1e-4)
