@@ -23,7 +23,6 @@ are chosen, so that the validation livers stay out of every choice.
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import shutil
 import subprocess
@@ -33,7 +32,6 @@ from pathlib import Path
 
 import numpy as np
 
-from data_spec.views import dataset_fingerprint
 from fem_sim.batch.chunked import generate_chunks
 from liverviz.report import ROOT, SOFA, SOFA_FRAME, write_report
 from surrogate.patient import SYNTHETIC
@@ -52,15 +50,6 @@ GOAL_MM = 0.5   # the issue's goal: this MEE within GOAL_MINUTES on two cores
 GOAL_MINUTES = 5.0
 FRAMES = {SOFA.stem: SOFA_FRAME}   # a liver file not in the scene's frame: predict-liver's --frame
 BIG_PEAK_MM = 30.0   # a held-out simulation's FE peak displacement counted as a large one
-
-
-def split(ds, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """(the K = ``k`` training simulations, the held-out ones) of a liver's truth ``ds``: the
-    first HELD are held out and the next ``k`` train, so a larger K adds simulations to the
-    truth without changing what is held out.
-    """
-    sims = np.unique(ds.sample_sim)
-    return sims[HELD:HELD + k], sims[:HELD]
 
 
 def truth(pred, liver: Path, a, frame: str | None = None) -> Path:
@@ -104,60 +93,33 @@ def linear(scene: Path, data: Path, record: Path, order: int = 1, green: bool = 
 
 
 def curve(liver: Path, a) -> tuple[dict, dict]:
-    """Every K's errors on the liver's held-out simulations (kept in <results>/<liver>/k.json),
-    and where the corrected model's error is at SOURCES_K or the largest K below
-    (:func:`sources`).
+    """Every K's errors on the liver's held-out simulations (``surrogate evaluate-patient``'s,
+    kept under <results>/<liver>), and where the corrected model's error is at SOURCES_K or
+    the largest K below (:func:`sources`).
     """
     from surrogate.data import load_dataset
     from surrogate.evaluate import place
-    from surrogate.patient import held_out_errors
+    from surrogate.patient.curve import evaluate_patient
     from surrogate.predictor import load_predictor
 
     model = Path(a.model) / "model"
     pred = load_predictor(model)
-    rest = load_predictor(Path(a.rest) / "model") if a.rest else None
     t = time.perf_counter()
     frame = FRAMES.get(liver.stem)
     placement, _ = place(pred, liver, frame)
     placing = time.perf_counter() - t
     data = truth(pred, liver, a, frame)
-    ds = load_dataset(data)
-    path = a.results / liver.stem / "k.json"
-    key = made_by(model, data, Path(a.rest) / "model" if a.rest else None)
-    done = json.loads(path.read_text()) if path.exists() else {}
-    if done.get("made_by") != key:   # another population model, adaptation or truth
-        done = {"made_by": key}
-    ks = [k for k in a.ks if HELD + k <= np.unique(ds.sample_sim).size]   # --no-new-fe
-    for k in ks:
-        train, held = split(ds, k)
-        used = dataset_fingerprint(data, np.concatenate([held, train]))
-        if done.get(str(k), {}).get("shards") != used:
-            done[str(k)] = {**held_out_errors(pred, placement, ds, train, held,
-                                              run=a.results / liver.stem / f"run_K{k}",
-                                              tune=a.tune, rest=rest, log_fn=lambda m: None),
-                            "shards": used}
-            path.write_text(json.dumps(done, indent=1))
-        print(f"[{liver.stem}] K={k}: {done[str(k)]}", flush=True)
-    return ({"liver": liver.stem, "nodes": int(ds.points[0].shape[0]), "points": done,
-             "held_out_sims": held_out_sims(ds, a.results / liver.stem, (ks[0], ks[-1])),
+    found = evaluate_patient(model, data, liver, a.results / liver.stem, ks=a.ks, held=HELD,
+                             rest=Path(a.rest) / "model" if a.rest else None, tune=a.tune,
+                             placement=placement,
+                             log_fn=lambda m: print(f"[{liver.stem}] {m}", flush=True))
+    ks, ds = found["ks"], load_dataset(data)
+    return ({"liver": liver.stem, "nodes": found["nodes"], "points": found["points"],
+             "held_out_sims": found["held_out_sims"],
              "fe_seconds": fe_seconds(data, a.np, ks), "place_seconds": placing,
              "linear_seconds": json.loads((data.parent / "linear.json").read_text())["seconds"]},
             {"liver": liver.stem, "k": min(a.sources_k, ks[-1]),
              **sources(pred, placement, ds, min(a.sources_k, ks[-1]))})
-
-
-def held_out_sims(ds, results: Path, ks) -> dict:
-    """For each K of ``ks``, the exported patient model's error and the FE field's size on
-    each held-out simulation (:func:`surrogate.patient_errors.per_simulation`; seconds).
-    """
-    from surrogate.patient import load_predictor_of, predictor_fields, sample_fields, sims_samples
-    from surrogate.patient_errors import per_simulation
-
-    smp = sims_samples(ds, split(ds, 0)[1])
-    true = sample_fields(ds, smp)
-    return {str(k): per_simulation(predictor_fields(load_predictor_of(results / f"run_K{k}"),
-                                                    ds, smp), true, ds.sample_sim[smp])
-            for k in dict.fromkeys(ks) if (results / f"run_K{k}" / "model").is_dir()}
 
 
 def sources(pred, placement, ds, k: int) -> dict:
@@ -166,9 +128,10 @@ def sources(pred, placement, ds, k: int) -> dict:
     seconds).
     """
     from surrogate.patient import Teacher, fit_teacher, sample_fields, sims_samples
+    from surrogate.patient.curve import held_out_split
     from surrogate.patient_errors import error_sources
 
-    train_sims, held_sims = split(ds, k)
+    train_sims, held_sims = held_out_split(ds, k, HELD)
     train, held = sims_samples(ds, train_sims), sims_samples(ds, held_sims)
     teacher = fit_teacher(Teacher(pred, placement, ds), ds, train_sims)
     f, x = ds.forces[held, 0], ds.load_points[held, 0]
@@ -202,24 +165,6 @@ def minutes(c: dict, k: int, start: float) -> float:
         return c["place_seconds"] / 60
     return (c["place_seconds"] + start + c["fe_seconds"].get(str(k), 0.0)
             + c.get("linear_seconds", 0.0) + sum(p["adapt_seconds"].values())) / 60
-
-
-def made_by(model: Path, data: Path, rest: Path | None = None) -> str:
-    """A digest of what every K's errors depend on but the simulations (each K is keyed on the
-    fingerprint of those it uses): the population model's files (and the base's rest model's),
-    the adaptation's code and the truth's small-strain responses.
-    """
-    from data_spec.linear_fields import linear_fields_path, read_linear_fields
-
-    h = hashlib.sha256()
-    if linear_fields_path(data).exists():
-        lf = read_linear_fields(linear_fields_path(data))
-        h.update(f"order {lf.order} green {lf.green is not None}".encode())
-    code = [*sorted((ROOT / "surrogate" / "patient").glob("*.py")),
-            *(ROOT / "surrogate" / n for n in ("tuning.py", "linear_base.py"))]
-    for f in [*sorted(model.glob("*")), *(sorted(rest.glob("*")) if rest else []), *code]:
-        h.update(f.read_bytes())
-    return h.hexdigest()[:16]
 
 
 def end_to_end(liver: Path, a, k: int = 40) -> dict:

@@ -22,6 +22,8 @@ import json
 import sys
 from pathlib import Path
 
+from data_spec.checks import count
+
 FRAMES = ("LPS", "RAS", "population", "auto")
 
 
@@ -133,6 +135,25 @@ def _add_adapt(sub) -> None:
                    "(config population_linear), added to the patient's own base")
 
 
+def _add_evaluate_patient(sub) -> None:
+    e = sub.add_parser("evaluate-patient", help="a patient model against K: made from the "
+                       "first K of the patient's FE simulations, measured on those held out")
+    e.add_argument("model", help="the population model's run directory")
+    e.add_argument("data", help="the patient's FE truth (truth-scene, fem_sim generate, "
+                   "fem_sim linear)")
+    e.add_argument("--liver", required=True, help="the liver file it was solved on")
+    e.add_argument("--results", required=True, help="where each K's patient model and the "
+                   "kept errors go (a second call computes only what is new)")
+    e.add_argument("--ks", type=count, nargs="+", default=[0, 5, 10, 20, 40],
+                   help="the K measured (default 0 5 10 20 40)")
+    e.add_argument("--held", type=count, default=10, help="the first HELD simulations are "
+                   "held out, the same for every K (default 10)")
+    e.add_argument("--frame", choices=FRAMES, default=None, help="as predict-liver's")
+    e.add_argument("--rest", metavar="RUN", help="as adapt's")
+    e.add_argument("--tune", action="store_true", help="as adapt's")
+    e.add_argument("--out", help="write the errors here as JSON")
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="liverfem-surrogate")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -140,6 +161,7 @@ def _parser() -> argparse.ArgumentParser:
     _add_predict_liver(sub)
     _add_evaluate(sub)
     _add_adapt(sub)
+    _add_evaluate_patient(sub)
     return parser
 
 
@@ -305,6 +327,33 @@ def _adapt(args) -> int:
     return 0
 
 
+def _evaluate_patient(args) -> int:
+    from data_spec.atomic import out_problem
+    from surrogate.data import DataError
+    from surrogate.patient.curve import evaluate_patient
+    from surrogate.viewer import model_dir
+
+    why = (args.out and out_problem(args.out, "--out")) or out_problem(
+        args.results, "--results", directory=True)
+    if why:
+        return _fail("evaluate-patient", why)
+    if args.held < 1:
+        return _fail("evaluate-patient", f"--held: expected an integer >= 1, got {args.held}")
+    try:
+        found = evaluate_patient(model_dir(Path(args.model)), args.data, args.liver,
+                                 args.results, ks=args.ks, held=args.held, frame=args.frame,
+                                 rest=model_dir(Path(args.rest)) if args.rest else None,
+                                 tune=args.tune, log_fn=lambda m: print(m, flush=True))
+    except (DataError, ValueError, OSError) as exc:
+        return _fail("evaluate-patient", str(exc))
+    if not found["ks"]:
+        return _fail("evaluate-patient", f"{args.data}: too few simulations for any K with "
+                     f"{args.held} held out")
+    if args.out:
+        Path(args.out).write_text(json.dumps(found, indent=1))
+    return 0
+
+
 def wrong_environment(command: str) -> str | None:
     """Why ``command`` cannot run in this Python (None when it can): the solver environment
     has no JAX.
@@ -325,7 +374,8 @@ def main(argv=None) -> int:
         print(why, file=sys.stderr)
         return 2
     command = {"train": _train, "predict-liver": _predict_liver, "truth-scene": _truth_scene,
-               "evaluate": _evaluate, "adapt": _adapt}[args.command]
+               "evaluate": _evaluate, "adapt": _adapt,
+               "evaluate-patient": _evaluate_patient}[args.command]
     return command(args)
 
 

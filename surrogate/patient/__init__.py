@@ -44,8 +44,9 @@ them with the K FE fields.
 The subpackage, one job a module: :mod:`~surrogate.patient.correction` (the kernel
 regression and its cross-validation), :mod:`~surrogate.patient.teacher` (the base and the
 correction fitted), :mod:`~surrogate.patient.distill` (the drawn loads and the student),
-:mod:`~surrogate.patient.adapt` (the command) and :mod:`~surrogate.patient.evaluation` (a
-patient model against held-out FE simulations).
+:mod:`~surrogate.patient.adapt` (the command), :mod:`~surrogate.patient.evaluation` (a
+patient model against held-out FE simulations) and :mod:`~surrogate.patient.curve` (that
+against K: ``surrogate evaluate-patient``).
 """
 
 from surrogate.patient.adapt import adapt, adapted, used_simulations

@@ -547,3 +547,46 @@ def test_held_out_errors_ranks_the_base_its_student_and_the_population_model(tmp
     assert "corrected" not in out and out["correction"] is None
     assert out["linear"] < 0.5 * out["population"]
     assert abs(out["patient_model"] - out["linear"]) < 0.2 * out["linear"] + 0.01
+
+
+@pytest.mark.dataset
+def test_evaluate_patient_measures_each_k_on_the_same_held_out_simulations(tmp_path, capsys):
+    """``surrogate evaluate-patient`` on make test's patient: the first HELD simulations are
+    held out for every K, each K's patient model is exported and its error is that model's
+    own fields against those simulations (recomputed here through load_predictor); a K
+    beyond the simulations is named and left out; a second call computes nothing again."""
+    from surrogate.__main__ import main
+    from surrogate.patient import sample_fields, sims_samples
+    from surrogate.patient.curve import held_out_split
+
+    d = Path(generated_dataset("LIVERFEM_TEST_PATIENT"))
+    info = json.loads((d / "run" / "adaptation.json").read_text())
+    ds = load_dataset(d / "data")
+    n = np.unique(ds.sample_sim).size
+    res, out = tmp_path / "k", tmp_path / "k.json"
+    argv = ["evaluate-patient", info["population_model"], str(d / "data"), "--liver",
+            info["liver"], "--results", str(res), "--ks", "0", "3", str(n), "--held", "4",
+            "--out", str(out)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(argv) == 0
+    assert f"K = [{n}] left out: {n} simulations, 4 of them held out" in capsys.readouterr().out
+    found = json.loads(out.read_text())
+    assert found["ks"] == [0, 3] and set(found["held_out_sims"]) == {"0", "3"}
+    sims = np.unique(ds.sample_sim)
+    train, held = held_out_split(ds, 3, 4)
+    assert list(held) == list(sims[:4]) and list(train) == list(sims[4:7])
+    smp = sims_samples(ds, held)
+    fields = load_predictor(res / "run_K3" / "model")(
+        ds.forces[smp], ds.load_nodes[smp], nodes=np.asarray(ds.out_nodes[0]))
+    true = sample_fields(ds, smp)
+    mine = np.linalg.norm(np.asarray(fields, float) - true, axis=-1).mean()
+    assert np.isclose(found["points"]["3"]["patient_model"], mine, rtol=1e-5)
+    assert found["points"]["3"]["fe_simulations"] == 3
+    assert found["points"]["0"]["held_out"] == found["points"]["3"]["held_out"] == 4
+    stamp = (res / "run_K3" / "model" / "model.json").stat().st_mtime_ns
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(argv) == 0
+    assert (res / "run_K3" / "model" / "model.json").stat().st_mtime_ns == stamp
+    assert json.loads(out.read_text())["points"] == found["points"]
