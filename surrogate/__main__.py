@@ -110,13 +110,27 @@ def _add_evaluate(sub) -> None:
     e.add_argument("--out", help="write the metrics here as JSON")
 
 
+def _patient_arguments(p) -> None:
+    """What adapt and evaluate-patient both take: the population model, the patient's FE
+    truth, its liver file and frame, the rest model and the fine-tuning switch.
+    """
+    p.add_argument("model", help="the population model's run directory")
+    p.add_argument("data", help="the patient's FE simulations (truth-scene, then fem_sim "
+                   "generate and fem_sim linear)")
+    p.add_argument("--liver", required=True, help="the liver file they were solved on")
+    p.add_argument("--frame", choices=FRAMES, default=None, help="as predict-liver's")
+    p.add_argument("--tune", action="store_true",
+                   help="fine-tune the population network on the simulations before the "
+                   "correction (docs/patient.md measures it)")
+    p.add_argument("--rest", metavar="RUN",
+                   help="a population model of what each liver's small-strain base misses "
+                   "(config population_linear), added to the patient's own base")
+
+
 def _add_adapt(sub) -> None:
     a = sub.add_parser("adapt", help="a patient's own model: a population model corrected "
                        "with FE simulations of the patient's liver, as a one-liver model")
-    a.add_argument("model", help="the population model's run directory")
-    a.add_argument("data", help="the patient's FE simulations (truth-scene, then fem_sim "
-                   "generate)")
-    a.add_argument("--liver", required=True, help="the liver file they were solved on")
+    _patient_arguments(a)
     a.add_argument("--run", required=True, help="the patient model's run directory to write")
     a.add_argument("--sims", type=int, help="use the first K simulations (default: all)")
     # the default is surrogate.patient.SYNTHETIC, read when the command runs: building the
@@ -124,33 +138,20 @@ def _add_adapt(sub) -> None:
     a.add_argument("--synthetic", type=int, default=None,
                    help="loads drawn for the distillation (default: surrogate.patient's "
                    "SYNTHETIC)")
-    a.add_argument("--frame", choices=FRAMES, default=None, help="as predict-liver's")
     a.add_argument("--placement", help="the placement file truth-scene --placement wrote "
                    "(used when it holds this liver, frame and model; written otherwise)")
-    a.add_argument("--tune", action="store_true",
-                   help="fine-tune the population network on the simulations before the "
-                   "correction (docs/patient.md measures it)")
-    a.add_argument("--rest", metavar="RUN",
-                   help="a population model of what each liver's small-strain base misses "
-                   "(config population_linear), added to the patient's own base")
 
 
 def _add_evaluate_patient(sub) -> None:
     e = sub.add_parser("evaluate-patient", help="a patient model against K: made from the "
                        "first K of the patient's FE simulations, measured on those held out")
-    e.add_argument("model", help="the population model's run directory")
-    e.add_argument("data", help="the patient's FE truth (truth-scene, fem_sim generate, "
-                   "fem_sim linear)")
-    e.add_argument("--liver", required=True, help="the liver file it was solved on")
+    _patient_arguments(e)
     e.add_argument("--results", required=True, help="where each K's patient model and the "
                    "kept errors go (a second call computes only what is new)")
     e.add_argument("--ks", type=count, nargs="+", default=[0, 5, 10, 20, 40],
                    help="the K measured (default 0 5 10 20 40)")
     e.add_argument("--held", type=count, default=10, help="the first HELD simulations are "
                    "held out, the same for every K (default 10)")
-    e.add_argument("--frame", choices=FRAMES, default=None, help="as predict-liver's")
-    e.add_argument("--rest", metavar="RUN", help="as adapt's")
-    e.add_argument("--tune", action="store_true", help="as adapt's")
     e.add_argument("--out", help="write the errors here as JSON")
 
 
