@@ -286,11 +286,19 @@ def _check_param_set(where: str, item: Any, problems: list[str]) -> dict:
     return out
 
 
+GRASP_RADIUS = 10.0   # mm: a grasping tool's patch when the scene does not say
+GRASP_TOOLS = 2       # tools at most
+
+
 def _check_loads(ld: dict, problems: list[str]) -> None:
     if ld.get("kind") == "patch" and "patch_radius" not in ld:
         problems.append("loads.patch_radius: missing (needed when kind = 'patch')")
     if ld.get("kind") == "nodal" and "patch_radius" in ld:
-        problems.append("loads.patch_radius: only used when kind = 'patch'")
+        problems.append("loads.patch_radius: only used when kind = 'patch' or 'grasp'")
+    if ld.get("kind") == "grasp":
+        ld.setdefault("patch_radius", GRASP_RADIUS)
+        if isinstance(ld.get("count"), int) and ld["count"] > GRASP_TOOLS:
+            problems.append(f"loads.count: {ld['count']} tools; a grasp has 1 to {GRASP_TOOLS}")
 
 
 def _check_steps(st: dict, problems: list[str]) -> None:
@@ -322,6 +330,10 @@ def _check_cases(raw_cases: Any, data: dict, problems: list[str]) -> list[dict]:
         return []
     out = []
     count = data["loads"].get("count")
+    if raw_cases and data["loads"].get("kind") == "grasp":
+        problems.append("cases: explicit cases give forces; a grasp scene draws its tools "
+                        "(loads.kind = 'grasp' with no [[cases]])")
+        return []
     for i, item in enumerate(raw_cases):
         where = f"cases[{i}]"
         case = _check_section(where, item, _CASE_KEYS, problems, where=where)

@@ -117,11 +117,11 @@ def _output_nodes(v: Any) -> str | None:
 
 
 def _direction(v: Any) -> str | None:
-    if v == "uniform":
+    if v in ("uniform", "away"):
         return None
     if _vec3(v) is None and any(x != 0 for x in v):
         return None
-    return "'uniform' or a non-zero vector [x, y, z]"
+    return "'uniform', 'away' or a non-zero vector [x, y, z]"
 
 
 def _fractions(v: Any) -> str | None:
@@ -233,16 +233,22 @@ _SCHEMA: dict[str, dict[str, Key]] = {
     },
     "loads": {
         "count": Key(_int(1), 1, "simultaneous forces per simulation"),
-        "kind": Key(_choice("nodal", "patch"), "nodal",
-                    "nodal: on one node; patch: spread over the surface within patch_radius"),
-        "magnitude": Key(_positive_or_range, REQUIRED, "force magnitude, N (value or [lo, hi])"),
-        "direction": Key(_direction, "uniform", "'uniform' on the sphere, or a fixed vector"),
+        "kind": Key(_choice("nodal", "patch", "grasp"), "nodal",
+                    "nodal: on one node; patch: spread over the surface within patch_radius; "
+                    "grasp: the surface within patch_radius moved rigidly by a prescribed "
+                    "displacement (a tool), its reaction force recorded"),
+        "magnitude": Key(_positive_or_range, REQUIRED, "force magnitude, N (value or [lo, hi]); "
+                         "a grasp: its displacement, mm"),
+        "direction": Key(_direction, "uniform", "'uniform' on the sphere, 'away' (uniform "
+                         "over the half facing away from the nearest fixed node), or a fixed "
+                         "vector"),
         "eligible": Key(_choice("surface", "all"), "surface", "nodes a load may act on"),
         "min_distance_to_fixed": Key(_num(0.0, strict=False), 0.0,
                                      "eligible nodes are at least this far from fixed nodes, mm"),
         "min_separation": Key(_num(0.0, strict=False), 0.0,
                               "minimum distance between simultaneous load nodes, mm"),
-        "patch_radius": Key(_num(0.0), OPTIONAL, "patch radius, mm (kind = patch)"),
+        "patch_radius": Key(_num(0.0), OPTIONAL, "patch radius, mm (kind = patch; grasp: "
+                            "default 10)"),
     },
     "steps": {
         "n": Key(_int(1), 10, "number of equal load steps (ignored if fractions is given)"),

@@ -15,7 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 
 SHARD_FORMAT = "liver-fem-shard"
-SHARD_SCHEMA_VERSION = 2  # 2: a sha256 checksum of every entry (attribute "checksum")
+# 2: a sha256 checksum of every entry (attribute "checksum"); 3: the tools of a grasp, their
+# displacement and reaction force at every stored step (a shard of 2 reads as no tool)
+SHARD_SCHEMA_VERSION = 3
+READABLE_VERSIONS = (2, 3)
 UNITS = {"units_length": "mm", "units_force": "N", "units_stress": "MPa", "units_time": "s"}
 STATUSES = ("ok", "failed")
 
@@ -30,6 +33,7 @@ class Entry:
     shape: tuple = ()       # symbolic, datasets only
     finite: bool = False    # NaN/inf is a defect
     compress: bool = False  # gzip, one chunk per leading index
+    since: int = 2          # the schema version that brought it (absent from older files)
 
     @property
     def is_attr(self) -> bool:
@@ -67,6 +71,10 @@ LAYOUT: tuple[Entry, ...] = (
     Entry("/output_nodes", "output_nodes", "int64", ("n_out",)),
     Entry("/displacement", "displacement", "float64", ("n_done", "n_out", 3), finite=True,
           compress=True),
+    Entry("/load/tool_displacement", "tool_displacement", "float64", ("n_done", "n_tools", 3),
+          finite=True, since=3),
+    Entry("/load/reaction", "reaction", "float64", ("n_done", "n_tools", 3), finite=True,
+          since=3),
     Entry("/solver/newton_iterations", "stats.newton_iterations", "int32", ("n_done",)),
     Entry("/solver/residual_norms", "stats.residual_norms", "float64", ("n_done",),
           finite=True),
@@ -91,15 +99,26 @@ def _canonical(e: Entry, value) -> bytes:
     return repr(a.shape).encode() + a.tobytes()
 
 
-def checksum(values: dict) -> str:
-    """sha256 over every entry (path, shape and bytes in the layout's order): written into the
-    file as the attribute ``checksum``, recomputed by the reader and the validator, so one
-    flipped bit in a label is caught (uncompressed datasets have no checksum of their own).
+def entries(version: int = SHARD_SCHEMA_VERSION) -> tuple[Entry, ...]:
+    """The entries a file of schema ``version`` holds."""
+    return tuple(e for e in LAYOUT if e.since <= version)
+
+
+def version_of(f) -> int:
+    """An open shard's schema version."""
+    return int(f.attrs.get("schema_version", SHARD_SCHEMA_VERSION))
+
+
+def checksum(values: dict, version: int = SHARD_SCHEMA_VERSION) -> str:
+    """sha256 over every entry of a file of ``version`` (path, shape and bytes in the layout's
+    order): written into the file as the attribute ``checksum``, recomputed by the reader and
+    the validator, so one flipped bit in a label is caught (uncompressed datasets have no
+    checksum of their own).
     """
     import hashlib
 
     h = hashlib.sha256()
-    for e in LAYOUT:
+    for e in entries(version):
         h.update(e.path.encode() + b"\0" + _canonical(e, values[e.path]) + b"\0")
     return h.hexdigest()
 
@@ -109,12 +128,19 @@ CHECKSUM_MISMATCH = "checksum mismatch: the file was changed or corrupted after 
 
 def checksum_ok(f, values: dict) -> bool:
     """Whether the ``values`` read from the open shard ``f`` match its stored checksum."""
-    return checksum(values) == str(f.attrs["checksum"])
+    return checksum(values, version_of(f)) == str(f.attrs["checksum"])
 
 
 def read_values(f) -> dict:
-    """Every entry of an open shard file, by path (after :func:`missing` found none absent)."""
-    return {e.path: read_entry(f, e) for e in LAYOUT}
+    """Every entry of an open shard file, by path (after :func:`missing` found none absent);
+    an entry newer than the file is its empty value (a shard of version 2: no tool).
+    """
+    values = {e.path: read_entry(f, e) for e in entries(version_of(f))}
+    n_done = np.shape(values["/displacement"])[0]
+    for e in LAYOUT:
+        if e.path not in values:   # the tools' entries, (n_done, 0, 3)
+            values[e.path] = np.zeros((n_done, 0, 3))
+    return values
 
 
 def write_entry(f, e: Entry, value) -> None:
@@ -143,7 +169,7 @@ def missing(f) -> list[str]:
     """Entries (and constant attributes) absent from an open shard file."""
     out = [f"attribute '{k}'" for k in ("format", "schema_version", "checksum", *UNITS)
            if k not in f.attrs]
-    for e in LAYOUT:
+    for e in entries(version_of(f)):
         if e.is_attr:
             holder = f.get(e.group) if e.group != "/" else f
             if holder is None or e.name not in holder.attrs:

@@ -27,6 +27,7 @@ from data_spec.material import OgdenMaterial
 from data_spec.shard_layout import (
     CHECKSUM_MISMATCH,
     LAYOUT,
+    READABLE_VERSIONS,
     SHARD_FORMAT,
     SHARD_SCHEMA_VERSION,
     STATUSES,
@@ -36,6 +37,7 @@ from data_spec.shard_layout import (
     get,
     missing,
     read_values,
+    version_of,
     write_entry,
 )
 from data_spec.xdmf import shard_xdmf
@@ -119,6 +121,10 @@ class Shard:
     failure_reason: str = ""
     patch_radius: float = 0.0
     geometry_file: str = ""  # relative to the shard file; filled by write_shard/read_shard
+    # a grasp: each tool's displacement (mm) and reaction force (N) at every stored step,
+    # (n_done, n_tools, 3); None: no tool (loads given as forces; written as (n_done, 0, 3))
+    tool_displacement: np.ndarray | None = None
+    reaction: np.ndarray | None = None
 
     def __post_init__(self):
         self.load_nodes = np.asarray(self.load_nodes, dtype=np.int64)
@@ -127,6 +133,9 @@ class Shard:
         self.load_fractions = np.asarray(self.load_fractions, dtype=np.float64)
         self.output_nodes = np.asarray(self.output_nodes, dtype=np.int64)
         self.displacement = np.asarray(self.displacement, dtype=np.float64)
+        for name in ("tool_displacement", "reaction"):
+            if getattr(self, name) is not None:
+                setattr(self, name, np.asarray(getattr(self, name), dtype=np.float64))
 
     @property
     def n_done(self) -> int:
@@ -164,6 +173,9 @@ def write_shard(directory: str | Path, shard: Shard) -> Path:
         for k, v in UNITS.items():
             f.attrs[k] = v
         values = {e.path: get(shard, e.source) for e in LAYOUT}
+        for e in LAYOUT:   # no tool: the tools' entries empty
+            if values[e.path] is None:
+                values[e.path] = np.zeros((shard.n_done, 0, 3))
         for e in LAYOUT:
             write_entry(f, e, values[e.path])
         f.attrs["checksum"] = checksum(values)
@@ -179,6 +191,9 @@ def read_shard(path: str | Path) -> Shard:
     with h5py.File(path, "r") as f:
         if f.attrs.get("format") != SHARD_FORMAT:
             raise ValueError(f"{path}: not a {SHARD_FORMAT} file")
+        if version_of(f) not in READABLE_VERSIONS:
+            raise ValueError(f"{path}: shard schema_version {version_of(f)}; this code reads "
+                             f"{READABLE_VERSIONS}")
         absent = missing(f)
         if absent:
             raise ValueError(f"{path}: missing {', '.join(absent)}")

@@ -17,6 +17,7 @@ from data_spec.geometry import GEOMETRY_FORMAT, geometry_problems, read_geometry
 from data_spec.shard_layout import (
     CHECKSUM_MISMATCH,
     DATASETS,
+    READABLE_VERSIONS,
     SHARD_FORMAT,
     SHARD_SCHEMA_VERSION,
     STATUSES,
@@ -70,9 +71,9 @@ def _read(path: Path) -> tuple[list[str], dict | None, dict]:
         p += [f"{path}: missing {what}" for what in missing(f)]
         if p:
             return p, None, {}
-        if f.attrs["schema_version"] != SHARD_SCHEMA_VERSION:
-            p.append(f"{path}: schema_version {f.attrs['schema_version']}, expected "
-                     f"{SHARD_SCHEMA_VERSION}")
+        if f.attrs["schema_version"] not in READABLE_VERSIONS:
+            p.append(f"{path}: schema_version {f.attrs['schema_version']}, expected one of "
+                     f"{READABLE_VERSIONS} (written: {SHARD_SCHEMA_VERSION})")
         try:
             values = read_values(f)
         except OSError as exc:

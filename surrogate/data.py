@@ -182,6 +182,10 @@ def load_dataset(directory: str | Path, stream: bool | str = "auto",
         scene = load_scene(directory / "scene.toml")
     except ValueError as exc:  # SceneError
         raise DataError(str(exc)) from None
+    if scene["loads"]["kind"] == "grasp":   # its forces are zero: inputs the net cannot use
+        raise DataError(f"{directory}: a grasp dataset (loads.kind = 'grasp'): the surrogate "
+                        "learns loads given as forces; learning grasps (the tool's "
+                        "displacement in, the field and the force back) is not built yet")
     paths = list_shards(directory)
     if not paths:
         raise DataError(f"{directory}: no shards (expected {directory}/sims/sim_*.h5)")

@@ -32,6 +32,8 @@ class Case:
     forces: np.ndarray           # (n_loads, 3) N at load fraction 1
     material: OgdenMaterial
     patch_radius: float = 0.0
+    # a grasp: each tool's displacement at load fraction 1 (n_loads, 3) mm; forces are zero
+    displacements: np.ndarray | None = None
 
 
 def fixed_nodes(scene: Scene, g: Geometry, source: str = "scene") -> np.ndarray:
@@ -149,15 +151,50 @@ def make_case(scene: Scene, index: int, g: Geometry, fixed: np.ndarray,
         raise CaseError(f"scene {scene.name}: only {eligible.size} eligible load nodes for "
                         f"{n} loads (check loads.eligible / min_distance_to_fixed)")
     nodes = _pick_nodes(rng, eligible, g.points, n, ld["min_separation"])
-    if ld["direction"] == "uniform":
-        d = rng.normal(size=(n, 3))
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
-    else:
-        d = np.tile(np.asarray(ld["direction"], float) / np.linalg.norm(ld["direction"]),
-                    (n, 1))
+    d = _directions(rng, ld["direction"], g.points[nodes], g.points[fixed])
     mags = np.array([_draw(rng, ld["magnitude"]) for _ in range(n)])
     mat = _case_material(scene, rng, table)
+    if ld["kind"] == "grasp":
+        return Case(index, geometry_index, "grasp", nodes, np.zeros((n, 3)), mat,
+                    float(ld["patch_radius"]), displacements=d * mags[:, None])
     return Case(index, geometry_index, ld["kind"], nodes, d * mags[:, None], mat, patch)
+
+
+def _directions(rng, rule, at: np.ndarray, fixed: np.ndarray) -> np.ndarray:
+    """(n, 3) unit directions of the loads at the points ``at``: uniform on the sphere,
+    ``away`` (uniform over the half-sphere facing away from each point's nearest fixed node:
+    a tool pulls the liver off its support, not into it) or the scene's fixed vector.
+    """
+    n = at.shape[0]
+    if rule in ("uniform", "away"):
+        d = rng.normal(size=(n, 3))
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        if rule == "away":
+            near = fixed[np.argmin(np.linalg.norm(at[:, None] - fixed[None], axis=2), axis=1)]
+            out = at - near
+            d *= np.where(np.sum(d * out, axis=1) < 0, -1.0, 1.0)[:, None]
+        return d
+    return np.tile(np.asarray(rule, float) / np.linalg.norm(rule), (n, 1))
+
+
+def grasp_patches(case: Case, g: Geometry, fixed: np.ndarray) -> list[np.ndarray]:
+    """Each tool's grasped nodes: the surface nodes within the case's patch radius of its
+    centre node; CaseError when a patch touches the fixed region or another tool's.
+    """
+    surf = g.surface_nodes
+    out = []
+    for node in case.load_nodes:
+        patch = surf[np.linalg.norm(g.points[surf] - g.points[node], axis=1)
+                     <= case.patch_radius]
+        if np.intersect1d(patch, fixed).size:
+            raise CaseError(f"case {case.index}: the grasp at node {node} (radius "
+                            f"{case.patch_radius:g} mm) reaches the fixed region: raise "
+                            "loads.min_distance_to_fixed above the patch radius")
+        if any(np.intersect1d(patch, p).size for p in out):
+            raise CaseError(f"case {case.index}: two grasps overlap: raise "
+                            "loads.min_separation above twice the patch radius")
+        out.append(patch)
+    return out
 
 
 def _case_material(scene: Scene, rng, table: list[OgdenMaterial] | None) -> OgdenMaterial:

@@ -307,30 +307,60 @@ def _warm_jit_cache(degree: int, qdeg: int) -> None:
 
 
 def case_loads(case: cs.Case, g: Geometry) -> list:
-    """The solver's loads of a case (at load fraction 1)."""
+    """The solver's loads of a case (at load fraction 1); none for a grasp."""
     from fem_sim.solver.loads import NodalLoad, PatchLoad
 
+    if case.load_kind == "grasp":
+        return []
     if case.load_kind == "patch":
         return [PatchLoad(g.points[node], force, case.patch_radius)
                 for node, force in zip(case.load_nodes, case.forces)]
     return [NodalLoad(case.load_nodes, case.forces)]
 
 
+def case_constraints(case: cs.Case, g: Geometry, fixed: np.ndarray) -> tuple[list, list]:
+    """(the solver's constraints of a case, the node sets whose reaction is kept): the fixed
+    region, and for a grasp each tool's patch moved rigidly by its displacement.
+    """
+    from fem_sim.solver.loads import Constraint
+
+    if case.load_kind != "grasp":
+        return [Constraint(fixed)], []
+    patches = cs.grasp_patches(case, g, fixed)
+    return ([Constraint(fixed), *(Constraint(p, values=d) for p, d in
+                                  zip(patches, case.displacements))], patches)
+
+
+def _solved(problem, case: cs.Case, g: Geometry, fixed: np.ndarray, fractions):
+    """(solution or None, status, reason) of one case (collective); a crash is a reason."""
+    try:
+        constraints, tools = case_constraints(case, g, fixed)
+    except cs.CaseError as exc:   # the case's own tools (a patch on the fixed region)
+        return None, "failed", str(exc)
+    try:
+        sol = problem.solve(case.material, constraints, case_loads(case, g), fractions,
+                            reactions=tools)
+        return sol, sol.status, sol.failure_reason
+    except Exception as exc:  # a crash of one case is recorded, never kills the batch
+        log.exception("case %d crashed", case.index)
+        return None, "failed", f"solver error: {type(exc).__name__}: {exc}"
+
+
+def _tools(case: cs.Case, sol, n_done: int, fractions) -> dict:
+    """A grasp's shard fields: each tool's displacement and reaction at the stored steps."""
+    if case.load_kind != "grasp":
+        return {}
+    reaction = sol.reaction[:n_done] if sol is not None else np.zeros((0, len(case.forces), 3))
+    return {"tool_displacement": np.asarray(fractions)[:n_done, None, None]
+            * case.displacements[None], "reaction": reaction}
+
+
 def run_case(problem, scene: Scene, case: cs.Case, g: Geometry, fixed: np.ndarray,
              out_nodes: np.ndarray, geometry_id: str) -> Shard | None:
     """Solve one case on the group (collective); the shard on the group's rank 0."""
-    from fem_sim.solver.problem import Constraint
-
-    loads = case_loads(case, g)
     fractions = np.asarray(scene.load_fractions)
     t0 = time.perf_counter()
-    try:
-        sol = problem.solve(case.material, [Constraint(fixed)], loads,
-                            fractions)
-        status, reason = sol.status, sol.failure_reason
-    except Exception as exc:  # a crash of one case is recorded, never kills the batch
-        log.exception("case %d crashed", case.index)
-        sol, status, reason = None, "failed", f"solver error: {type(exc).__name__}: {exc}"
+    sol, status, reason = _solved(problem, case, g, fixed, fractions)
     if problem.comm.rank != 0:
         return None
     if sol is None or sol.displacement is None:
@@ -359,7 +389,8 @@ def run_case(problem, scene: Scene, case: cs.Case, g: Geometry, fixed: np.ndarra
                  load_nodes=case.load_nodes, forces=case.forces, material=case.material,
                  fixed_nodes=fixed, load_fractions=fractions, output_nodes=out_nodes,
                  displacement=disp, stats=stats, status=status, failure_reason=reason,
-                 patch_radius=case.patch_radius)
+                 patch_radius=case.patch_radius,
+                 **_tools(case, sol, disp.shape[0], fractions))
 
 
 class _Liver:

@@ -72,6 +72,10 @@ def _checked_request(scene_file: str, out: Path, synthetic: int, order: int,
     if synthetic < 0:
         raise ValueError(f"--synthetic must be >= 0, got {synthetic}")
     scene = load_scene(scene_file)
+    if scene["loads"]["kind"] == "grasp":
+        raise ValueError(f"{scene_file}: loads.kind = 'grasp': small-strain responses are "
+                         "computed for forces; a grasp's (its patch's Green's function, "
+                         "G_PP f = d) is not built yet")
     if green and scene["loads"]["kind"] != "nodal":
         raise ValueError(f"{scene_file}: loads.kind = {scene['loads']['kind']!r}; --green gives "
                          "the responses to unit nodal forces, of a scene of nodal loads")
@@ -233,6 +237,9 @@ def population_linear_fields(data: str | Path, order: int = 2, progress: bool = 
         raise ValueError(f"--order must be 1 or 2, got {order}")
     if not (data / "scene.toml").exists():
         raise ValueError(f"{data}: no scene.toml: not a dataset directory of fem_sim generate")
+    if load_scene(data / "scene.toml")["loads"]["kind"] == "grasp":
+        raise ValueError(f"{data}: a grasp dataset: small-strain responses are computed for "
+                         "forces; a grasp's is not built yet")
     livers = None
     if world.rank == 0:
         try:

@@ -34,6 +34,7 @@ class Equations:
         self.lift = self.b.duplicate()   # prescribed minus current values, constrained dofs
         self.cons: DofConstraints | None = None
         self.f_norm = 0.0
+        self._blocks: dict[bytes, np.ndarray] = {}   # dof blocks of the node sets asked
 
     # ------------------------------------------------------------------------------------------
     def set_problem(self, material: OgdenMaterial, constraints: list[Constraint],
@@ -122,9 +123,16 @@ class Equations:
         """Total internal force (N) on the dofs of a node set: the reaction force when the set
         is constrained (same value on every rank).
         """
+        if not hasattr(self, "_fint"):   # a vector of its own: the residual b is kept
+            self._fint = self.b.duplicate()
         self.assembler.update_points(tangent=False)
-        self.assembler.internal_forces(self.b)
-        fint = self.b.array.reshape(-1, 3)
-        blocks = self.disc.node_blocks(nodes)
+        self.assembler.internal_forces(self._fint)
+        fint = self._fint.array.reshape(-1, 3)
+        key = np.asarray(nodes, dtype=np.int64).tobytes()
+        if key not in self._blocks:   # a tool's patch is asked at every stored step
+            if len(self._blocks) >= 8:
+                self._blocks.clear()
+            self._blocks[key] = self.disc.node_blocks(nodes)
+        blocks = self._blocks[key]
         local = fint[blocks].sum(axis=0) if blocks.size else np.zeros(3)
         return self.disc.comm.allreduce(local, op=MPI.SUM)

@@ -88,13 +88,16 @@ class OgdenProblem:
         return self.linear.name
 
     def solve(self, material: OgdenMaterial, constraints: list[Constraint],
-              loads: list, fractions) -> Solution:
-        """Run the load steps of one simulation from the undeformed state (collective)."""
+              loads: list, fractions, reactions=()) -> Solution:
+        """Run the load steps of one simulation from the undeformed state (collective);
+        ``reactions``: node sets (a tool's grasped patch) whose reaction force (N) is kept at
+        every stored step (:attr:`Solution.reaction`).
+        """
         fractions = np.asarray(fractions, dtype=np.float64)
         if fractions.size == 0 or np.any(np.diff(fractions) <= 0) or fractions[0] <= 0:
             raise ValueError(f"fractions must be increasing and > 0, got {fractions}")
         self.equations.set_problem(material, constraints, loads)
-        return self.stepper.run(fractions, self.displacement)
+        return self.stepper.run(fractions, self.displacement, reactions)
 
     def linear_responses(self, material: OgdenMaterial, constraints: list[Constraint],
                          loads: list[list], rtol: float = 1e-6) -> np.ndarray | None:

@@ -63,9 +63,19 @@ class Solution(WorkCounts):
     increments: list[int] = field(default_factory=list)  # converged increments per step
     wall_time: list[float] = field(default_factory=list)
     residual_history: list[list[float]] = field(default_factory=list)
+    # per stored step, the reaction (N) on each node set the solve was asked for (a tool's
+    # grasped patch): the total internal force on its dofs, every rank
+    reactions: list[np.ndarray] = field(default_factory=list)
     status: str = "ok"
     failure_reason: str = ""
 
     @property
     def n_done(self) -> int:
         return len(self.newton_iterations)
+
+    @property
+    def reaction(self) -> np.ndarray:
+        """(n_done, n_sets, 3) N: :attr:`reactions` as one array."""
+        n_sets = len(self.reactions[0]) if self.reactions else 0
+        return np.asarray(self.reactions, dtype=np.float64).reshape(self.n_done, n_sets, 3) \
+            if self.reactions else np.zeros((self.n_done, 0, 3))

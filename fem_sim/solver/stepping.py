@@ -100,15 +100,16 @@ class LoadStepper:
         self.settings, self.eqs, self.newton = settings, eqs, newton
         self.predictor, self.linear = predictor, linear
 
-    def run(self, fractions: np.ndarray, gather) -> Solution:
+    def run(self, fractions: np.ndarray, gather, reactions=()) -> Solution:
         """Solve at every fraction from u = 0 (collective). ``gather()`` returns the current
-        displacement at the source nodes (on rank 0) for storage. OpenBLAS runs on one thread
+        displacement at the source nodes (on rank 0) for storage; at each stored fraction the
+        reaction on each node set of ``reactions`` is kept too. OpenBLAS runs on one thread
         meanwhile, except in MUMPS' factorisations (:mod:`fem_sim.solver.blas`).
         """
         with blas.threads(1):
-            return self._run(fractions, gather)
+            return self._run(fractions, gather, reactions)
 
-    def _run(self, fractions: np.ndarray, gather) -> Solution:
+    def _run(self, fractions: np.ndarray, gather, reactions=()) -> Solution:
         eqs = self.eqs
         eqs.set_state(np.zeros_like(eqs.u.x.array))
         self.linear.reset()
@@ -130,6 +131,8 @@ class LoadStepper:
                 break
             st.record(sol)
             stored.append(gather())
+            if reactions:
+                sol.reactions.append(np.array([eqs.reaction(n) for n in reactions]))
             w.dlam = max(w.dlam, 0.0)
             nxt = np.searchsorted(fractions, target, side="right")
             if nxt < fractions.size and not st.cutbacks:

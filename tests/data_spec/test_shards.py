@@ -241,3 +241,35 @@ def test_every_layout_entry_is_documented():
     shard_doc = readme[readme.index("## Shard"):]
     for e in LAYOUT:
         assert f"`{e.name}`" in shard_doc, e.path
+
+
+def test_a_grasp_shard_keeps_its_tools_and_a_version_2_shard_reads_as_none(tmp_path):
+    """Schema 3 adds each tool's displacement and force per stored step; a shard written
+    before (schema 2: no such entries, their checksum without them) is still read and
+    validated, as a shard with no tool; a version this code does not know is refused."""
+    from data_spec.shard_layout import checksum, entries, read_values
+
+    geo = box_mesh(2)
+    write_geometry(geometry_path(tmp_path, geo.geometry_id), geo)
+    scene = write_test_scene(tmp_path, n_simulations=2)
+    s = synthetic_shard(geo, 0, n_steps=3, scene_name=scene.name, scene_hash=scene.hash)
+    s.tool_displacement = np.arange(9.0).reshape(3, 1, 3)
+    s.reaction = 0.1 * np.arange(9.0).reshape(3, 1, 3)
+    back = read_shard(write_shard(tmp_path, s))
+    np.testing.assert_array_equal(back.tool_displacement, s.tool_displacement)
+    np.testing.assert_array_equal(back.reaction, s.reaction)
+    old = write_shard(tmp_path, synthetic_shard(geo, 1, n_steps=3, scene_name=scene.name,
+                                                scene_hash=scene.hash))
+    assert read_shard(old).reaction.shape == (3, 0, 3)   # written now: no tool
+    with h5py.File(old, "r+") as f:   # as schema 2 wrote it
+        del f["/load/tool_displacement"], f["/load/reaction"]
+        f.attrs["schema_version"] = 2
+        f.attrs["checksum"] = checksum({e.path: v for e, v in zip(
+            entries(2), [read_values(f)[e.path] for e in entries(2)])}, 2)
+    two = read_shard(old)
+    assert two.reaction.shape == (3, 0, 3) and two.tool_displacement.shape == (3, 0, 3)
+    assert validate_dataset(tmp_path) == []
+    with h5py.File(old, "r+") as f:
+        f.attrs["schema_version"] = 9
+    with pytest.raises(ValueError, match="schema_version 9; this code reads"):
+        read_shard(old)
