@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from data_spec.linear_fields import linear_fields_path
+from fem_sim.batch.chunked import liver_truth
 from liverviz.report import ROOT, write_report
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
@@ -43,11 +44,12 @@ SYNTHETIC = 600   # make patient's drawn loads
 
 def truth(model: Path, liver: Path, n: int, ranks: int) -> Path:
     """The liver's ``n`` FE simulations with the model's boundary condition (resumable)."""
-    from surrogate.evaluate import unseen_truth
+    from surrogate.evaluate import truth_scene
     from surrogate.predictor import load_predictor
 
-    return unseen_truth(load_predictor(model / "model"), liver, RESULTS / liver.stem, SCENE,
-                        n, ranks=ranks, stale=("linear.json", "patient.json"))
+    return liver_truth(RESULTS / liver.stem,
+                       truth_scene(load_predictor(model / "model"), SCENE, liver, n, None), n,
+                       ranks=ranks, stale=("linear.json", "patient.json"))
 
 
 # the variants compared: (order, Green's function) by key; "2" is the truth's own directory

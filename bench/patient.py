@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_sim.batch.chunked import generate_chunks
+from fem_sim.batch.chunked import generate_chunks, liver_truth
 from liverviz.report import ROOT, SOFA, SOFA_FRAME, write_report
 from surrogate.patient import SYNTHETIC
 
@@ -57,10 +57,11 @@ def truth(pred, liver: Path, a, frame: str | None = None) -> Path:
     ``frame``, predict-liver's --frame): a scene of TRUTH_SIMS simulations, the first HELD +
     the largest K solved.
     """
-    from surrogate.evaluate import unseen_truth
+    from surrogate.evaluate import truth_scene
 
     d, n = a.results / liver.stem, HELD + max(a.ks)
-    data = unseen_truth(pred, liver, d, SCENE, TRUTH_SIMS, frame=frame, solve=0)
+    data = liver_truth(d, truth_scene(pred, SCENE, liver, TRUTH_SIMS, frame), n,
+                       generate=False)   # the scene; another one's truth emptied
     if not (a.no_new_fe and (data / "sims").is_dir()):
         generate_chunks(d / "scene.toml", data, n, ranks=a.np, chunk=n)
     linear(d / "scene.toml", data, d / "linear.json", a.order, a.green)

@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_sim.batch.chunked import generate_chunks, linear_bases
+from fem_sim.batch.chunked import generate_chunks, linear_bases, liver_truth
 from liverviz.report import ROOT, SOFA, SOFA_FRAME, commit, write_report
 from surrogate.reports import DesignRecord
 from surrogate.small_strain import base_of
@@ -161,7 +161,7 @@ def unseen(data: Path, a) -> list[dict]:
     small-strain base's rest (when trained), that model on the base of the liver's own mesh
     and the base alone (over the linear response: also ``make liver`` timed from the file)."""
     from data_spec import load_scene
-    from surrogate.evaluate import evaluate_liver, place, unseen_truth
+    from surrogate.evaluate import evaluate_liver, place, truth_scene
     from surrogate.latency import timed_placed
     from surrogate.predict_liver import PlacedModel, read_liver_surface
     from surrogate.predictor import load_predictor
@@ -178,8 +178,9 @@ def unseen(data: Path, a) -> list[dict]:
         placed([[0.0, 0.0, -0.4]], placed.load_nodes(points[:1]))
         seconds = time.perf_counter() - t
         placement, found = place(pred, liver, frame)
-        fe = unseen_truth(pred, liver, RESULTS / "unseen" / liver.stem, SCENE, a.unseen_sims,
-                          frame=frame, ranks=a.np)
+        fe = liver_truth(RESULTS / "unseen" / liver.stem,
+                         truth_scene(pred, SCENE, liver, a.unseen_sims, frame), a.unseen_sims,
+                         ranks=a.np)
         m = evaluate_liver(pred, fe, placement, found, population_data=data)
         row = {"liver": liver.stem, "frame": frame or "scene", "file_to_predictor_s":
                seconds, "truth": str((RESULTS / "unseen" / liver.stem).relative_to(ROOT)),
@@ -217,7 +218,8 @@ def _over_base(pred, fe: Path, data: Path, liver: Path, frame, a) -> dict:
     from surrogate.evaluate import evaluate_unseen, place
     from surrogate.latency import timed_over_green
 
-    m = evaluate_unseen(pred, fe, liver, frame, population_data=data, ranks=a.np)
+    linear_bases(fe, scene=fe.parent / "scene.toml", order=pred.base.order, ranks=a.np)
+    m = evaluate_unseen(pred, fe, liver, frame, population_data=data)
     row = {"order": pred.base.order, "base_alone": m["base_alone"],
            "over_base": {k: m[k] for k in ("network", "skill", "naive", "sims")}}
     if pred.base.from_green:

@@ -37,10 +37,10 @@ from pathlib import Path
 import numpy as np
 
 from data_spec.views import extension, first
-from fem_sim.batch.chunked import generate_chunks
+from fem_sim.batch.chunked import generate_chunks, liver_truth
 from fem_sim.batch.knob_run import price_list_error
 from liverviz.report import ROOT, SOFA, commit, header, put_section
-from surrogate.evaluate import evaluate_liver, heldout_floor, place, unseen_truth
+from surrogate.evaluate import evaluate_liver, heldout_floor, place, truth_scene
 from surrogate.latency import timed, timed_placed
 from surrogate.reports import DesignRecord, design_label
 from surrogate.train import train_or_reuse
@@ -132,8 +132,9 @@ def unseen(scene_file: Path, base: Path, model_dir: Path, a) -> dict | None:
 
     pred = load_predictor(model_dir)
     placement, found = place(pred, liver, a.unseen_frame)
-    data = unseen_truth(pred, liver, RESULTS / f"unseen_{a.unseen_frame}", scene_file,
-                        UNSEEN_SIMS, frame=a.unseen_frame, ranks=a.np, chunk=a.chunk)
+    data = liver_truth(RESULTS / f"unseen_{a.unseen_frame}",
+                       truth_scene(pred, scene_file, liver, UNSEEN_SIMS, a.unseen_frame),
+                       UNSEEN_SIMS, ranks=a.np, solver_python=a.solver_python, chunk=a.chunk)
     return {"liver": liver.name, "frame": a.unseen_frame, "placed_as": placement.frame,
             **evaluate_liver(pred, data, placement, found, population_data=base / "data"),
             "ms_placed": timed_placed(pred, placement, LATENCY_NODES, a.calls),

@@ -263,37 +263,19 @@ def evaluate_liver(pred, data: Path, placement, found: list = (), *, population_
             **_scale_fit(pred_all, true_all)}
 
 
-def unseen_truth(pred, liver: str | Path, where: str | Path, scene_file: str | Path,
-                 sims: int, *, frame: str | None = None, solve: int | None = None,
-                 ranks: int = 2, chunk: int | None = None, stale: tuple = ()) -> Path:
-    """The FE truth of a liver ``pred`` never saw, under ``where`` (resumable: what is solved
-    stays; another placement's truth is emptied first): the population scene's loads,
-    material and solver on the liver's own mesh, fixed where the model's placement puts the
-    template's fixed region; ``sims`` simulations in its scene, the first ``solve`` of them
-    solved now (default all, 0: the scene only); ``stale``: files of ``where`` made from
-    another truth, removed with it. Returns its data directory.
-    """
-    from fem_sim.batch.chunked import liver_truth
-
-    n = sims if solve is None else solve
-    return liver_truth(where, truth_scene(pred, scene_file, liver, sims, frame), n,
-                       ranks=ranks, chunk=chunk, generate=n > 0, stale=stale)
-
-
 def evaluate_unseen(pred, truth: str | Path, liver: str | Path, frame: str | None = None, *,
-                    population_data=None, ranks: int = 2) -> dict:
-    """The model ``pred`` against the FE truth of a liver it never saw (:func:`unseen_truth`),
-    placed as predict-liver places it: :func:`evaluate_liver`'s figures; a model of the rest
-    of a small-strain base is evaluated over the base of the truth's own mesh (built when
-    missing, ``fem_sim linear``), and the base alone comes as ``base_alone``.
+                    population_data=None) -> dict:
+    """The model ``pred`` against the FE truth of a liver it never saw (``truth``: the data
+    directory of ``surrogate truth-scene`` then ``fem_sim generate``; resumable by
+    :func:`fem_sim.batch.chunked.liver_truth`), placed as predict-liver places it:
+    :func:`evaluate_liver`'s figures; a model of the rest of a small-strain base is evaluated
+    over the base of the truth's own mesh (``truth/linear.h5``, ``fem_sim linear``:
+    ValueError naming the command when missing), and the base alone comes as
+    ``base_alone``.
     """
-    from fem_sim.batch.chunked import linear_bases
     from surrogate.linear_base import liver_base_metrics
 
     truth = Path(truth)
-    if not pred.base.whole:
-        linear_bases(truth, scene=truth.parent / "scene.toml", order=pred.base.order,
-                     ranks=ranks)
     placement, found = place(pred, liver, frame)
     out = evaluate_liver(pred, truth, placement, found, population_data=population_data)
     if not pred.base.whole:
