@@ -28,3 +28,12 @@ def min_distance(a: np.ndarray, b: np.ndarray, chunk: int = 2048) -> np.ndarray:
         d = a[i:i + chunk, None, :] - b[None, :, :]
         out[i:i + chunk] = np.sqrt(np.min(np.einsum("ijk,ijk->ij", d, d), axis=1))
     return out
+
+
+def grasp_patch(points: np.ndarray, surface_nodes: np.ndarray, centre: int,
+                radius: float) -> np.ndarray:
+    """A grasping tool's patch, the rule the solver moves and the surrogate answers alike:
+    the surface nodes within ``radius`` mm of the node ``centre`` (which is one of them).
+    """
+    surf = np.asarray(surface_nodes, dtype=np.int64)
+    return surf[np.linalg.norm(points[surf] - points[int(centre)], axis=1) <= radius]

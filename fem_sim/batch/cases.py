@@ -151,7 +151,7 @@ def make_case(scene: Scene, index: int, g: Geometry, fixed: np.ndarray,
         raise CaseError(f"scene {scene.name}: only {eligible.size} eligible load nodes for "
                         f"{n} loads (check loads.eligible / min_distance_to_fixed)")
     nodes = _pick_nodes(rng, eligible, g.points, n, ld["min_separation"])
-    d = _directions(rng, ld["direction"], g.points[nodes], g.points[fixed])
+    d = load_directions(rng, ld["direction"], g.points[nodes], g.points[fixed])
     mags = np.array([_draw(rng, ld["magnitude"]) for _ in range(n)])
     mat = _case_material(scene, rng, table)
     if ld["kind"] == "grasp":
@@ -160,7 +160,7 @@ def make_case(scene: Scene, index: int, g: Geometry, fixed: np.ndarray,
     return Case(index, geometry_index, ld["kind"], nodes, d * mags[:, None], mat, patch)
 
 
-def _directions(rng, rule, at: np.ndarray, fixed: np.ndarray) -> np.ndarray:
+def load_directions(rng, rule, at: np.ndarray, fixed: np.ndarray) -> np.ndarray:
     """(n, 3) unit directions of the loads at the points ``at``: uniform on the sphere,
     ``away`` (uniform over the half-sphere facing away from each point's nearest fixed node:
     a tool pulls the liver off its support, not into it) or the scene's fixed vector.
@@ -181,11 +181,9 @@ def grasp_patches(case: Case, g: Geometry, fixed: np.ndarray) -> list[np.ndarray
     """Each tool's grasped nodes: the surface nodes within the case's patch radius of its
     centre node; CaseError when a patch touches the fixed region or another tool's.
     """
-    surf = g.surface_nodes
     out = []
     for node in case.load_nodes:
-        patch = surf[np.linalg.norm(g.points[surf] - g.points[node], axis=1)
-                     <= case.patch_radius]
+        patch = eligible_loads.grasp_patch(g.points, g.surface_nodes, node, case.patch_radius)
         if np.intersect1d(patch, fixed).size:
             raise CaseError(f"case {case.index}: the grasp at node {node} (radius "
                             f"{case.patch_radius:g} mm) reaches the fixed region: raise "
