@@ -1,0 +1,50 @@
+"""surrogate.grasp without a liver: the force a pressed patch spreads over its nodes, and a
+grasp over a Green's function known in closed form."""
+
+import numpy as np
+import pytest
+
+from data_spec.geometry import box_mesh
+from surrogate.grasp import GreenGrasp, patch_weights
+
+
+def test_a_pressed_patch_spreads_the_whole_force_by_area_and_bump():
+    """On the top face of a block (a regular grid), the shares sum to one, fall with the
+    distance to the centre, vanish at the radius, and nodes at the same distance with the
+    same lumped area carry the same share."""
+    g = box_mesh(8, (8.0, 8.0, 1.0))
+    top = g.surface_nodes[g.points[g.surface_nodes, 2] == 1.0]
+    centre = top[np.argmin(np.linalg.norm(g.points[top, :2] - 4.0, axis=1))]
+    patch = top[np.linalg.norm(g.points[top] - g.points[centre], axis=1) <= 2.0]
+    w = patch_weights(g.points, g.surface_triangles, patch, centre, 2.0)
+    r = np.linalg.norm(g.points[patch] - g.points[centre], axis=1)
+    assert w.sum() == pytest.approx(1.0) and np.all(w >= 0)
+    assert w[r == 0].item() == w.max() and np.all(w[r == 2.0] == 0)
+    ring = np.isclose(r, 1.0)
+    assert ring.sum() == 4 and np.allclose(w[ring], w[ring][0])   # the four at 1 mm
+    with pytest.raises(ValueError, match="carries no area"):
+        patch_weights(g.points, g.surface_triangles, patch[r == 2.0][:1], centre, 2.0)
+
+
+def test_a_grasp_of_independent_springs_is_their_stiffness_and_a_bad_patch_is_named():
+    """A Green's function of uncoupled nodes, u_i = f_i / k_i (a diagonal, closed form): a
+    tool holding nodes of stiffness k_i feels sum k_i d, moves only its own nodes, and two
+    tools do not feel each other; a node without a row, a wrong displacement shape or NaN
+    is refused."""
+    k = np.array([1.0, 2.0, 4.0, 8.0])
+    green = np.zeros((4, 3, 4, 3))
+    for i in range(4):
+        green[i, :, i, :] = np.eye(3) / k[i]
+    nodes = np.array([10, 11, 12, 13])      # mesh ids of the rows and columns
+    grasp = GreenGrasp(green, nodes, nodes, [[10, 11], [13]])
+    d = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -2.0]])
+    u, force = grasp(d)
+    np.testing.assert_allclose(force, [[3.0, 0.0, 0.0], [0.0, 0.0, -16.0]])
+    np.testing.assert_allclose(u, [[1, 0, 0], [1, 0, 0], [0, 0, 0], [0, 0, -2]], atol=1e-12)
+    np.testing.assert_allclose(grasp.stiffness, np.diag([3, 3, 3, 8, 8, 8.0]))
+    with pytest.raises(ValueError, match="grasped node 9 has no unit response"):
+        GreenGrasp(green, nodes, nodes, [[9, 10]])
+    with pytest.raises(ValueError, match=r"expected finite \(2, 3\) mm"):
+        grasp(d[:1])
+    with pytest.raises(ValueError, match="expected finite"):
+        grasp.force(np.full((2, 3), np.nan))
