@@ -36,7 +36,7 @@ MPIRUN := mpirun -n $(NP)
 .PHONY: help setup setup-system setup-solver setup-trainer demo test test-solver test-trainer \
         test-extremes extremes-doc \
         dataset train population table4 bench bench-solver bench-throughput bench-inference \
-        bench-population truth evaluate patient patient-args liver liver-args scene4-real bench-patient tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
+        bench-population truth evaluate patient patient-args liver liver-args scene4-real bench-patient bench-surgical tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
         bench-viewer docs-manipulator viewer \
         clean lock-trainer
 
@@ -53,6 +53,8 @@ help:
 	@echo "make evaluate RUN=... DATA=... [LIVER=...]   a model against a dataset it never saw"
 	@echo "make patient LIVER=... MODEL=... [K=40]   a new patient's own model (docs/patient.md)"
 	@echo "make liver LIVER=... MODEL=... AT=\"X Y Z FX FY FZ\"   a new liver over its own Green's function, seconds"
+	@echo "           (or GRASP=\"X Y Z DX DY DZ\": a 10 mm patch moved, the field and the tool's force)"
+	@echo "make bench-surgical   grasps to 40 mm, forces to 4 N on the validation livers -> docs/surgical_loads.md"
 	@echo "make tradeoff-fem   FEM speed/accuracy price list -> docs/tradeoff_fem.md (long, resumable)"
 	@echo "make tradeoff-surrogate   surrogate price list + error budget -> docs/ (long, resumable)"
 	@echo "make table4   the paper's Table 4, scenes 1-4 -> docs/table4.md (long, resumable)"
@@ -241,12 +243,15 @@ patient: patient-args setup
 # template's fixed region (truth-scene), its small-strain Green's function from one
 # factorisation (fem_sim linear --green, one process: the factorisation's threads take the
 # cores), and predict-liver --base on its own mesh with the force AT = "X Y Z FX FY FZ" (mm,
-# N; the liver file's frame). No FE simulation, no training.
+# N; the liver file's frame), or a grasp GRASP = "X Y Z DX DY DZ" (the 10 mm patch nearest to
+# X Y Z moved by DX DY DZ mm: the field and the tool's force, of the small-strain base alone:
+# docs/surgical_loads.md). No FE simulation, no training.
 AT ?=
+GRASP ?=
 LIVER_DIR ?= runs/liver/$(basename $(notdir $(LIVER)))
 liver-args:
 	@$(SYS_PY) scripts/make_args.py liver LIVER="$(LIVER)" MODEL="$(MODEL)" AT="$(AT)" \
-	    PSCENE="$(PSCENE)" FRAME="$(FRAME)"
+	    GRASP="$(GRASP)" PSCENE="$(PSCENE)" FRAME="$(FRAME)"
 liver: liver-args setup
 	$(TPY) -m surrogate truth-scene $(MODEL) $(LIVER) --scene $(PSCENE) --sims 1 \
 	    $(if $(FRAME),--frame $(FRAME)) --out $(LIVER_DIR)/scene.toml \
@@ -255,7 +260,7 @@ liver: liver-args setup
 	    $(SPY) -m fem_sim linear $(LIVER_DIR)/scene.toml --out $(LIVER_DIR)/data --green
 	$(TPY) -m surrogate predict-liver $(MODEL) $(LIVER) --base $(LIVER_DIR)/data \
 	    --placement $(LIVER_DIR)/placement.npz $(if $(FRAME),--frame $(FRAME)) \
-	    --force $(AT) --out $(LIVER_DIR)/prediction
+	    $(if $(GRASP),--grasp $(GRASP),--force $(AT)) --out $(LIVER_DIR)/prediction
 
 # Scene 4 on real livers (long, resumable): the designs cross-validated by liver, the livers
 # never seen against FE (and make liver timed on each) -> docs/scene4_real.md (then make
@@ -266,6 +271,11 @@ scene4-real: setup
 
 bench-patient: setup
 	$(TPY) bench/patient.py --np $(NP)
+
+# Surgical loads (resumable): grasps pulled 5-40 mm and 0.4-4 N on a patch, FE against the
+# small-strain base over each validation liver's Green's function -> docs/surgical_loads.md
+bench-surgical: setup-solver
+	$(SPY) bench/surgical_loads.py
 
 evaluate: setup-trainer
 	$(TPY) -m surrogate evaluate $(RUN) $(DATA) $(if $(LIVER),--liver $(LIVER)) \

@@ -17,8 +17,8 @@ from pathlib import Path
 USAGE = {
     "patient": 'make patient LIVER=file MODEL=run [K=40] [HELD=0] [PSCENE=scene] '
                '[PATIENT=dir]',
-    "liver": 'make liver LIVER=file MODEL=run AT="X Y Z FX FY FZ" [PSCENE=scene] '
-             '[FRAME=...] [LIVER_DIR=dir]',
+    "liver": 'make liver LIVER=file MODEL=run (AT="X Y Z FX FY FZ" | GRASP="X Y Z DX DY DZ") '
+             '[PSCENE=scene] [FRAME=...] [LIVER_DIR=dir]',
 }
 FRAMES = ("", "population", "LPS", "RAS", "auto")
 
@@ -51,16 +51,20 @@ def _scene(value: str) -> str | None:
     return None if Path(value).is_file() else "no such scene file"
 
 
-def _at(value: str) -> str | None:
+def _at(value: str, unit: str = "a force in N (FX FY FZ)") -> str | None:
     words = value.split()
     try:
         numbers = [float(w) for w in words]
     except ValueError:
         numbers = []
     if len(words) != 6 or len(numbers) != 6 or not all(map(math.isfinite, numbers)):
-        return ("expected six finite numbers \"X Y Z FX FY FZ\": a point on the liver's "
-                "surface in mm and a force in N")
+        return ("expected six finite numbers: a point on the liver's surface in mm (X Y Z) "
+                f"and {unit}")
     return None
+
+
+def _grasp(value: str) -> str | None:
+    return _at(value, "the grasped patch's displacement in mm (DX DY DZ)")
 
 
 CHECKS = {
@@ -70,16 +74,25 @@ CHECKS = {
                 "SYNTHETIC": lambda v: _whole(v, "drawn small-strain loads"),
                 "ORDER": _one_of("1", "2"), "GREEN": _one_of("0", "1"),
                 "FRAME": _one_of(*FRAMES)},
-    "liver": {"LIVER": _file, "MODEL": _model, "PSCENE": _scene, "AT": _at,
+    "liver": {"LIVER": _file, "MODEL": _model, "PSCENE": _scene, "AT": _at, "GRASP": _grasp,
               "FRAME": _one_of(*FRAMES)},
 }
+# variables of which exactly one is given: the checks above see only the one given
+ONE_OF = {"liver": ("AT", "GRASP")}
 
 
 def problems(target: str, values: dict[str, str]) -> list[str]:
     """One line per variable of ``target`` that is wrong (empty when all are right)."""
     out = []
+    pick = ONE_OF.get(target, ())
+    given = [n for n in pick if values.get(n, "").strip()]
+    if pick and len(given) != 1:
+        out.append(f"make {target}: give one of " + " or ".join(pick) + (
+            f", not {len(given)}" if given else ""))
     for name, check in CHECKS[target].items():
         value = values.get(name, "").strip()
+        if name in pick and not value:   # said above when none is given
+            continue
         why = check(value)
         if why:
             out.append(f"make {target}: {name}={value!r}: {why}")

@@ -80,6 +80,13 @@ def _add_predict_liver(sub) -> None:
                    help="the liver's own mesh and small-strain Green's function (fem_sim "
                    "linear --green on its truth-scene, as make liver runs it): the whole field "
                    "on that mesh, of a model of the rest over it (config population_green)")
+    p.add_argument("--grasp", nargs=6, type=float, action="append", default=[],
+                   metavar=("X", "Y", "Z", "DX", "DY", "DZ"),
+                   help="with --base, instead of --force: a tool grasping the 10 mm patch "
+                   "around the liver surface point nearest to X Y Z (mm) and moving it by DX "
+                   "DY DZ (mm); once or twice. The field and each tool's force are the "
+                   "small-strain base over the liver's Green's function (the network has "
+                   "learned nodal forces, not grasps: docs/surgical_loads.md)")
     p.add_argument("--placement", help="with --base: the placement file truth-scene "
                    "--placement wrote (read when it holds this liver, frame and model)")
 
@@ -172,11 +179,15 @@ def _fail(command: str, message: str) -> int:
 
 
 def _predict_liver(args) -> int:
-    if args.base and (not args.force or args.no_center):
-        return _fail("predict-liver", "--base needs --force (the manipulator shows the placed "
-                     "population model, without --base) and a centred placement (no "
-                     "--no-center: the liver's mesh is placed as truth-scene placed it)")
-    if not args.force:  # no force given: the manipulator opens on the placed liver
+    if args.grasp and not args.base:
+        return _fail("predict-liver", "--grasp needs --base (the liver's own mesh and Green's "
+                     "function: make liver GRASP=...)")
+    if args.base and (not (args.force or args.grasp) or args.no_center):
+        return _fail("predict-liver", "--base needs --force or --grasp (the manipulator "
+                     "shows the placed population model, without --base) and a centred "
+                     "placement (no --no-center: the liver's mesh is placed as truth-scene "
+                     "placed it)")
+    if not (args.force or args.grasp):  # no load: the manipulator opens on the placed liver
         from surrogate.viewer import main as viewer
 
         return viewer([str(args.run), "--place", str(args.liver), "--scale-to-mm",
@@ -193,7 +204,7 @@ def _predict_liver(args) -> int:
         def over(predictor, forces, at):
             return predict_over_green(predictor, args.base, args.liver, forces, at,
                                       frame=args.frame, saved=args.placement,
-                                      shape=args.shape)[0]
+                                      shape=args.shape, grasp=bool(args.grasp))[0]
     return predict_liver(args, over)
 
 

@@ -23,7 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
+from data_spec.eligible_loads import grasp_patch
+from data_spec.scene import GRASP_RADIUS
 from liverreg.morph import interpolation_matrix
+from surrogate.grasp import GreenGrasp
 from surrogate.predictor import LinearPart
 
 
@@ -72,6 +75,19 @@ class OverGreen:
         at = np.asarray(at, dtype=np.float64)
         ids = cKDTree(self.points[self.green_nodes]).query(at.reshape(-1, 3))[1]
         return self.green_nodes[ids].reshape(at.shape[:-1])
+
+    def grasp(self, at, radius: float = GRASP_RADIUS) -> GreenGrasp:
+        """Tools grasping the liver at the points ``at`` (T, 3) mm, each the patch of radius
+        ``radius`` around the free surface node nearest to its point: a
+        :class:`~surrogate.grasp.GreenGrasp` giving the field at the output nodes and each
+        tool's force for their displacements. The small-strain base alone: the network has
+        learned nodal forces, not grasps (docs/surgical_loads.md measures what the base
+        misses). ValueError when a patch reaches the fixed region.
+        """
+        centres = np.atleast_1d(self.load_nodes(np.asarray(at, np.float64).reshape(-1, 3)))
+        return GreenGrasp(self.linear.green, self.green_nodes, self.output_nodes,
+                          [grasp_patch(self.points, self.geometry.surface_nodes, c, radius)
+                           for c in centres])
 
     def _template_nodes(self, load_nodes: np.ndarray) -> np.ndarray:
         """The registered template's surface nodes under the mesh nodes ``load_nodes``, kept
@@ -131,12 +147,14 @@ def green_of(predictor, data) -> tuple:
 
 
 def predict_over_green(predictor, data, liver, forces, at, *, frame: str | None = None,
-                       saved=None, shape: str | None = None):
+                       saved=None, shape: str | None = None, grasp: bool = False):
     """predict-liver over the liver's own Green's function: (the
     :class:`~surrogate.predict_liver.LiverPrediction` on the liver's own mesh, the model).
     ``forces`` (n_loads, 3) N act at the mesh's surface nodes nearest to ``at`` (n_loads, 3)
     mm, both in the liver file's frame; the placement is ``surrogate.evaluate.place``'s
     (``saved``: the file truth-scene --placement wrote, read when it holds this liver).
+    ``grasp``: ``forces`` are the displacements (mm) of tools grasping the liver at ``at``
+    (:meth:`OverGreen.grasp`); the prediction's forces are then each tool's force on it.
     """
     from surrogate.evaluate import place
     from surrogate.predict_liver import LiverPrediction
@@ -153,8 +171,14 @@ def predict_over_green(predictor, data, liver, forces, at, *, frame: str | None 
     forces = np.asarray(forces, dtype=np.float64).reshape(-1, 3)
     nodes = model.load_nodes(np.asarray(at, dtype=np.float64).reshape(-1, 3))
     u = np.zeros_like(g.points)
-    u[model.output_nodes] = model(forces, nodes)
+    moved = None
+    if grasp:
+        moved = forces
+        u[model.output_nodes], forces = model.grasp(at)(moved)
+    else:
+        u[model.output_nodes] = model(forces, nodes)
     return LiverPrediction(
+        tool_displacements=moved,
         points=g.points, cells=g.cells, triangles=g.surface_triangles,
         fixed_nodes=model.fixed_nodes, displacement=u, load_nodes=nodes, forces=forces,
         coefficients=placement.coefficients, shape_told=model.placed.shape_told,

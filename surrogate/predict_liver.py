@@ -140,6 +140,8 @@ class LiverPrediction:
     frame: str = "as given"     # how the liver was turned into the population's frame
     inverted: int = 0           # template tetrahedra the placement turned inside out
     warnings: list = field(default_factory=list)
+    # a grasp (predict-liver --grasp): each tool's displacement, mm; forces are then its force
+    tool_displacements: np.ndarray | None = None
 
     def write_vtu(self, path) -> Path:
         """The liver as a ParaView file: tetrahedra, point data displacement and |u|."""
@@ -411,7 +413,10 @@ def _summary(args, predictor, pred, asked) -> dict:
             "force_points_asked_mm": asked.tolist(), "force_points_used_mm": used.tolist(),
             "force_point_moved_mm": np.linalg.norm(used - asked, axis=1).tolist(),
             "max_displacement_mm": float(np.linalg.norm(pred.displacement, axis=1).max()),
-            "warnings": pred.warnings}
+            "warnings": pred.warnings} | ({} if pred.tool_displacements is None else {
+                # a grasp: forces_N are each tool's force on the liver, of the base alone
+                "grasp_displacements_mm": pred.tool_displacements.tolist(),
+                "grasp": "the small-strain base over the liver's Green's function alone"})
 
 
 def _checked_request(args, fail):
@@ -421,6 +426,7 @@ def _checked_request(args, fail):
     import sys
 
     from data_spec.atomic import out_problem
+    from data_spec.scene import GRASP_TOOLS
     from surrogate.predictor import load_predictor
 
     why = out_problem(args.out, "--out", directory=True)   # nothing created for --out
@@ -435,13 +441,17 @@ def _checked_request(args, fail):
     if not (predictor.base.whole or args.base):
         return fail(f"{args.run}: {predictor.base.rest_only()}")
     L = predictor.spec.n_loads
-    if len(args.force) != L:
+    grasp = getattr(args, "grasp", None)
+    if grasp and (args.force or not args.base or len(grasp) > GRASP_TOOLS):
+        return fail(f"--grasp: 1 to {GRASP_TOOLS} tools, with --base (the liver's Green's "
+                    "function, make liver) and no --force")
+    if not grasp and len(args.force) != L:
         return fail(f"--force: the model takes {L} force(s), got {len(args.force)} (each "
                     "--force X Y Z FX FY FZ: a point near the liver surface in mm and a force "
                     "in N)")
-    spec = np.asarray(args.force, dtype=np.float64)
+    spec = np.asarray(grasp or args.force, dtype=np.float64)
     if not np.all(np.isfinite(spec)):
-        return fail("--force: contains NaN or inf")
+        return fail(f"--{'grasp' if grasp else 'force'}: contains NaN or inf")
     try:
         points, triangles = read_liver_surface(args.liver, args.scale_to_mm)
     except LiverFileError as exc:
@@ -499,6 +509,11 @@ def main(args, over=None) -> int:
     if not args.no_picture:
         png = pred.draw(out / "liver_deformed.png", title=Path(args.liver).name)
         print(f"picture: {png}", file=sys.stderr)
+    if pred.tool_displacements is not None:
+        for d, f in zip(pred.tool_displacements, pred.forces):
+            print(f"grasp moved {np.linalg.norm(d):.1f} mm: the tool's force on the liver "
+                  f"{np.round(f, 3).tolist()} N ({np.linalg.norm(f):.3f} N; the small-strain "
+                  "base alone, docs/surgical_loads.md)")
     print(f"placed as {pred.frame}; registration residual {pred.residual:.2f} mm, "
           f"{pred.inverted} of {pred.cells.shape[0]} template tetrahedra inverted; max "
           f"displacement {summary['max_displacement_mm']:.2f} mm; written {vtu} and "

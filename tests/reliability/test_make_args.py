@@ -58,6 +58,15 @@ def test_right_variables_pass_the_check():
                                         "AT": "1 2 3 0 0 -0.4"}) == [
         f"make liver: MODEL={model!r}: not a trained run: no model/model.json in it (surrogate "
         "train writes one)"]
+    grasp = make_args.problems("liver", {"LIVER": str(LIVER), "MODEL": model, "PSCENE": scene,
+                                         "GRASP": "1 2 3 0 0 20"})
+    assert len(grasp) == 1 and "MODEL=" in grasp[0]   # a grasp instead of a force is right
+    both = make_args.problems("liver", {"LIVER": str(LIVER), "PSCENE": scene,
+                                        "AT": "1 2 3 0 0 -0.4", "GRASP": "1 2 nan 0 0 20"})
+    assert "make liver: give one of AT or GRASP, not 2" in both
+    assert any(p.startswith("make liver: GRASP='1 2 nan 0 0 20': expected six finite numbers")
+               and "displacement in mm" in p for p in both)
+    assert "make liver: give one of AT or GRASP" in make_args.problems("liver", {})
     assert make_args.problems("patient", {"LIVER": str(LIVER), "MODEL": model, "PSCENE": scene,
                                           "K": "0", "HELD": "6", "SYNTHETIC": "600",
                                           "ORDER": "2", "GREEN": "1", "FRAME": "auto"})[1:] == []

@@ -207,3 +207,45 @@ def test_the_evaluation_of_an_unseen_liver_adds_the_base_and_reports_it_alone(pa
     alone = ds.sample_fraction[smp][:, None, None] * solved
     assert got["base_alone"]["order"] == 1
     assert np.isclose(got["base_alone"]["network"]["mee"], field_mee(alone, true), rtol=1e-4)
+
+
+def test_a_grasp_over_the_greens_function_holds_its_patch_and_gives_the_force_back(patient,
+                                                                                   tmp_path):
+    """make liver GRASP=...: the tool's patch (the solver's rule) follows the tool; the field
+    is the Green's function's response to the patch's nodal forces (the contraction every
+    load's linear part is) and the force their sum, doing positive work; the base is linear
+    (twice the pull, twice both); a patch that reaches the fixed region is refused naming the
+    node; the command writes the tool's force."""
+    from surrogate.__main__ import main
+    from surrogate.over_green import OverGreen
+
+    d, info, run = patient
+    rest = load_predictor(run / "model")
+    model = OverGreen(rest, d / "data", _placed(rest, d, info))
+    g, free = model.geometry, model.green_nodes
+    far = free[np.argmax(np.linalg.norm(g.points[free][:, None] - g.points[model.fixed_nodes]
+                                        [None], axis=2).min(axis=1))]
+    grasp = model.grasp([g.points[far]])
+    pull = np.array([[3.0, -4.0, 10.0]])
+    u, force = grasp(pull)
+    patch = grasp.patches[0]
+    assert far in patch and patch.size > 1
+    np.testing.assert_allclose(u[np.searchsorted(model.output_nodes, patch)],
+                               np.broadcast_to(pull, (patch.size, 3)), atol=1e-6 * 10)
+    nodal = grasp.nodal_forces @ pull.ravel()
+    np.testing.assert_allclose(model.linear(nodal[None], patch[None])[0], u,
+                               atol=1e-6 * np.abs(u).max())
+    np.testing.assert_allclose(force[0], nodal.sum(axis=0), rtol=1e-9)
+    assert force[0] @ pull[0] > 0 and np.all(np.linalg.eigvalsh(grasp.stiffness) > 0)
+    u2, force2 = grasp(2 * pull)
+    np.testing.assert_allclose(u2, 2 * u, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(force2, 2 * force, rtol=1e-9)
+    with pytest.raises(ValueError, match="has no unit response"):
+        model.grasp([g.points[model.fixed_nodes[0]]], radius=40.0)
+    o = tmp_path / "grasp"
+    assert main(["predict-liver", str(run), info["liver"], "--base", str(d / "data"),
+                 "--placement", str(d / "placement.npz"), "--grasp", *map(str, g.points[far]),
+                 *map(str, pull[0]), "--out", str(o), "--no-picture"]) == 0
+    summary = json.loads((o / "prediction.json").read_text())
+    np.testing.assert_allclose(summary["forces_N"], force, rtol=1e-6)
+    assert summary["grasp_displacements_mm"] == pull.tolist()
