@@ -33,13 +33,20 @@ def test_paper_scene_sizes_and_what_varies():
     sizes = {k: v.n_simulations for k, v in by_name.items() if k.startswith("scene")}
     assert sizes == {"scene1_base": 400, "scene2_two_forces": 1500,
                      "scene3_materials": 3000, "scene4_livers": 1015,
-                     "scene4_phantoms": 10200}
+                     "scene4_phantoms": 10200, "scene4_grasp": 725}
     assert by_name["scene1_base"].varies == {"loads": True, "material": False,
                                              "geometry": False}
     assert by_name["scene2_two_forces"]["loads"]["count"] == 2
     assert by_name["scene3_materials"].varies["material"]
     assert by_name["scene4_livers"].varies["geometry"]
     assert by_name["scene4_phantoms"].varies["geometry"]
+    # the grasp scene: the same livers, the same validation livers set aside, tools not forces
+    grasp, forces = by_name["scene4_grasp"], by_name["scene4_livers"]
+    for key in ("livers", "validation", "exclude", "mesh_size", "population_seed"):
+        assert grasp["geometry"][key] == forces["geometry"][key], key
+    assert grasp["fixed"] == forces["fixed"] and grasp["solver"] == forces["solver"]
+    assert grasp["loads"]["kind"] == "grasp" and grasp["loads"]["magnitude"] == 40.0
+    assert grasp["loads"]["min_distance_to_fixed"] > grasp["loads"]["patch_radius"]
 
 
 def test_defaults_filled_and_hash_stable():
