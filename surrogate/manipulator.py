@@ -105,6 +105,23 @@ class Manipulator:
         self.active = 0
         self.mode = "pull"
 
+    magnitude_title = "force of the active handle (N)"
+
+    @property
+    def magnitude_max(self) -> float:
+        """The slider's end: the largest force seen in training (N)."""
+        return self.f_max
+
+    def magnitude(self, handle: int | None = None) -> float:
+        """The slider's value: the handle's force (N)."""
+        return float(np.linalg.norm(self.handles[self._handle(handle)].force))
+
+    def describe(self, j: int) -> str:
+        """The status line of handle ``j``."""
+        h, mark = self.handles[j], "*" if j == self.active and len(self.handles) > 1 else ""
+        return (f"F{j + 1}{mark} = {np.linalg.norm(h.force):.3f} N (max {self.f_max:.2f}) "
+                f"at node {h.node}")
+
     # -- picking and dragging ------------------------------------------------------------------
     def default_nodes(self, n: int) -> list[int]:
         """Surface nodes farthest from the fixed region (and from each other): where a user
@@ -239,4 +256,128 @@ class Manipulator:
         u = self.pred(forces, nodes, nodes=self._predict_nodes, material=material,
                       geometry=geometry)
         seconds = time.perf_counter() - t
+        return Frame(surface_u=u[self._rows], u=u, seconds=seconds)
+
+
+class GraspManipulator:
+    """A grasping tool on a liver's own mesh over its small-strain Green's function (the data
+    directory of ``make liver``, ``fem_sim linear --green``): a click picks the patch the tool
+    holds (:func:`data_spec.eligible_loads.grasp_patch`), a drag moves it to the pointer
+    (clamped to ``max_pull`` mm), and the field and the tool's force on the liver come from
+    :class:`surrogate.grasp.GreenGrasp`: the small-strain base, which no network corrects yet
+    (docs/surgical_loads.md measures what it misses). It offers what the viewer draws, as
+    :class:`Manipulator` does; a handle's ``force`` is the tool's force (N) and the load a
+    script or the slider sets is the pull (mm).
+    """
+
+    magnitude_title = "pull of the grasp (mm)"
+    nodes_mode = "all"
+    mode = "pull"
+
+    def __init__(self, data, max_pull: float = 40.0, radius: float | None = None):
+        from data_spec import read_geometry
+        from data_spec.linear_fields import read_dataset_linear
+        from data_spec.scene import GRASP_RADIUS
+        from data_spec.shards import geometry_path
+
+        lf = read_dataset_linear(data)
+        if lf.green is None:
+            raise ValueError(f"{data}: its small-strain file holds no Green's function; run "
+                             "fem_sim linear with --green (make liver does)")
+        g = read_geometry(geometry_path(data, lf.geometry_id))
+        if lf.output_nodes.size != g.n_nodes:
+            raise ValueError(f"{data}: its Green's function reaches {lf.output_nodes.size} of "
+                             f"the mesh's {g.n_nodes} nodes; the grasp draws the whole liver "
+                             "(a scene with [output] nodes = \"all\", as make liver writes it)")
+        self.points, self.radius = g.points, float(radius or GRASP_RADIUS)
+        self.fixed = np.setdiff1d(g.surface_nodes, lf.green_nodes)
+        self.surface = Surface.from_mesh(g.points, g.surface_triangles, self.fixed)
+        self._lf, self._surface_nodes = lf, g.surface_nodes
+        self._rows = np.searchsorted(lf.output_nodes, self.surface.nodes)
+        self.max_pull = self.magnitude_max = self.drag_length = float(max_pull)
+        self.inputs: list[Input] = []
+        self.active, self.pull = 0, np.zeros(3)
+        self.handles = [Handle(node=Manipulator.default_nodes(self, 1)[0])]
+        self._grasp = self._grasp_at(self.handles[0].node)
+        # the arrows' scale: the force of the largest pull along the stiffest axis
+        self.f_max = float(np.sqrt(np.linalg.eigvalsh(
+            self._grasp.stiffness.T @ self._grasp.stiffness).max())) * self.max_pull
+
+    def _grasp_at(self, node: int):
+        from data_spec.eligible_loads import grasp_patch
+        from surrogate.grasp import GreenGrasp
+
+        lf = self._lf
+        return GreenGrasp(lf.green, lf.green_nodes, lf.output_nodes,
+                          [grasp_patch(self.points, self._surface_nodes, node, self.radius)])
+
+    nearest_surface_node = Manipulator.nearest_surface_node
+
+    def pick(self, xyz, handle: int | None = None, deformed: np.ndarray | None = None) -> int:
+        """Grasp the patch around the surface node nearest ``xyz`` (on the ``deformed``
+        surface when given), the pull kept; a patch that reaches the fixed region is not
+        taken (the tool stays where it was).
+        """
+        if deformed is not None:
+            i = int(np.argmin(np.linalg.norm(np.asarray(deformed) - np.asarray(xyz), axis=1)))
+            node = int(self.surface.nodes[i])
+        else:
+            node = self.nearest_surface_node(xyz)
+        try:
+            self._grasp = self._grasp_at(node)
+        except ValueError:   # the patch holds a fixed node
+            return self.handles[0].node
+        self.handles[0].node = node
+        return node
+
+    def set_force(self, pull, handle: int | None = None) -> np.ndarray:
+        """Set the tool's pull (mm; its length clamped to ``max_pull``); returns it."""
+        d = np.asarray(pull, dtype=float).reshape(3)
+        if not np.all(np.isfinite(d)):
+            raise ValueError(f"pull: expected finite components, got {d.tolist()}")
+        n = float(np.linalg.norm(d))
+        self.pull = d * (self.max_pull / n) if n > self.max_pull else d
+        return self.pull
+
+    def drag(self, tip, handle: int | None = None) -> np.ndarray:
+        """Move the patch to ``tip`` (mm): the pull is tip less the grasped node, clamped."""
+        return self.set_force(np.asarray(tip, float).reshape(3)
+                              - self.points[self.handles[0].node])
+
+    def handle_position(self, handle: int | None = None) -> np.ndarray:
+        """Where the tool holds the patch's centre: the node moved by the pull."""
+        return self.points[self.handles[0].node] + self.pull
+
+    def set_magnitude(self, magnitude: float, handle: int | None = None) -> np.ndarray:
+        """Pull by ``magnitude`` mm along the present pull (along the outward normal at first)."""
+        n = float(np.linalg.norm(self.pull))
+        direction = self.pull / n if n > 0 else \
+            self.surface.normals()[self.surface.local([self.handles[0].node])[0]]
+        return self.set_force(direction * max(float(magnitude), 0.0))
+
+    def magnitude(self, handle: int | None = None) -> float:
+        return float(np.linalg.norm(self.pull))
+
+    def toggle_mode(self) -> str:
+        return self.mode   # a grasp pulls where the pointer is: nothing to switch
+
+    def set_input(self, index: int, value: float) -> float:
+        raise ValueError("a grasp over a Green's function takes no material or shape input")
+
+    @property
+    def n_predicted(self) -> int:
+        return int(self._lf.output_nodes.size)
+
+    def describe(self, handle: int = 0) -> str:
+        """The status line of the tool: its pull and its force."""
+        f = self.handles[0].force
+        return (f"grasp at node {self.handles[0].node}: {np.linalg.norm(self.pull):.1f} mm "
+                f"(max {self.max_pull:g})\nforce {np.linalg.norm(f):.3f} N (small-strain base)")
+
+    def predict(self) -> Frame:
+        """The field of the whole liver and the tool's force for the present pull."""
+        t = time.perf_counter()
+        u, force = self._grasp(self.pull[None])
+        seconds = time.perf_counter() - t
+        self.handles[0].force = force[0]
         return Frame(surface_u=u[self._rows], u=u, seconds=seconds)

@@ -5,6 +5,8 @@
                                                              frames + GIF, no display needed
     python -m surrogate.viewer RUN_DIR --compare --data DATA [--sim N] [--offscreen --out DIR]
                                                              FE beside surrogate, error coloured
+    python -m surrogate.viewer LIVER_DATA --grasp [--offscreen --out DIR]
+                                                             a grasping tool (make liver's data)
 
 RUN_DIR is a training run (its ``model/``) or a model directory. In the window: right-click a
 surface point to move the active force there; drag the red sphere to set the force (its
@@ -12,8 +14,11 @@ magnitude is clamped to the training range and shown on screen); the slider sets
 keys 1 / 2 choose the force of a two-force model, ``z`` sets the forces to zero, ``g`` shows
 the undeformed outline, ``m`` switches the spheres between pulling (the surface follows the
 sphere) and pushing (the sphere stands outside, where the push comes from). Sliders set the
-material / shape inputs when the model has them. The status line shows the surrogate's inference
-time and the frame time (inference + drawing).
+material / shape inputs when the model has them. The status line shows the surrogate's
+inference time and the frame time (inference + drawing). With ``--grasp`` a click grasps the
+10 mm patch there and the sphere is the tool: the patch follows it (at most 40 mm), the
+slider sets the pull and the status shows the tool's force, an arrow draws it
+(surrogate.manipulator.GraspManipulator); a script's "forces" are then pulls in mm.
 
 A script (``--script``) is JSON: ``{"fps": 10, "frames": [{"nodes": [id] or "points": [[x, y,
 z]], "forces": [[fx, fy, fz]], "steps": 12, "inputs": [...]}, ...]}``; each entry is reached
@@ -84,7 +89,7 @@ def _default_script(m) -> list[dict]:
     n = m.surface.normals()[m.surface.local([node])[0]]
     side = np.cross(n, [0.0, 0.0, 1.0])
     side = side / max(np.linalg.norm(side), 1e-12)
-    f = m.f_max
+    f = m.magnitude_max
     keys = [(np.zeros(3), 1), (-f * n, 12), (f * side, 12), (f * n * 0.6, 12),
             (-f * side, 12), (np.zeros(3), 10)]
     frames, prev = [], np.zeros((L, 3))
@@ -215,6 +220,8 @@ def display_range(m) -> float:
     """A fixed colour range (mm) for a live view: the largest |u| of the surface under the
     largest training force along +-x, +-y, +-z at each handle's node, rounded up.
     """
+    if hasattr(m, "max_pull"):   # a grasp: no node moves more than the patch
+        return float(np.ceil(m.max_pull))
     saved = [h.force.copy() for h in m.handles]
     top = 0.0
     for j in range(len(m.handles)):
@@ -228,11 +235,7 @@ def display_range(m) -> float:
 
 
 def status_text(m, inference_s: float, frame_s: float | None, spheres: bool = False) -> str:
-    parts = []
-    for j, h in enumerate(m.handles):
-        mark = "*" if j == m.active and len(m.handles) > 1 else ""
-        parts.append(f"F{j + 1}{mark} = {np.linalg.norm(h.force):.3f} N (max {m.f_max:.2f}) "
-                     f"at node {h.node}")
+    parts = [m.describe(j) for j in range(len(m.handles))]
     for inp in m.inputs[:4]:
         parts.append(f"{inp.name} = {inp.value:.4g}")
     lines = parts + ([f"spheres {m.mode} (key m)"] if spheres else [])
@@ -291,8 +294,8 @@ class Window:
         self.scene = LiverScene(self.p, m, clim, spheres=True)
         self.widgets = []
         self.slider = self.p.add_slider_widget(
-            self.on_magnitude, (0.0, m.f_max), value=0.0,
-            title="force of the active handle (N)", pointa=(0.64, 0.9), pointb=(0.96, 0.9),
+            self.on_magnitude, (0.0, m.magnitude_max), value=0.0, title=m.magnitude_title,
+            pointa=(0.64, 0.9), pointb=(0.96, 0.9),
             interaction_event="always", color="black", title_height=0.02, slider_width=0.02,
             tube_width=0.006, fmt="%.2f")
         self._add_handles()
@@ -338,8 +341,7 @@ class Window:
             w.SetCenter(*self.m.handle_position(j))
 
     def show_magnitude(self) -> None:  # the slider follows the active force, however set
-        force = self.m.handles[self.m.active].force
-        self.slider.GetRepresentation().SetValue(float(np.linalg.norm(force)))
+        self.slider.GetRepresentation().SetValue(self.m.magnitude())
 
     def on_magnitude(self, value) -> None:
         self.m.set_magnitude(value)
@@ -535,9 +537,17 @@ def compare(m, pred, data: Path, sim: int | None, out: Path | None, window_size)
 
 def build(args):
     """(manipulator, predictor) from the command line's model and liver options."""
-    from surrogate.manipulator import Manipulator
+    from surrogate.manipulator import GraspManipulator, Manipulator
     from surrogate.predictor import load_predictor
 
+    if getattr(args, "grasp", False):   # a liver's data directory with its Green's function
+        from data_spec.linear_fields import linear_fields_path
+
+        if not linear_fields_path(args.run).exists():
+            raise ViewerError(f"{args.run}: --grasp takes a liver's data directory with its "
+                              "Green's function (make liver's runs/liver/NAME/data): no "
+                              f"{linear_fields_path(args.run).name} in it")
+        return GraspManipulator(Path(args.run)), None
     mdir = model_dir(Path(args.run))
     pred = load_predictor(mdir)
     geometry = None
@@ -574,7 +584,13 @@ def build(args):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m surrogate.viewer", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("run", help="training run directory (or its model/ directory)")
+    ap.add_argument("run", help="training run directory (or its model/ directory); with "
+                    "--grasp a liver's data directory holding its Green's function")
+    ap.add_argument("--grasp", action="store_true",
+                    help="a grasping tool on the liver of RUN, a data directory of make liver "
+                    "(runs/liver/NAME/data): a click grasps the 10 mm patch there, a drag "
+                    "moves it to the pointer (at most 40 mm), the field and the tool's force "
+                    "from the liver's Green's function (the small-strain base)")
     ap.add_argument("--nodes", choices=("surface", "all"), default="surface",
                     help="predict the surface only (default) or every node of the liver")
     ap.add_argument("--offscreen", action="store_true", help="render to files, no window")
@@ -609,6 +625,8 @@ def main(argv=None) -> int:
         ap.error("--script is for --offscreen (the window is driven by the mouse)")
     if args.compare and args.data is None:
         ap.error("--compare needs --data DATASET (the FE solutions)")
+    if args.grasp and (args.compare or args.place):
+        ap.error("--grasp shows the liver of its data directory: no --compare or --place")
     try:
         m, pred = build(args)
         if args.compare:

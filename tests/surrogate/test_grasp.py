@@ -48,3 +48,47 @@ def test_a_grasp_of_independent_springs_is_their_stiffness_and_a_bad_patch_is_na
         grasp(d[:1])
     with pytest.raises(ValueError, match="expected finite"):
         grasp.force(np.full((2, 3), np.nan))
+
+
+@pytest.mark.dataset
+def test_the_grasp_manipulator_moves_the_patch_to_the_pointer_and_shows_its_force(tmp_path):
+    """make test's patient liver with its Green's function (make liver's kind of directory):
+    a drag puts the grasped patch at the pointer (clamped at 40 mm), the field and the tool's
+    force are the Green's function grasp's, the fixed region cannot be grasped, and the viewer
+    draws it off screen; a directory without the function is refused naming it."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from surrogate.manipulator import GraspManipulator
+    from tests.surrogate.conftest import generated_dataset
+
+    data = Path(generated_dataset("LIVERFEM_TEST_PATIENT")) / "data"
+    m = GraspManipulator(data)
+    node = m.handles[0].node
+    tip = m.points[node] + [0.0, 0.0, 15.0]
+    m.drag(tip)
+    np.testing.assert_allclose(m.handle_position(), tip)
+    frame = m.predict()
+    patch = m._grasp.patches[0]
+    np.testing.assert_allclose(frame.surface_u[m.surface.local(patch)],
+                               np.broadcast_to([0.0, 0.0, 15.0], (patch.size, 3)), atol=1e-5)
+    u, force = m._grasp(np.array([[0.0, 0.0, 15.0]]))
+    np.testing.assert_allclose(frame.u, u)
+    np.testing.assert_allclose(m.handles[0].force, force[0])
+    assert force[0, 2] > 0   # pulled up, the tool pulls up
+    m.drag(m.points[node] + [0.0, 0.0, 100.0])
+    assert np.linalg.norm(m.pull) == pytest.approx(40.0)
+    assert m.pick(m.points[m.fixed[0]]) == node   # the fixed region is not grasped
+    out = tmp_path / "frames"
+    res = subprocess.run([sys.executable, "-m", "surrogate.viewer", str(data), "--grasp",
+                          "--offscreen", "--out", str(out), "--size", "320", "240"],
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
+    timings = json.loads((out / "timings.json").read_text())
+    assert timings["nodes_predicted"] == m.n_predicted and (out / "manipulator.gif").exists()
+    res = subprocess.run([sys.executable, "-m", "surrogate.viewer", str(tmp_path), "--grasp",
+                          "--offscreen", "--out", str(tmp_path / "none")],
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode == 2 and "--grasp takes a liver's data directory" in res.stderr
