@@ -4,7 +4,8 @@
 design's runtime says how: ``on_nodes``), since the cost of one call depends on the design,
 the network and the node count, not on the values of the weights or the modes. ``latency``
 times calls; ``timed`` gives the figures a report quotes; ``timed_placed`` times a population
-model placed on a liver it never saw, at a user's mesh of it.
+model placed on a liver it never saw, at a user's mesh of it; ``grasp_latency`` a grasp over
+a Green's function of a given size (surrogate.grasp).
 """
 
 from __future__ import annotations
@@ -177,3 +178,31 @@ def timed_over_green(pred, data, placement, n_nodes: int, calls: int) -> dict:
             times.append(time.perf_counter() - t)
         out[key] = 1e3 * float(np.median(times[5:]))
     return out
+
+
+def grasp_latency(n_out: int = 15400, m: int = 20, calls: int = 200) -> dict:
+    """Medians (s) of a grasp's set-up, a whole field and the force alone at ``n_out`` output
+    nodes and an ``m``-node patch (a 10 mm patch of a mesh that fine), on a Green's function
+    of that shape (its values do not change the work: random, symmetric positive definite
+    among the patch).
+    """
+    from surrogate.grasp import GreenGrasp
+
+    def median(f):
+        times = []
+        for _ in range(calls):
+            t = time.perf_counter()
+            f()
+            times.append(time.perf_counter() - t)
+        return float(np.median(times))
+
+    rng = np.random.default_rng(0)
+    green = rng.normal(size=(m, 3, n_out, 3))
+    a = rng.normal(size=(3 * m, 3 * m))
+    green[:, :, :m] = (a @ a.T + 3 * m * np.eye(3 * m)).reshape(m, 3, m, 3)
+    nodes, patch = np.arange(n_out), np.arange(m)
+    grasp = GreenGrasp(green, patch, nodes, [patch])
+    d = np.array([[0.0, 0.0, 20.0]])
+    return {"nodes": n_out, "patch_nodes": m,
+            "setup_s": median(lambda: GreenGrasp(green, patch, nodes, [patch])),
+            "field_s": median(lambda: grasp(d)), "force_s": median(lambda: grasp.force(d))}

@@ -1,0 +1,401 @@
+"""Surgical loads on the livers no training saw: a 10 mm grasp pulled 5 to 40 mm and 0.4 to
+4 N pressed on a 10 mm patch, the Ogden FE against the small-strain base over each liver's own
+Green's function (surrogate.grasp: the linear part of make liver's answer) and a naive model
+(each simulation's own mean displacement).
+
+    .venv-solver/bin/python bench/surgical_loads.py [--livers 15] [--rate N] [--report-only]
+
+scene4_livers' validation livers, meshed and fixed as its population's are, its material and
+element; tools 30 mm or more from the fixed region, pulled away from it (rule ``away``); a
+pressed force spread by surrogate.grasp.patch_weights, the FE given the same nodal forces.
+Resumable (bench/results/surgical_loads/). Writes docs/surgical_loads{.md,.json,.png,_worst.png}.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+import time
+import zlib
+
+import numpy as np
+
+from liverviz.ledger import Ledger
+from liverviz.report import ROOT, write_report
+
+SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
+GRASP_SCENE = ROOT / "data_spec" / "scenes" / "scene4_grasp.toml"
+RESULTS = ROOT / "bench" / "results" / "surgical_loads"
+PULLS = (5.0, 10.0, 20.0, 30.0, 40.0)      # mm
+FORCES = (0.4, 1.0, 2.0, 4.0)              # N
+RADIUS = 10.0                              # mm, the tool's patch
+PLACES = 3                                 # grasps, and pressed patches, per liver
+GOAL = {"median": 0.5, "worst": 1.0, "lt3": 99.0, "force": 5.0}
+
+
+def errors(truth: np.ndarray, model: np.ndarray) -> dict:
+    """MEE, 95th percentile (mm), % of nodes under 3 mm of a field, and the truth's mean |u|."""
+    from surrogate.metrics import displacement_metrics, mee
+
+    m = displacement_metrics(model, truth)
+    return {"mee": m["mee"], "p95": m["ee_p95"], "lt3": m["pct_ee_lt_3mm"], "mean_u": mee(truth)}
+
+
+def sites(g, fixed, n: int, rng) -> np.ndarray:
+    """``n`` surface nodes at least 30 mm from the fixed region, 2.5 patches apart."""
+    from data_spec.eligible_loads import eligible_load_nodes
+
+    cand = eligible_load_nodes({"eligible": "surface", "min_distance_to_fixed": 30.0},
+                               g.points, g.surface_nodes, fixed)
+    chosen: list[int] = []
+    for node in rng.permutation(cand):
+        if len(chosen) < n and all(np.linalg.norm(g.points[node] - g.points[chosen], axis=1)
+                                   > 2.5 * RADIUS):
+            chosen.append(int(node))
+    return np.array(chosen, dtype=np.int64)
+
+
+def solve_liver(name: str, n_grasps: int, n_forces: int) -> dict:
+    """One validation liver's record (and the .npz of its worst 40 mm grasp)."""
+    from mpi4py import MPI
+
+    from data_spec import load_scene
+    from data_spec.eligible_loads import grasp_patch
+    from fem_sim import Constraint, OgdenProblem
+    from fem_sim.batch.cases import base_material, load_directions
+    from fem_sim.batch.generate import solver_settings
+    from fem_sim.geometry.file_population import prepare, registrar_of
+    from surrogate.grasp import patch_weights
+
+    scene, t0 = load_scene(SCENE), time.perf_counter()
+    g, _, _ = prepare(ROOT / scene["geometry"]["livers"] / f"{name}.obj",
+                        registrar_of(scene), scene["geometry"]["mesh_size"])
+    fixed = g.regions["vena_cava"]
+    rng = np.random.default_rng(zlib.crc32(name.encode()))
+    centres = sites(g, fixed, n_grasps + n_forces, rng)
+    patches = [grasp_patch(g.points, g.surface_nodes, c, RADIUS) for c in centres]
+    mat, solver = base_material(scene), scene["solver"]
+    prob = OgdenProblem(MPI.COMM_SELF, g.points, g.cells, degree=solver["degree"],
+                        quadrature_degree=solver["quadrature_degree"],
+                        settings=solver_settings(scene))
+    held, t1 = np.unique(np.concatenate(patches)), time.perf_counter()
+    green = prob.unit_responses(mat, [Constraint(fixed)], held)
+    away = load_directions(rng, "away", g.points[centres[:n_grasps]], g.points[fixed])
+    out = {"liver": name, "nodes": int(g.n_nodes), "prepare_s": t1 - t0, "grasps": [],
+           "green_rows_s": time.perf_counter() - t1, "forces": []}
+    worst = (-1.0,)
+    for k in range(n_grasps):
+        row, fields = _grasp_case(prob, mat, fixed, patches[k], 40.0 * away[k], green, held)
+        out["grasps"].append(row)
+        if row["status"] == "ok" and row["steps"][-1]["base"]["mee"] > worst[0]:
+            worst = (row["steps"][-1]["base"]["mee"], fields, patches[k], 40.0 * away[k])
+    for k in range(n_grasps, n_grasps + n_forces):
+        direction = load_directions(rng, "uniform", g.points[centres[k:k + 1]], None)[0]
+        w = patch_weights(g.points, g.surface_triangles, patches[k], centres[k], RADIUS)
+        out["forces"].append(_force_case(prob, mat, fixed, patches[k], w,
+                                         FORCES[-1] * direction, green, held))
+    if len(worst) > 1:
+        RESULTS.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(RESULTS / f"{name}.npz", points=g.points,
+                            triangles=g.surface_triangles, fixed=fixed, patch=worst[2],
+                            pull=worst[3], truth=worst[1][0], base=worst[1][1])
+    out["seconds"] = time.perf_counter() - t0
+    return out
+
+
+def _row(sol, t: float) -> dict:
+    """A simulation's record: its status, reason, seconds since ``t`` and solver counts."""
+    return {"status": sol.status, "reason": sol.failure_reason, "steps": [], "seconds":
+            time.perf_counter() - t, "cutbacks": sum(sol.cutbacks), "factorizations":
+            sol.factorizations}
+
+
+def _grasp_case(prob, mat, fixed, patch, d, green, held):
+    """(record, (FE field, base field) at the full pull) of one tool pulled by ``d`` mm."""
+    from fem_sim import Constraint
+    from surrogate.grasp import GreenGrasp
+
+    fractions = np.array(PULLS) / PULLS[-1]
+    t = time.perf_counter()
+    sol = prob.solve(mat, [Constraint(fixed), Constraint(patch, values=d)], [], fractions,
+                     reactions=[patch])
+    row = _row(sol, t)
+    grasp = GreenGrasp(green, held, np.arange(prob.n_nodes), [patch])
+    base = None
+    for s in range(sol.n_done):
+        u, force = grasp(fractions[s] * d[None])
+        truth, fe_force = sol.displacement[s], sol.reaction[s, 0]
+        row["steps"].append({
+            "pull": PULLS[s], "base": errors(truth, u), "naive": errors(truth, truth.mean(0)),
+            "fe_force": fe_force.tolist(), "base_force": force[0].tolist(),
+            "force_error": float(100 * np.linalg.norm(force[0] - fe_force)
+                                 / np.linalg.norm(fe_force))})
+        base = (truth, u)
+    return row, base
+
+
+def _force_case(prob, mat, fixed, patch, weights, force, green, held):
+    """The record of ``force`` (N) spread over ``patch`` by ``weights``, stored at FORCES."""
+    from fem_sim import Constraint, NodalLoad
+    from surrogate.small_strain import green_product
+
+    fractions = np.array(FORCES) / FORCES[-1]
+    nodal = weights[:, None] * force[None]
+    t = time.perf_counter()
+    sol = prob.solve(mat, [Constraint(fixed)], [NodalLoad(patch, nodal)], fractions)
+    row = _row(sol, t)
+    unit = green_product(green, np.searchsorted(held, patch)[None], nodal[None])[0]
+    for s in range(sol.n_done):
+        truth = sol.displacement[s]
+        row["steps"].append({"force": FORCES[s], "base": errors(truth, fractions[s] * unit),
+                             "naive": errors(truth, truth.mean(0))})
+    return row
+
+
+def main(argv=None) -> int:
+    import tomllib
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--livers", type=int, default=15, help="the first N validation livers")
+    p.add_argument("--report-only", action="store_true")
+    p.add_argument("--rate", type=int, metavar="N", help="time scene4_grasp's first N")
+    p.add_argument("--np", type=int, default=2)
+    a = p.parse_args(argv)
+    if a.rate:
+        RESULTS.mkdir(parents=True, exist_ok=True)
+        (RESULTS / "rate.json").write_text(json.dumps(generation_rate(a.rate, a.np), indent=1))
+    ledger = Ledger(RESULTS / "livers.jsonl", key="liver")
+    names = tomllib.loads(SCENE.read_text())["geometry"]["validation"][:a.livers]
+    for i, name in enumerate(names):
+        if a.report_only or name in ledger.records():
+            continue
+        print(f"[{i + 1}/{len(names)}] {name}", flush=True)
+        ledger.add(solve_liver(name, PLACES, PLACES))
+    if "dolfinx" in sys.modules:   # VTK cannot render beside it: the report in a fresh process
+        from subprocess import run
+
+        return run([sys.executable, __file__, "--report-only", f"--livers={a.livers}"]).returncode
+    report([r for n, r in ledger.records().items() if n in names])
+    return 0
+
+
+def generation_rate(n: int, ranks: int) -> dict:
+    """fem_sim generate of scene4_grasp's first ``n`` simulations on ``ranks`` ranks from
+    scratch (every liver of the population is prepared: its PCA needs them all), and the
+    whole scene's rate from the simulations' own seconds and the preparation's.
+    """
+    from data_spec import list_shards, load_scene, read_shard
+    from fem_sim.batch.chunked import generate_chunks
+
+    done = RESULTS / "grasp_rate" / "generation.json"   # a finished run of n is kept
+    if not (done.exists() and json.loads(done.read_text()).get("sims") == n):
+        shutil.rmtree(RESULTS / "grasp_rate", ignore_errors=True)
+    state = json.loads(done.read_text()) if done.exists() else generate_chunks(
+        GRASP_SCENE, RESULTS / "grasp_rate" / "data", n, ranks=ranks, chunk=n)
+    shards = [read_shard(p) for p in list_shards(RESULTS / "grasp_rate" / "data")]
+    sims = np.array([np.sum(s.stats.wall_time) for s in shards])
+    total = load_scene(GRASP_SCENE).n_simulations
+    prepare = max(state["seconds"] * ranks - sims.sum(), 0.0)   # core-seconds, all livers
+    return {"ranks": ranks, "sims": len(shards), "ok": sum(s.status == "ok" for s in shards),
+            "wall_s": state["seconds"], "sim_s_median": float(np.median(sims)),
+            "sim_s_mean": float(sims.mean()), "prepare_min": prepare / ranks / 60,
+            "scene_sims": total, "scene_per_hour":
+                3600 * total * ranks / (prepare + total * sims.mean()),
+            "sims_per_hour": 3600 * ranks / sims.mean()}
+
+
+def per_liver(records: list[dict], kind: str, key: str, at) -> dict:
+    """{liver: {model: {metric: the mean over its cases of kind at the step ``at``}}}."""
+    out = {}
+    for r in records:
+        steps = [s for c in r[kind] if c["status"] == "ok" for s in c["steps"] if s[key] == at]
+        if not steps:
+            continue
+        row = {m: {k: float(np.mean([s[m][k] for s in steps])) for k in steps[0][m]}
+               for m in ("base", "naive")}
+        if kind == "grasps":
+            row["force_error"] = float(np.mean([s["force_error"] for s in steps]))
+            row["fe_force"] = float(np.mean([np.linalg.norm(s["fe_force"]) for s in steps]))
+        out[r["liver"]] = row
+    return out
+
+
+def curve(records: list[dict], kind: str, key: str, values) -> list[dict]:
+    """Per step value: the median and worst liver of each figure."""
+    rows = []
+    for v in values:
+        livers = per_liver(records, kind, key, v)
+        if not livers:
+            continue
+        ls = list(livers.values())
+
+        def of(f, m, k, ls=ls):
+            return float(f([x[m][k] if m else x[k] for x in ls]))
+
+        row = {key: v, "livers": len(ls), "mean_u": of(np.median, "base", "mean_u")}
+        for m in ("base", "naive"):
+            row[m] = {"mee_median": of(np.median, m, "mee"), "mee_worst": of(np.max, m, "mee"),
+                      "p95_median": of(np.median, m, "p95"), "lt3_median":
+                      of(np.median, m, "lt3"), "lt3_worst": of(np.min, m, "lt3")}
+        if kind == "grasps":
+            row.update(force_error_median=of(np.median, None, "force_error"), force_error_worst=
+                       of(np.max, None, "force_error"), fe_force=of(np.median, None, "fe_force"))
+        rows.append(row)
+    return rows
+
+
+def report(records: list[dict]) -> None:
+    if not records:
+        return print("no liver solved yet", file=sys.stderr)
+    from surrogate.latency import grasp_latency
+
+    grasp, force = curve(records, "grasps", "pull", PULLS), curve(records, "forces", "force",
+                                                                  FORCES)
+    timing = grasp_latency()
+    _plot(grasp, force)
+    worst = _picture(records)
+    data = {"livers": records, "grasp_curve": grasp, "force_curve": force, "timing": timing,
+            "goal": GOAL}
+    write_report(ROOT / "docs" / "surgical_loads.md", "Surgical loads on the validation livers",
+                 _body(records, grasp, force, timing, worst), data)
+
+
+def _body(records, grasp, force, timing, worst) -> str:
+    n, g, f = len(records), grasp[-1]["base"], force[-1]["base"]
+    cases = [(r["liver"], c) for r in records for c in r["grasps"] + r["forces"]]
+    ok = [c for _, c in cases if c["status"] == "ok"]
+    failed = [f"{name}: {c['reason']}" for name, c in cases if c["status"] != "ok"]
+    lines = [
+        f"{n} validation livers of `scene4_livers` (no simulation, PCA or training saw them), "
+        "meshed and fixed as its population's livers, P2 at 16 mm, its Ogden material; "
+        f"{PLACES} grasps (10 mm, pulled to 40 mm away from the fixed region) and {PLACES} "
+        "forces (to 4 N on a 10 mm patch) a liver. **base**: the small-strain response over "
+        "the liver's Green's function (`surrogate.grasp`: G_PP f = d, u = G f, force = sum "
+        "f), what `make liver` answers; **naive**: each simulation's own mean displacement. "
+        "No network has learned these loads yet: **no model row**.", "",
+        "![curves](surgical_loads.png)", "",
+        "## Against the grasp's pull (median liver / worst liver)", "",
+        *_curve_table(grasp, "pull", "mm", True), "",
+        "## Against the force on the patch (median liver / worst liver)", "",
+        *_curve_table(force, "force", "N", False)]
+    g40, f4 = (per_liver(records, k, key, v) for k, key, v in (("grasps", "pull", 40.0),
+                                                                ("forces", "force", 4.0)))
+    lines += ["", "## Per liver, at 40 mm and at 4 N (base / naive MEE mm; force error %)", "",
+              "| liver | nodes | 40 mm | force | 4 N |", "|---|---|---|---|---|", *(
+                  f"| {r['liver']} | {r['nodes']:,} | " + " | ".join(
+                      f"{x['base']['mee']:.2f} / {x['naive']['mee']:.2f}" + (
+                          f" | {x['force_error']:.1f}" if "force_error" in x else "")
+                      if x else "failed" + " | -" * (k == 0)
+                      for k, x in enumerate((g40.get(r["liver"]), f4.get(r["liver"]))))
+                  + " |" for r in records)]
+    lines += [
+        "", "## The solver and the times", "",
+        f"{len(ok)} of {len(cases)} simulations converge at every stored step"
+        + (": " + "; ".join(failed) if failed else "") + f"; {sum(c['cutbacks'] for c in ok)} "
+        f"cut-backs in all; median {np.median([c['factorizations'] for c in ok]):.0f} "
+        f"factorisations and {np.median([c['seconds'] for c in ok]):.1f} s a simulation "
+        "(one process). Meshing, registration and fixing a liver: median "
+        f"{np.median([r['prepare_s'] for r in records]):.0f} s; the Green's function rows of "
+        f"its patches: {np.median([r['green_rows_s'] for r in records]):.1f} s.", "",
+        f"The base at {timing['nodes']:,.0f} nodes (a {timing['patch_nodes']:.0f}-node patch; "
+        "the shape of a Green's function, not a liver's values): a grasp set up (factorising "
+        "G_PP, the field per mm) in "
+        f"{1e3 * timing['setup_s']:.2f} ms, a whole field in {1e6 * timing['field_s']:.0f} µs, "
+        f"the force alone in {1e6 * timing['force_s']:.1f} µs (numpy, one thread, medians of "
+        "200 calls).", ""]
+    rate = json.loads((RESULTS / "rate.json").read_text()) \
+        if (RESULTS / "rate.json").exists() else None
+    if rate:
+        lines += [f"`scene4_grasp.toml` (`--rate N`), its first {rate['sims']} simulations on "
+                  f"{rate['ranks']} ranks, {rate['ok']} converged: a simulation takes "
+                  f"{rate['sim_s_median']:.1f} s (median; mean {rate['sim_s_mean']:.1f}), "
+                  f"{rate['sims_per_hour']:.0f} an hour on the ranks, after "
+                  f"{rate['prepare_min']:.0f} min preparing the population's livers; the whole "
+                  f"scene ({rate['scene_sims']}) at about {rate['scene_per_hour']:.0f} an hour "
+                  "(goal: 1,000).", ""]
+    if worst:
+        lines += ["![worst liver](surgical_loads_worst.png)", "", f"The worst: {worst}.", ""]
+    lines += ["## Goals (issue 83) and where the base stands", "",
+              f"At 40 mm and at 4 N: MEE at most {GOAL['median']} mm on the median liver and "
+              f"{GOAL['worst']} mm on the worst, {GOAL['lt3']:g} % of nodes under 3 mm, "
+              f"reaction force within {GOAL['force']:g} %. The base alone, on the median / worst "
+              f"liver: 40 mm, MEE {g['mee_median']:.2f} / {g['mee_worst']:.2f} mm, "
+              f"{g['lt3_median']:.1f} / {g['lt3_worst']:.1f} % under 3 mm, force "
+              f"{grasp[-1]['force_error_median']:.0f} / {grasp[-1]['force_error_worst']:.0f} % "
+              f"off; 4 N, MEE {f['mee_median']:.2f} / {f['mee_worst']:.2f} mm, "
+              f"{f['lt3_median']:.1f} / {f['lt3_worst']:.1f} % under 3 mm. What the base misses "
+              "is the network's to learn."]
+    return "\n".join(lines)
+
+
+def _curve_table(rows, key: str, unit: str, force_back: bool) -> list[str]:
+    """The markdown table of a curve: per step, the median / worst liver of each figure."""
+    cols = ["FE mean u mm", *(["FE force N"] if force_back else []), "base MEE mm",
+            "base p95", "base % < 3 mm", *(["base force error %"] if force_back else []),
+            "naive MEE mm"]
+    out = [f"| {key} {unit} | " + " | ".join(cols) + " |", "|---" * (len(cols) + 1) + "|"]
+    for r in rows:
+        b, nv = r["base"], r["naive"]
+        cells = [f"{r['mean_u']:.1f}", *([f"{r['fe_force']:.2f}"] if force_back else []),
+                 f"{b['mee_median']:.2f} / {b['mee_worst']:.2f}", f"{b['p95_median']:.2f}",
+                 f"{b['lt3_median']:.1f} / {b['lt3_worst']:.1f}",
+                 *([f"{r['force_error_median']:.1f} / {r['force_error_worst']:.1f}"]
+                   if force_back else []), f"{nv['mee_median']:.2f} / {nv['mee_worst']:.2f}"]
+        out.append(f"| {r[key]:g} | " + " | ".join(cells) + " |")
+    return out
+
+
+def _plot(grasp, force) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 3, figsize=(13, 3.8))
+    for rows, key, a, unit in ((grasp, "pull", ax[0], "grasp pull (mm)"),
+                               (force, "force", ax[2], "force on the patch (N)")):
+        x = [r[key] for r in rows]
+        for m, colour in (("base", "C0"), ("naive", "C3")):
+            a.plot(x, [r[m]["mee_median"] for r in rows], "o-", color=colour,
+                   label=f"{m}, median liver")
+            a.plot(x, [r[m]["mee_worst"] for r in rows], "--", color=colour,
+                   label=f"{m}, worst liver")
+        a.axhline(GOAL["median"], color="k", lw=0.8, ls=":", label="goal, median liver")
+        a.set(xlabel=unit, ylabel="MEE (mm)", yscale="log")
+        a.legend(fontsize=7)
+    for k, style in (("median", "o-"), ("worst", "--")):
+        ax[1].plot([r["pull"] for r in grasp], [r[f"force_error_{k}"] for r in grasp], style,
+                   label=f"base, {k} liver")
+    ax[1].axhline(GOAL["force"], color="k", lw=0.8, ls=":", label="goal")
+    ax[1].set(xlabel="grasp pull (mm)", ylabel="reaction force error (%)")
+    ax[1].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(ROOT / "docs" / "surgical_loads.png", dpi=110)
+    plt.close(fig)
+
+
+def _picture(records) -> str | None:
+    """docs/surgical_loads_worst.png: the worst 40 mm grasp, FE beside the base."""
+    from liverviz.pictures import Panel, Surface, render_panels
+
+    g40 = per_liver(records, "grasps", "pull", 40.0)
+    name = max((n for n in g40 if (RESULTS / f"{n}.npz").exists()),
+               key=lambda n: g40[n]["base"]["mee"], default=None)
+    if name is None:
+        return None
+    z = np.load(RESULTS / f"{name}.npz")
+    s = Surface.from_mesh(z["points"], z["triangles"], z["fixed"])
+    err = np.linalg.norm(z["truth"] - z["base"], axis=1)[s.nodes]
+    centre = z["patch"][:1]
+    panels = [Panel(s, z["truth"][s.nodes], label="FE (Ogden)", load_nodes=centre),
+              Panel(s, z["base"][s.nodes], label="small-strain base", load_nodes=centre),
+              Panel(s, z["truth"][s.nodes], scalars=err, title="base error (mm)",
+                    label="|FE - base|", load_nodes=centre)]
+    render_panels(panels, ROOT / "docs" / "surgical_loads_worst.png",
+                  title=f"{name}: a 10 mm grasp pulled 40 mm")
+    return f"{name} (base MEE {g40[name]['base']['mee']:.2f} mm at 40 mm)"
+
+
+if __name__ == "__main__":
+    sys.exit(main())
