@@ -581,7 +581,7 @@ def build(args):
     return Manipulator(pred, nodes=args.nodes, geometry=geometry), pred
 
 
-def main(argv=None) -> int:
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m surrogate.viewer", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("run", help="training run directory (or its model/ directory); with "
@@ -618,6 +618,11 @@ def main(argv=None) -> int:
     ap.add_argument("--screenshot", type=Path,
                     help="open the window, draw one pull, save this PNG and close")
     ap.add_argument("--size", type=int, nargs=2, default=(900, 700), metavar=("W", "H"))
+    return ap
+
+
+def main(argv=None) -> int:
+    ap = _parser()
     args = ap.parse_args(argv)
     if args.offscreen and args.out is None:
         ap.error("--offscreen needs --out DIR")
