@@ -1,6 +1,6 @@
 """Surgical loads on the livers no training saw: a 10 mm grasp pulled 5 to 40 mm and 0.4 to
 4 N pressed on a 10 mm patch, the Ogden FE against the small-strain base over each liver's own
-Green's function (surrogate.grasp: the linear part of make liver's answer) and a naive model
+Green's function (data_spec.green_grasp: the linear part of make liver's answer) and a naive model
 (each simulation's own mean displacement).
 
     .venv-solver/bin/python bench/surgical_loads.py [--livers 15] [--rate N] [--report-only]
@@ -114,8 +114,8 @@ def _row(sol, t: float) -> dict:
 
 def _grasp_case(prob, mat, fixed, patch, d, green, held):
     """(record, (FE field, base field) at the full pull) of one tool pulled by ``d`` mm."""
+    from data_spec.green_grasp import GreenGrasp
     from fem_sim import Constraint
-    from surrogate.grasp import GreenGrasp
 
     fractions = np.array(PULLS) / PULLS[-1]
     t = time.perf_counter()
@@ -271,7 +271,7 @@ def _body(records, grasp, force, timing, worst) -> str:
         "meshed and fixed as its population's livers, P2 at 16 mm, its Ogden material; "
         f"{PLACES} grasps (10 mm, pulled to 40 mm away from the fixed region) and {PLACES} "
         "forces (to 4 N on a 10 mm patch) a liver. **base**: the small-strain response over "
-        "the liver's Green's function (`surrogate.grasp`: G_PP f = d, u = G f, force = sum "
+        "the liver's Green's function (`data_spec.green_grasp`: G_PP f = d, u = G f, force = sum "
         "f), what `make liver` answers; **naive**: each simulation's own mean displacement. "
         "No network has learned these loads yet: **no model row**.", "",
         "![curves](surgical_loads.png)", "",

@@ -5,7 +5,7 @@ design's runtime says how: ``on_nodes``), since the cost of one call depends on 
 the network and the node count, not on the values of the weights or the modes. ``latency``
 times calls; ``timed`` gives the figures a report quotes; ``timed_placed`` times a population
 model placed on a liver it never saw, at a user's mesh of it; ``grasp_latency`` a grasp over
-a Green's function of a given size (surrogate.grasp).
+a Green's function of a given size (data_spec.green_grasp).
 """
 
 from __future__ import annotations
@@ -186,7 +186,7 @@ def grasp_latency(n_out: int = 15400, m: int = 20, calls: int = 200) -> dict:
     of that shape (its values do not change the work: random, symmetric positive definite
     among the patch).
     """
-    from surrogate.grasp import GreenGrasp
+    from data_spec.green_grasp import GreenGrasp
 
     def median(f):
         times = []

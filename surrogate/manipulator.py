@@ -264,7 +264,7 @@ class GraspManipulator:
     directory of ``make liver``, ``fem_sim linear --green``): a click picks the patch the tool
     holds (:func:`data_spec.eligible_loads.grasp_patch`), a drag moves it to the pointer
     (clamped to ``max_pull`` mm), and the field and the tool's force on the liver come from
-    :class:`surrogate.grasp.GreenGrasp`: the small-strain base, which no network corrects yet
+    :class:`data_spec.green_grasp.GreenGrasp`: the small-strain base, which no network corrects yet
     (docs/surgical_loads.md measures what it misses). It offers what the viewer draws, as
     :class:`Manipulator` does; a handle's ``force`` is the tool's force (N) and the load a
     script or the slider sets is the pull (mm).
@@ -305,7 +305,7 @@ class GraspManipulator:
 
     def _grasp_at(self, node: int):
         from data_spec.eligible_loads import grasp_patch
-        from surrogate.grasp import GreenGrasp
+        from data_spec.green_grasp import GreenGrasp
 
         lf = self._lf
         return GreenGrasp(lf.green, lf.green_nodes, lf.output_nodes,

@@ -24,9 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from data_spec.eligible_loads import grasp_patch
+from data_spec.green_grasp import GreenGrasp
 from data_spec.scene import GRASP_RADIUS
 from liverreg.morph import interpolation_matrix
-from surrogate.grasp import GreenGrasp
 from surrogate.predictor import LinearPart
 
 
@@ -79,7 +79,7 @@ class OverGreen:
     def grasp(self, at, radius: float = GRASP_RADIUS) -> GreenGrasp:
         """Tools grasping the liver at the points ``at`` (T, 3) mm, each the patch of radius
         ``radius`` around the free surface node nearest to its point: a
-        :class:`~surrogate.grasp.GreenGrasp` giving the field at the output nodes and each
+        :class:`~data_spec.green_grasp.GreenGrasp` giving the field at the output nodes and each
         tool's force for their displacements. The small-strain base alone: the network has
         learned nodal forces, not grasps (docs/surgical_loads.md measures what the base
         misses). ValueError when a patch reaches the fixed region.

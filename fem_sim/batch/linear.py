@@ -199,9 +199,9 @@ def _one_liver(data: Path, gid: str, shards: list, order: int) -> Path:
     from fem_sim.solver.problem import OgdenProblem
 
     scene = load_scene(data / "scene.toml")
-    if scene["loads"]["kind"] != "nodal":
+    if scene["loads"]["kind"] not in ("nodal", "grasp"):
         raise ValueError(f"{data}/scene.toml: loads.kind = {scene['loads']['kind']!r}; the "
-                         "population's small-strain responses are of nodal loads")
+                         "population's small-strain responses are of nodal loads or grasps")
     g, first = read_geometry(geometry_path(data, gid)), shards[0]
     if len({s.material for s in shards}) > 1:
         raise ValueError(f"{data}: liver {gid}: its simulations' materials differ; small-"
@@ -211,16 +211,40 @@ def _one_liver(data: Path, gid: str, shards: list, order: int) -> Path:
                            quadrature_degree=solver["quadrature_degree"],
                            element=solver.get("element", "lagrange"),
                            settings=solver_settings(scene))
-    loads = [[NodalLoad(s.load_nodes, s.forces)] for s in shards]
     nodes = first.output_nodes
-    u = problem.load_expansion(first.material, [Constraint(first.fixed_nodes)], loads,
-                               order=order)[:, :, nodes]
+    if scene["loads"]["kind"] == "grasp":
+        u = _grasp_responses(problem, first, shards, g, scene["loads"]["patch_radius"])[:, None]
+    else:
+        loads = [[NodalLoad(s.load_nodes, s.forces)] for s in shards]
+        u = problem.load_expansion(first.material, [Constraint(first.fixed_nodes)], loads,
+                                   order=order)[:, :, nodes]
     return write_linear_fields(linear_fields_path(data, gid), LinearFields(
         case_index=np.array([s.sim_index for s in shards], np.int64),
         load_nodes=np.stack([s.load_nodes for s in shards]),
         forces=np.stack([s.forces for s in shards]), output_nodes=nodes,
         displacement=u[:, 0], scene_name=scene.name, scene_hash=scene.hash, geometry_id=gid,
         seconds=time.perf_counter() - t, second_order=u[:, 1] if order == 2 else None))
+
+
+def _grasp_responses(problem, first, shards: list, g, radius: float) -> np.ndarray:
+    """(len(shards), n_out, 3) mm: each grasp simulation's small-strain response at load
+    fraction 1 at the output nodes, from the Green's function rows of the liver's tools'
+    patches (one factorisation, three back-solves a patch node): G_PP f = d per simulation
+    (:class:`data_spec.green_grasp.GreenGrasp`; the rows are those of the free surface, so a
+    patch is held exactly as the solver holds it).
+    """
+    from data_spec.eligible_loads import grasp_patch
+    from data_spec.green_grasp import GreenGrasp
+    from fem_sim.solver.loads import Constraint
+
+    patches = [[grasp_patch(g.points, g.surface_nodes, n, radius) for n in s.load_nodes]
+               for s in shards]
+    held = np.unique(np.concatenate([p for ps in patches for p in ps]))
+    nodes = first.output_nodes
+    green = problem.unit_responses(first.material, [Constraint(first.fixed_nodes)],
+                                   held)[:, :, nodes]
+    return np.stack([GreenGrasp(green, held, nodes, ps)(
+        s.tool_displacement[-1] / s.load_fractions[-1])[0] for s, ps in zip(shards, patches)])
 
 
 def population_linear_fields(data: str | Path, order: int = 2, progress: bool = True) -> list:
@@ -237,9 +261,9 @@ def population_linear_fields(data: str | Path, order: int = 2, progress: bool = 
         raise ValueError(f"--order must be 1 or 2, got {order}")
     if not (data / "scene.toml").exists():
         raise ValueError(f"{data}: no scene.toml: not a dataset directory of fem_sim generate")
-    if load_scene(data / "scene.toml")["loads"]["kind"] == "grasp":
-        raise ValueError(f"{data}: a grasp dataset: small-strain responses are computed for "
-                         "forces; a grasp's is not built yet")
+    if load_scene(data / "scene.toml")["loads"]["kind"] == "grasp" and order != 1:
+        raise ValueError(f"{data}: a grasp dataset: its small-strain responses are of order 1 "
+                         "(a grasp's second-order term is not built): --order 1")
     livers = None
     if world.rank == 0:
         try:

@@ -87,7 +87,8 @@ def test_a_grasp_scene_end_to_end_records_each_tools_displacement_and_force(tmp_
     """fem_sim generate on a tiny grasp scene (two tools of 10 mm pulled 5-15 mm away from
     the vena cava, on two ranks): every shard is valid and holds, at each stored step, each
     tool's displacement (the load fraction times its pull, which its patch's nodes follow)
-    and a finite force that does positive work; the force grows with the pull."""
+    and a finite force that does positive work; the force grows with the pull. The small-
+    strain responses of the dataset hold each patch at its pull (order 2 refused)."""
     import subprocess
     import sys
     from pathlib import Path
@@ -138,6 +139,24 @@ def test_a_grasp_scene_end_to_end_records_each_tools_displacement_and_force(tmp_
         work = np.einsum("std,td->s", s.reaction, case.displacements)
         assert np.all(np.isfinite(s.reaction)) and np.all(work > 0)
         assert np.all(np.diff(work) > 0)
+    # each simulation's small-strain response (fem_sim linear --population, order 1: the
+    # Green's function rows of its patches, G_PP f = d) holds every patch at its tool's pull
+    from data_spec.linear_fields import read_dataset_linear
+
+    lin = ["-m", "fem_sim", "linear", "--population", str(out), "--order"]
+    res = subprocess.run([sys.executable, *lin, "2"], env=mpirun_env(PYTHONPATH=str(root)),
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode != 0 and "a grasp's second-order term is not built" in res.stderr
+    res = subprocess.run([sys.executable, *lin, "1"], env=mpirun_env(PYTHONPATH=str(root)),
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
+    lf = read_dataset_linear(out, shards[0].geometry_id)
+    for s in shards:
+        case = cs.make_case(scene, s.sim_index, g, s.fixed_nodes)
+        u1 = lf.displacement[lf.rows([s.sim_index])[0]]
+        for patch, pull in zip(cs.grasp_patches(case, g, s.fixed_nodes), case.displacements):
+            np.testing.assert_allclose(u1[patch], np.broadcast_to(pull, (patch.size, 3)),
+                                       atol=1e-4 * np.linalg.norm(pull))
 
 
 def test_a_grasp_scene_is_checked_and_a_patch_on_the_fixed_region_is_a_recorded_failure(
@@ -186,7 +205,7 @@ def _far_patch(g, fixed, radius=10.0):
 
 
 def test_the_green_grasp_is_the_solvers_grasp_in_the_small_strain_limit():
-    """surrogate.grasp on the phantom's own Green's function (a unit response at every free
+    """data_spec.green_grasp on the phantom's own Green's function (a unit response at every free
     surface node, as fem_sim linear --green makes it) against the Ogden solve of the same
     grasp: the Green's function is symmetric among the patch nodes (Maxwell-Betti); its grasp
     puts every patch node at the tool's displacement; field and force agree with the FE to
@@ -194,8 +213,8 @@ def test_the_green_grasp_is_the_solvers_grasp_in_the_small_strain_limit():
     order in the pull: 10x less for a 10x smaller pull), below 1e-3 at a 0.01 mm pull."""
     from mpi4py import MPI
 
+    from data_spec.green_grasp import GreenGrasp
     from fem_sim.geometry.phantom import make_phantom
-    from surrogate.grasp import GreenGrasp
 
     g = make_phantom(0, 16.0)
     fixed = g.regions["vena_cava"]
