@@ -147,6 +147,14 @@ $(TEST_LIVERS)/.done: data_spec/scenes/ci_livers.toml | setup-solver
 	$(SPY) -m fem_sim linear --population $(TEST_LIVERS) --order 2
 	@touch $@
 
+# Six phantoms grasped (data_spec/scenes/ci_grasp.toml) with each liver's small-strain
+# responses (order 1: a grasp's), for the trainer's grasp tests (tests/surrogate/test_grasp.py).
+TEST_GRASP := runs/test-data/ci_grasp
+$(TEST_GRASP)/.done: data_spec/scenes/ci_grasp.toml | setup-solver
+	$(MPIRUN) $(SPY) -m fem_sim generate $< --out $(TEST_GRASP) --no-progress
+	$(SPY) -m fem_sim linear --population $(TEST_GRASP) --order 1
+	@touch $@
+
 # A tiny new patient end to end: a population model trained on the three livers, make patient
 # on a fourth (20 FE simulations to adapt on, 6 held out); tests/surrogate/test_patient.py.
 TEST_PATIENT := runs/test-data/ci_patient
@@ -159,10 +167,12 @@ $(TEST_PATIENT)/.done: $(TEST_LIVERS)/.done | setup
 	    PATIENT=$(TEST_PATIENT)
 	@touch $@
 
-test-trainer: setup-trainer $(TEST_DATA)/.done $(TEST_DATA4)/.done $(TEST_PATIENT)/.done
+test-trainer: setup-trainer $(TEST_DATA)/.done $(TEST_DATA4)/.done $(TEST_PATIENT)/.done \
+              $(TEST_GRASP)/.done
 	$(TRAIN_VENV)/bin/ruff check .
 	LIVERFEM_TEST_DATASET=$(TEST_DATA) LIVERFEM_TEST_DATASET4=$(TEST_DATA4) \
 	    LIVERFEM_TEST_PATIENT=$(TEST_PATIENT) LIVERFEM_TEST_LIVERS=$(TEST_LIVERS) \
+	    LIVERFEM_TEST_GRASP=$(TEST_GRASP) \
 	    bash scripts/run_pytest.sh $(TPY) tests/data_spec tests/liverviz tests/liverreg \
 	    tests/surrogate tests/reliability tests/common/test_environments.py -q $(TESTS)
 

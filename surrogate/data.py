@@ -42,7 +42,8 @@ class Dataset:
     sample_geo: np.ndarray      # (S,) geometry of each sample
     sample_sim: np.ndarray      # (S,) simulation index
     sample_fraction: np.ndarray  # (S,) load fraction
-    forces: np.ndarray          # (S, n_loads, 3) force at this step, N
+    forces: np.ndarray          # (S, n_loads, 3) force at this step, N (a grasp: the tool's
+    #                             displacement at this step, mm: see load_kind)
     load_points: np.ndarray     # (S, n_loads, 3) load node coordinates, mm
     load_nodes: np.ndarray      # (S, n_loads) load node ids
     extra: np.ndarray           # (S, e) material and/or shape coefficients
@@ -57,6 +58,9 @@ class Dataset:
     # phantoms mixed into a population of liver files (geometry.phantoms): augmentation,
     # trained on and never held out
     augmenting: frozenset = frozenset()
+    # "grasp": each load is a tool moving a patch (load_points: its centre) and ``forces`` hold
+    # its displacement (mm); "nodal" (and "patch"): forces in N
+    load_kind: str = "nodal"
 
     @property
     def n_samples(self) -> int:
@@ -126,10 +130,11 @@ class _Reader:
         gi = self.liver(sh)
         lp = self.geo["points"][gi][sh.load_nodes]  # load nodes, or patch centres
         mat = material_vector(sh.material.c, sh.material.m, sh.material.K)
-        s = self.smp
+        s, grasp = self.smp, sh.load_kind == "grasp"   # a grasp's load: the tool's pull, mm
         for k in range(sh.n_done):
+            f = sh.tool_displacement[k] if grasp else sh.forces * sh.load_fractions[k]
             for key, value in (("geo", gi), ("sim", sh.sim_index), ("fr", sh.load_fractions[k]),
-                               ("f", sh.forces * sh.load_fractions[k]), ("lp", lp),
+                               ("f", f), ("lp", lp),
                                ("ln", sh.load_nodes), ("extra", mat)):
                 s[key].append(value)
             t = sh.displacement[k].astype(np.float32)
@@ -162,6 +167,7 @@ class _Reader:
             load_points=np.asarray(s["lp"], dtype=np.float32), load_nodes=load_nodes,
             extra=np.asarray(extra, dtype=np.float32), targets=targets,
             sample_offset=np.concatenate([[0], np.cumsum(sizes)]), failed_sims=self.failed,
+            load_kind=self.scene["loads"]["kind"],
             loadable=None if self.scene.cases else [
                 np.union1d(rule, load_nodes[sample_geo == g].ravel())
                 for g, rule in enumerate(geo["loadable"])], directory=self.directory)
@@ -182,10 +188,6 @@ def load_dataset(directory: str | Path, stream: bool | str = "auto",
         scene = load_scene(directory / "scene.toml")
     except ValueError as exc:  # SceneError
         raise DataError(str(exc)) from None
-    if scene["loads"]["kind"] == "grasp":   # its forces are zero: inputs the net cannot use
-        raise DataError(f"{directory}: a grasp dataset (loads.kind = 'grasp'): the surrogate "
-                        "learns loads given as forces; learning grasps (the tool's "
-                        "displacement in, the field and the force back) is not built yet")
     paths = list_shards(directory)
     if not paths:
         raise DataError(f"{directory}: no shards (expected {directory}/sims/sim_*.h5)")

@@ -80,6 +80,10 @@ class Predictor:
         self.dtype = dtype
         d = Path(directory)
         self.meta = meta = read_meta(d / "model.json", DESIGNS)
+        if meta.get("load") == "grasp":
+            raise ValueError(f"{d}: a model of grasps (scene {meta.get('scene')!r}: its load is "
+                             "a tool's displacement): answering a grasp with its network is "
+                             "not built yet; make liver GRASP=... gives the small-strain base")
         try:
             self.spec = FeatureSpec(**meta["feature_spec"])
             cfg = meta["config"]

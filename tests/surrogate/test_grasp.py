@@ -1,11 +1,12 @@
-"""surrogate.grasp without a liver: the force a pressed patch spreads over its nodes, and a
+"""surrogate.grasp and data_spec.green_grasp without a liver: a pressed patch's shares, and a
 grasp over a Green's function known in closed form."""
 
 import numpy as np
 import pytest
 
 from data_spec.geometry import box_mesh
-from surrogate.grasp import GreenGrasp, patch_weights
+from data_spec.green_grasp import GreenGrasp
+from surrogate.grasp import patch_weights
 
 
 def test_a_pressed_patch_spreads_the_whole_force_by_area_and_bump():
@@ -92,3 +93,41 @@ def test_the_grasp_manipulator_moves_the_patch_to_the_pointer_and_shows_its_forc
                           "--offscreen", "--out", str(tmp_path / "none")],
                          capture_output=True, text=True, timeout=300)
     assert res.returncode == 2 and "--grasp takes a liver's data directory" in res.stderr
+
+
+@pytest.mark.dataset
+def test_a_grasp_population_trains_over_its_small_strain_base_and_is_not_served_as_forces(
+        tmp_path):
+    """make test's grasped phantoms (ci_grasp): each sample's load is its tool's displacement
+    at the step (the shard's record, mm), the base of a sample holds the patch at that pull
+    (fem_sim linear --population --order 1), a population model over it trains and exports,
+    and loading it for forces is refused naming the grasp: answering a grasp with the network
+    is not built."""
+    from data_spec import list_shards, read_geometry, read_shard
+    from data_spec.eligible_loads import grasp_patch
+    from data_spec.shards import geometry_path
+    from surrogate import load_predictor
+    from surrogate.config import get_config
+    from surrogate.data import load_dataset
+    from surrogate.linear_base import PopulationLinearBase
+    from surrogate.train import train_and_evaluate
+    from tests.surrogate.conftest import generated_dataset
+
+    data = generated_dataset("LIVERFEM_TEST_GRASP")
+    ds = load_dataset(data)
+    assert ds.load_kind == "grasp"
+    sh = read_shard(list_shards(data)[5])
+    at = np.flatnonzero(ds.sample_sim == sh.sim_index)
+    np.testing.assert_allclose(ds.forces[at], sh.tool_displacement, rtol=1e-6)
+    base = PopulationLinearBase(ds, order=1)
+    g = read_geometry(geometry_path(data, sh.geometry_id))
+    patch = grasp_patch(g.points, g.surface_nodes, sh.load_nodes[0], 10.0)
+    for s in at:
+        u = base.sample(ds, s)[np.searchsorted(ds.out_nodes[ds.sample_geo[s]], patch)]
+        np.testing.assert_allclose(u, np.broadcast_to(ds.forces[s, 0], u.shape), atol=1e-3)
+    run = tmp_path / "run"
+    train_and_evaluate(data, run, get_config("population_green", folds=3, evaluate_folds=1,
+                                             epochs=3, hidden=[16], ensemble=1, modes=4),
+                       log_fn=lambda m: None)
+    with pytest.raises(ValueError, match="a model of grasps .* not built yet"):
+        load_predictor(run / "model")
