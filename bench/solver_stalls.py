@@ -73,13 +73,29 @@ def solve(data: Path, index: int, settings: dict) -> dict:
 
     sh = read_shard(data / "sims" / f"sim_{index:06d}.h5")
     p = _problem(data, sh.geometry_id, json.dumps(settings, sort_keys=True))
+    constraints, loads = [Constraint(sh.fixed_nodes)], [NodalLoad(sh.load_nodes, sh.forces)]
+    if sh.load_kind == "grasp":   # each tool's patch moved by its pull
+        constraints, loads = constraints + _tools(data, sh), []
     t = time.perf_counter()
-    sol = p.solve(sh.material, [Constraint(sh.fixed_nodes)],
-                  [NodalLoad(sh.load_nodes, sh.forces)], sh.load_fractions)
+    sol = p.solve(sh.material, constraints, loads, sh.load_fractions)
     return {"seconds": time.perf_counter() - t, "status": sol.status,
             "factorizations": int(sol.factorizations),
             "iterations": int(np.sum(sol.newton_iterations)),
             "cutbacks": int(np.sum(sol.cutbacks)), "u": sol.displacement}
+
+
+def _tools(data: Path, sh) -> list:
+    """A grasp shard's tools: each patch (the scene's radius) moved by its full pull."""
+    from data_spec import load_scene, read_geometry
+    from data_spec.eligible_loads import grasp_patch
+    from data_spec.shards import geometry_path
+    from fem_sim.solver.problem import Constraint
+
+    g = read_geometry(geometry_path(data, sh.geometry_id))
+    radius = load_scene(data / "scene.toml")["loads"]["patch_radius"]
+    pull = sh.tool_displacement[-1] / sh.load_fractions[-1]
+    return [Constraint(grasp_patch(g.points, g.surface_nodes, n, radius), values=d)
+            for n, d in zip(sh.load_nodes, pull)]
 
 
 def _difference(u0: np.ndarray, u1: np.ndarray) -> float:
