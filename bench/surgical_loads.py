@@ -187,13 +187,12 @@ def generation_rate(n: int, ranks: int) -> dict:
     """
     from data_spec import list_shards, load_scene, read_shard
     from fem_sim.batch.chunked import generate_chunks
-
     done = RESULTS / "grasp_rate" / "generation.json"   # a finished run of n is kept
     if not (done.exists() and json.loads(done.read_text()).get("sims") == n):
         shutil.rmtree(RESULTS / "grasp_rate", ignore_errors=True)
     state = json.loads(done.read_text()) if done.exists() else generate_chunks(
         GRASP_SCENE, RESULTS / "grasp_rate" / "data", n, ranks=ranks, chunk=n)
-    shards = [read_shard(p) for p in list_shards(RESULTS / "grasp_rate" / "data")]
+    shards = [read_shard(p) for p in list_shards(RESULTS / "grasp_rate" / "data")[:n]]
     sims = np.array([np.sum(s.stats.wall_time) for s in shards])
     total = load_scene(GRASP_SCENE).n_simulations
     prepare = max(state["seconds"] * ranks - sims.sum(), 0.0)   # core-seconds, all livers
