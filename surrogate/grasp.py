@@ -7,6 +7,11 @@ from __future__ import annotations
 
 import numpy as np
 
+# mm: beyond this pull a grasp's small-strain base is off by millimetres and its force far too
+# low, the Ogden liver stiffening (docs/surgical_loads.md): predict-liver and the manipulator
+# say so
+SMALL_PULL_MM = 5.0
+
 
 def patch_weights(points: np.ndarray, triangles: np.ndarray, patch, centre: int,
                   radius: float) -> np.ndarray:

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from liverviz.pictures import Surface
+from surrogate.grasp import SMALL_PULL_MM
 
 
 @dataclass
@@ -372,7 +373,9 @@ class GraspManipulator:
         """The status line of the tool: its pull and its force."""
         f = self.handles[0].force
         return (f"grasp at node {self.handles[0].node}: {np.linalg.norm(self.pull):.1f} mm "
-                f"(max {self.max_pull:g})\nforce {np.linalg.norm(f):.3f} N (small-strain base)")
+                f"(max {self.max_pull:g})\nforce {np.linalg.norm(f):.3f} N (small-strain base"
+                + ("; too low at this pull)" if np.linalg.norm(self.pull) > SMALL_PULL_MM
+                   else ")"))
 
     def predict(self) -> Frame:
         """The field of the whole liver and the tool's force for the present pull."""

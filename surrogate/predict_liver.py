@@ -475,6 +475,8 @@ def main(args, over=None) -> int:
     """
     import sys
 
+    from surrogate import grasp
+
     def fail(msg):
         print(f"liverfem-surrogate predict-liver: {msg}", file=sys.stderr)
         return 2
@@ -514,6 +516,11 @@ def main(args, over=None) -> int:
             print(f"grasp moved {np.linalg.norm(d):.1f} mm: the tool's force on the liver "
                   f"{np.round(f, 3).tolist()} N ({np.linalg.norm(f):.3f} N; the small-strain "
                   "base alone, docs/surgical_loads.md)")
+            if np.linalg.norm(d) > grasp.SMALL_PULL_MM:
+                print(f"warning: a {np.linalg.norm(d):.0f} mm pull is beyond the small-strain "
+                      "base's range: the Ogden liver stiffens, so its force is too low and its "
+                      "field off by millimetres (docs/surgical_loads.md measures by how much)",
+                      file=sys.stderr)
     print(f"placed as {pred.frame}; registration residual {pred.residual:.2f} mm, "
           f"{pred.inverted} of {pred.cells.shape[0]} template tetrahedra inverted; max "
           f"displacement {summary['max_displacement_mm']:.2f} mm; written {vtu} and "
