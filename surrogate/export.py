@@ -76,7 +76,7 @@ def _export(directory, params, design: dict, cfg, ds, unseen=(), on_template=Fal
         # the honest cases to compare it with the FE solution on (surrogate.viewer --compare).
         "unseen_simulations": sorted(int(i) for i in unseen),
     }
-    if ds.load_kind == "grasp":   # its "forces" are the tools' pulls, mm
+    if getattr(ds, "load_kind", "nodal") == "grasp":   # its "forces" are the tools' pulls, mm
         meta["load"], meta["units"]["force"] = "grasp", "mm (a tool's displacement)"
     meta["embedded_geometry"] = len(ds.points) == 1
     loadable = getattr(ds, "loadable", None)
