@@ -42,12 +42,8 @@ class GreenGrasp:
         m, t = nodes.size, len(self.patches)
         gpp = np.asarray(green[rows][:, :, cols], dtype=np.float64).reshape(3 * m, 3 * m)
         gpp = 0.5 * (gpp + gpp.T)   # symmetric in exact arithmetic (stored in float32)
-        b = np.zeros((3 * m, 3 * t))
-        start = 0
-        for tool, p in enumerate(self.patches):
-            for k in range(start, start + p.size):
-                b[3 * k: 3 * k + 3, 3 * tool: 3 * tool + 3] = np.eye(3)
-            start += p.size
+        # each node's tool (its row of the identity), each coordinate its own: (3m, 3T)
+        b = np.kron(np.repeat(np.eye(t), [p.size for p in self.patches], axis=0), np.eye(3))
         try:
             c = np.linalg.cholesky(gpp)   # nodal forces per mm of each tool's pull:
             x = np.linalg.solve(c.T, np.linalg.solve(c, b))

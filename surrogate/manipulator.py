@@ -50,6 +50,15 @@ class Frame:
     seconds: float
 
 
+def clamped(v, top: float, what: str) -> np.ndarray:
+    """``v`` as a finite 3-vector, its length clamped to ``top``; ValueError naming ``what``."""
+    v = np.asarray(v, dtype=float).reshape(3)
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"{what}: expected finite components, got {v.tolist()}")
+    n = float(np.linalg.norm(v))
+    return v * (top / n) if n > top else v
+
+
 def material_names(material_dim: int) -> list[str]:
     """Names of the material vector (c_1..c_n, m_1..m_n, K), as features.material_vector."""
     n = (material_dim - 1) // 2
@@ -153,15 +162,24 @@ class Manipulator:
         deformed liver.
         """
         h = self._handle(handle)
-        if deformed is not None:
-            i = int(np.argmin(np.linalg.norm(np.asarray(deformed) - np.asarray(xyz), axis=1)))
-            node = int(self.surface.nodes[i])
-        else:
-            node = self.nearest_surface_node(xyz)
+        node = self.clicked_node(xyz, deformed)
         if int(node) in self.fixed.tolist():
             return self.handles[h].node  # the fixed region cannot be loaded: keep the node
         self.handles[h].node = node
         return node
+
+    def clicked_node(self, xyz, deformed: np.ndarray | None = None) -> int:
+        """The surface node a click at ``xyz`` (mm) picks: the nearest vertex of ``deformed``
+        (the surface vertices as drawn) when given, else of the undeformed surface.
+        """
+        if deformed is None:
+            return self.nearest_surface_node(xyz)
+        i = int(np.argmin(np.linalg.norm(np.asarray(deformed) - np.asarray(xyz), axis=1)))
+        return int(self.surface.nodes[i])
+
+    def outward_normal(self, node: int) -> np.ndarray:
+        """The outward unit normal of the surface at the mesh node ``node``."""
+        return self.surface.normals()[self.surface.local([node])[0]]
 
     def drag(self, tip, handle: int | None = None) -> np.ndarray:
         """Set a handle's force from its sphere's position ``tip`` (mm); returns it (N)."""
@@ -188,13 +206,7 @@ class Manipulator:
     def set_force(self, force, handle: int | None = None) -> np.ndarray:
         """Set a force (N), its magnitude clamped to the training range; returns it."""
         h = self._handle(handle)
-        f = np.asarray(force, dtype=float).reshape(3)
-        if not np.all(np.isfinite(f)):
-            raise ValueError(f"force: expected finite components, got {f.tolist()}")
-        mag = float(np.linalg.norm(f))
-        if mag > self.f_max:
-            f = f * (self.f_max / mag)
-        self.handles[h].force = f
+        self.handles[h].force = f = clamped(force, self.f_max, "force")
         return f
 
     def set_magnitude(self, magnitude: float, handle: int | None = None) -> np.ndarray:
@@ -205,11 +217,7 @@ class Manipulator:
         h = self._handle(handle)
         f = self.handles[h].force
         n = float(np.linalg.norm(f))
-        if n > 0:
-            direction = f / n
-        else:
-            i = self.surface.local([self.handles[h].node])[0]
-            direction = self._sign * self.surface.normals()[i]
+        direction = f / n if n > 0 else self._sign * self.outward_normal(self.handles[h].node)
         return self.set_force(direction * max(float(magnitude), 0.0), h)
 
     def set_input(self, index: int, value: float) -> float:
@@ -301,8 +309,7 @@ class GraspManipulator:
         self.handles = [Handle(node=Manipulator.default_nodes(self, 1)[0])]
         self._grasp = self._grasp_at(self.handles[0].node)
         # the arrows' scale: the force of the largest pull along the stiffest axis
-        self.f_max = float(np.sqrt(np.linalg.eigvalsh(
-            self._grasp.stiffness.T @ self._grasp.stiffness).max())) * self.max_pull
+        self.f_max = float(np.linalg.norm(self._grasp.stiffness, 2)) * self.max_pull
 
     def _grasp_at(self, node: int):
         from data_spec.eligible_loads import grasp_patch
@@ -313,17 +320,15 @@ class GraspManipulator:
                           [grasp_patch(self.points, self._surface_nodes, node, self.radius)])
 
     nearest_surface_node = Manipulator.nearest_surface_node
+    clicked_node = Manipulator.clicked_node
+    outward_normal = Manipulator.outward_normal
 
     def pick(self, xyz, handle: int | None = None, deformed: np.ndarray | None = None) -> int:
         """Grasp the patch around the surface node nearest ``xyz`` (on the ``deformed``
         surface when given), the pull kept; a patch that reaches the fixed region is not
         taken (the tool stays where it was).
         """
-        if deformed is not None:
-            i = int(np.argmin(np.linalg.norm(np.asarray(deformed) - np.asarray(xyz), axis=1)))
-            node = int(self.surface.nodes[i])
-        else:
-            node = self.nearest_surface_node(xyz)
+        node = self.clicked_node(xyz, deformed)
         try:
             self._grasp = self._grasp_at(node)
         except ValueError:   # the patch holds a fixed node
@@ -333,11 +338,7 @@ class GraspManipulator:
 
     def set_force(self, pull, handle: int | None = None) -> np.ndarray:
         """Set the tool's pull (mm; its length clamped to ``max_pull``); returns it."""
-        d = np.asarray(pull, dtype=float).reshape(3)
-        if not np.all(np.isfinite(d)):
-            raise ValueError(f"pull: expected finite components, got {d.tolist()}")
-        n = float(np.linalg.norm(d))
-        self.pull = d * (self.max_pull / n) if n > self.max_pull else d
+        self.pull = clamped(pull, self.max_pull, "pull")
         return self.pull
 
     def drag(self, tip, handle: int | None = None) -> np.ndarray:
@@ -352,8 +353,7 @@ class GraspManipulator:
     def set_magnitude(self, magnitude: float, handle: int | None = None) -> np.ndarray:
         """Pull by ``magnitude`` mm along the present pull (along the outward normal at first)."""
         n = float(np.linalg.norm(self.pull))
-        direction = self.pull / n if n > 0 else \
-            self.surface.normals()[self.surface.local([self.handles[0].node])[0]]
+        direction = self.pull / n if n > 0 else self.outward_normal(self.handles[0].node)
         return self.set_force(direction * max(float(magnitude), 0.0))
 
     def magnitude(self, handle: int | None = None) -> float:
