@@ -25,7 +25,7 @@ from liverviz.pictures import pyvista
 from liverviz.report import header
 from surrogate.manipulator import Manipulator
 from surrogate.predictor import load_predictor
-from surrogate.viewer import LiverScene, apply_frame, display_range, load_script, model_dir
+from surrogate.viewer import LiverScene, apply_frame, load_script, model_dir
 
 
 def measure(run: Path, nodes: str, frames: int, repeats: int, size) -> dict:
@@ -34,7 +34,7 @@ def measure(run: Path, nodes: str, frames: int, repeats: int, size) -> dict:
     m = Manipulator(pred, nodes=nodes)
     script, _ = load_script(None, m)
     script = (script * (frames // len(script) + 1))[:frames]
-    clim = display_range(m)
+    clim = m.colour_range()
     inference, frame = [], []
     for _ in range(repeats):
         p = pv.Plotter(off_screen=True, window_size=size)

@@ -233,6 +233,21 @@ class Manipulator:
         return h
 
     # -- prediction -----------------------------------------------------------------------------
+    def colour_range(self) -> float:
+        """A fixed colour range (mm) for a live view: the largest |u| of the surface under the
+        largest training force along +-x, +-y, +-z at each handle's node, rounded up.
+        """
+        saved = [h.force.copy() for h in self.handles]
+        top = 0.0
+        for j in range(len(self.handles)):
+            for axis in np.vstack([np.eye(3), -np.eye(3)]):
+                for k, h in enumerate(self.handles):
+                    h.force = axis * self.f_max if k == j else np.zeros(3)
+                top = max(top, float(np.linalg.norm(self.predict().surface_u, axis=1).max()))
+        for h, f in zip(self.handles, saved):
+            h.force = f
+        return float(np.ceil(max(top, 1e-3) * 1.1))
+
     def _node_plan(self, nodes: str):
         """(node ids to predict or None for all, rows of the prediction for the surface
         vertices). A reduced-basis model predicts its output nodes only.
@@ -368,6 +383,12 @@ class GraspManipulator:
     @property
     def n_predicted(self) -> int:
         return int(self._lf.output_nodes.size)
+
+    def colour_range(self) -> float:
+        """A fixed colour range (mm) for a live view: the largest pull (no node moves more
+        than the held patch).
+        """
+        return float(np.ceil(self.max_pull))
 
     def describe(self, handle: int = 0) -> str:
         """The status line of the tool: its pull and its force."""

@@ -216,24 +216,6 @@ def apply_frame(m, frame: dict) -> None:
             m.set_input(i, v)
 
 
-def display_range(m) -> float:
-    """A fixed colour range (mm) for a live view: the largest |u| of the surface under the
-    largest training force along +-x, +-y, +-z at each handle's node, rounded up.
-    """
-    if hasattr(m, "max_pull"):   # a grasp: no node moves more than the patch
-        return float(np.ceil(m.max_pull))
-    saved = [h.force.copy() for h in m.handles]
-    top = 0.0
-    for j in range(len(m.handles)):
-        for axis in np.vstack([np.eye(3), -np.eye(3)]):
-            for k, h in enumerate(m.handles):
-                h.force = axis * m.f_max if k == j else np.zeros(3)
-            top = max(top, float(np.linalg.norm(m.predict().surface_u, axis=1).max()))
-    for h, f in zip(m.handles, saved):
-        h.force = f
-    return float(np.ceil(max(top, 1e-3) * 1.1))
-
-
 def status_text(m, inference_s: float, frame_s: float | None, spheres: bool = False) -> str:
     parts = [m.describe(j) for j in range(len(m.handles))]
     for inp in m.inputs[:4]:
@@ -640,7 +622,7 @@ def main(argv=None) -> int:
             if png:
                 print(png)
             return 0
-        clim = display_range(m)
+        clim = m.colour_range()
         if args.offscreen:
             t = run_offscreen(m, clim, args.script, args.out, tuple(args.size))
             print(f"{log_prefix}: {t['frames']} frames, {t['gif']}; median inference "

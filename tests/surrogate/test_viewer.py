@@ -18,7 +18,7 @@ from surrogate import load_predictor
 from surrogate.config import get_config
 from surrogate.manipulator import Manipulator
 from surrogate.train import train_and_evaluate
-from surrogate.viewer import ViewerError, compare, display_range, load_script, run_offscreen
+from surrogate.viewer import ViewerError, compare, load_script, run_offscreen
 
 ROOT = Path(__file__).parents[2]
 
@@ -135,7 +135,7 @@ def test_off_screen_frames_are_drawn_and_differ_between_forces(m, tmp_path):
     import time
 
     t0 = time.perf_counter()
-    t = run_offscreen(m, display_range(m), script, tmp_path / "out", (320, 240))
+    t = run_offscreen(m, m.colour_range(), script, tmp_path / "out", (320, 240))
     wall = time.perf_counter() - t0
     a, b = _frame(tmp_path / "out" / "frame_0000.png"), _frame(tmp_path / "out" / "frame_0001.png")
     assert a.shape == (240, 320, 3)
