@@ -15,6 +15,9 @@ A report may carry a section that another benchmark owns (``put_section``): it s
 report's own benchmark keeps it (``sections``; ``write_report`` does) when it rewrites the
 rest. The section ``measured-and-rejected`` is owned by no command: what was measured by hand
 and not kept, said once in the report it belongs to.
+
+A report's prose is a Jinja template beside its benchmark (``render``): the driver gives the
+records, the template says what they mean.
 """
 
 from __future__ import annotations
@@ -131,6 +134,35 @@ def put_section(path: str | Path, name: str, body: str) -> None:
     else:
         text = text.rstrip("\n") + ("\n\n" if text else "") + block
     path.write_text(text)
+
+
+def render(template: str | Path, **context) -> str:
+    """The text of the Jinja template at ``template`` given ``context``. Undefined names raise;
+    ``x|f(",.3f")`` is ``format(x, ",.3f")`` ("n/a" for None or NaN), ``row(*cells)`` a table
+    row, ``{% filter oneline %}`` joins a paragraph written over several lines into one line.
+    Templates in the same folder can be imported (``{% import "rows.j2" as rows %}``).
+    """
+    import jinja2
+
+    template = Path(template)
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(template.parent),
+                             undefined=jinja2.StrictUndefined, trim_blocks=True,
+                             lstrip_blocks=True, keep_trailing_newline=True,
+                             autoescape=False)
+    env.filters["f"] = _fmt
+    env.filters["oneline"] = lambda text: " ".join(text.split())
+    env.globals["row"] = lambda *cells: "| " + " | ".join(str(c) for c in cells) + " |"
+    return env.get_template(template.name).render(**context)
+
+
+def _fmt(x, spec: str = ".3f") -> str:
+    import jinja2
+
+    if jinja2.is_undefined(x):
+        str(x)  # StrictUndefined: raises, naming what is undefined
+    if x is None or (isinstance(x, float) and x != x):
+        return "n/a"
+    return format(x, spec)
 
 
 class _Tee(io.TextIOBase):

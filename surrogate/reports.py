@@ -8,6 +8,9 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
+
+import numpy as np
 
 from surrogate.small_strain import SmallStrainBase, base_of
 
@@ -74,3 +77,11 @@ class DesignRecord:
 def xyz(m: dict, key: str, fmt: str = "{:.3f}") -> str:
     """``key``'s x / y / z values of a metrics dict (``mae`` or ``corr``)."""
     return " / ".join(fmt.format(m[f"{key}_{c}"]) for c in "xyz")
+
+
+# What every report template may call (liverviz.report.render's context):
+# ``render(template, **REPORT_NAMES, ...)``.
+REPORT_NAMES = {
+    "label": design_label, "xyz": xyz, "nan": math.nan,
+    "use_cell": lambda d: DesignRecord.from_json(d).use_cell(),
+    "mean": lambda xs: float(np.mean(list(xs))), "median": lambda xs: float(np.median(list(xs)))}
