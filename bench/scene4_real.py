@@ -38,11 +38,9 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 from fem_sim.batch.chunked import generate_chunks, linear_bases, liver_truth
-from liverviz.report import ROOT, SOFA, SOFA_FRAME, commit, write_report
-from surrogate.reports import DesignRecord
+from liverviz.report import ROOT, SOFA, SOFA_FRAME, commit, render, write_report
+from surrogate.reports import REPORT_NAMES, DesignRecord
 from surrogate.small_strain import base_of
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
@@ -122,28 +120,6 @@ def _merged(old: list[dict], new: list[dict]) -> list[dict]:
     by = {d["config"]: d for d in old} | {d["config"]: d for d in new}
     order = [c for c, _ in DESIGNS]
     return sorted(by.values(), key=lambda d: order.index(d["config"]))
-
-
-def _every_fold_lines(out: dict) -> list[str]:
-    """The section of the designs cross-validated over every fold."""
-    rows = out.get("every_fold")
-    if not rows:
-        return []
-    lines = ["## Every fold", "",
-             "The population designs with each of the 10 folds held out in turn (each of the "
-             f"{len(rows[0]['metrics']['per_liver_mee']['values'])} livers with simulations "
-             "held out once, no final fit; `bench/scene4_real.py --every-fold`): "
-             "the same columns over all held-out livers, and the spread of the folds' pooled "
-             "skill.", "",
-             "| design | sims | pooled skill | skill mean / median liver | MEE mm | MEE median "
-             "liver mm | naive MEE mm | % EE < 3 mm | training | folds' skill min / max |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
-    for d in rows:
-        folds = [f["skill"] for f in d["metrics"]["per_fold"]]
-        line = _design_line(d).split("\n")
-        cells = line[0].rsplit("|", 2)[0] + f"| {min(folds):.3f} / {max(folds):.3f} |"
-        lines += [cells, *line[1:]]
-    return lines + [""]
 
 
 def unseen_livers(scene) -> list[tuple[Path, str | None]]:
@@ -269,106 +245,10 @@ def _scene():
     return load_scene(SCENE)
 
 
-def _design_line(d: dict) -> str:
-    r = DesignRecord.from_json(d)
-    m = r.metrics
-    kept = f" (measured at {r.kept_from})" if r.kept_from else ""
-    line = (f"| {r.config}{kept} | {m['n_simulations']:,} | {m['skill']:.3f} | "
-            f"{r.per_liver_skill()} | {m['network']['mee']:.3f} | "
-            f"{m['per_liver_mee']['median']:.3f} | {m['naive']['mee']:.3f} | "
-            f"{m['network']['pct_ee_lt_3mm']:.2f} | {m['total_seconds'] / 60:.0f} min | "
-            f"{r.use_cell('{big:.2f}')} |")
-    if r.base is None:
-        return line
-    b = DesignRecord(r.config, r.base_alone)
-    return line + (f"\n| its small-strain base alone ({r.base.words}, no network) | 0 | "
-                   f"{b.metrics['skill']:.3f} | {b.per_liver_skill()} | "
-                   f"{b.metrics['network']['mee']:.3f} | {b.metrics['per_liver_mee']['median']:.3f}"
-                   f" | {b.metrics['naive']['mee']:.3f} | "
-                   f"{b.metrics['network']['pct_ee_lt_3mm']:.2f} | | |")
-
-
-def _unseen_line(u: dict) -> str:
-    n = u["network"]
-    floor = f"{u['modes_floor_mm']:.3f}" if "modes_floor_mm" in u else ""
-    kept = f" (measured at {u['kept_from']})" if "kept_from" in u else ""
-    return (f"| {u['liver']}{kept} | {u['frame']} | {u['nodes']:,} | {u['sims']} | "
-            f"{u['residual_mm']:.2f} | {u['coefficients_out']} | {n['mee']:.3f} | "
-            f"{u['naive']['mee']:.3f} | {u['skill']:.3f} | {n['pct_ee_lt_3mm']:.2f} | "
-            f"{u['best_scale']:.2f} | {floor} | {u['file_to_predictor_s']:.1f} |")
-
-
-def _over_line(u: dict, widths: dict) -> str:
-    """An unseen liver over its own base: each rest design's MEE, skill, % < 3 mm and its base
-    alone's MEE and skill; over the linear response, make liver's seconds and a call's ms
-    (``widths``: each design's number of columns)."""
-    cells = [u["liver"]]
-    for c, width in widths.items():
-        o = u["over"].get(c)
-        if o is None:   # a row kept from an older report, before this design
-            cells += ["not measured"] * width
-            continue
-        n, b = o["over_base"], o["base_alone"]
-        cells += [f"{n['network']['mee']:.3f}", f"{n['skill']:.3f}",
-                  f"{n['network']['pct_ee_lt_3mm']:.2f}", f"{b['network']['mee']:.3f}",
-                  f"{b['skill']:.3f}"]
-        if "make_liver_s" in o:
-            cells += [f"{o['make_liver_s']:.1f}", f"{o['ms_own']:.2f} / {o['ms_big']:.2f}"]
-    return "| " + " | ".join(cells) + " |"
-
-
-def _stopped(un: list[dict]) -> list[str]:
-    """The unseen livers' simulations that stopped part-way, as each truth's evaluation
-    recorded them."""
-    stops = [f"{u['liver']} simulation {s['sim']} ({s['steps']} of {s['of']} load steps; "
-             f"{s['reason']})" for u in un for s in u.get("stopped", [])]
-    return ["Simulations of a truth that stopped part-way count with their converged load "
-            "steps: " + "; ".join(stops) + ".", ""] if stops else []
-
-
-def _placed_calls(un: list[dict]) -> list[str]:
-    """The sentence on what a call of the placed model costs at a user's mesh of a liver."""
-    ms = [u["ms_placed"] for u in un if "ms_placed" in u]
-    if not ms:
-        return []
-    return [f"A call of the model placed on a liver meshed at {LATENCY_NODES:,} nodes (the "
-            "template's network, one sparse interpolation to the nodes, the turn into the "
-            "liver's frame: what `predict-liver` and the manipulator pay per force): median "
-            f"{np.median(ms):.2f} ms over the unseen livers, at most {max(ms):.2f} ms (goal: at "
-            "most 1 ms). The table's last column times the same network with its modes on "
-            f"{LATENCY_NODES:,} nodes (a population exported on a template that fine).", ""]
-
-
 def _rest_designs(out: dict) -> list[dict]:
     """The designs over each liver's small-strain base, by the base's order."""
     return sorted((d for d in out["designs"] if DesignRecord.from_json(d).base),
                   key=lambda d: DesignRecord.from_json(d).base.order)
-
-
-def _over_base_text(out: dict) -> list[str]:
-    """What the designs over each liver's small-strain base are, and their held-out
-    figures."""
-    rows = _rest_designs(out)
-    if not rows:
-        return []
-    each = "; ".join(
-        f"`{d['config']}` over the order-{d['base_alone']['order']} base: the base alone "
-        f"{d['base_alone']['per_liver_mee']['skill_mean']:.3f} / "
-        f"{d['base_alone']['per_liver_mee']['skill_median']:.3f}, the network over it "
-        f"{d['metrics']['per_liver_mee']['skill_mean']:.3f} / "
-        f"{d['metrics']['per_liver_mee']['skill_median']:.3f}" for d in rows)
-    return ["The designs over each liver's own small-strain base are the population basis "
-            "trained on what that base misses: the liver's own mesh linearised at rest under "
-            "the simulation's load (`fem_sim linear --population`: one float64 factorisation "
-            "per liver), to first order (the linear response) or with its second-order term, "
-            "the base added back to the network's field on the liver. On the same held-out "
-            f"livers (skill mean / median liver): {each}; the paper: {PAPER['mean']} / "
-            f"{PAPER['median']}. The linear response is linear in the force, so a new liver's "
-            "Green's function (a unit response at each surface node, from the same one "
-            "factorisation) gives it for any nodal load at run time: `make liver` builds that "
-            "model from a liver file with no FE simulation and no training (below). The "
-            "second-order term is not linear in the force (a solve per load): a model over it "
-            "is a patient model (`make patient`: minutes; docs/patient.md).", ""]
 
 
 def _cv_skill(out: dict, config: str) -> tuple[float, str]:
@@ -380,123 +260,14 @@ def _cv_skill(out: dict, config: str) -> tuple[float, str]:
     return d["metrics"]["per_liver_mee"]["skill_mean"], f"mean held-out liver, {where}"
 
 
-def _over_base_unseen(out: dict) -> list[str]:
-    """The section on the unseen livers over their own small-strain base."""
-    un = out["unseen"]
-    configs = [d["config"] for d in _rest_designs(out)
-               if any(d["config"] in u.get("over", {}) for u in un)]
-    if not configs:
-        return []
-    head, rule, said, widths = ["liver"], ["---"], [], {}
-    for c in configs:
-        has = [u["over"][c] for u in un if c in u.get("over", {})]
-        head += [f"`{c}` MEE mm", "skill", "% EE < 3 mm",
-                 f"order-{has[0]['order']} base alone: MEE mm", "skill"]
-        if "make_liver_s" in has[0]:
-            head += ["make liver s", f"ms per call at its mesh's nodes / {LATENCY_NODES:,}"]
-        widths[c] = len(head) - len(rule)
-        over = [o["over_base"]["skill"] for o in has]
-        alone = [o["base_alone"]["skill"] for o in has]
-        cv, where = _cv_skill(out, c)
-        lower = sum(o["over_base"]["network"]["mee"] < o["base_alone"]["network"]["mee"]
-                    for o in has)
-        said.append(f"`{c}`: median skill {np.median(over):.3f} (mean {np.mean(over):.3f}, "
-                    f"worst {max(over):.3f}) against its cross-validation's {cv:.3f} ({where}):"
-                    f" a ratio of {np.mean(over) / cv:.2f}; its base alone {np.median(alone):.3f}"
-                    f" (mean {np.mean(alone):.3f}, worst {max(alone):.3f}); the network lowers "
-                    f"the base's MEE on {lower} of the {len(has)} unseen livers it was measured "
-                    "on.")
-        if "make_liver_s" in has[0]:
-            secs = [o["make_liver_s"] for o in has]
-            own = [o["ms_own"] for o in has]
-            big = [o["ms_big"] for o in has]
-            said.append(
-                f"`make liver` from the liver file to the written prediction (truth-scene: "
-                "read, repair, register, place; `fem_sim linear --green`: mesh, one "
-                "factorisation, the unit responses; predict-liver --base: the model over them, "
-                "the VTU and the picture; three processes started, the forms compiled once per "
-                f"machine before): median {np.median(secs):.1f} s, at most {max(secs):.1f} s "
-                f"(goal: under 30 s). A call over the Green's function: median "
-                f"{np.median(own):.2f} ms at the liver's mesh nodes (at most {max(own):.2f}), "
-                f"{np.median(big):.2f} ms at {LATENCY_NODES:,} points inside it (at most "
-                f"{max(big):.2f}; goal: at most 1 ms).")
-        rule += ["---"] * (len(head) - len(rule))
-    return ["### Over each liver's own small-strain base", "",
-            "Each unseen liver's base from its truth's mesh (`fem_sim linear` on the truth's "
-            "scene), alone and with each population model of its rest, on the same "
-            "simulations as the table above (skill against the same naive model).", "",
-            "| " + " | ".join(head) + " |", "|" + "|".join(rule) + "|",
-            *[_over_line(u, widths) for u in un], "", *[x for t in said for x in (t, "")]]
-
-
-def _unseen_lines(out: dict) -> list[str]:
-    """The section on the livers no training run saw."""
-    un = out["unseen"]
-    skills = [u["skill"] for u in un]
-    secs = [u["file_to_predictor_s"] for u in un]
-    cv_skill, where = _cv_skill(out, out["designs"][0]["config"])
-    return [
-        "## Livers no training run saw", "",
-        f"Each placed as `predict-liver` places it (the validation livers in the scene's "
-        "frame, the SOFA liver by the best rigid fit), its FE truth on its own mesh fixed "
-        f"where the placement puts the template's fixed region ({un[0]['sims']} simulations "
-        "each, 10 load steps), the exported population basis against it. Naive: the "
-        "population's mean displacement turned into the liver's frame. Floor: the model's "
-        "modes fitted to the FE fields by least squares. File to predictor: read, register, "
-        "place and a first call, seconds.", "",
-        "| liver | frame | nodes | sims | residual mm | shape coefficients out of range | "
-        "MEE mm | naive MEE mm | skill | % EE < 3 mm | best scale | floor mm | file to "
-        "predictor s |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
-        *[_unseen_line(u) for u in un], "", *_stopped(un),
-        f"Median skill on the unseen livers {np.median(skills):.3f} (mean "
-        f"{np.mean(skills):.3f}, worst {max(skills):.3f}) against the cross-validation's "
-        f"{cv_skill:.3f} ({where}): a ratio of "
-        f"{np.mean(skills) / cv_skill:.2f} (goal: at most 1.25). From a liver file to a "
-        f"ready predictor: median {np.median(secs):.1f} s, at most {max(secs):.1f} s "
-        "(goal: under 30 s).", "", *_placed_calls(un), *_over_base_unseen(out)]
-
-
 def report(out: dict) -> str:
-    """docs/scene4_real.md's body after the header."""
-    pb = out["designs"][0]
-    part = out["sims"] < out["scene_sims"]
-    lines = [
-        f"Scene 4 on real CT-segmented livers (`{SCENE.name}`: AMOS and LiTS, 15 validation "
-        f"livers set aside before any training; {out['prepared']} livers prepared and in the "
-        f"PCA, {out['livers']} of them with simulations{' so far' if part else ''}), P2 at 16 "
-        f"mm, one random 0.4 N force per simulation, "
-        + (f"{out['sims']:,} of the scene's {out['scene_sims']:,}" if part else
-           f"the scene's {out['sims']:,}")
-        + f" simulations ({out['sims'] / out['livers']:.0f} per liver; the paper: 10,200 on "
-        "102 livers" + ("; `make scene4-real` resumes the rest" if part else "")
-        + "). Cross-validated by liver: the first "
-        "of 10 folds held out (its livers never trained on), "
-        + ("the designs on the same folds. " if len(out["designs"]) > 1 else
-           "the population basis only (the node-wise network is not trained on them yet). ")
-        +
-        "Skill = MEE_NN / MEE_naive (the naive model: the training livers' mean "
-        "displacement); per liver: mean / median over the held-out livers.", "",
-        "| design | sims | pooled skill | skill mean / median liver | MEE mm | MEE median "
-        "liver mm | naive MEE mm | % EE < 3 mm | training | ms per call at 15.4k nodes |",
-        "|---|---|---|---|---|---|---|---|---|---|",
-        f"| paper (node-wise (500,)x5) | 10,200 | | {PAPER['mean']} / {PAPER['median']} | "
-        f"0.662 | | 3.133 | {PAPER['lt3']} (median liver) | | GPU: 2-5 ms |",
-        *[_design_line(d) for d in out["designs"]], ""]
-    lines += _over_base_text(out) + _every_fold_lines(out)
-    if "floor" in pb:
-        f = pb["floor"]
-        lines += [f"The population basis's {f['modes']} modes fit the held-out livers' fields "
-                  f"to MEE {f['held_out']:.3f} mm (the training livers' to "
-                  f"{f['training']:.3f}): the rest of its error is in the coefficients its "
-                  "network gives a liver it never saw.", ""]
-    lines += _unseen_lines(out)
-    w = out.get("worst")
-    if w:
-        lines += [f"The worst unseen liver, {w['liver']}, at its worst simulation "
-                  f"({w['simulation']}, MEE {w['mee_mm']:.2f} mm), last load step:", "",
-                  "![worst unseen liver](scene4_real.png)", ""]
-    return "\n".join(lines)
+    """docs/scene4_real.md's body after the header (bench/templates/scene4_real.md.j2)."""
+    rests = _rest_designs(out)
+    configs = [d["config"] for d in rests
+               if any(d["config"] in u.get("over", {}) for u in out["unseen"])]
+    return render(Path(__file__).parent / "templates" / "scene4_real.md.j2", **REPORT_NAMES,
+                  out=out, rests=rests, configs=configs, cv_skill=_cv_skill, paper=PAPER,
+                  scene_name=SCENE.name, latency_nodes=LATENCY_NODES).rstrip("\n") + "\n"
 
 
 def main() -> int:
