@@ -1,23 +1,15 @@
-"""A new patient's model against K, the FE simulations on the patient's own mesh: docs/patient.md.
+"""A new patient's model against K, the FE simulations on the patient's own mesh: docs/patient.md
+(its prose: bench/templates/patient.md.j2).
 
     .venv-train/bin/python bench/patient.py [--model RUN] [--livers Amos-054 LiTS-100 LiTS-67]
         [--ks 0 5 10 20 40 80] [--design] [--order 1] [--no-green] [--no-tune]
 
-For each validation liver (never seen by the population model, its PCA or any design choice):
-its FE truth with the population model's boundary condition, HELD + K_MAX simulations
-(resumable, under bench/results/patient/: a larger K only adds simulations); then for every
-K the MEE on the first HELD simulations (the same for every K) of the placed population
-model alone, the corrected one, the liver's small-strain responses (``fem_sim linear``)
-alone and corrected, the exported patient model (``surrogate adapt`` on the K training
-simulations, :mod:`surrogate.patient`), the reduced basis trained on the same K simulations
-from scratch, with the adaptation's seconds, and the population network fine-tuned on them
-(``--tune``), alone and corrected; and the wall time of ``make patient`` end to end at K = 40
-on the first liver, on two cores.
-
-``--design``: the same on training livers (default Amos-005, LiTS-12, LiTS-16), with a
-population model trained as the shipped one on scene 4's dataset less their simulations
-(under bench/results/patient_design/): docs/patient_design.md, where the adaptation's settings
-are chosen, so that the validation livers stay out of every choice.
+For each validation liver: its FE truth with the population model's boundary condition
+(HELD + K_MAX simulations, resumable under bench/results/patient/), then for every K the MEE
+on the same first HELD simulations of every model the report's table names
+(:func:`surrogate.patient.curve.evaluate_patient`), and ``make patient``'s wall time end to
+end on the first liver. ``--design``: the same on training livers with a population model
+trained without them (docs/patient_design.md, where the adaptation's settings are chosen).
 """
 
 from __future__ import annotations
@@ -33,8 +25,9 @@ from pathlib import Path
 import numpy as np
 
 from fem_sim.batch.chunked import generate_chunks, liver_truth
-from liverviz.report import ROOT, SOFA, SOFA_FRAME, write_report
+from liverviz.report import ROOT, SOFA, SOFA_FRAME, render, write_report
 from surrogate.patient import SYNTHETIC
+from surrogate.reports import REPORT_NAMES
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
 RESULTS = ROOT / "bench" / "results" / "patient"
@@ -42,8 +35,7 @@ MODEL = ROOT / "bench" / "results" / "scene4_real" / "run_population_basis"
 DATA = ROOT / "runs" / "data" / "scene4_livers"   # scene 4's dataset (bench/scene4_real.py)
 DESIGN_OVERRIDES = {"folds": 10, "evaluate_folds": 1}   # as bench/scene4_real.py trains it
 DESIGN_LIVERS = ["Amos-005", "LiTS-12", "LiTS-16"]
-KS = (0, 5, 10, 20, 40, 80)
-HELD = 10
+KS, HELD = (0, 5, 10, 20, 40, 80), 10   # the K asked; the simulations held out of each liver
 TRUTH_SIMS = HELD + max(KS)   # the truth scene's simulations, solved up to HELD + the K asked
 SOURCES_K = 40  # the K at which the error's sources are measured (the largest K if less)
 GOAL_MM = 0.5   # the issue's goal: this MEE within GOAL_MINUTES on two cores
@@ -53,10 +45,8 @@ BIG_PEAK_MM = 30.0   # a held-out simulation's FE peak displacement counted as a
 
 
 def truth(pred, liver: Path, a, frame: str | None = None) -> Path:
-    """The liver's FE truth with the model's boundary condition (the liver file in
-    ``frame``, predict-liver's --frame): a scene of TRUTH_SIMS simulations, the first HELD +
-    the largest K solved.
-    """
+    """The liver's FE truth with the model's boundary condition (the file in ``frame``): a
+    scene of TRUTH_SIMS simulations, the first HELD + the largest K solved."""
     from surrogate.evaluate import truth_scene
 
     d, n = a.results / liver.stem, HELD + max(a.ks)
@@ -69,10 +59,8 @@ def truth(pred, liver: Path, a, frame: str | None = None) -> Path:
 
 
 def linear(scene: Path, data: Path, record: Path, order: int = 1, green: bool = False) -> dict:
-    """``fem_sim linear`` on the truth's scene (SYNTHETIC drawn loads, ``order``, with the
-    Green's function if ``green``), as make patient runs it, once per setting: its wall
-    seconds in ``record``.
-    """
+    """``fem_sim linear`` on the truth's scene as make patient runs it, once per setting: its
+    wall seconds in ``record``."""
     from data_spec import load_scene
     from data_spec.linear_fields import linear_fields_path, read_linear_fields
 
@@ -94,10 +82,8 @@ def linear(scene: Path, data: Path, record: Path, order: int = 1, green: bool = 
 
 
 def curve(liver: Path, a) -> tuple[dict, dict]:
-    """Every K's errors on the liver's held-out simulations (``surrogate evaluate-patient``'s,
-    kept under <results>/<liver>), and where the corrected model's error is at SOURCES_K or
-    the largest K below (:func:`sources`).
-    """
+    """Every K's errors on the liver's held-out simulations (``evaluate_patient``'s), and
+    where the corrected model's error is at SOURCES_K or the largest K below."""
     from surrogate.data import load_dataset
     from surrogate.evaluate import place
     from surrogate.patient.curve import evaluate_patient
@@ -124,10 +110,8 @@ def curve(liver: Path, a) -> tuple[dict, dict]:
 
 
 def sources(pred, placement, ds, k: int) -> dict:
-    """Where the corrected model's error is on the held-out simulations of the liver's truth
-    ``ds`` at K = ``k`` (:func:`surrogate.patient_errors.error_sources`; recomputed each run:
-    seconds).
-    """
+    """Where the corrected model's error is on the held-out simulations of ``ds`` at K = k
+    (:func:`surrogate.patient_errors.error_sources`)."""
     from surrogate.patient import Teacher, fit_teacher, sample_fields, sims_samples
     from surrogate.patient.curve import held_out_split
     from surrogate.patient_errors import error_sources
@@ -142,11 +126,8 @@ def sources(pred, placement, ds, k: int) -> dict:
 
 
 def fe_seconds(data: Path, ranks: int, ks=KS, first: int = HELD) -> dict:
-    """For each K, the own solve seconds (the shards' records) of the K training simulations
-    (those after the ``first`` held out) over ``ranks`` ranks: what make patient's FE takes at
-    that K, meshing and start-up aside; at K = 0 one simulation's (make patient solves one: a
-    patient dataset is made of simulations).
-    """
+    """For each K, the own solve seconds of the K training simulations (after the ``first``
+    held out) over ``ranks`` ranks, start-up aside; at K = 0 one simulation's."""
     from data_spec import list_shards, read_shard
 
     t = [float(read_shard(p).stats.info.get("total_wall_time", np.nan))
@@ -155,12 +136,9 @@ def fe_seconds(data: Path, ranks: int, ks=KS, first: int = HELD) -> dict:
 
 
 def minutes(c: dict, k: int, start: float) -> float:
-    """Wall minutes from the liver file to the patient model at K = ``k`` on two cores, by
-    parts: placing, ``start`` seconds of FE start-up (meshing, MPI, the forms), the first
-    ``k`` simulations' solves over the ranks, the small-strain responses (``fem_sim
-    linear``, a process of its own) and the adaptation (K = 0 without the responses:
-    placing only, the population model's predictor).
-    """
+    """Wall minutes from the liver file to the patient model at K = ``k`` on two cores:
+    placing, ``start`` s of FE start-up, the K solves over the ranks, ``fem_sim linear`` and
+    the adaptation (K = 0 without the responses: placing only)."""
     p = c["points"][str(k)]
     if "adapt_seconds" not in p:
         return c["place_seconds"] / 60
@@ -169,10 +147,8 @@ def minutes(c: dict, k: int, start: float) -> float:
 
 
 def end_to_end(liver: Path, a, k: int = 40) -> dict:
-    """Wall seconds of ``make patient`` (K simulations, two ranks), run once: in all, and of
-    its steps (placing and writing the truth scene, meshing and FE, adapting), read from when
-    each step's last output was written.
-    """
+    """Wall seconds of ``make patient`` (K simulations, two ranks) in all and by step, from
+    when each step's last output was written."""
     out = RESULTS / "make_patient"
     shutil.rmtree(out, ignore_errors=True)
     t = time.time()
@@ -190,42 +166,12 @@ def end_to_end(liver: Path, a, k: int = 40) -> dict:
             "adapt": end - solved, "k": k, "liver": liver.stem}
 
 
-def sources_lines(found: list[dict]) -> list[str]:
-    """The table and the sentence of where the corrected model's error is."""
-    rows = [f"| {s['liver']} | {s['population_mm']:.3f} | {s['corrected_mm']:.3f} | "
-            f"{s['projection_floor_mm']:.3f} | {s['relative_first_step']:.2f} | "
-            f"{s['relative_last_step']:.2f} | {s['spearman_displacement']:+.2f} | "
-            f"{s['spearman_nearest_load']:+.2f} | {s['nearest_load_mm']:.0f} | "
-            f"{s['worse_than_population']} of {s['simulations']} |" for s in found]
-    ratio = [s["corrected_mm"] / s["projection_floor_mm"] for s in found]
-    gap = [abs(s["relative_first_step"] - s["relative_last_step"]) for s in found]
-    return [
-        f"Where the corrected model's error is, at K = {found[0]['k']} "
-        "(`surrogate.patient_errors`, recomputed by each run): the projection floor is the "
-        "held-out FE fields' distance to the span of the K training FE fields (within the span the "
-        "correction combines); the error relative to the mean displacement, median over the "
-        "held-out simulations, at their first (nearly linear) and last load step; Spearman's "
-        "rank correlation over the held-out simulations of their error with their mean "
-        "displacement and with the distance from their load point to the nearest training "
-        "load.", "",
-        "| liver | population MEE mm | corrected MEE mm | projection floor mm | error / "
-        "displacement, first step | last step | rank correlation with displacement | with "
-        "nearest training load | nearest training load mm | held-out simulations made worse "
-        "by the correction |", "|---|---|---|---|---|---|---|---|---|---|", *rows, "",
-        f"The corrected error is {min(ratio):.1f} to {max(ratio):.1f} times its projection "
-        "floor (where it is several times, the fields a new load needs are in the span of "
-        "the K simulations and what is missing is how to combine them for a load not among "
-        "them); the first and last load steps' relative errors differ by at most "
-        f"{max(gap):.2f} on any liver (alike: the loads' nonlinearity is not what the "
-        "correction misses).", ""]
-
-
-def _size_lines(curves: list[dict], md: Path) -> list[str]:
-    """The sentence and the picture (``md`` with .png) of the patient model's error on each
-    held-out simulation against the size of its FE field, at K = 0 and the largest K."""
+def _size(curves: list[dict], md: Path) -> dict | None:
+    """The patient model's error on each held-out simulation against the size of its FE field,
+    at K = 0 and the largest K (and their picture, ``md`` with _loads.png)."""
     have = [c for c in curves if c.get("held_out_sims", {}).get("0")]
     if not have:
-        return []
+        return None
     from scipy.stats import spearmanr
 
     def pooled(k: str, key: str) -> np.ndarray:
@@ -235,26 +181,17 @@ def _size_lines(curves: list[dict], md: Path) -> list[str]:
     err, peak = pooled("0", "mee_mm"), pooled("0", "peak_mm")
     big = peak > BIG_PEAK_MM
     kmax = max(int(k) for c in have for k in c["held_out_sims"])
-    at_max = [c for c in have if str(kmax) in c["held_out_sims"]]
     e_max, p_max = pooled(str(kmax), "mee_mm"), pooled(str(kmax), "peak_mm")
     _size_picture(have, md.with_suffix(".png").with_stem(md.stem + "_loads"), kmax)
-    per = [f"{c['liver']} {int((np.array(h['peak_mm']) > BIG_PEAK_MM).sum())} "
-           f"({np.mean(np.array(h['mee_mm'])[np.array(h['peak_mm']) <= BIG_PEAK_MM]):.3f} mm "
-           "without them)" for c in have if (h := c["held_out_sims"]["0"])
-           and np.mean(h["mee_mm"]) > GOAL_MM - 0.1]
-    return [f"The patient model's error follows the size of the load's response. Over the "
-            f"{err.size} held-out simulations of {len(have)} livers at K = 0, Spearman's rank "
-            f"correlation of a simulation's MEE with its FE field's peak displacement (last "
-            f"load step) is {spearmanr(err, peak).statistic:.2f}; the {int(big.sum())} whose "
-            f"peak passes {BIG_PEAK_MM:.0f} mm (a 0.4 N force on a thin part of the liver) have "
-            f"median MEE {np.median(err[big]):.3f} mm, the others {np.median(err[~big]):.3f} "
-            f"mm. At K = {kmax} ({len(at_max)} livers) the same split gives "
-            f"{np.median(e_max[p_max > BIG_PEAK_MM]):.3f} and "
-            f"{np.median(e_max[p_max <= BIG_PEAK_MM]):.3f} mm: more FE simulations of the "
-            "patient do not reach the large deflections of loads they did not hold."
-            + (" Such simulations among the 10 held out of the livers nearest the goal: "
-               + ", ".join(per) + "." if per else ""), "",
-            f"![error against displacement]({md.stem}_loads.png)", ""]
+    per = [(c["liver"], int((np.array(h["peak_mm"]) > BIG_PEAK_MM).sum()),
+            np.mean(np.array(h["mee_mm"])[np.array(h["peak_mm"]) <= BIG_PEAK_MM]))
+           for c in have if (h := c["held_out_sims"]["0"]) and np.mean(h["mee_mm"]) > GOAL_MM - 0.1]
+    return {"n": err.size, "livers": len(have), "rho": spearmanr(err, peak).statistic,
+            "big": int(big.sum()), "big_mee": np.median(err[big]),
+            "small_mee": np.median(err[~big]), "kmax": kmax,
+            "livers_kmax": sum(str(kmax) in c["held_out_sims"] for c in have),
+            "big_mee_kmax": np.median(e_max[p_max > BIG_PEAK_MM]),
+            "small_mee_kmax": np.median(e_max[p_max <= BIG_PEAK_MM]), "per": per}
 
 
 def _size_picture(curves: list[dict], png: Path, kmax: int) -> None:
@@ -287,41 +224,21 @@ def _size_picture(curves: list[dict], png: Path, kmax: int) -> None:
     plt.close(fig)
 
 
-def _rest_lines(curves: list[dict]) -> list[str]:
-    """The sentence on what the population's rest adds to each liver's small-strain base."""
-    p0 = [c["points"]["0"] for c in curves]
-    if not all("linear_rest" in p for p in p0):
-        return []
-    lin, rest = [p["linear"] for p in p0], [p["linear_rest"] for p in p0]
-    lower = sum(r < x for r, x in zip(rest, lin))
-    return [f"The population's rest over each liver's small-strain base (linear + rest against "
-            f"linear, no FE simulation of the liver used): median {np.median(rest):.3f} against "
-            f"{np.median(lin):.3f} mm over the livers, lower on {lower} of {len(curves)}; "
-            + ", ".join(f"{c['liver']} {r:.3f} / {x:.3f}" for c, r, x in zip(curves, rest, lin))
-            + " mm.", "", *_weight_lines(curves)]
-
-
-def _weight_lines(curves: list[dict]) -> list[str]:
-    """The sentence on the rest's weight fitted on the K simulations (linear + rest at it
-    against at weight 1, the same held-out simulations)."""
+def _weights(curves: list[dict]) -> list[dict]:
+    """The rest's weight fitted on the K simulations: linear + rest at it against at weight 1
+    on the same held-out simulations, per K."""
     ks = sorted({int(k) for c in curves for k, p in c["points"].items()
                  if isinstance(p, dict) and "linear_rest_weighted" in p})
-    if not ks:
-        return []
-    parts = []
+    out = []
     for k in ks:
         have = [c for c in curves if "linear_rest_weighted" in c["points"].get(str(k), {})]
         w = [c["points"][str(k)]["linear_rest_weighted"] for c in have]
         one = [c["points"]["0"]["linear_rest"] for c in have]
-        weights = [c["points"][str(k)]["rest_weight"] for c in have]
-        parts.append(f"K = {k}: median {np.median(w):.3f} against {np.median(one):.3f} mm, "
-                     f"lower on {sum(x < y - 1e-9 for x, y in zip(w, one))}, higher on "
-                     f"{sum(x > y + 1e-9 for x, y in zip(w, one))} of {len(have)} (weights "
-                     + ", ".join(f"{c['liver']} {v:.2f}" for c, v in zip(have, weights)) + ")")
-    return ["The rest's weight fitted on the K simulations (least squares, clipped to [0, 1]; "
-            "the linear + corrected and patient model columns use it), linear + rest at that "
-            "weight against at weight 1 on the held-out simulations: " + "; ".join(parts)
-            + ".", ""]
+        out.append({"k": k, "median": np.median(w), "one": np.median(one),
+                    "lower": sum(x < y - 1e-9 for x, y in zip(w, one)),
+                    "higher": sum(x > y + 1e-9 for x, y in zip(w, one)),
+                    "livers": [(c["liver"], c["points"][str(k)]["rest_weight"]) for c in have]})
+    return out
 
 
 def _mee(c: dict, k: int) -> float:
@@ -330,193 +247,46 @@ def _mee(c: dict, k: int) -> float:
     return c["points"][str(k)].get("patient_model", c["points"][str(k)]["population"])
 
 
-def _ks_of(c: dict, ks) -> list[int]:
-    """The K values of ``ks`` the liver has."""
-    return [k for k in ks if str(k) in c["points"]]
-
-
-def _table_rows(curves: list[dict], a, start: float | None) -> tuple[list[str], list[str]]:
-    """The table's header and rows, one per liver and K."""
-    keys = ["population", "corrected", "linear", *(["linear_rest"] if a.rest else []),
-            "linear_corrected", "patient_model", "scratch", "tuned", "tuned_corrected"]
-    n_main = len(keys) - 2
-    rows = []
-    for k in a.ks:
-        for c in (c for c in curves if str(k) in c["points"]):
-            p = c["points"][str(k)]
-            cells = [f"{p.get(key, float('nan')):.3f}" if key in p else "" for key in keys]
-            adapt = f"{sum(p['adapt_seconds'].values()):.0f}" if "adapt_seconds" in p else ""
-            tuning = p.get("tuning") or {}
-            if tuning.get("steps"):
-                cells[n_main] += f" ({tuning['steps']} steps)"
-            cells.append(f"{tuning['seconds']:.0f}" if "seconds" in tuning else "")
-            wall = "" if start is None else f"{minutes(c, k, start):.1f}"
-            rows.append(f"| {k} | {c['liver']} | {' | '.join(cells[:n_main])} | {adapt} | "
-                        f"{wall} | {' | '.join(cells[n_main:])} |")
-    head = ["| K | liver | population MEE mm | corrected MEE mm | linear MEE mm | "
-            + ("linear + rest MEE mm | " if a.rest else "") + "linear + "
-            "corrected MEE mm | patient model MEE mm | scratch MEE mm | adaptation s | minutes | "
-            "tuned MEE mm | tuned + corrected MEE mm | tuning s |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|" + ("---|" if a.rest else "")]
-    return head, rows
-
-
-def _intro(curves: list[dict], a) -> str:
-    """The paragraph naming the livers and every column."""
-    order_note = ("; at `--order 2`, as here, plus its second-order term, damped and gated: "
-                  "docs/load_expansion.md" if a.order == 2 else "")
-    names = ", ".join(c["liver"] for c in curves if c["liver"] not in FRAMES)
-    other = [c["liver"] for c in curves if c["liver"] in FRAMES]
-    model = Path(a.model).resolve().relative_to(ROOT)
-    return (
-        (f"Design livers {names}: training livers of the scene whose simulations the "
-         f"population model `{model}` was not trained on (trained "
-         "as the shipped one on the scene's dataset less them; the PCA is the scene's, which "
-         "has their shapes), to choose the adaptation's settings on" if a.design else
-         _named(names, other) + f", none seen by the population model `{model}`, its PCA "
-         "or any design choice")
-        + "; FE truth on each liver's own mesh with the model's boundary condition "
-        f"(scene 4's settings: P2 at 16 mm, one random 0.4 N force, 10 load steps); MEE on "
-        f"its first {HELD} simulations, never used to adapt (the K training simulations are the "
-        "next K). Population: the model placed as "
-        "predict-liver places it. Corrected: plus the kernel ridge correction fitted on the "
-        "K training simulations. Linear: the liver's small-strain response on its own mesh "
-        "(`fem_sim linear`: the body linearised at u = 0, one factorisation, a back-solve "
-        f"per load, scaled by the load fraction{order_note}), no nonlinear simulation "
-        "needed; linear + corrected: plus the same correction fitted on its residuals (the liver's "
-        "stiffening)."
-        + (f" Linear + rest: plus the population model of what each liver's small-strain "
-           f"base misses (`{Path(a.rest).resolve().relative_to(ROOT)}`, config "
-           "population_linear, "
-           "docs/scene4_real.md), placed as the population model; it is the base the "
-           "correction corrects and the teacher distils." if a.rest else "")
-        + " Patient model: the linear + corrected teacher (at K = 0 the linear "
-        f"responses{' and the rest' if a.rest else ''} alone) on {SYNTHETIC} drawn loads "
-        "and the K simulations, distilled into "
-        "the exported one-liver model (`make patient`). Scratch: the reduced basis trained on "
-        "the same K simulations alone. Adaptation: the seconds of correcting and distilling "
-        "(placing the liver and the FE simulations not included). Minutes: from the liver "
-        "file to the patient model on two cores, by parts: placing the liver (this run's), the FE "
-        "start-up as `make patient` spent it (below), the K simulations' own solve "
-        "seconds over the two ranks (the shards' records; at K = 0 one simulation's, which "
-        "make patient solves as well), the small-strain responses "
-        "(`fem_sim linear` with its start-up and meshing, this run's) and the adaptation. "
-        "Tuned "
-        "(`surrogate adapt --tune`, not the default): the population network fine-tuned "
-        "on the K simulations "
-        "(surrogate.tuning; how many Adam steps, chosen by cross-validation over them, in "
-        "brackets); tuned + corrected: the correction fitted on the tuned network's "
-        "out-of-fold residuals; tuning s: the seconds of both.")
-
-
-def _named(names: str, other: list[str]) -> str:
-    """The validation livers ``names`` and the other livers ``other``, as the report names
-    them."""
-    who = [f"validation livers {names}"] if names else []
-    if other:
-        who.append(f"the liver{'s' if len(other) > 1 else ''} {', '.join(other)}, of another "
-                   "source and frame, placed by the best rigid fit (predict-liver's --frame "
-                   "auto, make patient's FRAME=auto)")
-    text = " and ".join(who)
-    return text[:1].upper() + text[1:]
-
-
-def _median_line(curves: list[dict], a) -> str:
-    """The patient model's median MEE over the livers at each K."""
-    med = {k: [_mee(c, k) for c in curves if str(k) in c["points"]] for k in a.ks}
-    return ("Median over the livers (patient model; at K = 0 the small-strain responses"
-            + (" and the population's rest" if a.rest else "") + " alone, distilled): "
-            + ", ".join(f"K = {k}: {np.median(m):.3f} mm" + ("" if len(m) == len(curves) else
-                                                               f" ({len(m)} livers)")
-                        for k, m in med.items()) + ".")
-
-
-def _tuned_lines(curves: list[dict], ks) -> list[str]:
-    """The sentence on fine-tuning the population network, when it was measured."""
-    tuned = {k: [np.median([c["points"][str(k)][key] for c in curves])
-                 for key in ("corrected", "tuned", "tuned_corrected")] for k in ks
-             if k and all("tuned" in c["points"].get(str(k), {}) for c in curves)}
-    if not tuned:
-        return []
-    lower = {k: sum(c["points"][str(k)]["tuned_corrected"] < c["points"][str(k)]["corrected"]
-                    for c in curves) for k in tuned}
-    return ["Fine-tuning the population network (`--tune`), median over the livers, "
-            "corrected / tuned / tuned + corrected: "
-            + "; ".join(f"K = {k}: {a:.3f} / {b:.3f} / {c:.3f} mm" for k, (a, b, c)
-                        in tuned.items())
-            + ". Tuned + corrected below corrected on "
-            + ", ".join(f"{n} of {len(curves)} livers at K = {k}" for k, n in lower.items())
-            + f" ({sum(lower.values())} of {len(curves) * len(lower)} points).", ""]
-
-
-def _reached_lines(curves: list[dict], ks, start: float | None) -> list[str]:
-    """The least K within the goal per liver, and the FE seconds against K."""
-    def reached(c) -> str:   # the least K within GOAL_MM, its FE seconds (and minutes)
-        k = next((k for k in _ks_of(c, ks) if _mee(c, k) <= GOAL_MM), None)
-        if k is None:
-            return f"{c['liver']}: not reached"
-        wall = "" if start is None else f", {minutes(c, k, start):.1f} min"
-        return f"{c['liver']}: {k} ({c['fe_seconds'].get(str(k), 0.0):.0f} s{wall})"
-
-    return ["Least K at which the patient model is within the goal's "
-            f"{GOAL_MM} mm, with the FE seconds of those K simulations on two ranks (their "
-            "own solve seconds over the ranks; meshing, start-up and adapting aside)"
-            + ("" if start is None else " and the minutes from the liver file")
-            + ": " + ", ".join(map(reached, curves))
-            + ".", "", "FE seconds on two ranks against K (the same records): "
-            + "; ".join(f"{c['liver']}: " + ", ".join(f"{v:.0f}" for v in
-                                                       c["fe_seconds"].values())
-                        for c in curves)
-            + f" (K = {', '.join(map(str, ks))}, as far as each liver has; at K = 0 one "
-            "simulation).", ""]
-
-
-def _within_lines(curves: list[dict], ks, start: float | None) -> list[str]:
-    """The least MEE each liver's patient model reaches within the goal's minutes."""
-    if start is None:
-        return []
+def _figures(curves: list[dict], a, start: float | None) -> dict:
+    """What the report says of the curves beyond the table: medians, the rest, fine-tuning,
+    the least K within the goal and the best within its minutes."""
+    ks_of = {c["liver"]: [k for k in a.ks if str(k) in c["points"]] for c in curves}
+    p0 = [c["points"]["0"] for c in curves]
+    rest = None if not all("linear_rest" in p for p in p0) else {
+        "linear": [p["linear"] for p in p0], "rest": [p["linear_rest"] for p in p0],
+        "lower": sum(p["linear_rest"] < p["linear"] for p in p0)}
+    tuned = {k: {"medians": [np.median([c["points"][str(k)][key] for c in curves])
+                             for key in ("corrected", "tuned", "tuned_corrected")],
+                 "lower": sum(c["points"][str(k)]["tuned_corrected"] <
+                              c["points"][str(k)]["corrected"] for c in curves)}
+             for k in a.ks if k and all("tuned" in c["points"].get(str(k), {}) for c in curves)}
     best = []
     for c in curves:
-        within = [k for k in _ks_of(c, ks) if minutes(c, k, start) <= GOAL_MINUTES]
-        k = min(within, key=lambda k: _mee(c, k)) if within else None
-        best.append(f"{c['liver']}: none" if k is None else
-                    f"{c['liver']}: {_mee(c, k):.3f} mm (K = {k}, "
-                    f"{minutes(c, k, start):.1f} min)")
-    return [f"Within the goal's {GOAL_MINUTES:.0f} minutes on two cores (the minutes "
-            "column), the least MEE each liver's patient model reaches: "
-            + ", ".join(best) + ".", ""]
-
-
-def _e2e_lines(curves: list[dict], e2e: dict | None, start: float | None) -> list[str]:
-    """The sentence on make patient run end to end, checked against the minutes column."""
-    if e2e is None:
-        return []
-    first = curves[0]
-    check = ("" if start is None or first["liver"] != e2e.get("liver", first["liver"])
-             or str(e2e["k"]) not in first["points"] else
-             f" The minutes column puts the same liver at K = {e2e['k']} at "
-             f"{minutes(first, e2e['k'], start):.1f} min (its start-up is this run's, "
-             f"{start:.0f} s: meshing the liver, MPI and the forms on each rank, and the "
-             "ranks' uneven end).")
-    return [f"`make patient` run end to end at K = {e2e['k']} on {first['liver']}, "
-            f"each step a process of its own: {e2e['total'] / 60:.1f} min wall time on "
-            f"two cores: placing the liver and writing its scene {e2e['place']:.0f} s, "
-            f"meshing and {e2e['k']} FE simulations on two ranks {e2e['fe']:.0f} s, "
-            f"adapting {e2e['adapt']:.0f} s." + check, ""]
+        within = [] if start is None else [k for k in ks_of[c["liver"]]
+                                           if minutes(c, k, start) <= GOAL_MINUTES]
+        best.append(min(within, key=lambda k: _mee(c, k)) if within else None)
+    return {"medians": [(k, np.median(m), len(m)) for k in a.ks
+                        for m in [[_mee(c, k) for c in curves if str(k) in c["points"]]]],
+            "rest_vs": rest, "weights": _weights(curves) if rest else [], "tuned": tuned,
+            "reached": [next((k for k in ks_of[c["liver"]] if _mee(c, k) <= GOAL_MM), None)
+                        for c in curves], "best_within": best}
 
 
 def report(curves: list[dict], e2e: dict | None, a, found: list[dict], md: Path) -> str:
-    """docs/patient.md's body after the header."""
+    """docs/patient.md's body after the header (bench/templates/patient.md.j2)."""
     # the FE start-up (meshing, MPI, the forms, the ranks' uneven end) as make patient spent
     # it: its FE step's wall seconds less its simulations' own solves over the ranks
     start = max(0.0, e2e["fe"] - e2e["solves"]) if e2e and "solves" in e2e else None
-    head, rows = _table_rows(curves, a, start)
-    lines = [_intro(curves, a), "", *head, *rows, "", _median_line(curves, a), "",
-             *_rest_lines(curves), *_tuned_lines(curves, a.ks),
-             *_reached_lines(curves, a.ks, start), *_within_lines(curves, a.ks, start),
-             *_e2e_lines(curves, e2e, start)]
-    lines += _size_lines(curves, md) + sources_lines(found)
-    return "\n".join(lines)
+    return render(Path(__file__).parent / "templates" / "patient.md.j2", **REPORT_NAMES,
+                  **_figures(curves, a, start), curves=curves, e2e=e2e, a=a, found=found,
+                  start=start, size=_size(curves, md), md_stem=md.stem, frames=FRAMES,
+                  model=Path(a.model).resolve().relative_to(ROOT),
+                  rest=a.rest and Path(a.rest).resolve().relative_to(ROOT), held=HELD,
+                  synthetic=SYNTHETIC, goal_mm=GOAL_MM, goal_minutes=GOAL_MINUTES,
+                  big_peak=BIG_PEAK_MM, mee=_mee, minutes=minutes,
+                  ratios=[s["corrected_mm"] / s["projection_floor_mm"] for s in found],
+                  gaps=[abs(s["relative_first_step"] - s["relative_last_step"]) for s in found]
+                  ).rstrip("\n") + "\n"
 
 
 def design_model(names: list[str], a) -> Path:
