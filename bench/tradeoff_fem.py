@@ -1,32 +1,23 @@
 """FEM price list: what each speed knob costs in accuracy, measured on this software.
 
-For a liver (the embedded phantom, and the real liver ``shared/data/livers/sofa_liver.vtk``
-when present) and a 0.4 N load far from the fixed region, as a patch load (a bump traction on a
-15 mm disc: it has a converged limit under refinement) and as the paper's nodal load, each run
-changes one knob from the defaults: mesh size and element (P1, P2, and ANP: P1 with averaged
-nodal pressure, the locking-free linear tetrahedron), load steps, Newton
-tolerance, factorisation / linear solver, predictor, and K/mu (P1 against P2, with a reference
-per K/mu). Every run records seconds per simulation, Newton iterations, factorisations and peak
-memory, and its displacement at the vertices of the reference mesh (the finest P2 solution that
-fits), from which the report computes mean and max errors. For the nodal load, which has no
-converged limit at the load node, the error is measured outside a ball of radius 2 h around the
-load point and reported inside it separately. A summary gives each element's seconds to come
-within 2 % of the converged answer on each liver.
+On the embedded phantom and the SOFA liver (when present), a 0.4 N load far from the fixed
+region as a patch load (a bump traction on a 15 mm disc: it has a converged limit) and as the
+paper's nodal load (its error measured outside a ball of 2 h around the load point, inside
+apart), each run changes one knob from the defaults: mesh size and element (P1, P2, ANP), load
+steps, Newton tolerance, linear solver, predictor, K/mu. Each records seconds, Newton
+iterations, factorisations, peak memory and its displacement at the reference mesh's vertices
+(the finest P2 that fits); the summary gives each element's seconds to come within 2 %.
 
-    .venv-solver/bin/python bench/tradeoff_fem.py            # run what is missing, then report
-    .venv-solver/bin/python bench/tradeoff_fem.py --threads 2   # each run on two threads
-    .venv-solver/bin/python bench/tradeoff_fem.py --report   # report only
-    make tradeoff-fem
+    .venv-solver/bin/python bench/tradeoff_fem.py [--threads 2] [--report]   # make tradeoff-fem
 
-Resumable: each run is a subprocess (a clean peak-memory figure, and a crash costs one run);
-its result is appended to ``bench/results/tradeoff_fem/runs.jsonl`` as it finishes, and runs
-already there are skipped. The report goes to ``docs/tradeoff_fem.md`` and
-``docs/tradeoff_fem.png``.
+Resumable: each run is a subprocess appended to bench/results/tradeoff_fem/runs.jsonl as it
+ends (runs there are skipped); writes docs/tradeoff_fem.md and docs/tradeoff_fem.png.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import platform
@@ -41,6 +32,7 @@ from fem_sim.batch.knob_run import (
     M1,
     PATCH_RADIUS,
     element_of,
+    field_errors,
     key_of,
     load_point,
     run_job,
@@ -53,8 +45,7 @@ RESULTS = ROOT / "bench" / "results" / "tradeoff_fem"
 RUNS = Ledger(RESULTS / "runs.jsonl", key="key")
 DOCS = ROOT / "docs"
 
-# Mesh sizes (mm): P1 from ~1k to ~30k vertices; P2 on the coarser ones; the reference is P2
-# on the finest mesh that fits in time and memory here.
+# mesh sizes (mm): P1 ~1k to ~30k vertices, P2 on the coarser; the reference P2 at 'ref'
 SIZES = {
     "phantom": {"p1": [12.0, 8.0, 6.0, 5.0, 4.0, 3.5], "p2": [16.0, 12.0, 10.0, 8.0],
                 "anp": [16.0, 12.0, 10.0, 8.0, 6.0, 5.0],
@@ -63,9 +54,7 @@ SIZES = {
              "anp": [16.0, 12.0, 10.0, 8.0, 6.0, 5.0],
              "ref": 6.0, "default": 8.0, "kmu": []},  # K/mu sweep on the phantom only (time)
 }
-# The references are solved tighter than the default tolerance (1e-9: their keys, and so
-# their reuse across studies, carry it).
-REF_RTOL = 1e-9
+REF_RTOL = 1e-9  # the references' Newton tolerance (their keys carry it)
 TARGET = 0.02  # the accuracy the summary asks of each element: 2 % of the converged answer
 
 
@@ -89,8 +78,7 @@ def _plan_steps_and_tolerances(add, liver: str, s: dict) -> None:
     d = s["default"]
     for n in (1, 2, 5, 20):
         add(liver=liver, load="patch", h=d, steps=n, role="steps")
-    # The locking-free elements with fewer load steps: one answer sooner (a dataset wants
-    # every load fraction as a sample; a single answer does not)
+    # the locking-free elements with fewer load steps: one answer sooner
     for n in (1, 2, 5):
         for h in s["p2"]:
             add(liver=liver, load="patch", h=h, degree=2, steps=n, role="steps")
@@ -98,8 +86,7 @@ def _plan_steps_and_tolerances(add, liver: str, s: dict) -> None:
             add(liver=liver, load="patch", h=h, element="anp", steps=n, role="steps")
     for rtol in (1e-4, 1e-5, 1e-8, 1e-10):
         add(liver=liver, load="patch", h=d, rtol=rtol, role="tolerance")
-    # The locking-free element at rtol 1e-9 (the references' tolerance): what the default
-    # tolerance saves in seconds and costs in accuracy where P2 reaches 2 %
+    # P2 at the references' tolerance: what the default saves and costs where P2 reaches 2 %
     for h in s["p2"]:
         add(liver=liver, load="patch", h=h, degree=2, rtol=1e-9, role="tolerance")
         add(liver=liver, load="patch", h=h, degree=2, rtol=1e-9, steps=1, role="tolerance")
@@ -118,8 +105,7 @@ def _plan_solvers_and_kmu(add, liver: str, s: dict) -> None:
                 add(liver=liver, load="patch", h=h, degree=degree, K_over_mu=kmu, role="K/mu")
 
 
-def plan(livers: list[str]) -> list[dict]:
-    """Every run of the study, references first."""
+def plan(livers: list[str]) -> list[dict]:  # every run of the study, references first
     runs = []
 
     def add(liver, **kw):
@@ -134,16 +120,13 @@ def plan(livers: list[str]) -> list[dict]:
 
 
 def npz_name(key: str) -> Path:
-    import hashlib
-
     return RESULTS / f"{hashlib.sha1(key.encode()).hexdigest()[:16]}.npz"
 
 
 def reference_of(spec: dict) -> dict:
-    load = spec["load"]
-    return spec_of(spec["liver"], load=load, h=SIZES[spec["liver"]]["ref"], degree=2,
-                   K_over_mu=spec["K_over_mu"] if load == "patch" else 200.0, rtol=REF_RTOL,
-                   role="reference")
+    return spec_of(spec["liver"], load=spec["load"], h=SIZES[spec["liver"]]["ref"], degree=2,
+                   K_over_mu=spec["K_over_mu"] if spec["load"] == "patch" else 200.0,
+                   rtol=REF_RTOL, role="reference")
 
 
 def study(livers: list[str], timeout: float, loads=("patch", "nodal"), threads: int = 1) -> None:
@@ -174,20 +157,8 @@ def study(livers: list[str], timeout: float, loads=("patch", "nodal"), threads: 
         RUNS.add({"key": key, "spec": spec, **record})
 
 
-# ----------------------------------------------------------------------------------------------
-# The report
-# ----------------------------------------------------------------------------------------------
-def signed_error(u: np.ndarray, u_ref: np.ndarray) -> float:
-    """The component of u - u_ref along u_ref over |u_ref|^2 (-0.1: the field is 10 % too
-    stiff overall; locking shows as a large negative value). The mean error is dominated by
-    the many small far-field displacements; this says which way and how far the field is off.
-    """
-    return float(np.sum((u - u_ref) * u_ref) / np.sum(u_ref * u_ref))
-
-
 def errors(spec: dict, rec: dict, h: float, res: dict) -> dict | None:
-    """Mean/max displacement error (mm and relative to max |u_ref|) against the reference
-    (``res``: the study's records, :func:`results`)."""
+    """The run's errors against its reference (``res``: the study's records)."""
     ref = res.get(key_of(reference_of(spec)))
     if ref is None or rec.get("status") != "ok" or not npz_name(key_of(
             reference_of(spec))).exists():
@@ -195,27 +166,15 @@ def errors(spec: dict, rec: dict, h: float, res: dict) -> dict | None:
     with np.load(npz_name(key_of(reference_of(spec)))) as z:
         u_ref, pts = z["u_nodes"], z["nodes"]
     with np.load(npz_name(rec["key"])) as z:
-        u = z["u"]
-    if spec["role"] == "reference":
-        u = u_ref
-    e = np.linalg.norm(u - u_ref, axis=1)
-    scale = np.abs(u_ref).max()
-    out = {}
-    if spec["load"] == "nodal":
-        p = np.asarray(json.loads((RESULTS / f"load_point_{spec['liver']}.json").read_text()))
-        near = np.linalg.norm(pts - p, axis=1) <= 2 * h
-        out["inside_mean"] = float(e[near].mean()) if near.any() else float("nan")
-        out["inside_max"] = float(e[near].max()) if near.any() else float("nan")
-        e, u, u_ref = e[~near], u[~near], u_ref[~near]
-    out.update(mean=float(e.mean()), max=float(e.max()), rel_mean=float(e.mean() / scale),
-               rel_max=float(e.max() / scale), u_ref_max=float(scale),
-               signed=signed_error(u, u_ref))  # over the same points
-    return out
+        u = u_ref if spec["role"] == "reference" else z["u"]
+    point = None if spec["load"] != "nodal" else json.loads(
+        (RESULTS / f"load_point_{spec['liver']}.json").read_text())
+    return field_errors(u, u_ref, pts, point, 2 * h)
 
 
 def knob_cost(spec: dict, rec: dict, res: dict) -> float | None:
-    """Largest difference (relative to max |u_ref|) between this run and the default run on
-    the same liver, load, mesh, element and K/mu: what the knob alone costs."""
+    """Largest difference (relative to max |u_ref|) from the default run on the same problem
+    and mesh: what the knob alone costs."""
     if spec["role"] in ("reference", "mesh", "K/mu") or rec.get("status") != "ok":
         return None
     base = spec_of(spec["liver"], load=spec["load"], h=spec["h"], role="mesh",
@@ -229,14 +188,12 @@ def knob_cost(spec: dict, rec: dict, res: dict) -> float | None:
         return float(np.abs(zr["u"] - zb["u"]).max() / np.abs(zref["u_nodes"]).max())
 
 
-def threads_note(rows: list) -> str:
-    """The thread counts the runs had (records before ``--threads`` ran on one)."""
+def threads_note(rows: list) -> str:  # the runs' thread counts (older records: one)
     counts = sorted({rec.get("threads", 1) for _, rec, _ in rows})
     return " or ".join(f"{n} thread{'s' if n > 1 else ''}" for n in counts) or "-"
 
 
-def later_cell(rec: dict, digits: int) -> str:
-    """Seconds of the run's later simulation on the same problem ('-' if none was run)."""
+def later_cell(rec: dict, digits: int) -> str:  # a later simulation's seconds ('-': none)
     if "seconds_later" not in rec:
         return "-"
     if rec.get("status_later") != "ok":
@@ -245,10 +202,8 @@ def later_cell(rec: dict, digits: int) -> str:
 
 
 def summary(rows: list) -> list[str]:
-    """The seconds each element needs to come within TARGET of the converged answer (patch
-    load, K/mu = 200, the mesh, load-step and tolerance rows), by the mean and by the max
-    error: the cheapest run that does, or the most accurate run when none does; with the
-    cheapest at the default Newton tolerance beside it when another one wins."""
+    """Each element's cheapest run within TARGET of the converged answer (by the mean and the
+    max error; the most accurate when none is), and the cheapest at the default tolerance."""
     out = ["## Seconds to reach 2 % of the converged answer", "",
            f"Patch load, K/mu = 200, the mesh, load-step and tolerance rows below. For each "
            f"element the cheapest run whose error is within {TARGET:.0%} of the reference's "
@@ -291,8 +246,7 @@ def summary(rows: list) -> list[str]:
     return out + [""]
 
 
-def _rows(res: dict) -> list:
-    """(spec, record, errors) of every run of the current plan, in the report's order."""
+def _rows(res: dict) -> list:  # (spec, record, errors) of the plan's runs, in order
     planned = {key_of(s) for s in plan(list(SIZES))}  # records of an earlier plan: not shown
     rows = []
     for rec in res.values():
@@ -342,8 +296,7 @@ def _intro(rows: list) -> list[str]:
 
 
 def _line(spec: dict, rec: dict, err, res: dict) -> str:
-    solver = (spec["linear_solver"] if spec["linear_solver"] != "direct"
-              else spec["factorization"])
+    solver = spec["linear_solver"] if spec["linear_solver"] != "direct" else spec["factorization"]
     base = (f"| {spec['liver']} | {spec['load']} | {spec['role']} | {element_of(spec)} | "
             f"{spec['h']:g} | {rec.get('n_vertices', '-')} | {spec['K_over_mu']:g} | "
             f"{spec['steps']} | {spec['rtol']:.0e} | {solver} | {spec['predictor']} | ")
@@ -393,11 +346,9 @@ def _plot_liver(ax, liver: str, rows: list) -> None:
     handles, labels = ax.get_legend_handles_labels()
     uniq = dict(zip(labels, handles))
     ax.legend(uniq.values(), uniq.keys(), fontsize=7)
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("seconds per simulation (1 rank)")
-    ax.set_ylabel("mean displacement error / max |u_ref|")
-    ax.set_title(f"{liver}: patch load, K/mu = 200 (labels: h in mm)")
+    ax.set(xscale="log", yscale="log", xlabel="seconds per simulation (1 rank)",
+           ylabel="mean displacement error / max |u_ref|",
+           title=f"{liver}: patch load, K/mu = 200 (labels: h in mm)")
     ax.grid(True, which="both", alpha=0.3)
 
 

@@ -84,6 +84,34 @@ def material(k_over_mu: float):
     return OgdenMaterial((C1,), (M1,), k_over_mu * C1 / 2)
 
 
+def signed_error(u: np.ndarray, u_ref: np.ndarray) -> float:
+    """The component of u - u_ref along u_ref over |u_ref|^2 (-0.1: the field is 10 % too
+    stiff overall; locking shows as a large negative value). The mean error is dominated by
+    the many small far-field displacements; this says which way and how far the field is off.
+    """
+    return float(np.sum((u - u_ref) * u_ref) / np.sum(u_ref * u_ref))
+
+
+def field_errors(u: np.ndarray, u_ref: np.ndarray, nodes: np.ndarray,
+                 load_point: np.ndarray | None = None, radius: float = 0.0) -> dict:
+    """Mean and max of |u - u_ref| over ``nodes`` (mm, and relative to max |u_ref|) and the
+    signed error; with ``load_point`` (a nodal load, no converged limit there) over the nodes
+    farther than ``radius`` from it, the error inside reported apart (inside_mean, _max).
+    """
+    e = np.linalg.norm(u - u_ref, axis=1)
+    scale = np.abs(u_ref).max()
+    out = {}
+    if load_point is not None:
+        near = np.linalg.norm(nodes - np.asarray(load_point), axis=1) <= radius
+        out["inside_mean"] = float(e[near].mean()) if near.any() else float("nan")
+        out["inside_max"] = float(e[near].max()) if near.any() else float("nan")
+        e, u, u_ref = e[~near], u[~near], u_ref[~near]
+    out.update(mean=float(e.mean()), max=float(e.max()), rel_mean=float(e.mean() / scale),
+               rel_max=float(e.max() / scale), u_ref_max=float(scale),
+               signed=signed_error(u, u_ref))  # over the same points
+    return out
+
+
 def spec_of(liver: str, **kw) -> dict:
     """A run of the study: the defaults, the liver's own keys, then ``kw``."""
     return {**DEFAULTS, **LIVER_KEYS.get(liver, {}), "liver": liver, **kw}
