@@ -301,6 +301,7 @@ tradeoff-fem: setup-solver
 tradeoff-surrogate: setup
 	$(SPY) bench/budget_fem.py
 	$(TPY) bench/tradeoff_surrogate.py --np $(NP)
+	$(TPY) bench/budget_fem.py --errors
 
 # Real-time designs side by side (long, resumable): scene 1 at the paper's size (400
 # simulations, make table4's scene-1 dataset; generate skips what is done), each design trained

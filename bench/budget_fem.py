@@ -1,14 +1,16 @@
-"""FE half of the error budget: scene-1 load cases solved on every budget mesh and on the reference.
+"""The error budget: scene-1 load cases solved on every budget mesh and on the reference (FE,
+solver environment), then, with ``--errors`` (trainer environment, after
+``bench/tradeoff_surrogate.py`` trained a network on each mesh's dataset), the FE error of each
+mesh, the network's error against its own mesh and the total a user gets: the section
+``error-budget`` of docs/tradeoff_surrogate.md (prose: bench/templates/error_budget.md.j2) and
+docs/error_budget.png.
 
-A few load cases are drawn exactly as scene 1 draws them (a random eligible surface node, a
-uniform random direction, 0.4 N; ``make_case`` at indices no dataset uses) on the coarsest mesh;
-every other mesh loads the eligible node nearest to the same point. Each case is solved on each
-mesh of ``MESHES`` and on the reference (P2 at 6 mm, the reference of ``tradeoff_fem.py``), and the
-reference is evaluated at the vertices of every budget mesh, so that
-``bench/tradeoff_surrogate.py`` (trainer environment) can compare, at a mesh's own nodes, the FE
-answer of that mesh, the surrogate trained on it and the reference.
+A few load cases are drawn exactly as scene 1 draws them (``make_case`` at indices no dataset
+uses) on the coarsest mesh; every other mesh loads the eligible node nearest to the same point.
+The reference (P2 at 6 mm, the price list's) is evaluated at the vertices of every budget mesh.
 
-    .venv-solver/bin/python bench/budget_fem.py   # resumable: bench/results/budget_fem
+    .venv-solver/bin/python bench/budget_fem.py            # resumable: bench/results/budget_fem
+    .venv-train/bin/python bench/budget_fem.py --errors    # make tradeoff-surrogate runs both
 """
 
 from __future__ import annotations
@@ -16,6 +18,9 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
+
+import numpy as np
 
 from fem_sim.batch.knob_run import (
     BUDGET_CASES,
@@ -24,14 +29,20 @@ from fem_sim.batch.knob_run import (
     BUDGET_RESULTS,
     BUDGET_RUNS,
     DEFAULTS,
+    budget_case_errors,
     budget_npz,
+    budget_summary,
     mesh,
+    mesh_name,
     run_job,
 )
-from liverviz.report import ROOT
+from liverviz.ledger import Ledger
+from liverviz.report import ROOT, put_section, render
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene1_base.toml"
 FIRST_INDEX = 100_000      # case indices of the budget: no dataset of the study reaches them
+SURROGATE = ROOT / "bench" / "results" / "tradeoff_surrogate"   # its datasets and networks
+DOCS = ROOT / "docs"
 
 
 def cases() -> list[dict]:
@@ -62,10 +73,114 @@ def run(case: dict, k: int, degree: int, h: float, timeout: float) -> dict:
     return run_job(job, timeout)
 
 
+EXCLUDE = 32.0  # mm: errors are measured outside this ball around the load point (2 x the
+                # coarsest h; a point load has no converged limit next to the load), on every mesh
+
+
+def simulation_seconds(name: str, n: int) -> float:
+    """Solver seconds of ``n`` simulations of dataset ``name`` (the mean over its shards; one
+    rank each: CPU-seconds)."""
+    from data_spec import list_shards, read_shard
+
+    per = [read_shard(p).stats.wall_time.sum() for p in list_shards(SURROGATE / "data" / name)]
+    return float(np.mean(per) * n)
+
+
+def _case_errors(k, case, degree, h, ds, predict, fem) -> dict | None:
+    """Load case k's node errors on mesh (degree, h) (None: a solve is missing)."""
+    rec = fem.get((k, degree, h))
+    if rec is None or rec.get("status") != "ok":
+        return None
+    e = budget_case_errors(k, case["point"], degree, h,
+                           predict(np.asarray([case["force"]]), [rec["load_node"]]), fem, EXCLUDE)
+    if e is not None and (e["nodes"].shape != ds.points[0].shape
+                          or not np.allclose(e["nodes"], ds.points[0])):
+        raise RuntimeError(f"{mesh_name(degree, h)}: the budget's mesh is not the dataset's")
+    return e
+
+
+def budget() -> list[dict]:
+    """Per budget mesh: FE error against the reference, surrogate error against its own FE
+    answer, and the surrogate's error against the reference (the sum a user gets), on the
+    budget's load cases at full load, at the mesh's vertices outside EXCLUDE of the load."""
+    from surrogate import load_predictor
+    from surrogate.data import load_dataset
+
+    fem = BUDGET_RUNS.records()
+    if not (BUDGET_RESULTS / "cases.json").exists():
+        return []
+    cases = json.loads((BUDGET_RESULTS / "cases.json").read_text())
+    runs = Ledger(SURROGATE / "runs.jsonl", key="id").records().values()
+    trained = {r["spec"]["data"]: r for r in runs if "error budget" in
+               [r["spec"]["group"], *r["spec"].get("also", [])]}
+    rows = []
+    for degree, h in sorted(BUDGET_MESHES, key=lambda m: (m[0], -m[1])):  # P1 then P2, coarse first
+        name = mesh_name(degree, h)
+        if name not in trained:
+            continue
+        ds = load_dataset(SURROGATE / "data" / name, stream=False)
+        n = trained[name]["spec"]["n_train"]
+        predict = load_predictor(SURROGATE / "models" / trained[name]["id"])
+        per = [e for k, case in enumerate(cases)
+               if (e := _case_errors(k, case, degree, h, ds, predict, fem)) is not None]
+        if not per:
+            continue
+        rows.append({"mesh": name, "degree": degree, "h": h, "vertices": ds.points[0].shape[0],
+                     **budget_summary(per),
+                     "sim_hours": simulation_seconds(name, n) / 3600,
+                     "train_hours": trained[name]["training_seconds"] / 3600,
+                     "sims": n})
+    return rows
+
+
+def _plot_budget(b, plt) -> None:
+    fig, ax = plt.subplots(figsize=(9, 5))
+    if b:
+        x = np.arange(len(b))
+        w = 0.27
+        ax.bar(x - w, [r["fe"] for r in b], w, label="FE error (mesh vs reference)")
+        ax.bar(x, [r["surrogate"] for r in b], w, label="surrogate error (vs its own FE data)")
+        ax.bar(x + w, [r["total"] for r in b], w, label="total (surrogate vs reference)")
+        ax.scatter(x + w, [r["fe"] + r["surrogate"] for r in b], marker="_", s=400,
+                   color="k", label="FE + surrogate (upper bound)", zorder=3)
+        ax.set_xticks(x, [f"P{r['degree']} {r['h']:g} mm\n{r['vertices']} nodes\n"
+                          f"{r['sim_hours'] + r['train_hours']:.2f} h" for r in b])
+        ax.set_yscale("log")
+        ax.set_ylabel(f"mean error, mm (outside {EXCLUDE:g} mm of the load)")
+        ax.set_title("error budget, scene 1 on the phantom; under each mesh: cost "
+                     "(simulation CPU-h + training h)", fontsize=10)
+        ax.legend(fontsize=8)
+        ax.grid(True, axis="y", which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(DOCS / "error_budget.png", dpi=110)
+    plt.close(fig)
+
+
+def errors() -> None:
+    """The error budget's section of docs/tradeoff_surrogate.md and docs/error_budget.png."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    b = budget()
+    put_section(DOCS / "tradeoff_surrogate.md", "error-budget", render(
+        Path(__file__).parent / "templates" / "error_budget.md.j2", b=b, exclude=EXCLUDE,
+        n_budget=b[0]["sims"] if b else "n/a", budget_cases=BUDGET_CASES))
+    _plot_budget(b, plt)
+    print(f"wrote the error budget into {DOCS / 'tradeoff_surrogate.md'} and "
+          f"{DOCS / 'error_budget.png'}")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per run")
+    ap.add_argument("--errors", action="store_true", help="the budget's errors and report "
+                    "(trainer environment), after bench/tradeoff_surrogate.py")
     a = ap.parse_args()
+    if a.errors:
+        errors()
+        return 0
     from tqdm import tqdm
 
     BUDGET_RESULTS.mkdir(parents=True, exist_ok=True)

@@ -1,38 +1,22 @@
-"""Surrogate price list and the end-to-end error budget, measured on this software.
+"""Surrogate price list, measured on this software (docs/tradeoff_surrogate.md; its prose:
+bench/templates/tradeoff_surrogate.md.j2).
 
-On scene 1 (one liver, one random 0.4 N nodal force, 10 load steps) the study trains the node-wise
-MLP with one knob changed at a time and measures it on the same held-out simulations:
-
-- learning curve: 25, 50, 100, 200, 400 training simulations (the paper's scene-1 network);
-- network size: the paper's architectures (scene 1; scenes 2-3; scene 4) and smaller ones;
-- sampled node fraction per epoch;
-- inference precision: float32, bfloat16, float16 (the same trained weights, cast);
-- all nodes against the surface nodes only (a model trained on all nodes, evaluated on the
-  surface; and a model trained on surface nodes only).
-
-Each row gives MEE, the 95th percentile of the Euclidean error, % of nodes under 1 mm, training
-seconds and the inference latency of the whole liver (median of repeated jitted calls).
-
-The error budget (``docs/error_budget.png``): for each mesh (P1 and P2 at several sizes) a dataset
-of the same scene on that mesh, a surrogate trained on it, and, for a few held-out load cases,
-the FE error of that mesh against the fine reference of ``bench/budget_fem.py`` (P2 at 6 mm),
-the surrogate's error against its own FE data, and the surrogate's error against the reference:
-the error a user of the trained surrogate actually gets. With the cost of each: simulation
-CPU-hours for the dataset plus training hours.
+On scene 1 the node-wise MLP is trained with one knob changed at a time (training simulations,
+network size, sampled node fraction, inference precision, all nodes against the surface only)
+and measured on the same held-out simulations: MEE, its 95th percentile, % under 1 mm, training
+seconds and latency. It also trains the error budget's network on each budget mesh's dataset
+(``bench/budget_fem.py --errors`` then writes the budget's section of the report).
 
     make tradeoff-surrogate       # budget_fem.py (solver env), then this script (trainer env)
     .venv-train/bin/python bench/tradeoff_surrogate.py --report   # report only
 
-Resumable: datasets are generated with ``fem_sim generate`` (which skips finished shards) into
-``bench/results/tradeoff_surrogate/data``; every training appends one line to
-``runs.jsonl`` and finished runs are skipped.
+Resumable: datasets are generated with ``fem_sim generate`` (finished shards skipped); every
+training appends one line to bench/results/tradeoff_surrogate/runs.jsonl, done ones skipped.
 """
 
 from __future__ import annotations
 
 import argparse
-import functools
-import json
 import os
 import platform
 import subprocess
@@ -42,18 +26,14 @@ from pathlib import Path
 
 import numpy as np
 
+from data_spec.scene_writer import relocated_scene, scene_toml
 from fem_sim.batch.chunked import mpirun_env
 from fem_sim.batch.knob_run import (
-    BUDGET_CASES,
     BUDGET_MESHES,
-    BUDGET_REFERENCE,
-    BUDGET_RESULTS,
-    BUDGET_RUNS,
-    budget_npz,
     mesh_name,
 )
 from liverviz.ledger import Ledger
-from liverviz.report import ROOT, header
+from liverviz.report import ROOT, header, render, sections
 
 RESULTS = ROOT / "bench" / "results" / "tradeoff_surrogate"
 DOCS = ROOT / "docs"
@@ -74,25 +54,11 @@ LATENCY_CALLS = 200
 
 
 def scene_text(degree: int, h: float, n: int) -> str:
-    """Scene 1 with another element, mesh size and number of simulations (same seed, load
-    draws and material)."""
-    out = []
-    section = None
-    for line in BASE_SCENE.read_text().splitlines():
-        s = line.strip()
-        if s.startswith("["):
-            section = s
-        key = s.split("=")[0].strip() if "=" in s and not s.startswith("#") else None
-        if section == "[scene]" and key == "name":
-            line = f'name = "tradeoff_{mesh_name(degree, h)}"'
-        elif section == "[scene]" and key == "n_simulations":
-            line = f"n_simulations = {n}"
-        elif section == "[geometry]" and key == "mesh_size":
-            line = f"mesh_size = {h!r}"
-        elif section == "[solver]" and key == "degree":
-            line = f"degree = {degree}"
-        out.append(line)
-    return "\n".join(out) + "\n"
+    """Scene 1 with another element, mesh size and number of simulations."""
+    d = relocated_scene(BASE_SCENE)
+    d["scene"].update(name=f"tradeoff_{mesh_name(degree, h)}", n_simulations=n)
+    d["geometry"]["mesh_size"], d["solver"]["degree"] = h, degree
+    return scene_toml(d)
 
 
 def datasets() -> dict[str, tuple[Path, Path]]:
@@ -126,9 +92,6 @@ def generate(nranks: int) -> None:
                         str(scene), "--out", str(out)], check=True, env=env)
 
 
-# ----------------------------------------------------------------------------------------------
-# The trainings
-# ----------------------------------------------------------------------------------------------
 def plan() -> list[dict]:
     """Every training of the study; each changes one knob from the paper's scene-1 network."""
     runs = []
@@ -236,8 +199,7 @@ def train_one(spec: dict) -> dict:
     return rec
 
 
-def latency(model_dir: Path, nodes, dtype: str, calls: int) -> float:
-    """Median seconds of one jitted call for one load case, after warm-up."""
+def latency(model_dir: Path, nodes, dtype: str, calls: int) -> float:  # median s of a call
     from surrogate import load_predictor
     from surrogate.latency import latency as timed_calls
 
@@ -280,104 +242,7 @@ def latencies() -> None:
         LATENCIES.add(out)
 
 
-# ----------------------------------------------------------------------------------------------
-# The error budget
-# ----------------------------------------------------------------------------------------------
-EXCLUDE = 32.0  # mm: errors are measured outside this ball around the load point (2 x the
-                # coarsest h; a point load has no converged limit next to the load), on every mesh
-
-
-def simulation_seconds(name: str, n: int) -> float:
-    """Solver seconds of ``n`` simulations of dataset ``name`` (the mean over its shards; one
-    rank each: CPU-seconds)."""
-    from data_spec import list_shards, read_shard
-
-    per = [read_shard(p).stats.wall_time.sum() for p in list_shards(RESULTS / "data" / name)]
-    return float(np.mean(per) * n)
-
-
-@functools.cache
-def _ref_offsets(k: int) -> dict:
-    """Where each mesh's vertices start in case k's reference values (MESHES order)."""
-    sizes = []
-    for d2, h2 in BUDGET_MESHES:
-        with np.load(budget_npz(k, d2, h2)) as z:
-            sizes.append(z["nodes"].shape[0])
-    return dict(zip(BUDGET_MESHES, np.cumsum([0, *sizes[:-1]])))
-
-
-def _case_errors(k, case, degree, h, ds, predict, fem) -> dict | None:
-    """FE, surrogate and total node errors of load case k on mesh (degree, h); None when a
-    solve is missing."""
-    ref_rec, rec = fem.get((k, *BUDGET_REFERENCE)), fem.get((k, degree, h))
-    if not (ref_rec and rec and ref_rec["status"] == "ok" and rec["status"] == "ok"):
-        return None
-    with np.load(budget_npz(k, degree, h)) as z:
-        u, pts = z["u_nodes"], z["nodes"]
-    if pts.shape != ds.points[0].shape or not np.allclose(pts, ds.points[0]):
-        raise RuntimeError(f"{mesh_name(degree, h)}: the budget's mesh is not the dataset's")
-    start = _ref_offsets(k)[(degree, h)]
-    with np.load(budget_npz(k, *BUDGET_REFERENCE)) as z:
-        u_ref = z["u"][start:start + pts.shape[0]]
-        scale = np.abs(z["u_nodes"]).max()
-        # Each mesh loads its node nearest to the case's point: how far apart the loaded
-        # points of this mesh and of the reference are.
-        offset = np.linalg.norm(pts[rec["load_node"]] - z["nodes"][ref_rec["load_node"]])
-    s = predict(np.asarray([case["force"]]), [rec["load_node"]])
-    far = np.linalg.norm(pts - np.asarray(case["point"]), axis=1) > EXCLUDE
-    fe, sur, tot = (np.linalg.norm(a - b, axis=1) for a, b in
-                    ((u, u_ref), (s, u), (s, u_ref)))
-    return {"fe": fe[far], "sur": sur[far], "tot": tot[far], "fe_all": fe, "tot_all": tot,
-            "scale": scale, "offset": offset}
-
-
-def budget() -> list[dict]:
-    """Per budget mesh: FE error against the reference, surrogate error against its own FE
-    answer, and the surrogate's error against the reference (the sum a user gets), on the
-    budget's load cases at full load, at the mesh's vertices outside EXCLUDE of the load."""
-    from surrogate import load_predictor
-
-    fem = BUDGET_RUNS.records()
-    if not (BUDGET_RESULTS / "cases.json").exists():
-        return []
-    cases = json.loads((BUDGET_RESULTS / "cases.json").read_text())
-    trained = {r["spec"]["data"]: r for r in RUNS.records().values()
-               if r["spec"]["group"] == "error budget" or "error budget" in
-               r["spec"].get("also", [])}
-    rows = []
-    for degree, h in sorted(BUDGET_MESHES, key=lambda m: (m[0], -m[1])):  # P1 then P2, coarse first
-        name = mesh_name(degree, h)
-        if name not in trained:
-            continue
-        ds, _ = dataset(name)
-        predict = load_predictor(RESULTS / "models" / trained[name]["id"])
-        per = [e for k, case in enumerate(cases)
-               if (e := _case_errors(k, case, degree, h, ds, predict, fem)) is not None]
-        if not per:
-            continue
-
-        def cat(key, per=per):
-            return np.concatenate([e[key] for e in per])
-
-        rows.append({"mesh": name, "degree": degree, "h": h, "vertices": ds.points[0].shape[0],
-                     "cases": len(per), "fe": float(cat("fe").mean()),
-                     "surrogate": float(cat("sur").mean()), "total": float(cat("tot").mean()),
-                     "fe_p95": float(np.percentile(cat("fe"), 95)),
-                     "total_p95": float(np.percentile(cat("tot"), 95)),
-                     "fe_all": float(cat("fe_all").mean()),
-                     "total_all": float(cat("tot_all").mean()),
-                     "u_ref_max": float(np.mean([e["scale"] for e in per])),
-                     "offset": float(np.mean([e["offset"] for e in per])),
-                     "sim_hours": simulation_seconds(name, N_BUDGET) / 3600,
-                     "train_hours": trained[name]["training_seconds"] / 3600,
-                     "sims": N_BUDGET})
-    return rows
-
-
-# ----------------------------------------------------------------------------------------------
-# The report
-# ----------------------------------------------------------------------------------------------
-def n_params(hidden: list[int], dim: int = 13) -> int:
+def n_params(hidden, dim: int = 13) -> int:
     widths = [dim, *hidden, 3]
     return sum(a * b + b for a, b in zip(widths[:-1], widths[1:]))
 
@@ -386,132 +251,7 @@ def _groups(r) -> list:
     return [r["spec"]["group"], *r["spec"].get("also", [])]
 
 
-def _m(r, key="all") -> str:
-    x = r[key]
-    return f"{x['mee']:.3f} | {x['ee_p95']:.3f} | {x['pct_ee_lt_1mm']:.1f}"
-
-
-def _ms(lat: dict, r, key) -> str:
-    v = lat.get(r["id"], {}).get(key)
-    return f"{1e3 * v:.2f}" if v is not None else "-"
-
-
 NAME_OF = {tuple(v): k for k, v in NETS.items()}
-
-
-def _intro(ds_note: str) -> list[str]:
-    return [*header("Surrogate price list and the error budget").rstrip().split("\n"),
-            "The FE error budget comes first from `bench/budget_fem.py` (`make "
-            "tradeoff-surrogate` runs both).", "",
-            f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-            "JAX on the CPU. Training seconds are single runs while another training or "
-            "simulation shared the 2 cores (expect 10-30 % noise); latencies are medians of "
-            f"{LATENCY_CALLS} jitted calls for one load case, measured with nothing else "
-            "running.", "",
-            f"Data: scene 1 (`data_spec/scenes/scene1_base.toml`: the phantom liver, P2 on a "
-            f"16 mm mesh, one random 0.4 N nodal force, 10 load steps): {ds_note}. Every "
-            "network is trained on the first N simulations (10 % of them held out for early "
-            f"stopping) and measured on the same {N_TEST} held-out simulations (all their load "
-            "steps), through the exported predictor. Unless the row changes it: the paper's "
-            f"scene-1 network {tuple(PAPER1)}, {N_KNOB} training simulations, node fraction "
-            f"0.25, float32, at most {EPOCHS} epochs. MEE: mean Euclidean error (mm); p95: its "
-            "95th percentile; < 1 mm: % of node errors under 1 mm; skill: MEE / MEE of the "
-            "naive mean-displacement predictor (paper, scene 1: 0.078).", ""]
-
-
-def _curve_and_networks(rows, lat, ds_note) -> tuple[list[str], list, list]:
-    L = ["## Training simulations (learning curve)", "",
-         "| training sims | MEE mm | p95 mm | < 1 mm % | skill | training s | epochs |",
-         "|---|---|---|---|---|---|---|"]
-    lc = sorted((r for r in rows if "training simulations" in _groups(r)),
-                key=lambda r: r["spec"]["n_train"])
-    for r in lc:
-        L.append(f"| {r['spec']['n_train']} | {_m(r)} | {r['all']['mee'] / r['naive_mee']:.3f} "
-                 f"| {r['training_seconds']:.0f} | {r['epochs']} |")
-    L += ["", "## Network size", "",
-          f"Latency: one load case, all {ds_note.split(' ')[0] if ds_note else ''} nodes / "
-          "surface nodes only, float32.", "",
-          "| network | hidden | parameters | MEE mm | p95 mm | < 1 mm % | training s | "
-          "latency all ms | latency surface ms |", "|---|---|---|---|---|---|---|---|---|"]
-    nets = sorted((r for r in rows if "network" in _groups(r)),
-                  key=lambda r: -n_params(r["spec"]["hidden"]))
-    for r in nets:
-        hid = r["spec"]["hidden"]
-        L.append(f"| {NAME_OF.get(tuple(hid), '')} | {tuple(hid)} | {n_params(hid):,} | "
-                 f"{_m(r)} | {r['training_seconds']:.0f} | {_ms(lat, r, 'all_float32')} | "
-                 f"{_ms(lat, r, 'surface_float32')} |")
-    return L, lc, nets
-
-
-def _fraction_and_precision(rows, lat) -> list[str]:
-    L = ["", "## Sampled node fraction per epoch", "",
-         "| node fraction | MEE mm | p95 mm | < 1 mm % | training s | examples seen |",
-         "|---|---|---|---|---|---|"]
-    for r in sorted((r for r in rows if "node fraction" in _groups(r)),
-                    key=lambda r: r["spec"]["node_fraction"]):
-        L.append(f"| {r['spec']['node_fraction']:g} | {_m(r)} | {r['training_seconds']:.0f} | "
-                 f"{r['examples_seen']:,} |")
-    L += ["", "## Inference precision", "",
-          "The float32-trained weights cast to 16 bits (`load_predictor(dir, dtype=...)`). "
-          "XLA on this CPU has no native 16-bit matrix units: the latency column says whether "
-          "it pays here.", "",
-          "| network | training sims | precision | MEE mm | p95 mm | < 1 mm % | MEE change | "
-          "latency all ms | latency surface ms |", "|---|---|---|---|---|---|---|---|---|"]
-    for r in sorted((r for r in rows if "all_float16" in r and r["spec"]["nodes"] == "all"),
-                    key=lambda r: (-n_params(r["spec"]["hidden"]), -r["spec"]["n_train"])):
-        hid = tuple(r["spec"]["hidden"])
-        for dt in ("float32", "bfloat16", "float16"):
-            key = "all" if dt == "float32" else f"all_{dt}"
-            change = r[key]["mee"] / r["all"]["mee"] - 1
-            L.append(f"| {NAME_OF.get(hid, hid)} | {r['spec']['n_train']} | {dt} | "
-                     f"{_m(r, key)} | {change:+.1%} | {_ms(lat, r, f'all_{dt}')} | "
-                     f"{_ms(lat, r, f'surface_{dt}')} |")
-    return L
-
-
-def _surface(rows, lat) -> list[str]:
-    L = ["", "## All nodes against the surface only", "",
-         "The paper notes that an application needs the visible surface only. A model "
-         "trained on all nodes and evaluated on the surface nodes, against one trained on "
-         "the surface nodes only.", "",
-         "| trained on | training sims | evaluated on | MEE mm | p95 mm | < 1 mm % | "
-         "training s | latency ms |", "|---|---|---|---|---|---|---|---|"]
-    for r in sorted((r for r in rows if r["spec"]["n_train"] == N_LEARN and
-                     r["spec"]["hidden"] == PAPER1), key=lambda r: r["spec"]["nodes"]):
-        trained_on = r["spec"]["nodes"]
-        for where in (["all", "surface"] if trained_on == "all" else ["surface"]):
-            L.append(f"| {trained_on} nodes | {N_LEARN} | {where} nodes | {_m(r, where)} | "
-                     f"{r['training_seconds']:.0f} | {_ms(lat, r, where + '_float32')} |")
-    return L
-
-
-def _budget_section(b: list) -> list[str]:
-    L = ["", "## Error budget: the FE mesh against the surrogate", "",
-         f"For each mesh, a dataset of scene 1 on it ({N_BUDGET} simulations), the paper's "
-         f"scene-1 network trained on it, and {BUDGET_CASES} new load cases drawn by scene "
-         "1's rule (`bench/budget_fem.py`), solved on that mesh "
-         "and on the reference (P2 on a 6 mm mesh, as in `docs/tradeoff_fem.md`). At the "
-         f"mesh's vertices more than {EXCLUDE:g} mm from the load point (a point load has no "
-         "converged limit next to it), at full load: the FE error (mesh against reference), "
-         "the surrogate's error (network against the FE answer of its own mesh: what "
-         "training reports), and the total (network against the reference: what a user "
-         "gets). Cost: solver CPU-hours of the dataset plus training hours (this machine; "
-         "both measured while up to five processes shared the two cores, so up to ~2.5x "
-         "what they cost alone). "
-         "Each mesh loads its node nearest to the case's point (the load offset column: how "
-         "far that node is from the reference's). A point load has no converged limit, and "
-         "with this stiffening material the far field too depends on how a mesh resolves "
-         "the load: the FE column is the error of each mesh for this scene's loads; "
-         "`docs/tradeoff_fem.md` gives the elements' error under a patch load.",
-         "", "| mesh | vertices | FE error mm | surrogate error mm | total mm | total p95 mm "
-         "| FE error, all nodes mm | total, all nodes mm | mean max u_ref mm | load offset "
-         "mm | simulation CPU-h | training h |", "|" + "---|" * 12]
-    for r in b:
-        L.append(f"| P{r['degree']} {r['h']:g} mm | {r['vertices']} | {r['fe']:.3f} | "
-                 f"{r['surrogate']:.3f} | {r['total']:.3f} | {r['total_p95']:.3f} | "
-                 f"{r['fe_all']:.3f} | {r['total_all']:.3f} | {r['u_ref_max']:.1f} | "
-                 f"{r['offset']:.1f} | {r['sim_hours']:.3f} | {r['train_hours']:.3f} |")
-    return L
 
 
 def report() -> None:
@@ -520,37 +260,48 @@ def report() -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    runs = RUNS.records()
     lat = LATENCIES.records()
-    rows = [r for r in runs.values() if "all" in r]
+    rows = [r for r in RUNS.records().values() if "all" in r]
     ds_note = ""
     if (RESULTS / "data" / LEARN_DATA).exists():
         ds, surface = dataset(LEARN_DATA)
         n_sims = np.unique(ds.sample_sim).size
         ds_note = (f"{ds.points[0].shape[0]} nodes ({surface.size} on the surface), "
                    f"{n_sims} simulations x {ds.n_samples // max(1, n_sims)} load steps")
-    curve, lc, nets = _curve_and_networks(rows, lat, ds_note)
-    b = budget()
-    L = (_intro(ds_note) + curve + _fraction_and_precision(rows, lat) + _surface(rows, lat)
-         + _budget_section(b))
+    lc = sorted((r for r in rows if "training simulations" in _groups(r)),
+                key=lambda r: r["spec"]["n_train"])
+    nets = sorted((r for r in rows if "network" in _groups(r)),
+                  key=lambda r: -n_params(r["spec"]["hidden"]))
+    body = render(Path(__file__).parent / "templates" / "tradeoff_surrogate.md.j2",
+                  lat=lat, lc=lc, nets=nets, ds_note=ds_note, tuple=tuple,
+                  fractions=sorted((r for r in rows if "node fraction" in _groups(r)),
+                                   key=lambda r: r["spec"]["node_fraction"]),
+                  precision=sorted((r for r in rows if "all_float16" in r
+                                    and r["spec"]["nodes"] == "all"),
+                                   key=lambda r: (-n_params(r["spec"]["hidden"]),
+                                                  -r["spec"]["n_train"])),
+                  surface=sorted((r for r in rows if r["spec"]["n_train"] == N_LEARN
+                                  and r["spec"]["hidden"] == PAPER1),
+                                 key=lambda r: r["spec"]["nodes"]),
+                  machine=platform.processor() or platform.machine(), cores=os.cpu_count(),
+                  calls=LATENCY_CALLS, n_test=N_TEST, paper1=tuple(PAPER1), n_knob=N_KNOB,
+                  epochs=EPOCHS, n_learn=N_LEARN, name_of=NAME_OF, n_params=n_params)
     DOCS.mkdir(exist_ok=True)
-    (DOCS / "tradeoff_surrogate.md").write_text("\n".join(L) + "\n")
-    plots(lc, nets, rows, lat, b, plt)
-    print(f"wrote {DOCS / 'tradeoff_surrogate.md'}, {DOCS / 'tradeoff_surrogate.png'} and "
-          f"{DOCS / 'error_budget.png'}")
+    md = DOCS / "tradeoff_surrogate.md"   # the error budget's section is budget_fem.py's
+    md.write_text(header("Surrogate price list and the error budget").rstrip() + "\n" + body
+                  + ("\n" + sections(md) if sections(md) else ""))
+    plots(lc, nets, rows, lat, plt)
+    print(f"wrote {md} and {DOCS / 'tradeoff_surrogate.png'}")
 
 
 def _plot_curve(ax, lc, plt) -> None:
     n = [r["spec"]["n_train"] for r in lc]
     ax.plot(n, [r["all"]["mee"] for r in lc], "o-", label="MEE")
     ax.plot(n, [r["all"]["ee_p95"] for r in lc], "s--", label="95th percentile")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
+    ax.set(xscale="log", yscale="log", xlabel="training simulations",
+           ylabel="error on held-out simulations (mm)", title="learning curve (paper scene-1 net)")
     ax.set_xticks(n, [str(v) for v in n])
     ax.xaxis.set_minor_formatter(plt.NullFormatter())
-    ax.set_xlabel("training simulations")
-    ax.set_ylabel("error on held-out simulations (mm)")
-    ax.set_title("learning curve (paper scene-1 net)")
     ax.legend()
 
 
@@ -569,10 +320,8 @@ def _plot_networks(ax, nets, lat) -> None:
     for hz in (300, 1000):
         ax.axvline(1e3 / hz, color="grey", ls=":", lw=1)
         ax.text(1e3 / hz, ax.get_ylim()[1] if nets else 1, f" {hz} Hz", fontsize=7, va="top")
-    ax.set_xscale("log")
-    ax.set_xlabel("latency per load case (ms, float32)")
-    ax.set_ylabel("MEE (mm)")
-    ax.set_title(f"network size ({N_KNOB} training sims)")
+    ax.set(xscale="log", xlabel="latency per load case (ms, float32)", ylabel="MEE (mm)",
+           title=f"network size ({N_KNOB} training sims)")
     ax.legend(fontsize=8)
 
 
@@ -583,35 +332,10 @@ def _plot_fractions(ax, rows) -> None:
         ax.scatter(r["training_seconds"], r["all"]["mee"], color="C2")
         ax.annotate(f"{r['spec']['node_fraction']:g}", (r["training_seconds"],
                     r["all"]["mee"]), textcoords="offset points", xytext=(4, 3), fontsize=8)
-    ax.set_xlabel("training seconds")
-    ax.set_ylabel("MEE (mm)")
-    ax.set_title("sampled node fraction per epoch")
+    ax.set(xlabel="training seconds", ylabel="MEE (mm)", title="sampled node fraction per epoch")
 
 
-def _plot_budget(b, plt) -> None:
-    fig, ax = plt.subplots(figsize=(9, 5))
-    if b:
-        x = np.arange(len(b))
-        w = 0.27
-        ax.bar(x - w, [r["fe"] for r in b], w, label="FE error (mesh vs reference)")
-        ax.bar(x, [r["surrogate"] for r in b], w, label="surrogate error (vs its own FE data)")
-        ax.bar(x + w, [r["total"] for r in b], w, label="total (surrogate vs reference)")
-        ax.scatter(x + w, [r["fe"] + r["surrogate"] for r in b], marker="_", s=400,
-                   color="k", label="FE + surrogate (upper bound)", zorder=3)
-        ax.set_xticks(x, [f"P{r['degree']} {r['h']:g} mm\n{r['vertices']} nodes\n"
-                          f"{r['sim_hours'] + r['train_hours']:.2f} h" for r in b])
-        ax.set_yscale("log")
-        ax.set_ylabel(f"mean error, mm (outside {EXCLUDE:g} mm of the load)")
-        ax.set_title("error budget, scene 1 on the phantom; under each mesh: cost "
-                     "(simulation CPU-h + training h)", fontsize=10)
-        ax.legend(fontsize=8)
-        ax.grid(True, axis="y", which="both", alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(DOCS / "error_budget.png", dpi=110)
-    plt.close(fig)
-
-
-def plots(lc, nets, rows, lat, b, plt) -> None:
+def plots(lc, nets, rows, lat, plt) -> None:
     fig, ax = plt.subplots(1, 3, figsize=(17, 5))
     if lc:
         _plot_curve(ax[0], lc, plt)
@@ -622,7 +346,6 @@ def plots(lc, nets, rows, lat, b, plt) -> None:
     fig.tight_layout()
     fig.savefig(DOCS / "tradeoff_surrogate.png", dpi=110)
     plt.close(fig)
-    _plot_budget(b, plt)
 
 
 def main() -> int:

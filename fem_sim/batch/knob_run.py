@@ -75,6 +75,59 @@ def budget_npz(case: int, degree: int, h: float) -> Path:
     return BUDGET_RESULTS / f"case{case}_{mesh_name(degree, h)}.npz"
 
 
+def budget_reference_offsets(case: int) -> dict:
+    """Where each budget mesh's vertices start in case ``case``'s reference values (the
+    reference's npz holds them for every mesh, in BUDGET_MESHES order).
+    """
+    sizes = []
+    for degree, h in BUDGET_MESHES:
+        with np.load(budget_npz(case, degree, h)) as z:
+            sizes.append(z["nodes"].shape[0])
+    return dict(zip(BUDGET_MESHES, np.cumsum([0, *sizes[:-1]])))
+
+
+def budget_case_errors(case: int, point, degree: int, h: float, predicted, fem: dict,
+                       exclude: float) -> dict | None:
+    """Node errors of budget case ``case`` on mesh (degree, h): FE (the mesh's answer against
+    the reference), surrogate (``predicted``, the network's field at the mesh's nodes, against
+    the mesh's answer) and total (the network against the reference); beyond ``exclude`` mm of
+    the load ``point`` (a point load has no converged limit there) and at every node (_all),
+    the reference's largest component and how far the mesh's loaded node is from the
+    reference's. ``fem``: BUDGET_RUNS' records. None when a solve is missing.
+    """
+    ref_rec, rec = fem.get((case, *BUDGET_REFERENCE)), fem.get((case, degree, h))
+    if not (ref_rec and rec and ref_rec["status"] == "ok" and rec["status"] == "ok"):
+        return None
+    with np.load(budget_npz(case, degree, h)) as z:
+        u, pts = z["u_nodes"], z["nodes"]
+    start = budget_reference_offsets(case)[(degree, h)]
+    with np.load(budget_npz(case, *BUDGET_REFERENCE)) as z:
+        u_ref = z["u"][start:start + pts.shape[0]]
+        scale = np.abs(z["u_nodes"]).max()
+        offset = np.linalg.norm(pts[rec["load_node"]] - z["nodes"][ref_rec["load_node"]])
+    far = np.linalg.norm(pts - np.asarray(point), axis=1) > exclude
+    fe, sur, tot = (np.linalg.norm(a - b, axis=1) for a, b in
+                    ((u, u_ref), (predicted, u), (predicted, u_ref)))
+    return {"fe": fe[far], "sur": sur[far], "tot": tot[far], "fe_all": fe, "tot_all": tot,
+            "scale": scale, "offset": offset, "nodes": pts}
+
+
+def budget_summary(per: list[dict]) -> dict:
+    """One budget mesh's row from its cases' node errors (:func:`budget_case_errors`): the
+    mean FE, surrogate and total errors beyond the load's ball, the 95th percentiles, the
+    means at every node, the reference's mean largest component and the mean load offset.
+    """
+    def cat(key):
+        return np.concatenate([e[key] for e in per])
+
+    return {"cases": len(per), "fe": float(cat("fe").mean()), "surrogate": float(cat("sur").mean()),
+            "total": float(cat("tot").mean()), "fe_p95": float(np.percentile(cat("fe"), 95)),
+            "total_p95": float(np.percentile(cat("tot"), 95)),
+            "fe_all": float(cat("fe_all").mean()), "total_all": float(cat("tot_all").mean()),
+            "u_ref_max": float(np.mean([e["scale"] for e in per])),
+            "offset": float(np.mean([e["offset"] for e in per]))}
+
+
 def material(k_over_mu: float):
     """The study's Ogden material at bulk-to-shear ratio ``k_over_mu`` (kappa = K/mu * c1/2,
     as the scenes set it).
