@@ -19,11 +19,13 @@ import shutil
 import sys
 import time
 import zlib
+from pathlib import Path
 
 import numpy as np
 
 from liverviz.ledger import Ledger
-from liverviz.report import ROOT, write_report
+from liverviz.report import ROOT, render, write_report
+from surrogate.reports import REPORT_NAMES
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
 GRASP_SCENE = ROOT / "data_spec" / "scenes" / "scene4_grasp.toml"
@@ -176,7 +178,14 @@ def main(argv=None) -> int:
         from subprocess import run
 
         return run([sys.executable, __file__, "--report-only", f"--livers={a.livers}"]).returncode
-    report([r for n, r in ledger.records().items() if n in names])
+    records = [r for n, r in ledger.records().items() if n in names]
+    saved = ROOT / "docs" / "surgical_loads.json"
+    if a.report_only and not records and saved.exists():   # the results are not on this host
+        data = json.loads(saved.read_text())
+        write_report(saved.with_suffix(".md"), "Surgical loads on the validation livers",
+                     _body(data), data)
+        return 0
+    report(records)
     return 0
 
 
@@ -251,98 +260,27 @@ def report(records: list[dict]) -> None:
 
     grasp, force = curve(records, "grasps", "pull", PULLS), curve(records, "forces", "force",
                                                                   FORCES)
-    timing = grasp_latency()
-    _plot(grasp, force)
-    worst = _picture(records)
-    data = {"livers": records, "grasp_curve": grasp, "force_curve": force, "timing": timing,
-            "goal": GOAL}
-    write_report(ROOT / "docs" / "surgical_loads.md", "Surgical loads on the validation livers",
-                 _body(records, grasp, force, timing, worst), data)
-
-
-def _body(records, grasp, force, timing, worst) -> str:
-    n, g, f = len(records), grasp[-1]["base"], force[-1]["base"]
-    cases = [(r["liver"], c) for r in records for c in r["grasps"] + r["forces"]]
-    ok = [c for _, c in cases if c["status"] == "ok"]
-    failed = [f"{name}: {c['reason']}" for name, c in cases if c["status"] != "ok"]
-    lines = [
-        f"{n} validation livers of `scene4_livers` (no simulation, PCA or training saw them), "
-        "meshed and fixed as its population's livers, P2 at 16 mm, its Ogden material; "
-        f"{PLACES} grasps (10 mm, pulled to 40 mm away from the fixed region) and {PLACES} "
-        "forces (to 4 N on a 10 mm patch) a liver. **base**: the small-strain response over "
-        "the liver's Green's function (`data_spec.green_grasp`: G_PP f = d, u = G f, force = sum "
-        "f), what `make liver` answers; **naive**: each simulation's own mean displacement. "
-        "No network has learned these loads yet: **no model row**.", "",
-        "![curves](surgical_loads.png)", "",
-        "## Against the grasp's pull (median liver / worst liver)", "",
-        *_curve_table(grasp, "pull", "mm", True), "",
-        "## Against the force on the patch (median liver / worst liver)", "",
-        *_curve_table(force, "force", "N", False)]
-    g40, f4 = (per_liver(records, k, key, v) for k, key, v in (("grasps", "pull", 40.0),
-                                                                ("forces", "force", 4.0)))
-    lines += ["", "## Per liver, at 40 mm and at 4 N (base / naive MEE mm; force error %)", "",
-              "| liver | nodes | 40 mm | force | 4 N |", "|---|---|---|---|---|", *(
-                  f"| {r['liver']} | {r['nodes']:,} | " + " | ".join(
-                      f"{x['base']['mee']:.2f} / {x['naive']['mee']:.2f}" + (
-                          f" | {x['force_error']:.1f}" if "force_error" in x else "")
-                      if x else "failed" + " | -" * (k == 0)
-                      for k, x in enumerate((g40.get(r["liver"]), f4.get(r["liver"]))))
-                  + " |" for r in records)]
-    lines += [
-        "", "## The solver and the times", "",
-        f"{len(ok)} of {len(cases)} simulations converge at every stored step"
-        + (": " + "; ".join(failed) if failed else "") + f"; {sum(c['cutbacks'] for c in ok)} "
-        f"cut-backs in all; median {np.median([c['factorizations'] for c in ok]):.0f} "
-        f"factorisations and {np.median([c['seconds'] for c in ok]):.1f} s a simulation "
-        "(one process). Meshing, registration and fixing a liver: median "
-        f"{np.median([r['prepare_s'] for r in records]):.0f} s; the Green's function rows of "
-        f"its patches: {np.median([r['green_rows_s'] for r in records]):.1f} s.", "",
-        f"The base at {timing['nodes']:,.0f} nodes (a {timing['patch_nodes']:.0f}-node patch; "
-        "the shape of a Green's function, not a liver's values): a grasp set up (factorising "
-        "G_PP, the field per mm) in "
-        f"{1e3 * timing['setup_s']:.2f} ms, a whole field in {1e6 * timing['field_s']:.0f} µs, "
-        f"the force alone in {1e6 * timing['force_s']:.1f} µs (numpy, one thread, medians of "
-        "200 calls).", ""]
     rate = json.loads((RESULTS / "rate.json").read_text()) \
         if (RESULTS / "rate.json").exists() else None
-    if rate:
-        lines += [f"`scene4_grasp.toml` (`--rate N`), its first {rate['sims']} simulations on "
-                  f"{rate['ranks']} ranks, {rate['ok']} converged: a simulation takes "
-                  f"{rate['sim_s_median']:.1f} s (median; mean {rate['sim_s_mean']:.1f}), "
-                  f"{rate['sims_per_hour']:.0f} an hour on the ranks, after "
-                  f"{rate['prepare_min']:.0f} min preparing the population's livers; the whole "
-                  f"scene ({rate['scene_sims']}) at about {rate['scene_per_hour']:.0f} an hour "
-                  "(goal: 1,000).", ""]
-    if worst:
-        lines += ["![worst liver](surgical_loads_worst.png)", "", f"The worst: {worst}.", ""]
-    lines += ["## Goals (issue 83) and where the base stands", "",
-              f"At 40 mm and at 4 N: MEE at most {GOAL['median']} mm on the median liver and "
-              f"{GOAL['worst']} mm on the worst, {GOAL['lt3']:g} % of nodes under 3 mm, "
-              f"reaction force within {GOAL['force']:g} %. The base alone, on the median / worst "
-              f"liver: 40 mm, MEE {g['mee_median']:.2f} / {g['mee_worst']:.2f} mm, "
-              f"{g['lt3_median']:.1f} / {g['lt3_worst']:.1f} % under 3 mm, force "
-              f"{grasp[-1]['force_error_median']:.0f} / {grasp[-1]['force_error_worst']:.0f} % "
-              f"off; 4 N, MEE {f['mee_median']:.2f} / {f['mee_worst']:.2f} mm, "
-              f"{f['lt3_median']:.1f} / {f['lt3_worst']:.1f} % under 3 mm. What the base misses "
-              "is the network's to learn."]
-    return "\n".join(lines)
+    _plot(grasp, force)
+    data = {"livers": records, "grasp_curve": grasp, "force_curve": force,
+            "timing": grasp_latency(), "goal": GOAL, "rate": rate, "worst": _picture(records)}
+    write_report(ROOT / "docs" / "surgical_loads.md", "Surgical loads on the validation livers",
+                 _body(data), data)
 
 
-def _curve_table(rows, key: str, unit: str, force_back: bool) -> list[str]:
-    """The markdown table of a curve: per step, the median / worst liver of each figure."""
-    cols = ["FE mean u mm", *(["FE force N"] if force_back else []), "base MEE mm",
-            "base p95", "base % < 3 mm", *(["base force error %"] if force_back else []),
-            "naive MEE mm"]
-    out = [f"| {key} {unit} | " + " | ".join(cols) + " |", "|---" * (len(cols) + 1) + "|"]
-    for r in rows:
-        b, nv = r["base"], r["naive"]
-        cells = [f"{r['mean_u']:.1f}", *([f"{r['fe_force']:.2f}"] if force_back else []),
-                 f"{b['mee_median']:.2f} / {b['mee_worst']:.2f}", f"{b['p95_median']:.2f}",
-                 f"{b['lt3_median']:.1f} / {b['lt3_worst']:.1f}",
-                 *([f"{r['force_error_median']:.1f} / {r['force_error_worst']:.1f}"]
-                   if force_back else []), f"{nv['mee_median']:.2f} / {nv['mee_worst']:.2f}"]
-        out.append(f"| {r[key]:g} | " + " | ".join(cells) + " |")
-    return out
+def _body(data: dict) -> str:
+    """The report's body (bench/templates/surgical_loads.md.j2) from what it is written from."""
+    records = data["livers"]
+    cases = [(r["liver"], c) for r in records for c in r["grasps"] + r["forces"]]
+    return render(Path(__file__).parent / "templates" / "surgical_loads.md.j2", **REPORT_NAMES,
+                  records=records, grasp=data["grasp_curve"], force=data["force_curve"],
+                  timing=data["timing"], goal=data["goal"], rate=data.get("rate"),
+                  worst=data.get("worst"), places=PLACES, n_cases=len(cases),
+                  ok=[c for _, c in cases if c["status"] == "ok"],
+                  failed=[f"{n}: {c['reason']}" for n, c in cases if c["status"] != "ok"],
+                  g40=per_liver(records, "grasps", "pull", 40.0),
+                  f4=per_liver(records, "forces", "force", 4.0)).rstrip("\n")
 
 
 def _plot(grasp, force) -> None:
