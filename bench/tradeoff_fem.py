@@ -39,7 +39,7 @@ from fem_sim.batch.knob_run import (
     spec_of,
 )
 from liverviz.ledger import Ledger
-from liverviz.report import ROOT, SOFA, header
+from liverviz.report import ROOT, SOFA, header, render
 
 RESULTS = ROOT / "bench" / "results" / "tradeoff_fem"
 RUNS = Ledger(RESULTS / "runs.jsonl", key="key")
@@ -201,32 +201,17 @@ def later_cell(rec: dict, digits: int) -> str:  # a later simulation's seconds (
     return f"{rec['seconds_later']:.{digits}f}"
 
 
-def summary(rows: list) -> list[str]:
+def summary(rows: list) -> list[tuple]:
     """Each element's cheapest run within TARGET of the converged answer (by the mean and the
-    max error; the most accurate when none is), and the cheapest at the default tolerance."""
-    out = ["## Seconds to reach 2 % of the converged answer", "",
-           f"Patch load, K/mu = 200, the mesh, load-step and tolerance rows below. For each "
-           f"element the cheapest run whose error is within {TARGET:.0%} of the reference's "
-           "largest displacement (mean error, then max error), with its seconds per "
-           "simulation (the first on a new problem, in a fresh process, and a later one on "
-           "the same problem, as a dataset's simulations on one liver run: they reuse the "
-           "ordering and the small-strain factorisation); when no run of the "
-           "study gets there, its most accurate one; when the cheapest has another Newton "
-           "tolerance than the default, the cheapest at the default one too. Fewer load steps "
-           "give the same answer (to the Newton tolerance) sooner: a single answer needs no 10 "
-           "steps, a dataset that stores every load fraction does. Another tolerance moves the "
-           "answer by the last column of its row in the table below.", "",
-           "| liver | element | measure | h mm | vertices | steps | rtol | s/sim first | "
-           "s/sim later | fact. first / later | error | signed |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    max error; the most accurate when none is), and the cheapest at the default tolerance:
+    (liver, element, measure, spec, record, errors, reached)."""
+    out = []
     for liver in SIZES:
         for element in ("P1", "ANP", "P2"):
             runs = [(s, r, e) for s, r, e in rows if s["liver"] == liver and e and
                     s["role"] in ("mesh", "steps", "tolerance") and s["load"] == "patch" and
                     s["K_over_mu"] == 200.0 and element_of(s) == element]
-            if not runs:
-                continue
-            for measure in ("rel_mean", "rel_max"):
+            for measure in ("rel_mean", "rel_max") if runs else ():
                 good = [x for x in runs if x[2][measure] <= TARGET]
                 # the most accurate: equal errors (other load steps) go to the cheapest run
                 best = (min(good, key=lambda x: x[1]["seconds"]) if good else
@@ -235,15 +220,8 @@ def summary(rows: list) -> list[str]:
                 default = [x for x in good if x[0]["rtol"] == DEFAULTS["rtol"]]
                 if best[0]["rtol"] != DEFAULTS["rtol"] and default:
                     shown.append(min(default, key=lambda x: x[1]["seconds"]))
-                for spec, rec, e in shown:
-                    secs = (f"{rec['seconds']:.1f}" if good else
-                            f"not reached ({rec['seconds']:.1f})")
-                    out.append(f"| {liver} | {element} | {measure[4:]} | {spec['h']:g} | "
-                               f"{rec['n_vertices']} | {spec['steps']} | {spec['rtol']:g} | "
-                               f"{secs} | {later_cell(rec, 1)} | {rec['factorizations']} / "
-                               f"{rec.get('factorizations_later', '-')} | "
-                               f"{e[measure]:.2%} | {e['signed']:+.1%} |")
-    return out + [""]
+                out += [(liver, element, measure, *x, bool(good)) for x in shown]
+    return out
 
 
 def _rows(res: dict) -> list:  # (spec, record, errors) of the plan's runs, in order
@@ -260,58 +238,6 @@ def _rows(res: dict) -> list:  # (spec, record, errors) of the plan's runs, in o
                              r[0]["K_over_mu"], element_of(r[0]), -r[0]["h"],
                              r[0]["steps"]))
     return rows
-
-
-def _intro(rows: list) -> list[str]:
-    return [*header("FEM price list: speed against accuracy").rstrip().split("\n"), "",
-            f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-            f"one MPI rank, {threads_note(rows)} per run (OMP_NUM_THREADS = "
-            "OPENBLAS_NUM_THREADS). Seconds are single runs (expect 10-30 % noise between "
-            "runs on this shared machine); counts and errors are exact.", "",
-            "Setting: 0.4 N along -z at the surface point farthest from the fixed region, "
-            f"as a patch load (bump traction, radius {PATCH_RADIUS:g} mm) or a nodal load; "
-            f"Ogden c1 = {C1 * 1e3:g}e-3 MPa, m1 = {M1}; defaults: "
-            + ", ".join(f"{k} = {v}" for k, v in DEFAULTS.items()) + ".",
-            "Errors are against the reference of the same liver, load and K/mu (P2 on the "
-            f"finest mesh, Newton tolerance rtol = {REF_RTOL:g}), at the reference mesh's "
-            "vertices, relative to the reference's "
-            "max |u|. Nodal load: error outside a ball of radius 2h around the load point; "
-            "inside it in the last column.", "",
-            "Signed: the component of u - u_ref along u_ref over |u_ref|^2 (negative: too "
-            "stiff; -0.5 = half the displacement).",
-            "Fixed region: the phantom's vena cava; on the real liver the surface triangles "
-            "whose centroid is within 25 mm of its most posterior point (all their vertices "
-            "fixed: about the same area on every mesh).", "",
-            *summary(rows),
-            "## Every run", "",
-            "Knob rows (steps, tolerance, linear solver, predictor) also give, in the last "
-            "column, the largest difference from the default run on the same mesh: what that "
-            "knob alone costs. Element: P1 / P2 Lagrange, ANP = P1 with averaged nodal "
-            "pressure (`solver.element = \"anp\"`).", "",
-            "| liver | load | knob | element | h mm | vertices | K/mu | steps | rtol | solver | "
-            "predictor | s/sim | later s/sim | Newton its | fact. | RSS MB | mean err mm | "
-            "max err mm | mean rel | max rel | signed | inside 2h (mean/max mm) | "
-            "knob alone (max rel) |",
-            "|" + "---|" * 23]
-
-
-def _line(spec: dict, rec: dict, err, res: dict) -> str:
-    solver = spec["linear_solver"] if spec["linear_solver"] != "direct" else spec["factorization"]
-    base = (f"| {spec['liver']} | {spec['load']} | {spec['role']} | {element_of(spec)} | "
-            f"{spec['h']:g} | {rec.get('n_vertices', '-')} | {spec['K_over_mu']:g} | "
-            f"{spec['steps']} | {spec['rtol']:.0e} | {solver} | {spec['predictor']} | ")
-    if rec.get("status") != "ok":
-        return base + f"{rec.get('status')}: {rec.get('reason', '')[:80]} |" + " |" * 12
-    cost = knob_cost(spec, rec, res)
-    e = err or {}
-    inside = f"{e['inside_mean']:.2f} / {e['inside_max']:.2f}" if "inside_mean" in e else ""
-    return (base + f"{rec['seconds']:.2f} | {later_cell(rec, 2)} | "
-            f"{sum(rec['newton_iterations'])} | {rec['factorizations']} | "
-            f"{rec['peak_rss_mb']:.0f} | "
-            + (f"{e['mean']:.3f} | {e['max']:.3f} | {e['rel_mean']:.2%} | "
-               f"{e['rel_max']:.2%} | {e['signed']:+.1%} | {inside} |" if e else
-               "- | - | - | - | - | |")
-            + (f" {cost:.1e} |" if cost is not None else " |"))
 
 
 MARKERS = {"mesh": "o", "steps": "s", "tolerance": "^", "linear solver": "D", "predictor": "v",
@@ -360,9 +286,15 @@ def report() -> None:
 
     res = RUNS.records()
     rows = _rows(res)
-    lines = _intro(rows) + [_line(spec, rec, err, res) for spec, rec, err in rows]
+    body = render(Path(__file__).parent / "templates" / "tradeoff_fem.md.j2", shown=summary(rows),
+                  rows=[(s, r, e, knob_cost(s, r, res)) for s, r, e in rows],
+                  machine=platform.processor() or platform.machine(), cores=os.cpu_count(),
+                  threads=threads_note(rows), patch_radius=PATCH_RADIUS, c1=C1, m1=M1,
+                  defaults=DEFAULTS, ref_rtol=REF_RTOL, target=TARGET, element_of=element_of,
+                  later_cell=later_cell)
     DOCS.mkdir(exist_ok=True)
-    (DOCS / "tradeoff_fem.md").write_text("\n".join(lines) + "\n")
+    (DOCS / "tradeoff_fem.md").write_text(
+        header("FEM price list: speed against accuracy").rstrip() + "\n\n" + body)
     # the errors beside the report, for the reports that quote an element's (table4)
     (DOCS / "tradeoff_fem.json").write_text("[\n" + ",\n".join(
         json.dumps({"spec": spec, "element": element_of(spec), "errors": err})
