@@ -3,7 +3,7 @@ settings and with others, side by side (docs/solver_stalls.md, docs/guess_guard.
 
     .venv-solver/bin/python bench/solver_stalls.py [--data DIR ...] [--worst 2] [--typical 1]
         [--all] [--baseline '{"stall_iterations": 0}'] [--settings '{}'] [--variants '[...]']
-        [--out REPORT] [--title TITLE]
+        [--out REPORT] [--title TITLE] [--report-only]
 
 By default the solver's defaults (``settings``, where ``stall_iterations`` gives up an attempt
 still far from converging after 10 Newton iterations) against the same without that rule
@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
-from liverviz.report import ROOT, write_report
+from liverviz.report import ROOT, render, write_report
 
 PATIENTS = ROOT / "bench" / "results" / "patient"
 
@@ -121,76 +121,15 @@ def compared(data: Path, index: int, settings: dict, k: int, variants=()) -> dic
             "max_u_mm": float(np.linalg.norm(u0[-1], axis=1).max()) if len(u0) else 0.0}
 
 
-def _row(r: dict) -> str:
-    d, v = r["baseline"], r["settings"]
-    return "| {} {} | {} / {} | {} / {} | {} / {} | {} / {} | {:.1f} | {:.1f} / {:.1f} | {:.1e} |" \
-        .format(Path(r["data"]).parent.name if Path(r["data"]).name == "data"
-                else Path(r["data"]).name, r["sim"], d["status"], v["status"],
-                d["factorizations"], v["factorizations"], d["iterations"], v["iterations"],
-                d["cutbacks"], v["cutbacks"], r["max_u_mm"], d["seconds"], v["seconds"],
-                r["max_diff_mm"])
-
-
-def _totals(rows: list[dict]) -> list[str]:
-    """One line per dataset: the sums of both runs over its simulations."""
-    out = ["| dataset | simulations | failed | factorisations | Newton iterations | cut-backs | "
-           "seconds | max difference mm |", "|---|---|---|---|---|---|---|---|"]
-    for data in dict.fromkeys(r["data"] for r in rows):
-        rs = [r for r in rows if r["data"] == data]
-
-        def both(key, rs=rs):
-            return " / ".join(f"{sum(r[k][key] for r in rs):.0f}" for k in ("baseline", "settings"))
-
-        failed = " / ".join(str(sum(r[k]["status"] != "ok" for r in rs))
-                            for k in ("baseline", "settings"))
-        out.append(f"| {data} | {len(rs)} | {failed} | {both('factorizations')} | "
-                   f"{both('iterations')} | {both('cutbacks')} | {both('seconds')} | "
-                   f"{max(r['max_diff_mm'] for r in rs):.1e} |")
-    return out
-
-
-def _variants(rows: list[dict], settings: dict, variants: list[dict]) -> list[str]:
-    """The variants' totals beside the baseline's and the settings' (all datasets)."""
-    runs = [("baseline", settings["baseline"], [r["baseline"] for r in rows]),
-            ("settings", settings["settings"], [r["settings"] for r in rows])]
-    runs += [(f"variant {i + 1}", v, [r["variants"][i] for r in rows])
-             for i, v in enumerate(variants)]
-    base = sum(r["factorizations"] for r in runs[0][2])
-    out = ["Variants, each over the solver's defaults, on the same simulations (their "
-           "difference against the baseline):", "",
-           "| run | settings | factorisations | ratio to the baseline | Newton iterations | "
-           "cut-backs | failed | max difference mm |", "|---|---|---|---|---|---|---|---|"]
-    for name, v, rs in runs:
-        f = sum(r["factorizations"] for r in rs)
-        diff = ("" if name == "baseline" else
-                f"{max(r['max_diff_mm'] for r in (rows if name == 'settings' else rs)):.1e}")
-        out.append(f"| {name} | `{json.dumps(v)}` | {f} | {f / base:.3f} | "
-                   f"{sum(r['iterations'] for r in rs)} | {sum(r['cutbacks'] for r in rs)} | "
-                   f"{sum(r['status'] != 'ok' for r in rs)} | {diff} |")
-    return out
-
-
 def report(rows: list[dict], settings: dict, every: bool, variants=()) -> str:
-    shown = [r for r in rows if not every
-             or r["baseline"]["factorizations"] != r["settings"]["factorizations"]]
-    out = [f"Baseline `{json.dumps(settings['baseline'])}` against "
-           f"`{json.dumps(settings['settings'])}` (over the solver's defaults), one rank each, "
-           "on the same simulations (a shard's load, fixed nodes and material solved again). "
-           "Each cell: baseline / settings.", "", *_totals(rows), "",
-           ("The simulations whose factorisations differ:" if every else "Each simulation:"),
-           "", "| liver, simulation | status | factorisations | Newton iterations | "
-           "cut-backs | max displacement mm | seconds | max difference mm |",
-           "|---|---|---|---|---|---|---|---|", *map(_row, shown)]
-    fd, fv = (sum(r[k]["factorizations"] for r in rows) for k in ("baseline", "settings"))
-    sd, sv = (sum(r[k]["seconds"] for r in rows) for k in ("baseline", "settings"))
-    out += ["", f"In all: {fd} factorisations with the baseline, {fv} with the settings "
-            f"(ratio {fv / fd:.2f}); {sd:.0f} s against {sv:.0f} s (ratio {sv / sd:.2f}, "
-            "one run each: the counts are the steadier figure). Max difference: the largest "
-            "nodal distance between the two solutions over the load steps (both converged to "
-            "Newton's tolerance; exactly 0 where both took the same path)."]
-    if variants:
-        out += ["", *_variants(rows, settings, list(variants))]
-    return "\n".join(out)
+    """The report's body (bench/templates/solver_stalls.md.j2)."""
+    def dataset_name(data: str) -> str:   # a patient truth's liver, else the folder's name
+        return Path(data).parent.name if Path(data).name == "data" else Path(data).name
+
+    return render(Path(__file__).parent / "templates" / "solver_stalls.md.j2", rows=rows,
+                  settings=settings, every=every, variants=list(variants),
+                  datasets=list(dict.fromkeys(r["data"] for r in rows)),
+                  dataset_name=dataset_name, settings_json=json.dumps).rstrip("\n")
 
 
 def main() -> int:
@@ -208,7 +147,14 @@ def main() -> int:
     ap.add_argument("--variants", default="[]",
                     help="JSON list: more settings solved on the same simulations, reported "
                     "as totals")
+    ap.add_argument("--report-only", action="store_true", help="rewrite --out from the JSON "
+                    "beside it (with --all if it was run with it)")
     a = ap.parse_args()
+    if a.report_only:
+        saved = json.loads(Path(a.out).with_suffix(".json").read_text())
+        write_report(a.out, a.title, report(saved["rows"], saved["settings"], a.all,
+                                            saved.get("variants", ())), saved)
+        return 0
     settings = {"baseline": json.loads(a.baseline), "settings": json.loads(a.settings)}
     variants = json.loads(a.variants)
     sets = [Path(d).resolve() for d in a.data] if a.data else sorted(
