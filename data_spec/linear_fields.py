@@ -21,6 +21,8 @@ second_order[i]``, the Taylor expansion of the Ogden body's response to second o
                                               them along x, y, z (the small-strain Green's
                                               function: any nodal load's response is
                                               green[node] contracted with its force)
+    /tool_force    (n, n_tools, 3)   float64  N: a grasp's tools' forces at load fraction 1
+                                              (optional; a grasp population's files)
     attrs: format, scene_name, scene_hash, geometry_id, synthetic_first, units_length,
            units_force, seconds (the factorisation and the solves)
 """
@@ -56,6 +58,7 @@ class LinearFields:
     second_order: np.ndarray | None = None
     green_nodes: np.ndarray | None = None
     green: np.ndarray | None = None
+    tool_force: np.ndarray | None = None
 
     @property
     def order(self) -> int:
@@ -94,6 +97,8 @@ def write_linear_fields(path: str | Path, lf: LinearFields) -> Path:
             f[name] = np.asarray(getattr(lf, name))
         if lf.green is not None:
             f["green_nodes"] = np.asarray(lf.green_nodes, np.int64)
+        if lf.tool_force is not None:
+            f["tool_force"] = np.asarray(lf.tool_force, np.float64)
         for name in ("displacement", "second_order", "green"):
             if getattr(lf, name) is not None:
                 f.create_dataset(name, data=np.asarray(getattr(lf, name), np.float32),
@@ -116,14 +121,14 @@ def read_linear_fields(path: str | Path) -> LinearFields:
             scene_name=str(f.attrs["scene_name"]), scene_hash=str(f.attrs["scene_hash"]),
             geometry_id=str(f.attrs["geometry_id"]), seconds=float(f.attrs["seconds"]),
             **{k: f[k][()] if k in f else None for k in ("second_order", "green_nodes",
-                                                          "green")})
+                                                          "green", "tool_force")})
 
 
 def _shape_problems(lf: LinearFields) -> list[str]:
     """The arrays' shapes against each other, and their finiteness."""
     n, n_out = lf.case_index.size, lf.output_nodes.size
     want = {"load_nodes": (n, None), "forces": (n, None, 3), "displacement": (n, n_out, 3),
-            "second_order": (n, n_out, 3)}
+            "second_order": (n, n_out, 3), "tool_force": (n, None, 3)}
     if lf.green is not None:
         want["green_nodes"] = (None,) if lf.green_nodes is None else (lf.green_nodes.size,)
         want["green"] = (want["green_nodes"][0], 3, n_out, 3)

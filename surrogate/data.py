@@ -61,6 +61,8 @@ class Dataset:
     # "grasp": each load is a tool moving a patch (load_points: its centre) and ``forces`` hold
     # its displacement (mm); "nodal" (and "patch"): forces in N
     load_kind: str = "nodal"
+    # a grasp: each tool's reaction force on the liver at the sample's step, N (S, n_loads, 3)
+    reactions: np.ndarray | None = None
 
     @property
     def n_samples(self) -> int:
@@ -101,7 +103,8 @@ class _Reader:
         self.geo_index: dict[str, int] = {}
         self.geo = {k: [] for k in ("points", "fixed", "out_nodes", "triangles", "shapes",
                                     "statics", "loadable")}
-        self.smp = {k: [] for k in ("geo", "sim", "fr", "f", "lp", "ln", "extra", "targets")}
+        self.smp = {k: [] for k in ("geo", "sim", "fr", "f", "lp", "ln", "extra", "targets",
+                                    "rf")}
         self.failed = 0
 
     def liver(self, sh) -> int:
@@ -137,6 +140,8 @@ class _Reader:
                                ("f", f), ("lp", lp),
                                ("ln", sh.load_nodes), ("extra", mat)):
                 s[key].append(value)
+            if grasp:
+                s["rf"].append(sh.reaction[k])
             t = sh.displacement[k].astype(np.float32)
             if self.spill is not None:
                 self.spill.write(np.ascontiguousarray(t).tobytes())
@@ -168,6 +173,7 @@ class _Reader:
             extra=np.asarray(extra, dtype=np.float32), targets=targets,
             sample_offset=np.concatenate([[0], np.cumsum(sizes)]), failed_sims=self.failed,
             load_kind=self.scene["loads"]["kind"],
+            reactions=np.asarray(s["rf"], dtype=np.float64) if s["rf"] else None,
             loadable=None if self.scene.cases else [
                 np.union1d(rule, load_nodes[sample_geo == g].ravel())
                 for g, rule in enumerate(geo["loadable"])], directory=self.directory)

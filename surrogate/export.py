@@ -21,6 +21,7 @@ model never executes code. This module writes them and reads them back checked;
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 from pathlib import Path
@@ -57,6 +58,19 @@ def export_model(directory, model, cfg, ds, unseen=(), linear_part=None) -> Path
     return d
 
 
+def _grasp_force(ds):
+    """The tools' force beyond the small-strain one (:class:`surrogate.grasp.GraspForce`)
+    fitted on every sample of the grasp dataset ``ds``; None without its small-strain files'
+    tools' forces (the model then gives the base's force).
+    """
+    from surrogate.grasp import GraspForce, grasp_force_samples
+
+    try:
+        return GraspForce.fit(*grasp_force_samples(ds, np.arange(ds.n_samples)))
+    except (ValueError, OSError):
+        return None
+
+
 def _export(directory, params, design: dict, cfg, ds, unseen=(), on_template=False) -> Path:
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
@@ -78,6 +92,9 @@ def _export(directory, params, design: dict, cfg, ds, unseen=(), on_template=Fal
     }
     if getattr(ds, "load_kind", "nodal") == "grasp":   # its "forces" are the tools' pulls, mm
         meta["load"], meta["units"]["force"] = "grasp", "mm (a tool's displacement)"
+        force = _grasp_force(ds)
+        if force is not None:
+            meta["grasp_force"] = dataclasses.asdict(force)
     meta["embedded_geometry"] = len(ds.points) == 1
     loadable = getattr(ds, "loadable", None)
     if meta["embedded_geometry"]:

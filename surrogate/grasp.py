@@ -1,9 +1,12 @@
 """What the surrogate adds to a grasp over a liver's Green's function
 (:class:`data_spec.green_grasp.GreenGrasp`, the relation itself): how a force pressed on a
-patch is spread over its nodes. numpy only.
+patch is spread over its nodes, and the tool's force on the Ogden liver beyond the
+small-strain one (:class:`GraspForce`). numpy only.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
@@ -33,3 +36,92 @@ def patch_weights(points: np.ndarray, triangles: np.ndarray, patch, centre: int,
     if w.sum() <= 0.0:
         raise ValueError(f"the patch around node {centre} carries no area")
     return w / w.sum()
+
+
+@dataclasses.dataclass(frozen=True)
+class GraspForce:
+    """A tool's force on the Ogden liver from its small-strain force: F = F_lin (1 + a p +
+    b p^2), p the tool's pull (mm). The Ogden law stiffens as it stretches, so the force of a
+    pull of centimetres is well above the linear one; (a, b) are fitted by least squares of
+    the relative error on a grasp population's training samples (:meth:`fit`), the FE
+    reaction forces against the small-strain base's (``fem_sim linear --population``: each
+    tool's force at fraction 1). (0, 0) is the base itself, exact in the small-strain limit,
+    as this is at p -> 0.
+    """
+
+    a: float = 0.0
+    b: float = 0.0
+
+    @classmethod
+    def fit(cls, pull, f_lin, f_fe) -> GraspForce:
+        """From the pulls (n,) mm, the base's forces (n, 3) N and the FE's (n, 3) N."""
+        p, f_lin = np.asarray(pull, np.float64)[:, None], np.asarray(f_lin, np.float64)
+        w = 1.0 / np.linalg.norm(f_fe, axis=1, keepdims=True)   # each sample's relative error
+        design = np.stack([(w * p * f_lin).ravel(), (w * p**2 * f_lin).ravel()], axis=1)
+        (a, b), *_ = np.linalg.lstsq(design, (w * (np.asarray(f_fe) - f_lin)).ravel(),
+                                     rcond=None)
+        return cls(float(a), float(b))
+
+    def __call__(self, d, f_lin) -> np.ndarray:
+        """The tools' forces (..., 3) N for their pulls ``d`` (..., 3) mm and base forces."""
+        p = np.linalg.norm(np.asarray(d, np.float64), axis=-1, keepdims=True)
+        return np.asarray(f_lin) * (1.0 + self.a * p + self.b * p * p)
+
+
+def grasp_force_samples(ds, samples) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(pull (n,) mm, the base's force (n, 3) N, the FE reaction (n, 3) N) of every tool of
+    the grasp dataset ``ds``'s ``samples``; ValueError when its small-strain files hold no
+    tools' forces (rerun ``fem_sim linear --population DATA --order 1``).
+    """
+    from surrogate.linear_base import PopulationLinearBase
+
+    if getattr(ds, "reactions", None) is None:
+        raise ValueError(f"{ds.directory}: not a grasp dataset (no reaction forces)")
+    base = PopulationLinearBase(ds, order=1)
+    f_lin = []
+    for s in samples:
+        lf, _ = base.files[int(ds.sample_geo[s])]
+        if lf.tool_force is None:
+            raise ValueError(f"{ds.directory}/linear: no tools' forces; rerun fem_sim linear "
+                             f"--population {ds.directory} --order 1")
+        f_lin.append(ds.sample_fraction[s] * lf.tool_force[lf.rows([ds.sample_sim[s]])[0]])
+    samples = np.asarray(samples, dtype=np.int64)
+    d = np.asarray(ds.forces[samples], np.float64).reshape(-1, 3)
+    return (np.linalg.norm(d, axis=1), np.concatenate(f_lin).reshape(-1, 3),
+            np.asarray(ds.reactions[samples]).reshape(-1, 3))
+
+
+def force_error_pct(f, f_fe) -> np.ndarray:
+    """|f - f_fe| / |f_fe| in %, per tool."""
+    return 100.0 * np.linalg.norm(np.asarray(f) - f_fe, axis=-1) / np.linalg.norm(f_fe, axis=-1)
+
+
+def heldout_grasp_force(data, run, large_mm: float = 20.0) -> dict:
+    """The tools' force on the held-out livers of a grasp population run's evaluated folds
+    (``RUN/config.json``: its folds and seed): :class:`GraspForce` fitted on each fold's
+    training samples against the small-strain base's force, the error in % of the FE
+    reaction per tool and load step (median and worst), over every pull and over pulls
+    beyond ``large_mm``.
+    """
+    import json
+    from pathlib import Path
+
+    from surrogate.data import kfold_groups, load_dataset, training_samples
+
+    cfg = json.loads((Path(run) / "config.json").read_text())
+    ds = load_dataset(data)
+    folds = kfold_groups(ds, cfg["folds"], cfg["seed"])[:cfg.get("evaluate_folds") or None]
+    pulls, base, model = [], [], []
+    for held in folds:
+        fit = GraspForce.fit(*grasp_force_samples(ds, training_samples(ds, held, cfg)))
+        p, f_lin, f_fe = grasp_force_samples(ds, held)
+        d = np.asarray(ds.forces[np.asarray(held)], np.float64).reshape(-1, 3)
+        pulls.append(p)
+        base.append(force_error_pct(f_lin, f_fe))
+        model.append(force_error_pct(fit(d, f_lin), f_fe))
+    p, errors = np.concatenate(pulls), {"base": np.concatenate(base),
+                                        "model": np.concatenate(model)}
+    return {"large_mm": large_mm, "tools": int(p.size), **{
+        k: {"median_pct": float(np.median(e)), "worst_pct": float(e.max()),
+            "large_median_pct": float(np.median(e[p > large_mm])) if np.any(p > large_mm)
+            else float("nan")} for k, e in errors.items()}}

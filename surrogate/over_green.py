@@ -76,18 +76,26 @@ class OverGreen:
         ids = cKDTree(self.points[self.green_nodes]).query(at.reshape(-1, 3))[1]
         return self.green_nodes[ids].reshape(at.shape[:-1])
 
-    def grasp(self, at, radius: float = GRASP_RADIUS) -> GreenGrasp:
+    def grasp(self, at, radius: float = GRASP_RADIUS):
         """Tools grasping the liver at the points ``at`` (T, 3) mm, each the patch of radius
-        ``radius`` around the free surface node nearest to its point: a
-        :class:`~data_spec.green_grasp.GreenGrasp` giving the field at the output nodes and each
-        tool's force for their displacements. The small-strain base alone: the network has
-        learned nodal forces, not grasps (docs/surgical_loads.md measures what the base
-        misses). ValueError when a patch reaches the fixed region.
+        ``radius`` around the free surface node nearest to its point: ``grasp(d)`` with the
+        tools' displacements d (T, 3) mm gives (the field at the output nodes, each tool's
+        force in N). Over the small-strain base (a
+        :class:`~data_spec.green_grasp.GreenGrasp`), a model of grasps adds the placed
+        network's rest to the field (the force stays the base's); a model of nodal forces
+        adds nothing (docs/surgical_loads.md measures what the base alone misses).
+        ValueError when a patch reaches the fixed region.
         """
         centres = np.atleast_1d(self.load_nodes(np.asarray(at, np.float64).reshape(-1, 3)))
-        return GreenGrasp(self.linear.green, self.green_nodes, self.output_nodes,
+        base = GreenGrasp(self.linear.green, self.green_nodes, self.output_nodes,
                           [grasp_patch(self.points, self.geometry.surface_nodes, c, radius)
                            for c in centres])
+        if self.placed.predictor.load != "grasp":
+            return base
+        if centres.size != self.placed.predictor.spec.n_loads:
+            raise ValueError(f"the model learned {self.placed.predictor.spec.n_loads} tool(s), "
+                             f"got {centres.size}")
+        return GraspOverGreen(base, self, centres)
 
     def _template_nodes(self, load_nodes: np.ndarray) -> np.ndarray:
         """The registered template's surface nodes under the mesh nodes ``load_nodes``, kept
@@ -121,6 +129,41 @@ class OverGreen:
             u = u.reshape(-1, k, 3).transpose(1, 0, 2)
         u = u + self.placed(f, self._template_nodes(n), rest=True)
         return u[0] if single else u
+
+
+class GraspOverGreen:
+    """A grasp's field over a liver's Green's function with a model of grasps: ``(d)`` ->
+    (the base's field plus the placed network's rest, each tool's force), ``d`` (T, 3) mm the
+    tools' displacements; ``force(d)`` alone (a haptic loop's microseconds): the base's
+    force stiffened as the model learned it (:class:`surrogate.grasp.GraspForce`; the base's
+    own when the model has none). Built by :meth:`OverGreen.grasp`.
+    """
+
+    def __init__(self, base: GreenGrasp, over: OverGreen, centres: np.ndarray):
+        self.base, self.over = base, over
+        self.patches, self.stiffness = base.patches, base.stiffness
+        self._at = over._template_nodes(np.asarray(centres, dtype=np.int64))
+        self._force = over.placed.predictor.grasp_force
+        # the grasped nodes move with their tool: the network's rest is not added there
+        where = {int(n): i for i, n in enumerate(over.output_nodes)}
+        self._held = np.array([where[int(n)] for p in base.patches for n in p if int(n) in where],
+                              dtype=np.int64)
+
+    def force(self, d) -> np.ndarray:
+        f = self.base.force(d)
+        return f if self._force is None else self._force(d, f)
+
+    def __call__(self, d) -> tuple[np.ndarray, np.ndarray]:
+        u, force = self.base(d)
+        if self._force is not None:
+            force = self._force(d, force)
+        if self.over._to_nodes is not None:   # at OverGreen's own points: interpolated
+            u = self.over._to_nodes @ u
+        rest = self.over.placed(np.asarray(d, dtype=np.float64)[None], self._at[None],
+                                rest=True)[0]
+        if self.over._to_nodes is None:
+            rest[self._held] = 0.0
+        return u + rest, force
 
 
 def green_of(predictor, data) -> tuple:

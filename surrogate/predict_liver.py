@@ -414,9 +414,12 @@ def _summary(args, predictor, pred, asked) -> dict:
             "force_point_moved_mm": np.linalg.norm(used - asked, axis=1).tolist(),
             "max_displacement_mm": float(np.linalg.norm(pred.displacement, axis=1).max()),
             "warnings": pred.warnings} | ({} if pred.tool_displacements is None else {
-                # a grasp: forces_N are each tool's force on the liver, of the base alone
+                # a grasp: forces_N are each tool's force on the liver, of the base
                 "grasp_displacements_mm": pred.tool_displacements.tolist(),
-                "grasp": "the small-strain base over the liver's Green's function alone"})
+                "grasp": ("the small-strain base over the liver's Green's function and the "
+                          "network's rest (the force the base's)" if predictor.load == "grasp"
+                          else "the small-strain base over the liver's Green's function "
+                          "alone")})
 
 
 def _checked_request(args, fail):
@@ -427,13 +430,15 @@ def _checked_request(args, fail):
 
     from data_spec.atomic import out_problem
     from data_spec.scene import GRASP_TOOLS
-    from surrogate.predictor import load_predictor
+    from surrogate.predictor import load_predictor, model_load
 
     why = out_problem(args.out, "--out", directory=True)   # nothing created for --out
     if why:
         return fail(why)
-    try:
-        predictor = load_predictor(Path(args.run) / "model")
+    grasp = getattr(args, "grasp", None)
+    try:   # a grasp: a model of grasps adds its rest, a model of forces gives the base alone
+        model = Path(args.run) / "model"
+        predictor = load_predictor(model, load=model_load(model) if grasp else "nodal")
     except (OSError, ValueError) as exc:
         return fail(exc)
     if predictor.shape_model is None:
@@ -441,10 +446,11 @@ def _checked_request(args, fail):
     if not (predictor.base.whole or args.base):
         return fail(f"{args.run}: {predictor.base.rest_only()}")
     L = predictor.spec.n_loads
-    grasp = getattr(args, "grasp", None)
     if grasp and (args.force or not args.base or len(grasp) > GRASP_TOOLS):
         return fail(f"--grasp: 1 to {GRASP_TOOLS} tools, with --base (the liver's Green's "
                     "function, make liver) and no --force")
+    if grasp and predictor.load == "grasp" and len(grasp) != L:
+        return fail(f"--grasp: the model learned {L} tool(s), got {len(grasp)}")
     if not grasp and len(args.force) != L:
         return fail(f"--force: the model takes {L} force(s), got {len(args.force)} (each "
                     "--force X Y Z FX FY FZ: a point near the liver surface in mm and a force "
@@ -518,9 +524,10 @@ def main(args, over=None) -> int:
                   "base alone, docs/surgical_loads.md)")
             if np.linalg.norm(d) > grasp.SMALL_PULL_MM:
                 print(f"warning: a {np.linalg.norm(d):.0f} mm pull is beyond the small-strain "
-                      "base's range: the Ogden liver stiffens, so its force is too low and its "
-                      "field off by millimetres (docs/surgical_loads.md measures by how much)",
-                      file=sys.stderr)
+                      "base's range: the Ogden liver stiffens, so its force is too low"
+                      + ("" if predictor.load == "grasp" else " and its field off by "
+                         "millimetres (a model of grasps corrects the field)")
+                      + " (docs/surgical_loads.md measures by how much)", file=sys.stderr)
     print(f"placed as {pred.frame}; registration residual {pred.residual:.2f} mm, "
           f"{pred.inverted} of {pred.cells.shape[0]} template tetrahedra inverted; max "
           f"displacement {summary['max_displacement_mm']:.2f} mm; written {vtu} and "

@@ -8,6 +8,7 @@ to evaluate; it never tests a design's name.
 
 from __future__ import annotations
 
+import json
 import logging
 import warnings
 from pathlib import Path
@@ -72,18 +73,34 @@ class Predictor:
     ``dtype``: the network's precision, one of :data:`PRECISIONS`.
     """
 
-    def __init__(self, directory, dtype: str = "float32"):
+    def __init__(self, directory, dtype: str = "float32", load: str = "nodal"):
         from surrogate.designs import DESIGNS
 
         if dtype not in PRECISIONS:
             raise ValueError(f"dtype: expected one of {sorted(PRECISIONS)}, got {dtype!r}")
+        if load not in LOADS:
+            raise ValueError(f"load: expected one of {sorted(LOADS)}, got {load!r}")
         self.dtype = dtype
         d = Path(directory)
         self.meta = meta = read_meta(d / "model.json", DESIGNS)
-        if meta.get("load") == "grasp":
-            raise ValueError(f"{d}: a model of grasps (scene {meta.get('scene')!r}: its load is "
-                             "a tool's displacement): answering a grasp with its network is "
-                             "not built yet; make liver GRASP=... gives the small-strain base")
+        self.load = meta.get("load", "nodal")   # "grasp": its loads are tools' pulls, mm
+        # a model of grasps: its tools' force beyond the small-strain one (None: the base's)
+        self.grasp_force = None
+        if meta.get("grasp_force") is not None:
+            from surrogate.grasp import GraspForce
+
+            self.grasp_force = GraspForce(**meta["grasp_force"])
+        if self.load not in LOADS:
+            raise ValueError(f"{d / 'model.json'}: load {self.load!r}, expected one of "
+                             f"{sorted(LOADS)}")
+        if self.load != load:
+            raise ValueError(f"{d}: a model of {LOADS[self.load]} (scene {meta.get('scene')!r}),"
+                             f" asked for {LOADS[load]}: "
+                             + ("give it a grasp (predict-liver --base DATA --grasp X Y Z DX DY "
+                                "DZ, make liver GRASP=...)" if self.load == "grasp" else
+                                "a grasp is answered by a model of grasps (scene4_grasp.toml); "
+                                "without one, predict-liver --base DATA --grasp gives the "
+                                "small-strain base alone"))
         try:
             self.spec = FeatureSpec(**meta["feature_spec"])
             cfg = meta["config"]
@@ -152,8 +169,9 @@ class Predictor:
             check_load_nodes(load_nodes, self.loadable)
         fmax = np.linalg.norm(forces, axis=-1).max()
         if fmax > 1.05 * self.force_norm_max:
-            warnings.warn(f"force magnitude {fmax:.3g} N exceeds the training range "
-                          f"({self.force_norm_max:.3g} N): extrapolating", stacklevel=2)
+            what, unit = ("pull", "mm") if self.load == "grasp" else ("force magnitude", "N")
+            warnings.warn(f"{what} {fmax:.3g} {unit} exceeds the training range "
+                          f"({self.force_norm_max:.3g} {unit}): extrapolating", stacklevel=2)
         # numpy in: the jitted call takes host arrays on its fast path (jnp.asarray here would
         # dispatch one eager conversion per argument, most of a small model's call)
         args = (np.asarray(forces, dtype=np.float32),
@@ -294,8 +312,20 @@ def _read_linear_part(d: Path, meta: dict, points, output_nodes) -> LinearPart |
     return LinearPart(nodes, green, points, output_nodes)
 
 
-def load_predictor(directory, dtype: str = "float32") -> Predictor:
+# The loads a model may have learned: nodal forces (N), or tools grasping a patch and moving
+# it (their displacements, mm: scene [loads] kind = "grasp").
+LOADS = {"nodal": "forces", "grasp": "grasps"}
+
+
+def model_load(directory) -> str:
+    """The load the exported model in ``directory`` learned: "nodal" or "grasp"."""
+    return json.loads((Path(directory) / "model.json").read_text()).get("load", "nodal")
+
+
+def load_predictor(directory, dtype: str = "float32", load: str = "nodal") -> Predictor:
     """Load an exported model directory; see :class:`Predictor`. ``dtype`` "bfloat16" or
     "float16" runs the network in 16 bits (docs/tradeoff_surrogate.md gives what it costs).
+    ``load``: what the caller gives it, "nodal" forces (N) or "grasp" (the tools' pulls, mm);
+    ValueError when the model learned the other (its field would answer the wrong load).
     """
-    return Predictor(directory, dtype)
+    return Predictor(directory, dtype, load)

@@ -212,8 +212,11 @@ def _one_liver(data: Path, gid: str, shards: list, order: int) -> Path:
                            element=solver.get("element", "lagrange"),
                            settings=solver_settings(scene))
     nodes = first.output_nodes
+    tool_force = None
     if scene["loads"]["kind"] == "grasp":
-        u = _grasp_responses(problem, first, shards, g, scene["loads"]["patch_radius"])[:, None]
+        u, tool_force = _grasp_responses(problem, first, shards, g,
+                                         scene["loads"]["patch_radius"])
+        u = u[:, None]
     else:
         loads = [[NodalLoad(s.load_nodes, s.forces)] for s in shards]
         u = problem.load_expansion(first.material, [Constraint(first.fixed_nodes)], loads,
@@ -223,13 +226,15 @@ def _one_liver(data: Path, gid: str, shards: list, order: int) -> Path:
         load_nodes=np.stack([s.load_nodes for s in shards]),
         forces=np.stack([s.forces for s in shards]), output_nodes=nodes,
         displacement=u[:, 0], scene_name=scene.name, scene_hash=scene.hash, geometry_id=gid,
-        seconds=time.perf_counter() - t, second_order=u[:, 1] if order == 2 else None))
+        seconds=time.perf_counter() - t, second_order=u[:, 1] if order == 2 else None,
+        tool_force=tool_force))
 
 
-def _grasp_responses(problem, first, shards: list, g, radius: float) -> np.ndarray:
-    """(len(shards), n_out, 3) mm: each grasp simulation's small-strain response at load
-    fraction 1 at the output nodes, from the Green's function rows of the liver's tools'
-    patches (one factorisation, three back-solves a patch node): G_PP f = d per simulation
+def _grasp_responses(problem, first, shards: list, g, radius: float) -> tuple:
+    """((len(shards), n_out, 3) mm, (len(shards), n_tools, 3) N): each grasp simulation's
+    small-strain response at load fraction 1 at the output nodes and its tools' forces, from
+    the Green's function rows of the liver's tools' patches (one factorisation, three
+    back-solves a patch node): G_PP f = d per simulation
     (:class:`data_spec.green_grasp.GreenGrasp`; the rows are those of the free surface, so a
     patch is held exactly as the solver holds it).
     """
@@ -243,8 +248,9 @@ def _grasp_responses(problem, first, shards: list, g, radius: float) -> np.ndarr
     nodes = first.output_nodes
     green = problem.unit_responses(first.material, [Constraint(first.fixed_nodes)],
                                    held)[:, :, nodes]
-    return np.stack([GreenGrasp(green, held, nodes, ps)(
-        s.tool_displacement[-1] / s.load_fractions[-1])[0] for s, ps in zip(shards, patches)])
+    both = [GreenGrasp(green, held, nodes, ps)(s.tool_displacement[-1] / s.load_fractions[-1])
+            for s, ps in zip(shards, patches)]
+    return np.stack([u for u, _ in both]), np.stack([f for _, f in both])
 
 
 def population_linear_fields(data: str | Path, order: int = 2, progress: bool = True) -> list:

@@ -139,9 +139,19 @@ def test_a_grasp_scene_end_to_end_records_each_tools_displacement_and_force(tmp_
         work = np.einsum("std,td->s", s.reaction, case.displacements)
         assert np.all(np.isfinite(s.reaction)) and np.all(work > 0)
         assert np.all(np.diff(work) > 0)
+    _small_strain_responses(out, root, scene, g, shards)
+
+
+def _small_strain_responses(out, root, scene, g, shards) -> None:
+    """The grasp dataset's small-strain responses checked against its shards."""
+    import subprocess
+    import sys
+
     # each simulation's small-strain response (fem_sim linear --population, order 1: the
     # Green's function rows of its patches, G_PP f = d) holds every patch at its tool's pull
     from data_spec.linear_fields import read_dataset_linear
+    from fem_sim.batch import cases as cs
+    from fem_sim.batch.chunked import mpirun_env
 
     lin = ["-m", "fem_sim", "linear", "--population", str(out), "--order"]
     res = subprocess.run([sys.executable, *lin, "2"], env=mpirun_env(PYTHONPATH=str(root)),
@@ -157,6 +167,15 @@ def test_a_grasp_scene_end_to_end_records_each_tools_displacement_and_force(tmp_
         for patch, pull in zip(cs.grasp_patches(case, g, s.fixed_nodes), case.displacements):
             np.testing.assert_allclose(u1[patch], np.broadcast_to(pull, (patch.size, 3)),
                                        atol=1e-4 * np.linalg.norm(pull))
+        # and its tools' small-strain forces: positive work along the pull, near the FE
+        # reaction at the first load step (a few mm: within 10 %), and the Ogden liver
+        # stiffening beyond them as the pull grows (the FE force over the linear one rises)
+        f1 = lf.tool_force[lf.rows([s.sim_index])[0]]
+        assert np.all(np.einsum("td,td->t", f1, case.displacements) > 0)
+        ratio = (np.linalg.norm(s.reaction, axis=2)
+                 / np.linalg.norm(s.load_fractions[:, None, None] * f1, axis=2))
+        assert np.all(np.abs(ratio[0] - 1.0) < 0.1) and np.all(ratio[-1] > ratio[0])
+
 
 
 def test_a_grasp_scene_is_checked_and_a_patch_on_the_fixed_region_is_a_recorded_failure(
