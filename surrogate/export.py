@@ -63,10 +63,10 @@ def _grasp_force(ds):
     fitted on every sample of the grasp dataset ``ds``; None without its small-strain files'
     tools' forces (the model then gives the base's force).
     """
-    from surrogate.grasp import GraspForce, grasp_force_samples
+    from surrogate.grasp import GraspForce, base_forces
 
     try:
-        return GraspForce.fit(*grasp_force_samples(ds, np.arange(ds.n_samples)))
+        return GraspForce.fit(ds.forces, base_forces(ds), ds.reactions)
     except (ValueError, OSError):
         return None
 

@@ -53,13 +53,13 @@ class GraspForce:
     b: float = 0.0
 
     @classmethod
-    def fit(cls, pull, f_lin, f_fe) -> GraspForce:
-        """From the pulls (n,) mm, the base's forces (n, 3) N and the FE's (n, 3) N."""
-        p, f_lin = np.asarray(pull, np.float64)[:, None], np.asarray(f_lin, np.float64)
+    def fit(cls, d, f_lin, f_fe) -> GraspForce:
+        """From the tools' pulls ``d`` (..., 3) mm, the base's forces and the FE's (..., 3) N."""
+        p = np.linalg.norm(np.asarray(d, np.float64).reshape(-1, 3), axis=1)[:, None]
+        f_lin, f_fe = (np.asarray(f, np.float64).reshape(-1, 3) for f in (f_lin, f_fe))
         w = 1.0 / np.linalg.norm(f_fe, axis=1, keepdims=True)   # each sample's relative error
         design = np.stack([(w * p * f_lin).ravel(), (w * p**2 * f_lin).ravel()], axis=1)
-        (a, b), *_ = np.linalg.lstsq(design, (w * (np.asarray(f_fe) - f_lin)).ravel(),
-                                     rcond=None)
+        (a, b), *_ = np.linalg.lstsq(design, (w * (f_fe - f_lin)).ravel(), rcond=None)
         return cls(float(a), float(b))
 
     def __call__(self, d, f_lin) -> np.ndarray:
@@ -68,27 +68,24 @@ class GraspForce:
         return np.asarray(f_lin) * (1.0 + self.a * p + self.b * p * p)
 
 
-def grasp_force_samples(ds, samples) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(pull (n,) mm, the base's force (n, 3) N, the FE reaction (n, 3) N) of every tool of
-    the grasp dataset ``ds``'s ``samples``; ValueError when its small-strain files hold no
-    tools' forces (rerun ``fem_sim linear --population DATA --order 1``).
+def base_forces(ds) -> np.ndarray:
+    """(S, n_tools, 3) N: each sample of the grasp dataset ``ds``, its tools' small-strain
+    force at the sample's step (its small-strain files' force at fraction 1, scaled);
+    ValueError when ``ds`` has no reaction forces or its files hold no tools' forces (rerun
+    ``fem_sim linear --population DATA --order 1``).
     """
     from surrogate.linear_base import PopulationLinearBase
 
     if getattr(ds, "reactions", None) is None:
         raise ValueError(f"{ds.directory}: not a grasp dataset (no reaction forces)")
-    base = PopulationLinearBase(ds, order=1)
-    f_lin = []
-    for s in samples:
-        lf, _ = base.files[int(ds.sample_geo[s])]
+    out = np.empty(ds.reactions.shape)
+    for g, (lf, _) in PopulationLinearBase(ds, order=1).files.items():
         if lf.tool_force is None:
             raise ValueError(f"{ds.directory}/linear: no tools' forces; rerun fem_sim linear "
                              f"--population {ds.directory} --order 1")
-        f_lin.append(ds.sample_fraction[s] * lf.tool_force[lf.rows([ds.sample_sim[s]])[0]])
-    samples = np.asarray(samples, dtype=np.int64)
-    d = np.asarray(ds.forces[samples], np.float64).reshape(-1, 3)
-    return (np.linalg.norm(d, axis=1), np.concatenate(f_lin).reshape(-1, 3),
-            np.asarray(ds.reactions[samples]).reshape(-1, 3))
+        at = np.flatnonzero(ds.sample_geo == g)
+        out[at] = ds.sample_fraction[at, None, None] * lf.tool_force[lf.rows(ds.sample_sim[at])]
+    return out
 
 
 def force_error_pct(f, f_fe) -> np.ndarray:
@@ -111,14 +108,14 @@ def heldout_grasp_force(data, run, large_mm: float = 20.0) -> dict:
     cfg = json.loads((Path(run) / "config.json").read_text())
     ds = load_dataset(data)
     folds = kfold_groups(ds, cfg["folds"], cfg["seed"])[:cfg.get("evaluate_folds") or None]
+    d, f_lin, f_fe = np.asarray(ds.forces, np.float64), base_forces(ds), ds.reactions
     pulls, base, model = [], [], []
     for held in folds:
-        fit = GraspForce.fit(*grasp_force_samples(ds, training_samples(ds, held, cfg)))
-        p, f_lin, f_fe = grasp_force_samples(ds, held)
-        d = np.asarray(ds.forces[np.asarray(held)], np.float64).reshape(-1, 3)
-        pulls.append(p)
-        base.append(force_error_pct(f_lin, f_fe))
-        model.append(force_error_pct(fit(d, f_lin), f_fe))
+        train = training_samples(ds, held, cfg)
+        fit = GraspForce.fit(d[train], f_lin[train], f_fe[train])
+        pulls.append(np.linalg.norm(d[held], axis=-1).ravel())
+        base.append(force_error_pct(f_lin[held], f_fe[held]).ravel())
+        model.append(force_error_pct(fit(d[held], f_lin[held]), f_fe[held]).ravel())
     p, errors = np.concatenate(pulls), {"base": np.concatenate(base),
                                         "model": np.concatenate(model)}
     return {"large_mm": large_mm, "tools": int(p.size), **{

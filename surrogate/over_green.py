@@ -82,8 +82,8 @@ class OverGreen:
         tools' displacements d (T, 3) mm gives (the field at the output nodes, each tool's
         force in N). Over the small-strain base (a
         :class:`~data_spec.green_grasp.GreenGrasp`), a model of grasps adds the placed
-        network's rest to the field (the force stays the base's); a model of nodal forces
-        adds nothing (docs/surgical_loads.md measures what the base alone misses).
+        network's rest to the field and stiffens the force (:class:`GraspOverGreen`); a model
+        of nodal forces adds nothing (docs/surgical_loads.md measures what the base misses).
         ValueError when a patch reaches the fixed region.
         """
         centres = np.atleast_1d(self.load_nodes(np.asarray(at, np.float64).reshape(-1, 3)))

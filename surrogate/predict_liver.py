@@ -414,12 +414,12 @@ def _summary(args, predictor, pred, asked) -> dict:
             "force_point_moved_mm": np.linalg.norm(used - asked, axis=1).tolist(),
             "max_displacement_mm": float(np.linalg.norm(pred.displacement, axis=1).max()),
             "warnings": pred.warnings} | ({} if pred.tool_displacements is None else {
-                # a grasp: forces_N are each tool's force on the liver, of the base
+                # a grasp: forces_N are each tool's force on the liver
                 "grasp_displacements_mm": pred.tool_displacements.tolist(),
-                "grasp": ("the small-strain base over the liver's Green's function and the "
-                          "network's rest (the force the base's)" if predictor.load == "grasp"
-                          else "the small-strain base over the liver's Green's function "
-                          "alone")})
+                "grasp": "the small-strain base over the liver's Green's function " + (
+                    "alone" if predictor.load != "grasp" else "and the network's rest (the "
+                    "force the base's" + ("" if predictor.grasp_force is None else
+                                          " stiffened as the model learned it") + ")")})
 
 
 def _checked_request(args, fail):
@@ -518,15 +518,20 @@ def main(args, over=None) -> int:
         png = pred.draw(out / "liver_deformed.png", title=Path(args.liver).name)
         print(f"picture: {png}", file=sys.stderr)
     if pred.tool_displacements is not None:
+        base_field = predictor.load != "grasp"   # a model of forces: the base alone
+        base_force = base_field or predictor.grasp_force is None
         for d, f in zip(pred.tool_displacements, pred.forces):
             print(f"grasp moved {np.linalg.norm(d):.1f} mm: the tool's force on the liver "
-                  f"{np.round(f, 3).tolist()} N ({np.linalg.norm(f):.3f} N; the small-strain "
-                  "base alone, docs/surgical_loads.md)")
-            if np.linalg.norm(d) > grasp.SMALL_PULL_MM:
+                  f"{np.round(f, 3).tolist()} N ({np.linalg.norm(f):.3f} N; "
+                  + ("the small-strain base alone" if base_force else
+                     "the base's stiffened as the model learned it")
+                  + ", docs/surgical_loads.md)")
+            off = ([] if not base_force else ["its force is too low"]) + \
+                ([] if not base_field else ["its field off by millimetres (a model of grasps "
+                                            "corrects the field)"])
+            if np.linalg.norm(d) > grasp.SMALL_PULL_MM and off:
                 print(f"warning: a {np.linalg.norm(d):.0f} mm pull is beyond the small-strain "
-                      "base's range: the Ogden liver stiffens, so its force is too low"
-                      + ("" if predictor.load == "grasp" else " and its field off by "
-                         "millimetres (a model of grasps corrects the field)")
+                      "base's range: the Ogden liver stiffens, so " + " and ".join(off)
                       + " (docs/surgical_loads.md measures by how much)", file=sys.stderr)
     print(f"placed as {pred.frame}; registration residual {pred.residual:.2f} mm, "
           f"{pred.inverted} of {pred.cells.shape[0]} template tetrahedra inverted; max "

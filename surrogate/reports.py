@@ -83,5 +83,4 @@ def xyz(m: dict, key: str, fmt: str = "{:.3f}") -> str:
 # ``render(template, **REPORT_NAMES, ...)``.
 REPORT_NAMES = {
     "label": design_label, "xyz": xyz, "nan": math.nan, "record": DesignRecord.from_json,
-    "use_cell": lambda d: DesignRecord.from_json(d).use_cell(),
     "mean": lambda xs: float(np.mean(list(xs))), "median": lambda xs: float(np.median(list(xs)))}
