@@ -474,6 +474,29 @@ def _checked_request(args, fail):
     return predictor, spec, points, triangles, said
 
 
+def _say_grasp(predictor, pred) -> None:
+    """Each tool's pull and force, and what part of them is the small-strain base alone."""
+    import sys
+
+    from surrogate import grasp
+
+    base_field = predictor.load != "grasp"   # a model of forces: the base alone
+    base_force = base_field or predictor.grasp_force is None
+    for d, f in zip(pred.tool_displacements, pred.forces):
+        print(f"grasp moved {np.linalg.norm(d):.1f} mm: the tool's force on the liver "
+              f"{np.round(f, 3).tolist()} N ({np.linalg.norm(f):.3f} N; "
+              + ("the small-strain base alone" if base_force else
+                 "the base's stiffened as the model learned it")
+              + ", docs/surgical_loads.md)")
+        off = ([] if not base_force else ["its force is too low"]) + \
+            ([] if not base_field else ["its field off by millimetres (a model of grasps "
+                                        "corrects the field)"])
+        if np.linalg.norm(d) > grasp.SMALL_PULL_MM and off:
+            print(f"warning: a {np.linalg.norm(d):.0f} mm pull is beyond the small-strain "
+                  "base's range: the Ogden liver stiffens, so " + " and ".join(off)
+                  + " (docs/surgical_loads.md measures by how much)", file=sys.stderr)
+
+
 def main(args, over=None) -> int:
     """The ``predict-liver`` subcommand (arguments parsed by surrogate.__main__); ``over``:
     the prediction over the liver's own base, ``over(predictor, forces, at)`` -> its
@@ -481,7 +504,6 @@ def main(args, over=None) -> int:
     """
     import sys
 
-    from surrogate import grasp
 
     def fail(msg):
         print(f"liverfem-surrogate predict-liver: {msg}", file=sys.stderr)
@@ -518,21 +540,7 @@ def main(args, over=None) -> int:
         png = pred.draw(out / "liver_deformed.png", title=Path(args.liver).name)
         print(f"picture: {png}", file=sys.stderr)
     if pred.tool_displacements is not None:
-        base_field = predictor.load != "grasp"   # a model of forces: the base alone
-        base_force = base_field or predictor.grasp_force is None
-        for d, f in zip(pred.tool_displacements, pred.forces):
-            print(f"grasp moved {np.linalg.norm(d):.1f} mm: the tool's force on the liver "
-                  f"{np.round(f, 3).tolist()} N ({np.linalg.norm(f):.3f} N; "
-                  + ("the small-strain base alone" if base_force else
-                     "the base's stiffened as the model learned it")
-                  + ", docs/surgical_loads.md)")
-            off = ([] if not base_force else ["its force is too low"]) + \
-                ([] if not base_field else ["its field off by millimetres (a model of grasps "
-                                            "corrects the field)"])
-            if np.linalg.norm(d) > grasp.SMALL_PULL_MM and off:
-                print(f"warning: a {np.linalg.norm(d):.0f} mm pull is beyond the small-strain "
-                      "base's range: the Ogden liver stiffens, so " + " and ".join(off)
-                      + " (docs/surgical_loads.md measures by how much)", file=sys.stderr)
+        _say_grasp(predictor, pred)
     print(f"placed as {pred.frame}; registration residual {pred.residual:.2f} mm, "
           f"{pred.inverted} of {pred.cells.shape[0]} template tetrahedra inverted; max "
           f"displacement {summary['max_displacement_mm']:.2f} mm; written {vtu} and "
