@@ -22,11 +22,9 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
-from fem_sim.batch.chunked import generate_chunks, liver_truth
+from fem_sim.batch.chunked import generate_chunks, linear_bases, liver_truth
 from liverviz.report import ROOT, SOFA, SOFA_FRAME, render, write_report
-from surrogate.patient import SYNTHETIC
+from surrogate.patient import SYNTHETIC, study
 from surrogate.reports import REPORT_NAMES
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
@@ -61,23 +59,16 @@ def truth(pred, liver: Path, a, frame: str | None = None) -> Path:
 def linear(scene: Path, data: Path, record: Path, order: int = 1, green: bool = False) -> dict:
     """``fem_sim linear`` on the truth's scene as make patient runs it, once per setting: its
     wall seconds in ``record``."""
-    from data_spec import load_scene
     from data_spec.linear_fields import linear_fields_path, read_linear_fields
 
-    path = linear_fields_path(data)
     done = json.loads(record.read_text()) if record.exists() else {}
-    if path.exists() and done.get("seconds") and done.get("order", 1) == order:
-        lf = read_linear_fields(path)
-        if lf.scene_hash == load_scene(scene).hash and lf.order == order \
-                and (lf.green is not None) == green:
-            return done
-    t = time.perf_counter()
-    subprocess.run([str(ROOT / ".venv-solver" / "bin" / "python"), "-m", "fem_sim", "linear",
-                    str(scene), "--out", str(data), "--synthetic", str(SYNTHETIC), "--order",
-                    str(order), *(["--green"] if green else [])], cwd=ROOT, check=True)
-    done = {"seconds": time.perf_counter() - t, "order": order,
-            "solves_seconds": read_linear_fields(path).seconds}
-    record.write_text(json.dumps(done))
+    if (done.get("order"), done.get("green")) != (order, green):   # timed again
+        linear_fields_path(data).unlink(missing_ok=True)
+    seconds = linear_bases(data, scene=scene, order=order, green=green, synthetic=SYNTHETIC)
+    if seconds is not None:
+        done = {"seconds": seconds, "order": order, "green": green,
+                "solves_seconds": read_linear_fields(linear_fields_path(data)).seconds}
+        record.write_text(json.dumps(done))
     return done
 
 
@@ -103,7 +94,7 @@ def curve(liver: Path, a) -> tuple[dict, dict]:
     ks, ds = found["ks"], load_dataset(data)
     return ({"liver": liver.stem, "nodes": found["nodes"], "points": found["points"],
              "held_out_sims": found["held_out_sims"],
-             "fe_seconds": fe_seconds(data, a.np, ks), "place_seconds": placing,
+             "fe_seconds": study.fe_seconds(data, a.np, ks, HELD), "place_seconds": placing,
              "linear_seconds": json.loads((data.parent / "linear.json").read_text())["seconds"]},
             {"liver": liver.stem, "k": min(a.sources_k, ks[-1]),
              **sources(pred, placement, ds, min(a.sources_k, ks[-1]))})
@@ -125,27 +116,6 @@ def sources(pred, placement, ds, k: int) -> dict:
         teacher.population(f, x), teacher(f, x), ds.sample_sim[held])
 
 
-def fe_seconds(data: Path, ranks: int, ks=KS, first: int = HELD) -> dict:
-    """For each K, the own solve seconds of the K training simulations (after the ``first``
-    held out) over ``ranks`` ranks, start-up aside; at K = 0 one simulation's."""
-    from data_spec import list_shards, read_shard
-
-    t = [float(read_shard(p).stats.info.get("total_wall_time", np.nan))
-         for p in list_shards(data)][first:]
-    return {str(k): sum(t[:max(k, 1)]) / ranks for k in ks}
-
-
-def minutes(c: dict, k: int, start: float) -> float:
-    """Wall minutes from the liver file to the patient model at K = ``k`` on two cores:
-    placing, ``start`` s of FE start-up, the K solves over the ranks, ``fem_sim linear`` and
-    the adaptation (K = 0 without the responses: placing only)."""
-    p = c["points"][str(k)]
-    if "adapt_seconds" not in p:
-        return c["place_seconds"] / 60
-    return (c["place_seconds"] + start + c["fe_seconds"].get(str(k), 0.0)
-            + c.get("linear_seconds", 0.0) + sum(p["adapt_seconds"].values())) / 60
-
-
 def end_to_end(liver: Path, a, k: int = 40) -> dict:
     """Wall seconds of ``make patient`` (K simulations, two ranks) in all and by step, from
     when each step's last output was written."""
@@ -162,36 +132,8 @@ def end_to_end(liver: Path, a, k: int = 40) -> dict:
     placed = (out / "scene.toml").stat().st_mtime
     solved = max(f.stat().st_mtime for f in (out / "data").rglob("*") if f.is_file())
     return {"total": end - t, "place": placed - t, "fe": solved - placed,
-            "solves": fe_seconds(out / "data", a.np, [k], first=0)[str(k)],
+            "solves": study.fe_seconds(out / "data", a.np, [k], first=0)[str(k)],
             "adapt": end - solved, "k": k, "liver": liver.stem}
-
-
-def _size(curves: list[dict], md: Path) -> dict | None:
-    """The patient model's error on each held-out simulation against the size of its FE field,
-    at K = 0 and the largest K (and their picture, ``md`` with _loads.png)."""
-    have = [c for c in curves if c.get("held_out_sims", {}).get("0")]
-    if not have:
-        return None
-    from scipy.stats import spearmanr
-
-    def pooled(k: str, key: str) -> np.ndarray:
-        return np.concatenate([c["held_out_sims"][k][key] for c in have
-                               if k in c["held_out_sims"]])
-
-    err, peak = pooled("0", "mee_mm"), pooled("0", "peak_mm")
-    big = peak > BIG_PEAK_MM
-    kmax = max(int(k) for c in have for k in c["held_out_sims"])
-    e_max, p_max = pooled(str(kmax), "mee_mm"), pooled(str(kmax), "peak_mm")
-    _size_picture(have, md.with_suffix(".png").with_stem(md.stem + "_loads"), kmax)
-    per = [(c["liver"], int((np.array(h["peak_mm"]) > BIG_PEAK_MM).sum()),
-            np.mean(np.array(h["mee_mm"])[np.array(h["peak_mm"]) <= BIG_PEAK_MM]))
-           for c in have if (h := c["held_out_sims"]["0"]) and np.mean(h["mee_mm"]) > GOAL_MM - 0.1]
-    return {"n": err.size, "livers": len(have), "rho": spearmanr(err, peak).statistic,
-            "big": int(big.sum()), "big_mee": np.median(err[big]),
-            "small_mee": np.median(err[~big]), "kmax": kmax,
-            "livers_kmax": sum(str(kmax) in c["held_out_sims"] for c in have),
-            "big_mee_kmax": np.median(e_max[p_max > BIG_PEAK_MM]),
-            "small_mee_kmax": np.median(e_max[p_max <= BIG_PEAK_MM]), "per": per}
 
 
 def _size_picture(curves: list[dict], png: Path, kmax: int) -> None:
@@ -224,66 +166,23 @@ def _size_picture(curves: list[dict], png: Path, kmax: int) -> None:
     plt.close(fig)
 
 
-def _weights(curves: list[dict]) -> list[dict]:
-    """The rest's weight fitted on the K simulations: linear + rest at it against at weight 1
-    on the same held-out simulations, per K."""
-    ks = sorted({int(k) for c in curves for k, p in c["points"].items()
-                 if isinstance(p, dict) and "linear_rest_weighted" in p})
-    out = []
-    for k in ks:
-        have = [c for c in curves if "linear_rest_weighted" in c["points"].get(str(k), {})]
-        w = [c["points"][str(k)]["linear_rest_weighted"] for c in have]
-        one = [c["points"]["0"]["linear_rest"] for c in have]
-        out.append({"k": k, "median": np.median(w), "one": np.median(one),
-                    "lower": sum(x < y - 1e-9 for x, y in zip(w, one)),
-                    "higher": sum(x > y + 1e-9 for x, y in zip(w, one)),
-                    "livers": [(c["liver"], c["points"][str(k)]["rest_weight"]) for c in have]})
-    return out
-
-
-def _mee(c: dict, k: int) -> float:
-    """The patient model's MEE at K = k (none at K = 0 without the small-strain responses:
-    the population model's)."""
-    return c["points"][str(k)].get("patient_model", c["points"][str(k)]["population"])
-
-
-def _figures(curves: list[dict], a, start: float | None) -> dict:
-    """What the report says of the curves beyond the table: medians, the rest, fine-tuning,
-    the least K within the goal and the best within its minutes."""
-    ks_of = {c["liver"]: [k for k in a.ks if str(k) in c["points"]] for c in curves}
-    p0 = [c["points"]["0"] for c in curves]
-    rest = None if not all("linear_rest" in p for p in p0) else {
-        "linear": [p["linear"] for p in p0], "rest": [p["linear_rest"] for p in p0],
-        "lower": sum(p["linear_rest"] < p["linear"] for p in p0)}
-    tuned = {k: {"medians": [np.median([c["points"][str(k)][key] for c in curves])
-                             for key in ("corrected", "tuned", "tuned_corrected")],
-                 "lower": sum(c["points"][str(k)]["tuned_corrected"] <
-                              c["points"][str(k)]["corrected"] for c in curves)}
-             for k in a.ks if k and all("tuned" in c["points"].get(str(k), {}) for c in curves)}
-    best = []
-    for c in curves:
-        within = [] if start is None else [k for k in ks_of[c["liver"]]
-                                           if minutes(c, k, start) <= GOAL_MINUTES]
-        best.append(min(within, key=lambda k: _mee(c, k)) if within else None)
-    return {"medians": [(k, np.median(m), len(m)) for k in a.ks
-                        for m in [[_mee(c, k) for c in curves if str(k) in c["points"]]]],
-            "rest_vs": rest, "weights": _weights(curves) if rest else [], "tuned": tuned,
-            "reached": [next((k for k in ks_of[c["liver"]] if _mee(c, k) <= GOAL_MM), None)
-                        for c in curves], "best_within": best}
-
-
 def report(curves: list[dict], e2e: dict | None, a, found: list[dict], md: Path) -> str:
     """docs/patient.md's body after the header (bench/templates/patient.md.j2)."""
     # the FE start-up (meshing, MPI, the forms, the ranks' uneven end) as make patient spent
     # it: its FE step's wall seconds less its simulations' own solves over the ranks
     start = max(0.0, e2e["fe"] - e2e["solves"]) if e2e and "solves" in e2e else None
+    size = study.load_size(curves, BIG_PEAK_MM, GOAL_MM)
+    if size:   # the curves that kept their held-out simulations, one colour a liver
+        _size_picture([c for c in curves if c.get("held_out_sims", {}).get("0")],
+                      md.with_suffix(".png").with_stem(md.stem + "_loads"), size["kmax"])
     return render(Path(__file__).parent / "templates" / "patient.md.j2", **REPORT_NAMES,
-                  **_figures(curves, a, start), curves=curves, e2e=e2e, a=a, found=found,
-                  start=start, size=_size(curves, md), md_stem=md.stem, frames=FRAMES,
+                  **study.curve_figures(curves, a.ks, start, GOAL_MM, GOAL_MINUTES),
+                  curves=curves, e2e=e2e, a=a, found=found, start=start, size=size, md_stem=md.stem,
+                  frames=FRAMES,
                   model=Path(a.model).resolve().relative_to(ROOT),
                   rest=a.rest and Path(a.rest).resolve().relative_to(ROOT), held=HELD,
                   synthetic=SYNTHETIC, goal_mm=GOAL_MM, goal_minutes=GOAL_MINUTES,
-                  big_peak=BIG_PEAK_MM, mee=_mee, minutes=minutes,
+                  big_peak=BIG_PEAK_MM, mee=study.patient_mee, minutes=study.patient_minutes,
                   ratios=[s["corrected_mm"] / s["projection_floor_mm"] for s in found],
                   gaps=[abs(s["relative_first_step"] - s["relative_last_step"]) for s in found]
                   ).rstrip("\n") + "\n"

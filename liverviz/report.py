@@ -105,8 +105,8 @@ def write_report(md: str | Path, title: str, body: str, data) -> None:
     import json
 
     md = Path(md)
-    md.write_text(header(title) + "\n" + body + "\n" + (("\n" + sections(md)) if md.exists()
-                                                         and sections(md) else ""))
+    kept = sections(md)   # one blank line between the header, the body and the kept sections
+    md.write_text(header(title) + body.strip("\n") + "\n" + ("\n" + kept if kept else ""))
     md.with_suffix(".json").write_text(json.dumps(data, indent=1, default=float) + "\n")
     print(f"report written to {md}", flush=True)
 

@@ -106,21 +106,25 @@ def generate_chunks(scene: str | Path, data: str | Path, n: int, *, ranks: int =
 
 
 def linear_bases(data: str | Path, *, ranks: int = 2, order: int = 2,
-                 scene: str | Path | None = None,
-                 solver_python: str | Path | None = None) -> None:
+                 scene: str | Path | None = None, synthetic: int = 0, green: bool = False,
+                 solver_python: str | Path | None = None) -> float | None:
     """The small-strain bases of a dataset from any environment (``fem_sim linear`` in the
     solver's): of every liver of the population dataset ``data`` on ``ranks`` ranks (each
     liver's file skipped when whole), or with ``scene``, of the one-liver dataset ``data`` of
-    that scene (``data/linear.h5``, kept when it holds the scene's simulations to ``order``:
-    a file of order 2 serves order 1).
+    that scene (``data/linear.h5``, one process, with ``synthetic`` drawn loads and with
+    ``green`` the Green's function, as make patient and make liver run it; kept when it holds
+    the scene's simulations to ``order``, those drawn loads and that Green's function: a file
+    of order 2 serves order 1). Returns the wall seconds of ``fem_sim linear`` when it ran,
+    None when every file was kept.
     """
     data = Path(data)
     solver_python = str(solver_python or ROOT / ".venv-solver" / "bin" / "python")
+    t = time.perf_counter()
     if scene is None:
         cmd = ["mpirun", "-n", str(ranks), solver_python, "-m", "fem_sim", "linear",
                "--population", str(data), "--order", str(order)]
         subprocess.run(cmd, check=True, cwd=ROOT, env=mpirun_env(oversubscribe=False))
-        return
+        return time.perf_counter() - t
     from data_spec import load_scene
     from data_spec.linear_fields import linear_fields_path, read_dataset_linear
 
@@ -130,7 +134,10 @@ def linear_bases(data: str | Path, *, ranks: int = 2, order: int = 2,
         except ValueError:   # another scene's, or not whole: made again
             lf = None
         if lf is not None and lf.scene_hash == sc.hash and lf.order >= order \
-                and lf.case_index.size >= sc.n_simulations:
-            return
+                and lf.case_index.size - lf.synthetic.size >= sc.n_simulations \
+                and lf.synthetic.size >= synthetic and (lf.green is not None or not green):
+            return None
     subprocess.run([solver_python, "-m", "fem_sim", "linear", str(scene), "--out", str(data),
+                    "--synthetic", str(synthetic), *(["--green"] if green else []),
                     "--order", str(order)], check=True, cwd=ROOT)
+    return time.perf_counter() - t

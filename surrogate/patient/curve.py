@@ -39,7 +39,7 @@ def made_by(model: Path, data: Path, rest: Path | None = None) -> str:
     if linear_fields_path(data).exists():
         lf = read_linear_fields(linear_fields_path(data))
         h.update(f"order {lf.order} green {lf.green is not None}".encode())
-    code = [*sorted(PACKAGE.glob("*.py")),
+    code = [*(f for f in sorted(PACKAGE.glob("*.py")) if f.name != "study.py"),   # reporting
             *(PACKAGE.parent / n for n in ("tuning.py", "linear_base.py"))]
     for f in [*sorted(Path(model).glob("*")), *(sorted(Path(rest).glob("*")) if rest else []),
               *code]:

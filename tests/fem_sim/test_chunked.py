@@ -52,3 +52,45 @@ def test_a_liver_truth_of_another_scene_is_emptied_and_its_own_kept(tmp_path):
     assert (d / "scene.toml").read_text() == "scene B" and not data.exists()
     assert not (d / "generation.json").exists() and not (d / "linear.json").exists()
     assert (d / "other.json").exists()
+
+
+def test_a_livers_small_strain_file_is_kept_only_when_it_holds_what_is_asked(tmp_path,
+                                                                            monkeypatch):
+    """linear_bases on a one-liver dataset (make patient's and make liver's fem_sim linear):
+    a file of the same scene is kept when its order, its drawn loads and its Green's function
+    cover what is asked; anything more runs fem_sim linear again with the flags asked, and
+    the call returns its seconds."""
+    import types
+
+    import numpy as np
+
+    import data_spec
+    import data_spec.linear_fields as linear_fields
+
+    data = tmp_path / "data"
+    data.mkdir()
+    (data / "linear.h5").touch()
+    cases = np.r_[np.arange(4), linear_fields.SYNTHETIC_FIRST + np.arange(2)]
+    have = types.SimpleNamespace(scene_hash="h", order=1, green=None, case_index=cases,
+                                 synthetic=np.flatnonzero(cases >= linear_fields.SYNTHETIC_FIRST))
+    monkeypatch.setattr(linear_fields, "read_dataset_linear", lambda d: have)
+    monkeypatch.setattr(data_spec, "load_scene",
+                        lambda s: types.SimpleNamespace(hash="h", n_simulations=4))
+    runs = []
+    monkeypatch.setattr(chunked.subprocess, "run", lambda cmd, **kw: runs.append(cmd))
+
+    def kept(**kw) -> bool:
+        return chunked.linear_bases(data, scene="s.toml", **kw) is None
+
+    assert kept(order=1, synthetic=2) and kept(order=1) and not runs
+    assert not kept(order=2) and runs[-1][runs[-1].index("--order") + 1] == "2"
+    assert not kept(order=1, green=True) and "--green" in runs[-1]
+    assert not kept(order=1, synthetic=3)
+    assert runs[-1][runs[-1].index("--synthetic") + 1] == "3" and "--green" not in runs[-1]
+    have.scene_hash = "another"
+    assert not kept(order=1)
+    have.scene_hash, have.order, have.green = "h", 2, np.zeros(1)
+    assert kept(order=1, green=True, synthetic=1) and len(runs) == 4
+    monkeypatch.setattr(data_spec, "load_scene",   # the scene grew: 5 simulations
+                        lambda s: types.SimpleNamespace(hash="h", n_simulations=5))
+    assert not kept(order=1)
