@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from liverviz.plots import shape_model
 from liverviz.report import ROOT, capture
 
 SCENE = """schema_version = 1
@@ -83,32 +84,6 @@ def picture(out: Path, png: Path, variety: str) -> None:
                   cols=3, panel_size=(420, 340))
 
 
-def plot(results: dict, png: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(1, 2, figsize=(10, 4))
-    for (variety, rows), c in zip(results.items(), ("C0", "C1", "C2")):
-        n = [r["n"] for r in rows]
-        ax[0].plot(n, [r["explained_variance"] for r in rows], "-o", ms=3, color=c,
-                   label=variety)
-        ax[1].plot(n, [r["iou_mean"] for r in rows], "-s", ms=3, color=c,
-                   label=f"{variety} (mean)")
-        ax[1].plot(n, [r["iou_min"] for r in rows], ":", color=c, label=f"{variety} (worst)")
-    ax[0].set_ylabel("cumulative explained variance")
-    ax[1].set_ylabel("IoU of the reconstruction")
-    ax[1].axhline(IOU_TARGET, color="gray", lw=0.8)
-    for a in ax:
-        a.set_xlabel("PCA components")
-        a.grid(alpha=0.3)
-        a.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(png, dpi=120)
-    plt.close(fig)
-
-
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--livers", type=int, default=40)
@@ -137,7 +112,7 @@ def main() -> int:
         results[variety] = json.loads((out / "population.json").read_text())["rows"]
         bodies[variety] = (out / "population.md").read_text().split("\n", 1)[1]
     md = Path(a.md)
-    plot(results, md.with_suffix(".png"))
+    shape_model(results, IOU_TARGET, md.with_suffix(".png"))
     first = a.varieties[0]
     livers_png = md.with_name(md.stem + "_livers.png")
     picture(Path(a.out) / first, livers_png, first)

@@ -37,6 +37,7 @@ from fem_sim.batch.knob_run import (
     run_job,
 )
 from liverviz.ledger import Ledger
+from liverviz.plots import error_budget
 from liverviz.report import ROOT, put_section, render
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene1_base.toml"
@@ -133,41 +134,13 @@ def budget() -> list[dict]:
     return rows
 
 
-def _plot_budget(b, plt) -> None:
-    fig, ax = plt.subplots(figsize=(9, 5))
-    if b:
-        x = np.arange(len(b))
-        w = 0.27
-        ax.bar(x - w, [r["fe"] for r in b], w, label="FE error (mesh vs reference)")
-        ax.bar(x, [r["surrogate"] for r in b], w, label="surrogate error (vs its own FE data)")
-        ax.bar(x + w, [r["total"] for r in b], w, label="total (surrogate vs reference)")
-        ax.scatter(x + w, [r["fe"] + r["surrogate"] for r in b], marker="_", s=400,
-                   color="k", label="FE + surrogate (upper bound)", zorder=3)
-        ax.set_xticks(x, [f"P{r['degree']} {r['h']:g} mm\n{r['vertices']} nodes\n"
-                          f"{r['sim_hours'] + r['train_hours']:.2f} h" for r in b])
-        ax.set_yscale("log")
-        ax.set_ylabel(f"mean error, mm (outside {EXCLUDE:g} mm of the load)")
-        ax.set_title("error budget, scene 1 on the phantom; under each mesh: cost "
-                     "(simulation CPU-h + training h)", fontsize=10)
-        ax.legend(fontsize=8)
-        ax.grid(True, axis="y", which="both", alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(DOCS / "error_budget.png", dpi=110)
-    plt.close(fig)
-
-
 def errors() -> None:
     """The error budget's section of docs/tradeoff_surrogate.md and docs/error_budget.png."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     b = budget()
     put_section(DOCS / "tradeoff_surrogate.md", "error-budget", render(
         Path(__file__).parent / "templates" / "error_budget.md.j2", b=b, exclude=EXCLUDE,
         n_budget=b[0]["sims"] if b else "n/a", budget_cases=BUDGET_CASES))
-    _plot_budget(b, plt)
+    error_budget(b, EXCLUDE, DOCS / "error_budget.png")
     print(f"wrote the error budget into {DOCS / 'tradeoff_surrogate.md'} and "
           f"{DOCS / 'error_budget.png'}")
 

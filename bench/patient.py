@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 
 from fem_sim.batch.chunked import generate_chunks, linear_bases, liver_truth
+from liverviz.plots import error_against_peak
 from liverviz.report import ROOT, SOFA, SOFA_FRAME, render, write_report
 from surrogate.patient import SYNTHETIC, study
 from surrogate.reports import REPORT_NAMES
@@ -136,36 +137,6 @@ def end_to_end(liver: Path, a, k: int = 40) -> dict:
             "adapt": end - solved, "k": k, "liver": liver.stem}
 
 
-def _size_picture(curves: list[dict], png: Path, kmax: int) -> None:
-    """Each held-out simulation's patient-model MEE against its FE peak displacement."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.ticker import NullFormatter, ScalarFormatter
-
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.4), sharey=True)
-    colours = plt.get_cmap("tab20")
-    for ax, k in zip(axes, ("0", str(kmax))):
-        for i, c in enumerate(curves):   # one colour per liver in both panels
-            h = c["held_out_sims"].get(k)
-            if h:
-                ax.scatter(h["peak_mm"], h["mee_mm"], s=14, color=colours(i % 20),
-                           label=c["liver"])
-        ax.axhline(GOAL_MM, color="k", lw=0.8, ls="--")
-        ax.axvline(BIG_PEAK_MM, color="grey", lw=0.8, ls=":")
-        ax.set(xscale="log", yscale="log", xlabel="FE peak displacement, last load step (mm)",
-               title=f"K = {k}: each held-out simulation")
-        ax.set_xticks([5, 10, 20, 30, 50, 100])
-        ax.xaxis.set_major_formatter(ScalarFormatter())
-        ax.xaxis.set_minor_formatter(NullFormatter())
-    axes[0].set_ylabel("patient model MEE on the simulation (mm)")
-    axes[0].legend(fontsize=6, ncol=2, loc="upper left")
-    fig.tight_layout()
-    fig.savefig(png, dpi=120)
-    plt.close(fig)
-
-
 def report(curves: list[dict], e2e: dict | None, a, found: list[dict], md: Path) -> str:
     """docs/patient.md's body after the header (bench/templates/patient.md.j2)."""
     # the FE start-up (meshing, MPI, the forms, the ranks' uneven end) as make patient spent
@@ -173,8 +144,9 @@ def report(curves: list[dict], e2e: dict | None, a, found: list[dict], md: Path)
     start = max(0.0, e2e["fe"] - e2e["solves"]) if e2e and "solves" in e2e else None
     size = study.load_size(curves, BIG_PEAK_MM, GOAL_MM)
     if size:   # the curves that kept their held-out simulations, one colour a liver
-        _size_picture([c for c in curves if c.get("held_out_sims", {}).get("0")],
-                      md.with_suffix(".png").with_stem(md.stem + "_loads"), size["kmax"])
+        error_against_peak([c for c in curves if c.get("held_out_sims", {}).get("0")],
+                           size["kmax"], GOAL_MM, BIG_PEAK_MM,
+                           md.with_suffix(".png").with_stem(md.stem + "_loads"))
     return render(Path(__file__).parent / "templates" / "patient.md.j2", **REPORT_NAMES,
                   **study.curve_figures(curves, a.ks, start, GOAL_MM, GOAL_MINUTES),
                   curves=curves, e2e=e2e, a=a, found=found, start=start, size=size, md_stem=md.stem,

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from liverviz.ledger import Ledger
+from liverviz.plots import surgical_curves
 from liverviz.report import ROOT, render, write_report
 from surrogate.reports import REPORT_NAMES
 
@@ -262,7 +263,7 @@ def report(records: list[dict]) -> None:
                                                                   FORCES)
     rate = json.loads((RESULTS / "rate.json").read_text()) \
         if (RESULTS / "rate.json").exists() else None
-    _plot(grasp, force)
+    surgical_curves(grasp, force, GOAL, ROOT / "docs" / "surgical_loads.png")
     data = {"livers": records, "grasp_curve": grasp, "force_curve": force,
             "timing": grasp_latency(), "goal": GOAL, "rate": rate, "worst": _picture(records)}
     write_report(ROOT / "docs" / "surgical_loads.md", "Surgical loads on the validation livers",
@@ -281,35 +282,6 @@ def _body(data: dict) -> str:
                   failed=[f"{n}: {c['reason']}" for n, c in cases if c["status"] != "ok"],
                   g40=per_liver(records, "grasps", "pull", 40.0),
                   f4=per_liver(records, "forces", "force", 4.0)).rstrip("\n")
-
-
-def _plot(grasp, force) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(1, 3, figsize=(13, 3.8))
-    for rows, key, a, unit in ((grasp, "pull", ax[0], "grasp pull (mm)"),
-                               (force, "force", ax[2], "force on the patch (N)")):
-        x = [r[key] for r in rows]
-        for m, colour in (("base", "C0"), ("naive", "C3")):
-            a.plot(x, [r[m]["mee_median"] for r in rows], "o-", color=colour,
-                   label=f"{m}, median liver")
-            a.plot(x, [r[m]["mee_worst"] for r in rows], "--", color=colour,
-                   label=f"{m}, worst liver")
-        a.axhline(GOAL["median"], color="k", lw=0.8, ls=":", label="goal, median liver")
-        a.set(xlabel=unit, ylabel="MEE (mm)", yscale="log")
-        a.legend(fontsize=7)
-    for k, style in (("median", "o-"), ("worst", "--")):
-        ax[1].plot([r["pull"] for r in grasp], [r[f"force_error_{k}"] for r in grasp], style,
-                   label=f"base, {k} liver")
-    ax[1].axhline(GOAL["force"], color="k", lw=0.8, ls=":", label="goal")
-    ax[1].set(xlabel="grasp pull (mm)", ylabel="reaction force error (%)")
-    ax[1].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(ROOT / "docs" / "surgical_loads.png", dpi=110)
-    plt.close(fig)
 
 
 def _picture(records) -> str | None:

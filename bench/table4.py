@@ -31,6 +31,7 @@ import numpy as np
 from data_spec.views import extension, first
 from fem_sim.batch.chunked import generate_chunks, liver_truth
 from fem_sim.batch.knob_run import price_list_error
+from liverviz.plots import learning_curves
 from liverviz.report import ROOT, SOFA, commit, header, put_section, render
 from surrogate.evaluate import evaluate_liver, heldout_floor, place, truth_scene
 from surrogate.latency import timed, timed_placed
@@ -285,7 +286,7 @@ def report_body(rows: dict, a) -> str:
 
 def write_report(rows: dict, a) -> None:
     if a.png:
-        plot_curves(rows, ROOT / "docs" / "table4.png")
+        learning_curves(rows, PAPER, PAPER_FOLDS, ROOT / "docs" / "table4.png")
     path = Path(a.md)
     path.write_text(header("Table 4: the paper's scenes end to end") + report_body(rows, a))
     # the rows themselves beside the report: a later run of other scenes keeps these rows
@@ -303,35 +304,6 @@ def write_report(rows: dict, a) -> None:
                       latency_nodes=LATENCY_NODES)
         put_section(a.realtime_md, "table4-scene4", text)
         print(f"{a.realtime_md}: {text.splitlines()[-1]}", flush=True)
-
-
-def plot_curves(rows: dict, png: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6.0, 4.0))
-    for k, r in sorted(rows.items()):
-        n = [c["train_sims"] for c in r["curve"]]
-        line, = ax.loglog(n, [c["skill"] for c in r["curve"]], "o-", label=f"scene {k}")
-        for b in r.get("beyond", []):  # past the budget: measured, not in the fit
-            f = b["overrides"]["folds"]
-            ax.loglog([b["metrics"]["n_simulations"] * (f - 1) / f], [b["metrics"]["skill"]],
-                      "o", mfc="none", ms=8, color=line.get_color())
-        ps = PAPER[k]
-        ax.loglog([ps["sims"] * (PAPER_FOLDS - 1) / PAPER_FOLDS],
-                  [float(ps["skill"].split("/")[-1])], "*", ms=10,
-                  color=line.get_color())
-    ax.set_xlabel("training simulations per fold")
-    ax.set_ylabel("skill = MEE_NN / MEE_naive")
-    ax.set_title("learning curves; stars: the paper; open circles: past the budget",
-                 fontsize=9)
-    ax.grid(alpha=0.3, which="both")
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(png, dpi=120)
-    plt.close(fig)
 
 
 def _sims_arg(text: str) -> dict:

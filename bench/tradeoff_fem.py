@@ -39,6 +39,7 @@ from fem_sim.batch.knob_run import (
     spec_of,
 )
 from liverviz.ledger import Ledger
+from liverviz.plots import fem_price_list
 from liverviz.report import ROOT, SOFA, header, render
 
 RESULTS = ROOT / "bench" / "results" / "tradeoff_fem"
@@ -246,44 +247,23 @@ COLOURS = {"mesh P1": "C0", "mesh P2": "C1", "mesh ANP": "C8", "steps": "C2",
            "tolerance": "C3", "linear solver": "C4", "predictor": "C5", "K/mu": "C6"}
 
 
-def _plot_liver(ax, liver: str, rows: list) -> None:
-    """Error against seconds on one liver (patch load, K/mu = 200), the Pareto front marked."""
-    pts = []
+def _points(rows: list) -> dict:
+    """{liver: the chart's points}: each run of the patch load at K/mu = 200 but the
+    reference, (label, marker, colour, mesh size, seconds, error); every liver a panel."""
+    out: dict = {spec["liver"]: [] for spec, _, _ in rows}
     for spec, rec, err in rows:
-        if spec["liver"] != liver or spec["load"] != "patch" or not err or \
-                spec["role"] == "reference" or spec["K_over_mu"] != 200.0:
+        if spec["load"] != "patch" or not err or spec["role"] == "reference" \
+                or spec["K_over_mu"] != 200.0:
             continue
-        label = f"{spec['role']} {element_of(spec)}" if spec["role"] == "mesh" else \
-            spec["role"]
-        x, y = rec["seconds"], max(err["rel_mean"], 1e-6)
-        pts.append((x, y))
-        ax.scatter(x, y, marker=MARKERS.get(spec["role"], "o"), label=label,
-                   color=COLOURS.get(label, "C7"))
-        if spec["role"] == "mesh":
-            ax.annotate(f"{spec['h']:g}", (x, y), textcoords="offset points", xytext=(4, 3),
-                        fontsize=7)
-    pareto, best = [], np.inf
-    for x, y in sorted(pts):
-        if y < best * (1 - 1e-6):  # runs that differ by round-off only are no gain
-            pareto.append((x, y))
-            best = y
-    if pareto:
-        ax.plot(*zip(*pareto), "k--", lw=1, label="Pareto front")
-    handles, labels = ax.get_legend_handles_labels()
-    uniq = dict(zip(labels, handles))
-    ax.legend(uniq.values(), uniq.keys(), fontsize=7)
-    ax.set(xscale="log", yscale="log", xlabel="seconds per simulation (1 rank)",
-           ylabel="mean displacement error / max |u_ref|",
-           title=f"{liver}: patch load, K/mu = 200 (labels: h in mm)")
-    ax.grid(True, which="both", alpha=0.3)
+        mesh = spec["role"] == "mesh"
+        label = f"mesh {element_of(spec)}" if mesh else spec["role"]
+        out[spec["liver"]].append(
+            (label, MARKERS.get(spec["role"], "o"), COLOURS.get(label, "C7"),
+             f"{spec['h']:g}" if mesh else "", rec["seconds"], max(err["rel_mean"], 1e-6)))
+    return out
 
 
 def report() -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     res = RUNS.records()
     rows = _rows(res)
     body = render(Path(__file__).parent / "templates" / "tradeoff_fem.md.j2", shown=summary(rows),
@@ -299,13 +279,8 @@ def report() -> None:
     (DOCS / "tradeoff_fem.json").write_text("[\n" + ",\n".join(
         json.dumps({"spec": spec, "element": element_of(spec), "errors": err})
         for spec, _, err in rows if err) + "\n]\n")
-    livers = sorted({s["liver"] for s, _, _ in rows})
-    fig, axes = plt.subplots(1, max(1, len(livers)), figsize=(7 * max(1, len(livers)), 5.5),
-                             squeeze=False)
-    for ax, liver in zip(axes[0], livers):
-        _plot_liver(ax, liver, rows)
-    fig.tight_layout()
-    fig.savefig(DOCS / "tradeoff_fem.png", dpi=110)
+    fem_price_list(_points(rows), "patch load, K/mu = 200 (labels: h in mm)",
+                   DOCS / "tradeoff_fem.png")
     print(f"wrote {DOCS / 'tradeoff_fem.md'} and {DOCS / 'tradeoff_fem.png'}")
 
 

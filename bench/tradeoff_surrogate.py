@@ -33,6 +33,7 @@ from fem_sim.batch.knob_run import (
     mesh_name,
 )
 from liverviz.ledger import Ledger
+from liverviz.plots import surrogate_price_list
 from liverviz.report import ROOT, header, render, sections
 
 RESULTS = ROOT / "bench" / "results" / "tradeoff_surrogate"
@@ -255,11 +256,6 @@ NAME_OF = {tuple(v): k for k, v in NETS.items()}
 
 
 def report() -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     lat = LATENCIES.records()
     rows = [r for r in RUNS.records().values() if "all" in r]
     ds_note = ""
@@ -290,62 +286,10 @@ def report() -> None:
     md = DOCS / "tradeoff_surrogate.md"   # the error budget's section is budget_fem.py's
     md.write_text(header("Surrogate price list and the error budget").rstrip() + "\n" + body
                   + ("\n" + sections(md) if sections(md) else ""))
-    plots(lc, nets, rows, lat, plt)
+    surrogate_price_list(lc, nets, sorted((r for r in rows if "node fraction" in _groups(r)),
+                                          key=lambda r: r["spec"]["node_fraction"]),
+                         lat, NAME_OF, N_KNOB, DOCS / "tradeoff_surrogate.png")
     print(f"wrote {md} and {DOCS / 'tradeoff_surrogate.png'}")
-
-
-def _plot_curve(ax, lc, plt) -> None:
-    n = [r["spec"]["n_train"] for r in lc]
-    ax.plot(n, [r["all"]["mee"] for r in lc], "o-", label="MEE")
-    ax.plot(n, [r["all"]["ee_p95"] for r in lc], "s--", label="95th percentile")
-    ax.set(xscale="log", yscale="log", xlabel="training simulations",
-           ylabel="error on held-out simulations (mm)", title="learning curve (paper scene-1 net)")
-    ax.set_xticks(n, [str(v) for v in n])
-    ax.xaxis.set_minor_formatter(plt.NullFormatter())
-    ax.legend()
-
-
-def _plot_networks(ax, nets, lat) -> None:
-    for r in nets:
-        t = lat.get(r["id"], {}).get("all_float32")
-        if t is None:
-            continue
-        ax.scatter(1e3 * t, r["all"]["mee"], color="C0")
-        ax.annotate(NAME_OF.get(tuple(r["spec"]["hidden"]), ""), (1e3 * t, r["all"]["mee"]),
-                    textcoords="offset points", xytext=(4, 3), fontsize=8)
-        ts = lat[r["id"]].get("surface_float32")
-        ax.scatter(1e3 * ts, r["surface"]["mee"], color="C1", marker="^")
-    ax.scatter([], [], color="C0", label="all nodes")
-    ax.scatter([], [], color="C1", marker="^", label="surface nodes")
-    for hz in (300, 1000):
-        ax.axvline(1e3 / hz, color="grey", ls=":", lw=1)
-        ax.text(1e3 / hz, ax.get_ylim()[1] if nets else 1, f" {hz} Hz", fontsize=7, va="top")
-    ax.set(xscale="log", xlabel="latency per load case (ms, float32)", ylabel="MEE (mm)",
-           title=f"network size ({N_KNOB} training sims)")
-    ax.legend(fontsize=8)
-
-
-def _plot_fractions(ax, rows) -> None:
-    fr = sorted((r for r in rows if "node fraction" in _groups(r)),
-                key=lambda r: r["spec"]["node_fraction"])
-    for r in fr:
-        ax.scatter(r["training_seconds"], r["all"]["mee"], color="C2")
-        ax.annotate(f"{r['spec']['node_fraction']:g}", (r["training_seconds"],
-                    r["all"]["mee"]), textcoords="offset points", xytext=(4, 3), fontsize=8)
-    ax.set(xlabel="training seconds", ylabel="MEE (mm)", title="sampled node fraction per epoch")
-
-
-def plots(lc, nets, rows, lat, plt) -> None:
-    fig, ax = plt.subplots(1, 3, figsize=(17, 5))
-    if lc:
-        _plot_curve(ax[0], lc, plt)
-    _plot_networks(ax[1], nets, lat)
-    _plot_fractions(ax[2], rows)
-    for a in ax:
-        a.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(DOCS / "tradeoff_surrogate.png", dpi=110)
-    plt.close(fig)
 
 
 def main() -> int:
