@@ -36,7 +36,7 @@ MPIRUN := mpirun -n $(NP)
 .PHONY: help setup setup-system setup-solver setup-trainer demo test test-solver test-trainer \
         test-extremes extremes-doc \
         dataset train population table4 bench bench-solver bench-throughput bench-inference \
-        bench-population truth evaluate patient patient-args liver liver-args scene4-real bench-patient bench-surgical tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
+        bench-population truth evaluate patient patient-args liver liver-args scene4-real bench-patient bench-surgical bench-grasp-rest tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
         bench-viewer docs-manipulator viewer \
         clean lock-trainer
 
@@ -55,6 +55,7 @@ help:
 	@echo "make liver LIVER=... MODEL=... AT=\"X Y Z FX FY FZ\"   a new liver over its own Green's function, seconds"
 	@echo "           (or GRASP=\"X Y Z DX DY DZ\": a 10 mm patch moved, the field and the tool's force)"
 	@echo "make bench-surgical   grasps to 40 mm, forces to 4 N on the validation livers -> docs/surgical_loads.md"
+	@echo "make bench-grasp-rest   the network over the grasp's base, cross-validated; the model of grasps"
 	@echo "make tradeoff-fem   FEM speed/accuracy price list -> docs/tradeoff_fem.md (long, resumable)"
 	@echo "make tradeoff-surrogate   surrogate price list + error budget -> docs/ (long, resumable)"
 	@echo "make table4   the paper's Table 4, scenes 1-4 -> docs/table4.md (long, resumable)"
@@ -284,8 +285,16 @@ bench-patient: setup
 
 # Surgical loads (resumable): grasps pulled 5-40 mm and 0.4-4 N on a patch, FE against the
 # small-strain base over each validation liver's Green's function -> docs/surgical_loads.md
-bench-surgical: setup-solver
+# the FE of the validation livers' grasps and forces against the small-strain base; with a
+# model of grasps (bench/grasp_rest.py trains one on scene4_grasp: make bench-grasp-rest), its
+# rows beside the base's, placed on each liver in the trainer's environment
+GRASP_MODEL ?= bench/results/grasp_rest/run
+bench-surgical: setup-solver setup-trainer
 	$(SPY) bench/surgical_loads.py
+	$(if $(wildcard $(GRASP_MODEL)/model/model.json),$(TPY) bench/surgical_loads.py --report-only --model $(GRASP_MODEL))
+
+bench-grasp-rest: setup
+	$(TPY) bench/grasp_rest.py --sims 290
 
 evaluate: setup-trainer
 	$(TPY) -m surrogate evaluate $(RUN) $(DATA) $(if $(LIVER),--liver $(LIVER)) \

@@ -9,9 +9,12 @@ scene), each liver's small-strain responses (fem_sim linear --population --order
 patch held at its pull over the liver's Green's function), the population model of what the
 base misses (config population_green, its shipped settings) trained with ``--folds`` folds by
 liver, ``--evaluate-folds`` of them held out in turn; on their livers, per pull, the MEE of the
-model, of the base alone and of the naive model (the training folds' mean displacement), per
-liver then median and worst. Resumable (generation; each fold's figures kept in
-bench/results/grasp_rest/). Writes the section "grasp-network" of docs/surgical_loads.md.
+model, of the base alone and of the naive model (the training folds' mean displacement), and
+the tool's force error of the model and of the base, per liver then median and worst. Then the
+model of grasps trained on them all (bench/results/grasp_rest/run, one fold evaluated), which
+``bench/surgical_loads.py --model`` places on the validation livers. Resumable (generation;
+each fold's figures kept in bench/results/grasp_rest/; the run reused while the dataset is
+the same). Writes the section "grasp-network" of docs/surgical_loads.md.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ def fold_figures(data: Path, folds: int, k: int, sims: int) -> dict:
     """Fold ``k``'s held-out livers: {pull: {model: [per liver MEE]}} (its own file kept)."""
     from surrogate.config import get_config
     from surrogate.data import kfold_groups, load_dataset
+    from surrogate.grasp import GraspForce, base_forces, force_error_pct
     from surrogate.linear_base import PopulationLinearBase
     from surrogate.train import fit_design, predict_design, training_mean, training_samples
 
@@ -51,6 +55,10 @@ def fold_figures(data: Path, folds: int, k: int, sims: int) -> dict:
     fields = {"model": pred, "base": np.concatenate([base.sample(ds, s) for s in held]),
               "naive": np.broadcast_to(training_mean(ds, train), true.shape)}
     err = {m: np.linalg.norm(np.asarray(f, np.float64) - true, axis=1) for m, f in fields.items()}
+    d, f_lin, f_fe = np.asarray(ds.forces, np.float64), base_forces(ds), ds.reactions
+    fit = GraspForce.fit(d[train], f_lin[train], f_fe[train])   # the tool's force, % off
+    force = {"model": force_error_pct(fit(d[rows], f_lin[rows]), f_fe[rows])[:, 0],
+             "base": force_error_pct(f_lin[rows], f_fe[rows])[:, 0]}   # rows: each node's sample
     pull = np.round(np.linalg.norm(ds.forces[rows, 0], axis=-1), 1)   # the tool's, mm
     geo = ds.sample_geo[rows]
     out = {}
@@ -58,6 +66,8 @@ def fold_figures(data: Path, folds: int, k: int, sims: int) -> dict:
         at = pull == p
         out[f"{p:g}"] = {m: [float(e[at & (geo == g)].mean()) for g in np.unique(geo[at])]
                          for m, e in err.items()}
+        out[f"{p:g}"]["force"] = {m: [float(e[at & (geo == g)].mean()) for g in
+                                      np.unique(geo[at])] for m, e in force.items()}
     RESULTS.mkdir(parents=True, exist_ok=True)
     kept.write_text(json.dumps(out))
     return out
@@ -77,22 +87,30 @@ def section(a) -> str:
         figures = [json.loads(f.read_text()) for k in range(a.evaluate_folds)
                    if (f := RESULTS / f"fold{k}_of_{a.folds}_{n}_sims.json").exists()]
         pulls = sorted({p for f in figures for p in f}, key=float)
+        force = all("force" in f[p] for f in figures for p in f)   # older folds: MEE only
         lines += ["", f"{n} simulations ({n // 145} a liver):", "",
-                  "| pull mm | livers | model | base alone | naive |", "|---|---|---|---|---|"]
+                  "| pull mm | livers | model | base alone | naive |"
+                  + (" force error %, model | base |" if force else ""),
+                  "|---" * (7 if force else 5) + "|"]
         for p in pulls:
             per = {m: sum((f[p][m] for f in figures if p in f), [])
                    for m in ("model", "base", "naive")}
+            per_f = {m: sum((f[p]["force"][m] for f in figures if p in f), [])
+                     for m in ("model", "base")} if force else {}
             lines.append(f"| {p} | {len(per['model'])} | " + " | ".join(
-                f"{np.median(per[m]):.2f} / {np.max(per[m]):.2f}"
-                for m in ("model", "base", "naive")) + " |")
-    lines += ["", "Not yet: the network's force back (the tool's force is the base's), the "
-              "network placed on a liver never seen (make liver answers a grasp with the base "
-              "alone), and its inputs and training chosen by measurement."]
+                [f"{np.median(per[m]):.2f} / {np.max(per[m]):.2f}"
+                 for m in ("model", "base", "naive")]
+                + [f"{np.median(v):.1f} / {np.max(v):.1f}" for v in per_f.values()]) + " |")
+    lines += ["", "Force error: |F - F_FE| / |F_FE| of the tool's force, per liver the mean over "
+              "its held-out grasps at that pull, median / worst liver; the model's is the base's "
+              "force stiffened by `surrogate.grasp.GraspForce` fitted on the training folds. "
+              "The model placed on the validation livers: the model rows of the tables above."]
     return "\n".join(lines)
 
 
 def main(argv=None) -> int:
     from fem_sim.batch.chunked import generate_chunks, linear_bases
+    from surrogate.train import train_or_reuse
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--sims", type=int, default=145)
@@ -106,6 +124,8 @@ def main(argv=None) -> int:
         linear_bases(data, ranks=2, order=1)
         for k in range(a.evaluate_folds):
             fold_figures(data, a.folds, k, a.sims)
+        train_or_reuse(data, RESULTS / "run", "population_green",
+                       {"folds": a.folds, "evaluate_folds": 1})
     put_section(ROOT / "docs" / "surgical_loads.md", "grasp-network", section(a))
     print(section(a))
     return 0

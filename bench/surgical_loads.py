@@ -26,7 +26,7 @@ import numpy as np
 from liverviz.ledger import Ledger
 from liverviz.plots import surgical_curves
 from liverviz.report import ROOT, render, write_report
-from surrogate.reports import REPORT_NAMES
+from surrogate.reports import REPORT_NAMES, surgical_curve, surgical_per_liver
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
 GRASP_SCENE = ROOT / "data_spec" / "scenes" / "scene4_grasp.toml"
@@ -88,12 +88,18 @@ def solve_liver(name: str, n_grasps: int, n_forces: int) -> dict:
     away = load_directions(rng, "away", g.points[centres[:n_grasps]], g.points[fixed])
     out = {"liver": name, "nodes": int(g.n_nodes), "prepare_s": t1 - t0, "grasps": [],
            "green_rows_s": time.perf_counter() - t1, "forces": []}
-    worst = (-1.0,)
+    worst, kept = (-1.0,), {}   # every grasp's fields, for a model's rows (--model)
     for k in range(n_grasps):
         row, fields = _grasp_case(prob, mat, fixed, patches[k], 40.0 * away[k], green, held)
         out["grasps"].append(row)
+        kept.update({f"truth_{k}": fields[0].astype(np.float32), f"patch_{k}": patches[k],
+                     f"base_{k}": fields[1].astype(np.float32)})
         if row["status"] == "ok" and row["steps"][-1]["base"]["mee"] > worst[0]:
-            worst = (row["steps"][-1]["base"]["mee"], fields, patches[k], 40.0 * away[k])
+            worst = (row["steps"][-1]["base"]["mee"], (fields[0][-1], fields[1][-1]),
+                     patches[k], 40.0 * away[k])
+    (RESULTS / "fields").mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(RESULTS / "fields" / f"{name}.npz", points=g.points, **kept,
+                        centres=centres[:n_grasps], pulls=40.0 * away)
     for k in range(n_grasps, n_grasps + n_forces):
         direction = load_directions(rng, "uniform", g.points[centres[k:k + 1]], None)[0]
         w = patch_weights(g.points, g.surface_triangles, patches[k], centres[k], RADIUS)
@@ -116,7 +122,7 @@ def _row(sol, t: float) -> dict:
 
 
 def _grasp_case(prob, mat, fixed, patch, d, green, held):
-    """(record, (FE field, base field) at the full pull) of one tool pulled by ``d`` mm."""
+    """(record, (FE fields, base fields) at each stored pull) of one tool pulled by ``d`` mm."""
     from data_spec.green_grasp import GreenGrasp
     from fem_sim import Constraint
 
@@ -126,7 +132,7 @@ def _grasp_case(prob, mat, fixed, patch, d, green, held):
                      reactions=[patch])
     row = _row(sol, t)
     grasp = GreenGrasp(green, held, np.arange(prob.n_nodes), [patch])
-    base = None
+    base = []
     for s in range(sol.n_done):
         u, force = grasp(fractions[s] * d[None])
         truth, fe_force = sol.displacement[s], sol.reaction[s, 0]
@@ -135,8 +141,8 @@ def _grasp_case(prob, mat, fixed, patch, d, green, held):
             "fe_force": fe_force.tolist(), "base_force": force[0].tolist(),
             "force_error": float(100 * np.linalg.norm(force[0] - fe_force)
                                  / np.linalg.norm(fe_force))})
-        base = (truth, u)
-    return row, base
+        base.append(u)
+    return row, (sol.displacement[:sol.n_done], np.array(base).reshape(-1, prob.n_nodes, 3))
 
 
 def _force_case(prob, mat, fixed, patch, weights, force, green, held):
@@ -157,6 +163,39 @@ def _force_case(prob, mat, fixed, patch, weights, force, green, held):
     return row
 
 
+def model_rows(run: Path, ledger, names) -> None:
+    """Each solved liver's grasps answered by the model of grasps ``run`` (the trainer's
+    environment) placed on the liver as make liver places it, over the same base (its
+    network's rest added, its force stiffened): MEE and force error added to every step of
+    the liver's record, once per run."""
+    from data_spec import load_scene
+    from surrogate.evaluate import place
+    from surrogate.grasp import force_error_pct, grasp_over_base
+    from surrogate.predict_liver import PlacedModel
+    from surrogate.predictor import load_predictor
+
+    pred = load_predictor(ROOT / run / "model", load="grasp")
+    livers = ROOT / load_scene(SCENE)["geometry"]["livers"]
+    for name, r in ledger.records().items():
+        path = RESULTS / "fields" / f"{name}.npz"
+        if name not in names or r.get("model_run") == str(run) or not path.exists():
+            continue
+        z = np.load(path)
+        placed = PlacedModel(pred, nodes=z["points"],
+                             placement=place(pred, livers / f"{name}.obj", None)[0])
+        for k, case in enumerate(r["grasps"]):
+            at = placed.load_nodes(z["points"][z["centres"][k:k + 1]])
+            for s, step in enumerate(case["steps"]):
+                d = step["pull"] / PULLS[-1] * z["pulls"][k:k + 1]
+                u, f = grasp_over_base(placed, at, d, z[f"base_{k}"][s].astype(np.float64),
+                                       np.array([step["base_force"]]), z[f"patch_{k}"])
+                step["model"] = errors(z[f"truth_{k}"][s], u)
+                step["model_force_error"] = float(force_error_pct(f[0], step["fe_force"]))
+        ledger.add({**r, "model_run": str(run)})
+        print(f"[model] {name}: {sum(len(c['steps']) for c in r['grasps'])} grasp steps",
+              flush=True)
+
+
 def main(argv=None) -> int:
     import tomllib
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -164,6 +203,8 @@ def main(argv=None) -> int:
     p.add_argument("--report-only", action="store_true")
     p.add_argument("--rate", type=int, metavar="N", help="time scene4_grasp's first N")
     p.add_argument("--np", type=int, default=2)
+    p.add_argument("--model", metavar="RUN", help="a model of grasps (bench/grasp_rest.py's "
+                   "run; the trainer's environment): its rows beside the base's")
     a = p.parse_args(argv)
     if a.rate:
         RESULTS.mkdir(parents=True, exist_ok=True)
@@ -179,6 +220,8 @@ def main(argv=None) -> int:
         from subprocess import run
 
         return run([sys.executable, __file__, "--report-only", f"--livers={a.livers}"]).returncode
+    if a.model:
+        model_rows(Path(a.model).resolve().relative_to(ROOT), ledger, names)
     records = [r for n, r in ledger.records().items() if n in names]
     saved = ROOT / "docs" / "surgical_loads.json"
     if a.report_only and not records and saved.exists():   # the results are not on this host
@@ -214,53 +257,13 @@ def generation_rate(n: int, ranks: int) -> dict:
             "sims_per_hour": 3600 * ranks / sims.mean()}
 
 
-def per_liver(records: list[dict], kind: str, key: str, at) -> dict:
-    """{liver: {model: {metric: the mean over its cases of kind at the step ``at``}}}."""
-    out = {}
-    for r in records:
-        steps = [s for c in r[kind] if c["status"] == "ok" for s in c["steps"] if s[key] == at]
-        if not steps:
-            continue
-        row = {m: {k: float(np.mean([s[m][k] for s in steps])) for k in steps[0][m]}
-               for m in ("base", "naive")}
-        if kind == "grasps":
-            row["force_error"] = float(np.mean([s["force_error"] for s in steps]))
-            row["fe_force"] = float(np.mean([np.linalg.norm(s["fe_force"]) for s in steps]))
-        out[r["liver"]] = row
-    return out
-
-
-def curve(records: list[dict], kind: str, key: str, values) -> list[dict]:
-    """Per step value: the median and worst liver of each figure."""
-    rows = []
-    for v in values:
-        livers = per_liver(records, kind, key, v)
-        if not livers:
-            continue
-        ls = list(livers.values())
-
-        def of(f, m, k, ls=ls):
-            return float(f([x[m][k] if m else x[k] for x in ls]))
-
-        row = {key: v, "livers": len(ls), "mean_u": of(np.median, "base", "mean_u")}
-        for m in ("base", "naive"):
-            row[m] = {"mee_median": of(np.median, m, "mee"), "mee_worst": of(np.max, m, "mee"),
-                      "p95_median": of(np.median, m, "p95"), "lt3_median":
-                      of(np.median, m, "lt3"), "lt3_worst": of(np.min, m, "lt3")}
-        if kind == "grasps":
-            row.update(force_error_median=of(np.median, None, "force_error"), force_error_worst=
-                       of(np.max, None, "force_error"), fe_force=of(np.median, None, "fe_force"))
-        rows.append(row)
-    return rows
-
-
 def report(records: list[dict]) -> None:
     if not records:
         return print("no liver solved yet", file=sys.stderr)
     from surrogate.latency import grasp_latency
 
-    grasp, force = curve(records, "grasps", "pull", PULLS), curve(records, "forces", "force",
-                                                                  FORCES)
+    grasp = surgical_curve(records, "grasps", "pull", PULLS)
+    force = surgical_curve(records, "forces", "force", FORCES)
     rate = json.loads((RESULTS / "rate.json").read_text()) \
         if (RESULTS / "rate.json").exists() else None
     surgical_curves(grasp, force, GOAL, ROOT / "docs" / "surgical_loads.png")
@@ -278,17 +281,18 @@ def _body(data: dict) -> str:
                   records=records, grasp=data["grasp_curve"], force=data["force_curve"],
                   timing=data["timing"], goal=data["goal"], rate=data.get("rate"),
                   worst=data.get("worst"), places=PLACES, n_cases=len(cases),
+                  model_run=records[0].get("model_run") if records else None,
                   ok=[c for _, c in cases if c["status"] == "ok"],
                   failed=[f"{n}: {c['reason']}" for n, c in cases if c["status"] != "ok"],
-                  g40=per_liver(records, "grasps", "pull", 40.0),
-                  f4=per_liver(records, "forces", "force", 4.0)).rstrip("\n")
+                  g40=surgical_per_liver(records, "grasps", "pull", 40.0),
+                  f4=surgical_per_liver(records, "forces", "force", 4.0)).rstrip("\n")
 
 
 def _picture(records) -> str | None:
     """docs/surgical_loads_worst.png: the worst 40 mm grasp, FE beside the base."""
     from liverviz.pictures import Panel, Surface, render_panels
 
-    g40 = per_liver(records, "grasps", "pull", 40.0)
+    g40 = surgical_per_liver(records, "grasps", "pull", 40.0)
     name = max((n for n in g40 if (RESULTS / f"{n}.npz").exists()),
                key=lambda n: g40[n]["base"]["mee"], default=None)
     if name is None:

@@ -202,8 +202,7 @@ def _scale_fit(pred_all, true_all) -> dict:
     """
     scale = float(np.sum(pred_all * true_all) / max(float(np.sum(pred_all ** 2)), 1e-30))
     return {"best_scale": scale,
-            "truth_mean_mm": float(np.linalg.norm(true_all, axis=1).mean()),
-            "predicted_mean_mm": float(np.linalg.norm(pred_all, axis=1).mean()),
+            "truth_mean_mm": mee(true_all), "predicted_mean_mm": mee(pred_all),
             "mee_best_scale": mee(scale * pred_all, true_all)}
 
 

@@ -68,6 +68,22 @@ class GraspForce:
         return np.asarray(f_lin) * (1.0 + self.a * p + self.b * p * p)
 
 
+def grasp_over_base(placed, at, d, u_base, f_base, held=None) -> tuple[np.ndarray, np.ndarray]:
+    """A model of grasps over a grasp's small-strain base: (the base's field ``u_base``
+    (n, 3) mm at the nodes of ``placed`` (a :class:`~surrogate.predict_liver.PlacedModel`)
+    plus the placed network's rest for the tools' pulls ``d`` (T, 3) mm at the template nodes
+    ``at`` (T,), nothing added at the rows ``held`` (the grasped nodes move with their tool);
+    the base's forces ``f_base`` (T, 3) N stiffened by the model's :class:`GraspForce`, or
+    as they are when it has none).
+    """
+    d = np.asarray(d, dtype=np.float64)
+    rest = placed(d[None], np.asarray(at)[None], rest=True)[0]
+    if held is not None:
+        rest[np.asarray(held, dtype=np.int64)] = 0.0
+    force = placed.predictor.grasp_force
+    return u_base + rest, (f_base if force is None else force(d, f_base))
+
+
 def base_forces(ds) -> np.ndarray:
     """(S, n_tools, 3) N: each sample of the grasp dataset ``ds``, its tools' small-strain
     force at the sample's step (its small-strain files' force at fraction 1, scaled);

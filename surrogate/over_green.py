@@ -27,6 +27,7 @@ from data_spec.eligible_loads import grasp_patch
 from data_spec.green_grasp import GreenGrasp
 from data_spec.scene import GRASP_RADIUS
 from liverreg.morph import interpolation_matrix
+from surrogate.grasp import grasp_over_base
 from surrogate.predictor import LinearPart
 
 
@@ -155,15 +156,10 @@ class GraspOverGreen:
 
     def __call__(self, d) -> tuple[np.ndarray, np.ndarray]:
         u, force = self.base(d)
-        if self._force is not None:
-            force = self._force(d, force)
         if self.over._to_nodes is not None:   # at OverGreen's own points: interpolated
-            u = self.over._to_nodes @ u
-        rest = self.over.placed(np.asarray(d, dtype=np.float64)[None], self._at[None],
-                                rest=True)[0]
-        if self.over._to_nodes is None:
-            rest[self._held] = 0.0
-        return u + rest, force
+            return grasp_over_base(self.over.placed, self._at, d, self.over._to_nodes @ u,
+                                   force)
+        return grasp_over_base(self.over.placed, self._at, d, u, force, self._held)
 
 
 def green_of(predictor, data) -> tuple:

@@ -74,6 +74,58 @@ class DesignRecord:
         return f"{pl['skill_mean']:.3f} / {pl['skill_median']:.3f}"
 
 
+def surgical_per_liver(records: list[dict], kind: str, key: str, at) -> dict:
+    """bench/surgical_loads.py's records (a liver each: its ``grasps`` and ``forces``, each a
+    case with its status and steps) at the step whose ``key`` (pull mm, force N) is ``at``:
+    {liver: {model: {metric: the mean over its converged cases of ``kind``}}}, the models
+    those every step has (model, base, naive); for grasps also the force errors (base's
+    ``force_error``, the model's ``model_force_error``) and the FE force's size.
+    """
+    out = {}
+    for r in records:
+        steps = [s for c in r[kind] if c["status"] == "ok" for s in c["steps"] if s[key] == at]
+        if not steps:
+            continue
+        row = {m: {k: float(np.mean([s[m][k] for s in steps])) for k in steps[0][m]}
+               for m in ("model", "base", "naive") if all(m in s for s in steps)}
+        if kind == "grasps":
+            for k in ("force_error", "model_force_error")[:1 + ("model" in row)]:
+                row[k] = float(np.mean([s[k] for s in steps]))
+            row["fe_force"] = float(np.mean([np.linalg.norm(s["fe_force"]) for s in steps]))
+        out[r["liver"]] = row
+    return out
+
+
+def surgical_curve(records: list[dict], kind: str, key: str, values) -> list[dict]:
+    """Per value of ``key`` in ``values``: the median and worst liver of each model's
+    figures (:func:`surgical_per_liver`) over the livers that reached it, and for grasps each
+    model's force error.
+    """
+    rows = []
+    for v in values:
+        livers = surgical_per_liver(records, kind, key, v)
+        if not livers:
+            continue
+        ls = list(livers.values())
+
+        def of(f, m, k, ls=ls):
+            return float(f([x[m][k] if m else x[k] for x in ls]))
+
+        row = {key: v, "livers": len(ls), "mean_u": of(np.median, "base", "mean_u")}
+        for m in (m for m in ("model", "base", "naive") if all(m in x for x in ls)):
+            row[m] = {"mee_median": of(np.median, m, "mee"), "mee_worst": of(np.max, m, "mee"),
+                      "p95_median": of(np.median, m, "p95"), "lt3_median":
+                      of(np.median, m, "lt3"), "lt3_worst": of(np.min, m, "lt3")}
+            if kind == "grasps" and m != "naive":   # the tool's force, % off
+                e = "model_force_error" if m == "model" else "force_error"
+                row[m].update(force_median=of(np.median, None, e), force_worst=of(np.max, None, e))
+        if kind == "grasps":
+            row.update(force_error_median=row["base"]["force_median"], force_error_worst=row[
+                "base"]["force_worst"], fe_force=of(np.median, None, "fe_force"))
+        rows.append(row)
+    return rows
+
+
 def xyz(m: dict, key: str, fmt: str = "{:.3f}") -> str:
     """``key``'s x / y / z values of a metrics dict (``mae`` or ``corr``)."""
     return " / ".join(fmt.format(m[f"{key}_{c}"]) for c in "xyz")

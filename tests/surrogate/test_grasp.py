@@ -55,6 +55,32 @@ def test_a_grasp_of_independent_springs_is_their_stiffness_and_a_bad_patch_is_na
 
 
 @pytest.mark.dataset
+def test_a_model_of_grasps_adds_its_rest_off_the_patch_and_stiffens_the_force():
+    """surrogate.grasp.grasp_over_base with a stand-in placed network whose rest is known:
+    the rest is added but on the grasped rows, and the force is F_lin (1 + a p + b p^2) at
+    the pull's length p (hand value: p = 5 mm, a = 0.02, b = 0.004: 1 + 0.1 + 0.1 = 1.2)."""
+    from types import SimpleNamespace
+
+    from surrogate.grasp import GraspForce, grasp_over_base
+
+    calls = []
+
+    class Placed:
+        predictor = SimpleNamespace(grasp_force=GraspForce(a=0.02, b=0.004))
+
+        def __call__(self, d, at, rest):
+            calls.append((d.shape, at.tolist(), rest))
+            return np.ones((1, 4, 3))
+
+    base, f_lin = np.zeros((4, 3)), np.array([[1.0, 2.0, 0.0]])
+    u, f = grasp_over_base(Placed(), [7], [[3.0, 4.0, 0.0]], base, f_lin, held=[1, 2])
+    assert calls == [((1, 1, 3), [[7]], True)]
+    assert np.array_equal(u, [[1, 1, 1], [0, 0, 0], [0, 0, 0], [1, 1, 1]])
+    np.testing.assert_allclose(f, 1.2 * f_lin)
+    Placed.predictor = SimpleNamespace(grasp_force=None)   # a model without a force fit
+    assert grasp_over_base(Placed(), [7], [[3.0, 4.0, 0.0]], base, f_lin)[1] is f_lin
+
+
 def test_the_grasp_manipulator_moves_the_patch_to_the_pointer_and_shows_its_force(tmp_path):
     """make test's patient liver with its Green's function (make liver's kind of directory):
     a drag puts the grasped patch at the pointer (clamped at 40 mm), the field and the tool's
