@@ -87,19 +87,15 @@ def section(a) -> str:
         figures = [json.loads(f.read_text()) for k in range(a.evaluate_folds)
                    if (f := RESULTS / f"fold{k}_of_{a.folds}_{n}_sims.json").exists()]
         pulls = sorted({p for f in figures for p in f}, key=float)
-        force = all("force" in f[p] for f in figures for p in f)   # older folds: MEE only
-        lines += ["", f"{n} simulations ({n // 145} a liver):", "",
-                  "| pull mm | livers | model | base alone | naive |"
-                  + (" force error %, model | base |" if force else ""),
-                  "|---" * (7 if force else 5) + "|"]
+        lines += ["", f"{n} simulations ({n // 145} a liver):", "", "| pull mm | livers | "
+                  "model | base alone | naive | force error %, model | base |", "|---" * 7 + "|"]
         for p in pulls:
             per = {m: sum((f[p][m] for f in figures if p in f), [])
                    for m in ("model", "base", "naive")}
             per_f = {m: sum((f[p]["force"][m] for f in figures if p in f), [])
-                     for m in ("model", "base")} if force else {}
+                     for m in ("model", "base")}
             lines.append(f"| {p} | {len(per['model'])} | " + " | ".join(
-                [f"{np.median(per[m]):.2f} / {np.max(per[m]):.2f}"
-                 for m in ("model", "base", "naive")]
+                [f"{np.median(v):.2f} / {np.max(v):.2f}" for v in per.values()]
                 + [f"{np.median(v):.1f} / {np.max(v):.1f}" for v in per_f.values()]) + " |")
     lines += ["", "Force error: |F - F_FE| / |F_FE| of the tool's force, per liver the mean over "
               "its held-out grasps at that pull, median / worst liver; the model's is the base's "
