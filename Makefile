@@ -255,7 +255,8 @@ patient: patient-args setup
 # factorisation (fem_sim linear --green, one process: the factorisation's threads take the
 # cores), and predict-liver --base on its own mesh with the force AT = "X Y Z FX FY FZ" (mm,
 # N; the liver file's frame), or a grasp GRASP = "X Y Z DX DY DZ" (the 10 mm patch nearest to
-# X Y Z moved by DX DY DZ mm: the field and the tool's force, of the small-strain base alone:
+# X Y Z moved by DX DY DZ mm: the field and the tool's force; a model of grasps adds its
+# network's rest and stiffens the force, a model of forces gives the small-strain base alone:
 # docs/surgical_loads.md). No FE simulation, no training.
 AT ?=
 GRASP ?=
@@ -284,10 +285,9 @@ bench-patient: setup
 	$(TPY) bench/patient.py --np $(NP)
 
 # Surgical loads (resumable): grasps pulled 5-40 mm and 0.4-4 N on a patch, FE against the
-# small-strain base over each validation liver's Green's function -> docs/surgical_loads.md
-# the FE of the validation livers' grasps and forces against the small-strain base; with a
-# model of grasps (bench/grasp_rest.py trains one on scene4_grasp: make bench-grasp-rest), its
-# rows beside the base's, placed on each liver in the trainer's environment
+# small-strain base over each validation liver's Green's function -> docs/surgical_loads.md;
+# with a model of grasps (make bench-grasp-rest trains one on scene4_grasp), its rows beside
+# the base's, placed on each liver in the trainer's environment
 GRASP_MODEL ?= bench/results/grasp_rest/run
 bench-surgical: setup-solver setup-trainer
 	$(SPY) bench/surgical_loads.py

@@ -288,9 +288,11 @@ class GraspManipulator:
     directory of ``make liver``, ``fem_sim linear --green``): a click picks the patch the tool
     holds (:func:`data_spec.eligible_loads.grasp_patch`), a drag moves it to the pointer
     (clamped to ``max_pull`` mm), and the field and the tool's force on the liver come from
-    :class:`data_spec.green_grasp.GreenGrasp`: the small-strain base, which no network corrects yet
-    (docs/surgical_loads.md measures what it misses). It offers what the viewer draws, as
-    :class:`Manipulator` does; a handle's ``force`` is the tool's force (N) and the load a
+    :class:`data_spec.green_grasp.GreenGrasp`, the small-strain base, or with ``over`` (an
+    :class:`~surrogate.over_green.OverGreen` of a model of grasps placed on this liver) from
+    its :meth:`~surrogate.over_green.OverGreen.grasp`: the base plus the network's rest, the
+    force stiffened (docs/surgical_loads.md measures both). It offers what the viewer draws,
+    as :class:`Manipulator` does; a handle's ``force`` is the tool's force (N) and the load a
     script or the slider sets is the pull (mm).
     """
 
@@ -298,7 +300,7 @@ class GraspManipulator:
     nodes_mode = "all"
     mode = "pull"
 
-    def __init__(self, data, max_pull: float = 40.0, radius: float | None = None):
+    def __init__(self, data, max_pull: float = 40.0, radius: float | None = None, over=None):
         from data_spec import read_geometry
         from data_spec.linear_fields import read_dataset_linear
         from data_spec.scene import GRASP_RADIUS
@@ -316,7 +318,10 @@ class GraspManipulator:
         self.points, self.radius = g.points, float(radius or GRASP_RADIUS)
         self.fixed = np.setdiff1d(g.surface_nodes, lf.green_nodes)
         self.surface = Surface.from_mesh(g.points, g.surface_triangles, self.fixed)
-        self._lf, self._surface_nodes = lf, g.surface_nodes
+        self._lf, self._surface_nodes, self._over = lf, g.surface_nodes, over
+        if over is not None and over.placed.predictor.load != "grasp":
+            raise ValueError("the model over the Green's function learned nodal forces, not "
+                             "grasps: give a model of grasps, or none for the base alone")
         self._rows = np.searchsorted(lf.output_nodes, self.surface.nodes)
         self.max_pull = self.magnitude_max = self.drag_length = float(max_pull)
         self.inputs: list[Input] = []
@@ -330,6 +335,8 @@ class GraspManipulator:
         from data_spec.eligible_loads import grasp_patch
         from data_spec.green_grasp import GreenGrasp
 
+        if self._over is not None:   # the model of grasps: its network's rest and force
+            return self._over.grasp(self.points[node][None], self.radius)
         lf = self._lf
         return GreenGrasp(lf.green, lf.green_nodes, lf.output_nodes,
                           [grasp_patch(self.points, self._surface_nodes, node, self.radius)])
@@ -393,10 +400,11 @@ class GraspManipulator:
     def describe(self, handle: int = 0) -> str:
         """The status line of the tool: its pull and its force."""
         f = self.handles[0].force
+        said = "model of grasps: base + network)" if self._over is not None else \
+            "small-strain base" + ("; too low at this pull)"
+                                   if np.linalg.norm(self.pull) > SMALL_PULL_MM else ")")
         return (f"grasp at node {self.handles[0].node}: {np.linalg.norm(self.pull):.1f} mm "
-                f"(max {self.max_pull:g})\nforce {np.linalg.norm(f):.3f} N (small-strain base"
-                + ("; too low at this pull)" if np.linalg.norm(self.pull) > SMALL_PULL_MM
-                   else ")"))
+                f"(max {self.max_pull:g})\nforce {np.linalg.norm(f):.3f} N ({said}")
 
     def predict(self) -> Frame:
         """The field of the whole liver and the tool's force for the present pull."""

@@ -5,7 +5,8 @@
                                                              frames + GIF, no display needed
     python -m surrogate.viewer RUN_DIR --compare --data DATA [--sim N] [--offscreen --out DIR]
                                                              FE beside surrogate, error coloured
-    python -m surrogate.viewer LIVER_DATA --grasp [--offscreen --out DIR]
+    python -m surrogate.viewer LIVER_DATA --grasp [--grasp-model RUN --place LIVER]
+        [--offscreen --out DIR]
                                                              a grasping tool (make liver's data)
 
 RUN_DIR is a training run (its ``model/``) or a model directory. In the window: right-click a
@@ -18,7 +19,9 @@ material / shape inputs when the model has them. The status line shows the surro
 inference time and the frame time (inference + drawing). With ``--grasp`` a click grasps the
 10 mm patch there and the sphere is the tool: the patch follows it (at most 40 mm), the
 slider sets the pull and the status shows the tool's force, an arrow draws it
-(surrogate.manipulator.GraspManipulator); a script's "forces" are then pulls in mm.
+(surrogate.manipulator.GraspManipulator); a script's "forces" are then pulls in mm. With
+``--grasp-model RUN --place LIVER`` a model of grasps placed on that liver adds its network's
+rest to the field and stiffens the tool's force.
 
 A script (``--script``) is JSON: ``{"fps": 10, "frames": [{"nodes": [id] or "points": [[x, y,
 z]], "forces": [[fx, fy, fz]], "steps": 12, "inputs": [...]}, ...]}``; each entry is reached
@@ -517,6 +520,28 @@ def compare(m, pred, data: Path, sim: int | None, out: Path | None, window_size)
     return None
 
 
+def _grasp_model(args):
+    """With --grasp-model: the model of grasps placed on the liver of ``args.run`` (make
+    liver's data directory; its file ``--place``, the placement make liver saved beside it
+    reused), as an OverGreen for the grasping tool; None without.
+    """
+    if getattr(args, "grasp_model", None) is None:
+        return None
+    from surrogate.evaluate import place
+    from surrogate.over_green import OverGreen
+    from surrogate.predictor import load_predictor
+
+    if args.place is None:
+        raise ViewerError("--grasp-model places the model on the liver: give the liver's file "
+                          "with --place (make liver's LIVER)")
+    pred = load_predictor(model_dir(Path(args.grasp_model)), load="grasp")
+    saved = Path(args.run).parent / "placement.npz"
+    placement, found = place(pred, args.place, args.frame, saved if saved.exists() else None)
+    for msg in found:
+        print(f"{log_prefix}: warning: {msg}", file=sys.stderr)
+    return OverGreen(pred, Path(args.run), placement)
+
+
 def build(args):
     """(manipulator, predictor) from the command line's model and liver options."""
     from surrogate.manipulator import GraspManipulator, Manipulator
@@ -529,7 +554,7 @@ def build(args):
             raise ViewerError(f"{args.run}: --grasp takes a liver's data directory with its "
                               "Green's function (make liver's runs/liver/NAME/data): no "
                               f"{linear_fields_path(args.run).name} in it")
-        return GraspManipulator(Path(args.run)), None
+        return GraspManipulator(Path(args.run), over=_grasp_model(args)), None
     mdir = model_dir(Path(args.run))
     pred = load_predictor(mdir)
     geometry = None
@@ -572,7 +597,12 @@ def _parser() -> argparse.ArgumentParser:
                     help="a grasping tool on the liver of RUN, a data directory of make liver "
                     "(runs/liver/NAME/data): a click grasps the 10 mm patch there, a drag "
                     "moves it to the pointer (at most 40 mm), the field and the tool's force "
-                    "from the liver's Green's function (the small-strain base)")
+                    "from the liver's Green's function (the small-strain base; with "
+                    "--grasp-model, plus the model's network and force)")
+    ap.add_argument("--grasp-model", metavar="RUN", help="with --grasp and --place (the "
+                    "liver's file): a model of grasps (population_green trained on a grasp "
+                    "population) placed on the liver, its network's rest added to the base and "
+                    "the tool's force stiffened as it learned")
     ap.add_argument("--nodes", choices=("surface", "all"), default="surface",
                     help="predict the surface only (default) or every node of the liver")
     ap.add_argument("--offscreen", action="store_true", help="render to files, no window")
@@ -612,8 +642,11 @@ def main(argv=None) -> int:
         ap.error("--script is for --offscreen (the window is driven by the mouse)")
     if args.compare and args.data is None:
         ap.error("--compare needs --data DATASET (the FE solutions)")
-    if args.grasp and (args.compare or args.place):
-        ap.error("--grasp shows the liver of its data directory: no --compare or --place")
+    if args.grasp and (args.compare or (args.place and not args.grasp_model)):
+        ap.error("--grasp shows the liver of its data directory: no --compare, and --place "
+                 "only with --grasp-model (the liver's file, to place that model on)")
+    if args.grasp_model and not args.grasp:
+        ap.error("--grasp-model is a model of grasps for --grasp")
     try:
         m, pred = build(args)
         if args.compare:

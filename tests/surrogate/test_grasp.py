@@ -231,3 +231,17 @@ def test_a_model_of_grasps_answers_a_grasp_with_its_rest_and_its_force(grasp_run
     summary = json.loads((o / "prediction.json").read_text())
     np.testing.assert_allclose(summary["forces_N"], force, rtol=1e-5)
     assert "network's rest" in summary["grasp"]
+    # the viewer's grasping tool with the model: the same field and force at the same pull
+    from surrogate.viewer import _parser, build
+
+    args = _parser().parse_args([str(d / "data"), "--grasp", "--grasp-model", str(run),
+                                 "--place", liver])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tool = build(args)[0]
+    tool.pick(g.points[far])
+    tool.set_force(pull[0])
+    frame = tool.predict()
+    np.testing.assert_allclose(frame.u, u, atol=1e-5)
+    np.testing.assert_allclose(tool.handles[0].force, force[0], rtol=1e-5)
+    assert "model of grasps" in tool.describe()
