@@ -283,6 +283,43 @@ class Manipulator:
         return Frame(surface_u=u[self._rows], u=u, seconds=seconds)
 
 
+class GreenManipulator(Manipulator):
+    """Forces on a liver's own mesh over its small-strain Green's function with a model of
+    the rest placed on the liver (an :class:`~surrogate.over_green.OverGreen`: ``make
+    liver``'s data directory and a ``population_green`` model): the handles, drag, slider and
+    push / pull of :class:`Manipulator`, the whole field at every node of the mesh from
+    ``over(forces, nodes)`` (the linear response plus the network's rest). The liver's shape
+    is its own and the material the population's: no input sliders.
+    """
+
+    def __init__(self, over, drag_length: float | None = None):
+        g = over.geometry
+        if over.output_nodes.size != g.n_nodes:
+            raise ValueError(f"the liver's Green's function reaches {over.output_nodes.size} "
+                             f"of its {g.n_nodes} nodes; make liver writes the whole liver")
+        super().__init__(over.placed.predictor, geometry=(
+            g.points, over.fixed_nodes, g.surface_triangles, np.zeros(0)),
+            drag_length=drag_length)
+        self.over, self.inputs, self.nodes_mode = over, [], "all"
+        self._rows = np.searchsorted(over.output_nodes, self.surface.nodes)
+
+    @property
+    def n_predicted(self) -> int:
+        return int(self.over.output_nodes.size)
+
+    def set_input(self, index: int, value: float) -> float:
+        raise ValueError("a model over a liver's Green's function takes no material or "
+                         "shape input: the liver is its own")
+
+    def predict(self) -> Frame:
+        """The whole liver's field for the present handles (mm, every mesh node)."""
+        forces = np.stack([h.force for h in self.handles])
+        nodes = np.array([h.node for h in self.handles])
+        t = time.perf_counter()
+        u = self.over(forces, nodes)
+        return Frame(surface_u=u[self._rows], u=u, seconds=time.perf_counter() - t)
+
+
 class GraspManipulator:
     """A grasping tool on a liver's own mesh over its small-strain Green's function (the data
     directory of ``make liver``, ``fem_sim linear --green``): a click picks the patch the tool
@@ -318,10 +355,9 @@ class GraspManipulator:
         self.points, self.radius = g.points, float(radius or GRASP_RADIUS)
         self.fixed = np.setdiff1d(g.surface_nodes, lf.green_nodes)
         self.surface = Surface.from_mesh(g.points, g.surface_triangles, self.fixed)
-        self._lf, self._surface_nodes, self._over = lf, g.surface_nodes, over
-        if over is not None and over.placed.predictor.load != "grasp":
-            raise ValueError("the model over the Green's function learned nodal forces, not "
-                             "grasps: give a model of grasps, or none for the base alone")
+        self._lf, self._surface_nodes = lf, g.surface_nodes
+        # a model of forces over the Green's function grasps with the base alone
+        self._over = over if over is not None and over.placed.predictor.load == "grasp" else None
         self._rows = np.searchsorted(lf.output_nodes, self.surface.nodes)
         self.max_pull = self.magnitude_max = self.drag_length = float(max_pull)
         self.inputs: list[Input] = []

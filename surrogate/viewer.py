@@ -5,9 +5,10 @@
                                                              frames + GIF, no display needed
     python -m surrogate.viewer RUN_DIR --compare --data DATA [--sim N] [--offscreen --out DIR]
                                                              FE beside surrogate, error coloured
-    python -m surrogate.viewer LIVER_DATA --grasp [--grasp-model RUN --place LIVER]
-        [--offscreen --out DIR]
+    python -m surrogate.viewer LIVER_DATA --grasp [--offscreen --out DIR]
                                                              a grasping tool (make liver's data)
+    python -m surrogate.viewer RUN --place LIVER --base LIVER_DATA [--grasp]
+                                                             RUN over the liver's Green's function
 
 RUN_DIR is a training run (its ``model/``) or a model directory. In the window: right-click a
 surface point to move the active force there; drag the red sphere to set the force (its
@@ -20,8 +21,10 @@ inference time and the frame time (inference + drawing). With ``--grasp`` a clic
 10 mm patch there and the sphere is the tool: the patch follows it (at most 40 mm), the
 slider sets the pull and the status shows the tool's force, an arrow draws it
 (surrogate.manipulator.GraspManipulator); a script's "forces" are then pulls in mm. With
-``--grasp-model RUN --place LIVER`` a model of grasps placed on that liver adds its network's
-rest to the field and stiffens the tool's force.
+``--base LIVER_DATA --place LIVER`` RUN, a model over the small-strain base (make liver's
+MODEL), is placed on that liver and works over its own Green's function: forces as make liver
+answers them on the liver's own mesh (surrogate.manipulator.GreenManipulator), or with
+``--grasp`` a model of grasps adds its network's rest and stiffens the tool's force.
 
 A script (``--script``) is JSON: ``{"fps": 10, "frames": [{"nodes": [id] or "points": [[x, y,
 z]], "forces": [[fx, fy, fz]], "steps": 12, "inputs": [...]}, ...]}``; each entry is reached
@@ -520,26 +523,26 @@ def compare(m, pred, data: Path, sim: int | None, out: Path | None, window_size)
     return None
 
 
-def _grasp_model(args):
-    """With --grasp-model: the model of grasps placed on the liver of ``args.run`` (make
-    liver's data directory; its file ``--place``, the placement make liver saved beside it
-    reused), as an OverGreen for the grasping tool; None without.
+def _over_green(args):
+    """The model of RUN placed on the liver of ``--base`` (make liver's data directory with
+    the liver's Green's function; the liver's file ``--place``, the placement make liver
+    saved beside the directory reused) as an OverGreen: a model of grasps with --grasp, a
+    model of forces without.
     """
-    if getattr(args, "grasp_model", None) is None:
-        return None
     from surrogate.evaluate import place
     from surrogate.over_green import OverGreen
-    from surrogate.predictor import load_predictor
+    from surrogate.predictor import load_predictor, model_load
 
     if args.place is None:
-        raise ViewerError("--grasp-model places the model on the liver: give the liver's file "
-                          "with --place (make liver's LIVER)")
-    pred = load_predictor(model_dir(Path(args.grasp_model)), load="grasp")
-    saved = Path(args.run).parent / "placement.npz"
+        raise ViewerError("--base places the model on the liver of that directory: give the "
+                          "liver's file with --place (make liver's LIVER)")
+    mdir = model_dir(Path(args.run))
+    pred = load_predictor(mdir, load=model_load(mdir) if args.grasp else "nodal")
+    saved = Path(args.base).parent / "placement.npz"
     placement, found = place(pred, args.place, args.frame, saved if saved.exists() else None)
     for msg in found:
         print(f"{log_prefix}: warning: {msg}", file=sys.stderr)
-    return OverGreen(pred, Path(args.run), placement)
+    return OverGreen(pred, Path(args.base), placement)
 
 
 def build(args):
@@ -547,6 +550,13 @@ def build(args):
     from surrogate.manipulator import GraspManipulator, Manipulator
     from surrogate.predictor import load_predictor
 
+    if getattr(args, "base", None) is not None:   # over the liver's own Green's function
+        from surrogate.manipulator import GreenManipulator
+
+        over = _over_green(args)
+        if args.grasp:
+            return GraspManipulator(Path(args.base), over=over), None
+        return GreenManipulator(over), over.placed.predictor
     if getattr(args, "grasp", False):   # a liver's data directory with its Green's function
         from data_spec.linear_fields import linear_fields_path
 
@@ -554,7 +564,7 @@ def build(args):
             raise ViewerError(f"{args.run}: --grasp takes a liver's data directory with its "
                               "Green's function (make liver's runs/liver/NAME/data): no "
                               f"{linear_fields_path(args.run).name} in it")
-        return GraspManipulator(Path(args.run), over=_grasp_model(args)), None
+        return GraspManipulator(Path(args.run)), None
     mdir = model_dir(Path(args.run))
     pred = load_predictor(mdir)
     geometry = None
@@ -597,12 +607,13 @@ def _parser() -> argparse.ArgumentParser:
                     help="a grasping tool on the liver of RUN, a data directory of make liver "
                     "(runs/liver/NAME/data): a click grasps the 10 mm patch there, a drag "
                     "moves it to the pointer (at most 40 mm), the field and the tool's force "
-                    "from the liver's Green's function (the small-strain base; with "
-                    "--grasp-model, plus the model's network and force)")
-    ap.add_argument("--grasp-model", metavar="RUN", help="with --grasp and --place (the "
-                    "liver's file): a model of grasps (population_green trained on a grasp "
-                    "population) placed on the liver, its network's rest added to the base and "
-                    "the tool's force stiffened as it learned")
+                    "from the liver's Green's function (the small-strain base); with "
+                    "--base, RUN's model of grasps adds its network and force")
+    ap.add_argument("--base", type=Path, metavar="LIVER_DATA", help="with --place (the "
+                    "liver's file): RUN (a model over the small-strain base, population_green) "
+                    "over that liver's own Green's function, make liver's runs/liver/NAME/data: "
+                    "the whole field of the liver's own mesh, forces (or --grasp) as make "
+                    "liver answers them")
     ap.add_argument("--nodes", choices=("surface", "all"), default="surface",
                     help="predict the surface only (default) or every node of the liver")
     ap.add_argument("--offscreen", action="store_true", help="render to files, no window")
@@ -642,11 +653,11 @@ def main(argv=None) -> int:
         ap.error("--script is for --offscreen (the window is driven by the mouse)")
     if args.compare and args.data is None:
         ap.error("--compare needs --data DATASET (the FE solutions)")
-    if args.grasp and (args.compare or (args.place and not args.grasp_model)):
+    if args.grasp and (args.compare or (args.place and not args.base)):
         ap.error("--grasp shows the liver of its data directory: no --compare, and --place "
-                 "only with --grasp-model (the liver's file, to place that model on)")
-    if args.grasp_model and not args.grasp:
-        ap.error("--grasp-model is a model of grasps for --grasp")
+                 "only with --base (a model placed on the liver of that directory)")
+    if args.base and (args.compare or args.place is None):
+        ap.error("--base takes the liver's file (--place) and no --compare")
     try:
         m, pred = build(args)
         if args.compare:

@@ -234,8 +234,8 @@ def test_a_model_of_grasps_answers_a_grasp_with_its_rest_and_its_force(grasp_run
     # the viewer's grasping tool with the model: the same field and force at the same pull
     from surrogate.viewer import _parser, build
 
-    args = _parser().parse_args([str(d / "data"), "--grasp", "--grasp-model", str(run),
-                                 "--place", liver])
+    args = _parser().parse_args([str(run), "--place", liver, "--base", str(d / "data"),
+                                 "--grasp"])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         tool = build(args)[0]

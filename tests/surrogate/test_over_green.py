@@ -249,3 +249,33 @@ def test_a_grasp_over_the_greens_function_holds_its_patch_and_gives_the_force_ba
     summary = json.loads((o / "prediction.json").read_text())
     np.testing.assert_allclose(summary["forces_N"], force, rtol=1e-6)
     assert summary["grasp_displacements_mm"] == pull.tolist()
+
+
+def test_the_manipulator_opens_on_a_model_over_the_livers_greens_function(patient, tmp_path):
+    """python -m surrogate.viewer RUN --place LIVER --base DATA: the handles' forces answered
+    as make liver answers them (OverGreen's field at every node of the liver's own mesh),
+    the push mode a force's opposite, no input sliders; off screen it draws its frames."""
+    from surrogate.evaluate import place
+    from surrogate.over_green import OverGreen
+    from surrogate.viewer import _parser, build, main
+
+    d, info, run = patient
+    argv = [str(run), "--place", info["liver"], "--base", str(d / "data")]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        m = build(_parser().parse_args(argv))[0]
+        over = OverGreen(load_predictor(run / "model"), d / "data",
+                         place(load_predictor(run / "model"), info["liver"], None,
+                               d / "placement.npz")[0])
+    node = m.handles[0].node
+    f = m.set_force([0.0, 0.0, -0.3])
+    frame = m.predict()
+    np.testing.assert_allclose(frame.u, over(f[None], [node]), atol=1e-6)
+    assert frame.u.shape == (over.geometry.n_nodes, 3) and m.inputs == []
+    np.testing.assert_allclose(frame.surface_u, frame.u[m.surface.nodes])
+    m.toggle_mode()   # push: the sphere on the other side, the same force
+    np.testing.assert_allclose(m.drag(m.handle_position()), f)
+    with pytest.raises(ValueError, match="no material or shape input"):
+        m.set_input(0, 1.0)
+    assert main(argv + ["--offscreen", "--out", str(tmp_path / "v")]) == 0
+    assert len(list((tmp_path / "v").glob("frame_*.png"))) > 10
