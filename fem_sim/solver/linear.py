@@ -40,6 +40,7 @@ log = logging.getLogger(__name__)
 REFINE_MAX_IT = 60
 REFINE_BLOCK_IT = 6   # block iterative-refinement sweeps before a row gets its own GMRES
 BLOCK_CONTRACTION = 0.1   # a sweep that shrinks a row's residual less: the row to GMRES
+BLOCK_ROWS = 256   # rows of a block's residual computed at once (its temporaries stay small)
 GAMG_MAX_IT = 1000
 _warned_unused: set[tuple[str, ...]] = set()  # unused options warned about, once per process
 Factors = ldlt.SerialLDLT | pardiso.PardisoCholesky  # one interface: factor, solve, ...
@@ -129,6 +130,18 @@ class LinearSolver:
 
     def invalidate(self) -> None:
         pass
+
+
+def block_residual(A, B: np.ndarray, X: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """B[rows] - (A X[rows]^T)^T, BLOCK_ROWS rows at a time: a block of thousands of rows of
+    a liver's size in one product makes temporaries of the size of B (a gigabyte for the
+    unit responses at every surface node) where a chunk's are a few megabytes.
+    """
+    R = np.empty((rows.size, B.shape[1]))
+    for s in range(0, rows.size, BLOCK_ROWS):
+        r = rows[s:s + BLOCK_ROWS]
+        R[s:s + r.size] = B[r] - (A @ X[r].T).T
+    return R
 
 
 def _is_kept(kept: tuple | None, indices: np.ndarray, values: np.ndarray) -> bool:
@@ -251,7 +264,7 @@ class SerialLDLTSolver(LinearSolver):
         self.counts.back_solves += len(B)
         size = np.maximum(np.linalg.norm(B, axis=1), 1e-300)
         todo, last = np.arange(len(B)), np.full(len(B), np.inf)
-        R = B - (A @ X.T).T   # every row's residual, without gathering copies of B and X
+        R = block_residual(A, B, X, todo)
         for sweep in range(REFINE_BLOCK_IT + 1):
             rel = np.linalg.norm(R, axis=1) / size[todo]
             going = (rel > rtol) & (rel < BLOCK_CONTRACTION * last[todo])
@@ -265,7 +278,7 @@ class SerialLDLTSolver(LinearSolver):
                 return X
             X[todo] += factors.solve_block(R[going])
             self.counts.back_solves += todo.size
-            R = B[todo] - (A @ X[todo].T).T
+            R = block_residual(A, B, X, todo)
         return X
 
     def _block_factors(self, J: Jacobian) -> Factors:

@@ -158,3 +158,20 @@ def test_unit_responses_are_the_linear_responses_of_unit_nodal_forces(degree, fa
     again = prob.linear_responses(MAT, fixed, loads[:2], rtol=1e-8)   # the same matrix
     np.testing.assert_allclose(again, each[:2], rtol=0, atol=1e-6 * np.abs(each).max())
     assert prob.linear.counts.factorizations == made
+
+
+def test_a_blocks_residual_in_chunks_is_the_whole_products(monkeypatch):
+    """fem_sim.solver.linear.block_residual, chunk by chunk (3 rows here), is B - (A X^T)^T
+    of the rows asked, in their order."""
+    import scipy.sparse as sp
+
+    import fem_sim.solver.linear as linear
+
+    rng = np.random.default_rng(0)
+    A = sp.random(40, 40, density=0.2, random_state=1, format="csr") + sp.eye(40, format="csr")
+    B, X = rng.normal(size=(10, 40)), rng.normal(size=(10, 40))
+    rows = np.array([7, 0, 3, 9, 1, 4, 8])
+    monkeypatch.setattr(linear, "BLOCK_ROWS", 3)
+    np.testing.assert_allclose(linear.block_residual(A, B, X, rows),
+                               B[rows] - (A @ X[rows].T).T, rtol=1e-14, atol=1e-13)
+    assert linear.block_residual(A, B, X, rows[:0]).shape == (0, 40)
