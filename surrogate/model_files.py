@@ -16,6 +16,53 @@ MODEL_VERSION = 3          # 3: explicit layer names; 2: the design is recorded
 READABLE_VERSIONS = (1, 2, 3)  # 1-2: flax's automatic names Dense_i; version 1 is node-wise
 
 
+FINGERPRINT = "fingerprint.json"
+
+
+def _sha256(path: Path) -> str:
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def write_fingerprint(directory: str | Path) -> Path:
+    """The SHA-256 of every file of the model directory, in ``fingerprint.json``: what a
+    shipped model carries so that :func:`check_fingerprint` (and so ``load_predictor``)
+    refuses a file changed or lost since it was measured.
+    """
+    d = Path(directory)
+    files = {f.name: _sha256(f) for f in sorted(d.iterdir())
+             if f.is_file() and f.name != FINGERPRINT}
+    (d / FINGERPRINT).write_text(json.dumps({"sha256": files}, indent=1) + "\n")
+    return d / FINGERPRINT
+
+
+def check_fingerprint(directory: str | Path) -> None:
+    """ValueError naming the file when a model directory with a ``fingerprint.json`` holds
+    a file changed, lost or added since it was written; nothing for a directory without one
+    (a model trained here).
+    """
+    d = Path(directory)
+    path = d / FINGERPRINT
+    if not path.exists():
+        return
+    try:
+        files = json.loads(path.read_text())["sha256"]
+    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError) as exc:
+        raise ValueError(f"{path}: not a model fingerprint ({exc})") from None
+    here = {f.name for f in d.iterdir() if f.is_file() and f.name != FINGERPRINT}
+    for name in sorted(here | set(files)):
+        if name not in files or name not in here or _sha256(d / name) != files[name]:
+            what = "added" if name not in files else "missing" if name not in here else \
+                "changed"
+            raise ValueError(f"{d / name}: {what} since the model was fingerprinted "
+                             f"({path}): not the model its card measured; fetch it again")
+
+
 def read_meta(path: Path, designs) -> dict:
     """model.json, checked: the format, a readable version and one of ``designs``' names."""
     try:

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from surrogate.features import FeatureSpec, static_node_features
-from surrogate.model_files import read_meta
+from surrogate.model_files import check_fingerprint, read_meta
 from surrogate.small_strain import base_of, green_product
 
 # Inference precisions: float32 (as trained), or the weights and activations cast to 16 bits.
@@ -83,6 +83,7 @@ class Predictor:
         self.dtype = dtype
         d = Path(directory)
         self.meta = meta = read_meta(d / "model.json", DESIGNS)
+        check_fingerprint(d)   # a shipped model: its files as its card measured them
         self.load = meta.get("load", "nodal")   # "grasp": its loads are tools' pulls, mm
         # a model of grasps: its tools' force beyond the small-strain one (None: the base's)
         self.grasp_force = None

@@ -356,6 +356,38 @@ def test_tampered_model_files_are_refused_at_load(run, tmp_path, tamper, message
         load_predictor(d)
 
 
+def test_a_fingerprinted_model_is_refused_when_a_file_changed_went_or_came(run, tmp_path):
+    """A shipped model carries fingerprint.json (the SHA-256 of each file): it loads as it
+    is, and a weight changed by one bit of data, a file deleted or one added are refused
+    at load naming the file; a model without a fingerprint (trained here) is not checked."""
+    import shutil
+
+    from surrogate.model_files import write_fingerprint
+
+    d = tmp_path / "shipped"
+    shutil.copytree(run[0] / "model", d)
+    write_fingerprint(d)
+    x = np.ones((1, 1, 3)) * 0.1
+    nodes = [[0]]
+    np.testing.assert_array_equal(load_predictor(d)(x[0], nodes[0]),
+                                  load_predictor(run[0] / "model")(x[0], nodes[0]))
+    with np.load(d / "params.npz") as z:
+        flat = {k: z[k] for k in z.files}
+    flat["hidden_0/kernel"][0, 0] = np.nextafter(flat["hidden_0/kernel"][0, 0], np.inf)
+    np.savez(d / "params.npz", **flat)
+    with pytest.raises(ValueError, match=r"params.npz: changed since the model was"):
+        load_predictor(d)
+    shutil.copy(run[0] / "model" / "params.npz", d / "params.npz")
+    load_predictor(d)   # the shipped bytes again
+    (d / "extra.npz").write_bytes(b"x")
+    with pytest.raises(ValueError, match=r"extra.npz: added since"):
+        load_predictor(d)
+    (d / "extra.npz").unlink()
+    (d / "geometry.npz").unlink()
+    with pytest.raises(ValueError, match=r"geometry.npz: missing since"):
+        load_predictor(d)
+
+
 def test_restrict_nodes_keeps_the_targets_of_the_kept_nodes(synth_dir):
     """A surface-only view of a dataset: every sample keeps exactly its rows at the kept nodes
     (checked against the full dataset by node id), and training examples index into it."""
