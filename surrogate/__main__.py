@@ -57,7 +57,7 @@ def _add_predict_liver(sub) -> None:
                    metavar=("X", "Y", "Z", "FX", "FY", "FZ"),
                    help="a force FX FY FZ (N) at the liver surface point nearest to X Y Z "
                    "(mm); once per load of the model. Without it the manipulator (a window) "
-                   "opens on the placed liver")
+                   "opens on the placed liver (with --base, over its Green's function)")
     p.add_argument("--out", default="predict-liver", help="output directory")
     p.add_argument("--scale-to-mm", type=float, default=1.0,
                    help="multiply the file's coordinates by this (1000 for metres)")
@@ -182,14 +182,15 @@ def _predict_liver(args) -> int:
     if args.grasp and not args.base:
         return _fail("predict-liver", "--grasp needs --base (the liver's own mesh and Green's "
                      "function: make liver GRASP=...)")
-    if args.base and (not (args.force or args.grasp) or args.no_center):
-        return _fail("predict-liver", "--base needs --force or --grasp (the manipulator "
-                     "shows the placed population model, without --base) and a centred "
-                     "placement (no --no-center: the liver's mesh is placed as truth-scene "
-                     "placed it)")
+    if args.base and args.no_center:
+        return _fail("predict-liver", "--base takes a centred placement (no --no-center: the "
+                     "liver's mesh is placed as truth-scene placed it)")
     if not (args.force or args.grasp):  # no load: the manipulator opens on the placed liver
         from surrogate.viewer import main as viewer
 
+        if args.base:   # over the liver's own Green's function, as make liver answers
+            return viewer([str(args.run), "--place", str(args.liver), "--base", str(args.base),
+                           *(["--frame", args.frame] if args.frame else [])])
         return viewer([str(args.run), "--place", str(args.liver), "--scale-to-mm",
                        str(args.scale_to_mm),
                        *(["--frame", args.frame] if args.frame else []),

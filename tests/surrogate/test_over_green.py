@@ -124,10 +124,12 @@ def test_a_new_liver_over_its_greens_function_beats_the_placed_population_model(
 
 
 def test_a_model_without_a_linear_rest_is_refused_naming_what_to_run(patient, capsys,
-                                                                     tmp_path):
+                                                                     tmp_path, monkeypatch):
     """Models over no base or a second-order one cannot use the Green's function alone: each
     refused with what to do instead; a dataset without the function names fem_sim linear,
-    and predict-liver of the rest model without --base names make liver."""
+    and predict-liver of the rest model without --base names make liver. With --base and no
+    load, predict-liver opens the manipulator over the Green's function (no --no-center)."""
+    import surrogate.viewer
     from surrogate.__main__ import main
     from surrogate.over_green import OverGreen
 
@@ -138,9 +140,13 @@ def test_a_model_without_a_linear_rest_is_refused_naming_what_to_run(patient, ca
     rest = load_predictor(run / "model")
     with pytest.raises(ValueError, match="linear.h5: missing; run `fem_sim linear"):
         OverGreen(rest, d, _placed(rest, d, info))
-    assert main(["predict-liver", str(run), info["liver"], "--base", str(d / "data"),
-                 "--out", str(tmp_path / "nothing")]) == 2
-    assert "--base needs --force" in capsys.readouterr().err
+    opened = []
+    monkeypatch.setattr(surrogate.viewer, "main", lambda argv: opened.append(argv) or 0)
+    base = ["predict-liver", str(run), info["liver"], "--base", str(d / "data")]
+    assert main(base) == 0
+    assert opened == [[str(run), "--place", info["liver"], "--base", str(d / "data")]]
+    assert main(base + ["--no-center"]) == 2 and len(opened) == 1
+    assert "no --no-center" in capsys.readouterr().err
     assert main(["predict-liver", str(run), info["liver"], "--force", "0", "0", "0", "0", "0",
                  "-0.4", "--out", str(tmp_path / "nothing"), "--no-picture"]) == 2
     assert "make liver LIVER=... MODEL=<this run>" in capsys.readouterr().err
