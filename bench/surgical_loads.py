@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import sys
 import time
 import zlib
@@ -23,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fem_sim.batch.chunked import generation_rate
 from liverviz.ledger import Ledger
 from liverviz.plots import surgical_curves
 from liverviz.report import ROOT, render, write_report
@@ -184,6 +184,7 @@ def model_rows(run: Path, ledger, names) -> None:
         z = np.load(path)
         placed = PlacedModel(pred, nodes=z["points"],
                              placement=place(pred, livers / f"{name}.obj", None)[0])
+        last = {}   # each grasp's field at its last step, for the picture
         for k, case in enumerate(r["grasps"]):
             at = placed.load_nodes(z["points"][z["centres"][k:k + 1]])
             for s, step in enumerate(case["steps"]):
@@ -192,6 +193,8 @@ def model_rows(run: Path, ledger, names) -> None:
                                        np.array([step["base_force"]]), z[f"patch_{k}"])
                 step["model"] = errors(z[f"truth_{k}"][s], u)
                 step["model_force_error"] = float(force_error_pct(f[0], step["fe_force"]))
+                last[f"model_{k}"] = u.astype(np.float32)
+        np.savez_compressed(path.with_stem(f"{name}_model"), **last)
         ledger.add({**r, "model_run": str(run)})
         print(f"[model] {name}: {sum(len(c['steps']) for c in r['grasps'])} grasp steps",
               flush=True)
@@ -209,7 +212,8 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     if a.rate:
         RESULTS.mkdir(parents=True, exist_ok=True)
-        (RESULTS / "rate.json").write_text(json.dumps(generation_rate(a.rate, a.np), indent=1))
+        (RESULTS / "rate.json").write_text(json.dumps(generation_rate(
+            GRASP_SCENE, RESULTS / "grasp_rate", a.rate, a.np), indent=1))
     ledger = Ledger(RESULTS / "livers.jsonl", key="liver")
     names = tomllib.loads(SCENE.read_text())["geometry"]["validation"][:a.livers]
     for i, name in enumerate(names):
@@ -232,30 +236,6 @@ def main(argv=None) -> int:
         return 0
     report(records)
     return 0
-
-
-def generation_rate(n: int, ranks: int) -> dict:
-    """fem_sim generate of scene4_grasp's first ``n`` simulations on ``ranks`` ranks from
-    scratch (every liver of the population is prepared: its PCA needs them all), and the
-    whole scene's rate from the simulations' own seconds and the preparation's.
-    """
-    from data_spec import list_shards, load_scene, read_shard
-    from fem_sim.batch.chunked import generate_chunks
-    done = RESULTS / "grasp_rate" / "generation.json"   # a finished run of n is kept
-    if not (done.exists() and json.loads(done.read_text()).get("sims") == n):
-        shutil.rmtree(RESULTS / "grasp_rate", ignore_errors=True)
-    state = json.loads(done.read_text()) if done.exists() else generate_chunks(
-        GRASP_SCENE, RESULTS / "grasp_rate" / "data", n, ranks=ranks, chunk=n)
-    shards = [read_shard(p) for p in list_shards(RESULTS / "grasp_rate" / "data")[:n]]
-    sims = np.array([np.sum(s.stats.wall_time) for s in shards])
-    total = load_scene(GRASP_SCENE).n_simulations
-    prepare = max(state["seconds"] * ranks - sims.sum(), 0.0)   # core-seconds, all livers
-    return {"ranks": ranks, "sims": len(shards), "ok": sum(s.status == "ok" for s in shards),
-            "wall_s": state["seconds"], "sim_s_median": float(np.median(sims)),
-            "sim_s_mean": float(sims.mean()), "prepare_min": prepare / ranks / 60,
-            "scene_sims": total, "scene_per_hour":
-                3600 * total * ranks / (prepare + total * sims.mean()),
-            "sims_per_hour": 3600 * ranks / sims.mean()}
 
 
 def report(records: list[dict]) -> None:
@@ -290,25 +270,34 @@ def _body(data: dict) -> str:
 
 
 def _picture(records) -> str | None:
-    """docs/surgical_loads_worst.png: the worst 40 mm grasp, FE beside the base."""
+    """docs/surgical_loads_worst.png: the worst liver's worst 40 mm grasp, FE beside the model
+    of grasps (when measured), the small-strain base and the error of the first."""
     from liverviz.pictures import Panel, Surface, render_panels
 
     g40 = surgical_per_liver(records, "grasps", "pull", 40.0)
+    m = "model" if g40 and all("model" in v for v in g40.values()) else "base"
     name = max((n for n in g40 if (RESULTS / f"{n}.npz").exists()),
-               key=lambda n: g40[n]["base"]["mee"], default=None)
+               key=lambda n: g40[n][m]["mee"], default=None)
     if name is None:
         return None
-    z = np.load(RESULTS / f"{name}.npz")
-    s = Surface.from_mesh(z["points"], z["triangles"], z["fixed"])
-    err = np.linalg.norm(z["truth"] - z["base"], axis=1)[s.nodes]
-    centre = z["patch"][:1]
-    panels = [Panel(s, z["truth"][s.nodes], label="FE (Ogden)", load_nodes=centre),
-              Panel(s, z["base"][s.nodes], label="small-strain base", load_nodes=centre),
-              Panel(s, z["truth"][s.nodes], scalars=err, title="base error (mm)",
-                    label="|FE - base|", load_nodes=centre)]
+    z = dict(np.load(RESULTS / f"{name}.npz"))   # the mesh, and the base's worst grasp
+    shown = {"small-strain base": z["base"]}
+    if m == "model":   # the model's worst grasp of the liver, every field from its files
+        cases = next(r for r in records if r["liver"] == name)["grasps"]
+        k = max((k for k, c in enumerate(cases) if c["status"] == "ok"),
+                key=lambda k: cases[k]["steps"][-1]["model"]["mee"])
+        f, fm = (np.load(RESULTS / "fields" / f"{name}{x}.npz") for x in ("", "_model"))
+        z.update(truth=f[f"truth_{k}"][-1], patch=f[f"patch_{k}"])
+        shown = {"model of grasps": fm[f"model_{k}"], "small-strain base": f[f"base_{k}"][-1]}
+    s, centre = Surface.from_mesh(z["points"], z["triangles"], z["fixed"]), z["patch"][:1]
+    err = np.linalg.norm(z["truth"] - next(iter(shown.values())), axis=1)[s.nodes]
+    panels = [Panel(s, u[s.nodes], label=label, load_nodes=centre)
+              for label, u in {"FE (Ogden)": z["truth"], **shown}.items()]
+    panels.append(Panel(s, z["truth"][s.nodes], scalars=err, title=f"{m} error (mm)",
+                        label=f"|FE - {m}|", load_nodes=centre))
     render_panels(panels, ROOT / "docs" / "surgical_loads_worst.png",
                   title=f"{name}: a 10 mm grasp pulled 40 mm")
-    return f"{name} (base MEE {g40[name]['base']['mee']:.2f} mm at 40 mm)"
+    return f"{name} ({m} MEE {g40[name][m]['mee']:.2f} mm at 40 mm)"
 
 
 if __name__ == "__main__":

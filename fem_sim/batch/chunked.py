@@ -18,6 +18,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from data_spec.views import shard_count
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -141,3 +143,40 @@ def linear_bases(data: str | Path, *, ranks: int = 2, order: int = 2,
                     "--synthetic", str(synthetic), *(["--green"] if green else []),
                     "--order", str(order)], check=True, cwd=ROOT)
     return time.perf_counter() - t
+
+
+def rate_figures(wall_s: float, sim_s, ok: int, total: int, ranks: int) -> dict:
+    """A generation's rate from a run from scratch of ``len(sim_s)`` simulations on ``ranks``
+    ranks in ``wall_s`` s, each simulation's own seconds ``sim_s`` (``ok`` of them
+    converged): the rate on the ranks, and a scene of ``total`` simulations' rate with the
+    run's preparation (its core-seconds not in a simulation: meshing, registration, the
+    population's shape model) counted once.
+    """
+    sim_s = np.asarray(sim_s, dtype=np.float64)
+    prepare = max(wall_s * ranks - sim_s.sum(), 0.0)   # core-seconds
+    return {"ranks": ranks, "sims": int(sim_s.size), "ok": int(ok), "wall_s": float(wall_s),
+            "sim_s_median": float(np.median(sim_s)), "sim_s_mean": float(sim_s.mean()),
+            "prepare_min": prepare / ranks / 60, "scene_sims": int(total),
+            "scene_per_hour": 3600 * total * ranks / (prepare + total * sim_s.mean()),
+            "sims_per_hour": 3600 * ranks / sim_s.mean()}
+
+
+def generation_rate(scene: str | Path, directory: str | Path, n: int, ranks: int) -> dict:
+    """``fem_sim generate`` of the scene's first ``n`` simulations on ``ranks`` ranks from
+    scratch in ``directory`` (a finished run of ``n`` kept, anything else removed first) and
+    its :func:`rate_figures` for the whole scene.
+    """
+    import shutil
+
+    from data_spec import list_shards, load_scene, read_shard
+
+    d = Path(directory)
+    done = d / "generation.json"
+    if not (done.exists() and json.loads(done.read_text()).get("sims") == n):
+        shutil.rmtree(d, ignore_errors=True)
+    state = json.loads(done.read_text()) if done.exists() else generate_chunks(
+        scene, d / "data", n, ranks=ranks, chunk=n)
+    shards = [read_shard(p) for p in list_shards(d / "data")[:n]]
+    return rate_figures(state["seconds"], [np.sum(s.stats.wall_time) for s in shards],
+                        sum(s.status == "ok" for s in shards), load_scene(scene).n_simulations,
+                        ranks)

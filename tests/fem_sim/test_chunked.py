@@ -94,3 +94,15 @@ def test_a_livers_small_strain_file_is_kept_only_when_it_holds_what_is_asked(tmp
     monkeypatch.setattr(data_spec, "load_scene",   # the scene grew: 5 simulations
                         lambda s: types.SimpleNamespace(hash="h", n_simulations=5))
     assert not kept(order=1)
+
+
+def test_a_generation_rate_counts_the_preparation_once_for_the_whole_scene():
+    """rate_figures by hand: 100 s on 2 ranks for simulations of 10, 20 and 30 s leave
+    200 - 60 = 140 core-seconds of preparation; a 10-simulation scene then takes 140 + 10 x 20
+    core-seconds, 3600 x 10 x 2 / 340 = 211.8 an hour, and the ranks alone 3600 x 2 / 20."""
+    r = chunked.rate_figures(100.0, [10.0, 20.0, 30.0], 3, 10, 2)
+    assert r["prepare_min"] == 140.0 / 2 / 60 and r["sim_s_median"] == 20.0
+    assert abs(r["scene_per_hour"] - 72000.0 / 340.0) < 1e-9 and r["sims_per_hour"] == 360.0
+    assert (r["sims"], r["ok"], r["scene_sims"]) == (3, 3, 10)
+    # a run whose simulations took more core-seconds than its wall time had no preparation
+    assert chunked.rate_figures(10.0, [15.0, 15.0], 2, 4, 2)["prepare_min"] == 0.0
