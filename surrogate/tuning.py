@@ -25,6 +25,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from surrogate.metrics import mee as field_mee
+
 RATES = (1e-4,)                           # Adam's learning rates tried
 STEPS = (0, 10, 20, 40, 80, 160)          # steps tried (0: the population's weights)
 FOLDS = 3                                 # folds of whole simulations for the choice
@@ -132,8 +134,7 @@ def _trainer(runtime, rows) -> Trainer:
                                        c.context)) @ rows
 
     def mee(params, c: Cases) -> float:
-        d = (fields(params, c) - c.targets).reshape(len(c.targets), -1, 3)
-        return float(np.mean(np.linalg.norm(d, axis=-1)))
+        return field_mee(fields(params, c), c.targets)
 
     def arrays(c: Cases) -> tuple:
         t = np.asarray(c.targets, dtype=np.float64)
