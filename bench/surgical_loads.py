@@ -14,6 +14,7 @@ Resumable (bench/results/surgical_loads/). Writes docs/surgical_loads{.md,.json,
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import sys
 import time
@@ -176,10 +177,13 @@ def model_rows(run: Path, ledger, names) -> None:
     from surrogate.predictor import load_predictor
 
     pred = load_predictor(ROOT / run / "model", load="grasp")
+    made = hashlib.sha256(b"".join((ROOT / run / "model" / f).read_bytes() for f in (
+        "model.json", "params.npz"))).hexdigest()[:16]   # which export of the run
     livers = ROOT / load_scene(SCENE)["geometry"]["livers"]
     for name, r in ledger.records().items():
         path = RESULTS / "fields" / f"{name}.npz"
-        if name not in names or r.get("model_run") == str(run) or not path.exists():
+        if name not in names or (r.get("model_run"), r.get("model_trained_on")) == (
+                str(run), made) or not path.exists():
             continue
         z = np.load(path)
         placed = PlacedModel(pred, nodes=z["points"],
@@ -195,7 +199,7 @@ def model_rows(run: Path, ledger, names) -> None:
                 step["model_force_error"] = float(force_error_pct(f[0], step["fe_force"]))
                 last[f"model_{k}"] = u.astype(np.float32)
         np.savez_compressed(path.with_stem(f"{name}_model"), **last)
-        ledger.add({**r, "model_run": str(run)})
+        ledger.add({**r, "model_run": str(run), "model_trained_on": made})
         print(f"[model] {name}: {sum(len(c['steps']) for c in r['grasps'])} grasp steps",
               flush=True)
 

@@ -57,8 +57,8 @@ def test_a_grasp_of_independent_springs_is_their_stiffness_and_a_bad_patch_is_na
 @pytest.mark.dataset
 def test_a_model_of_grasps_adds_its_rest_off_the_patch_and_stiffens_the_force():
     """surrogate.grasp.grasp_over_base with a stand-in placed network whose rest is known:
-    the rest is added but on the grasped rows, and the force is F_lin (1 + a p + b p^2) at
-    the pull's length p (hand value: p = 5 mm, a = 0.02, b = 0.004: 1 + 0.1 + 0.1 = 1.2)."""
+    the rest is added but on the grasped rows, and the force is F_lin exp(a p + b p^2) at
+    the pull's length p (hand value: p = 5 mm, a = 0.02, b = 0.004: exp(0.1 + 0.1))."""
     from types import SimpleNamespace
 
     from surrogate.grasp import GraspForce, grasp_over_base
@@ -76,9 +76,26 @@ def test_a_model_of_grasps_adds_its_rest_off_the_patch_and_stiffens_the_force():
     u, f = grasp_over_base(Placed(), [7], [[3.0, 4.0, 0.0]], base, f_lin, held=[1, 2])
     assert calls == [((1, 1, 3), [[7]], True)]
     assert np.array_equal(u, [[1, 1, 1], [0, 0, 0], [0, 0, 0], [1, 1, 1]])
-    np.testing.assert_allclose(f, 1.2 * f_lin)
+    np.testing.assert_allclose(f, np.exp(0.2) * f_lin)
     Placed.predictor = SimpleNamespace(grasp_force=None)   # a model without a force fit
     assert grasp_over_base(Placed(), [7], [[3.0, 4.0, 0.0]], base, f_lin)[1] is f_lin
+
+
+def test_the_force_fit_recovers_a_known_stiffening_and_weighs_high_and_low_alike():
+    """GraspForce.fit on forces made by exp(0.03 p + 0.0005 p^2) (any direction, any base
+    size) gives those (a, b) back; two samples at one pull, 2x and 8x the base, fit 4x (the
+    geometric mean: a relative fit would pick a factor nearer 2)."""
+    from surrogate.grasp import GraspForce
+
+    rng = np.random.default_rng(3)
+    d = rng.normal(size=(40, 3)) * rng.uniform(1, 40, size=(40, 1))
+    f_lin = rng.normal(size=(40, 3))
+    true = GraspForce(0.03, 0.0005)
+    fit = GraspForce.fit(d, f_lin, true(d, f_lin))
+    assert abs(fit.a - 0.03) < 1e-9 and abs(fit.b - 0.0005) < 1e-10
+    d2, f2 = np.array([[10.0, 0, 0], [10.0, 0, 0]]), np.array([[1.0, 0, 0], [1.0, 0, 0]])
+    fit = GraspForce.fit(d2, f2, f2 * [[2.0], [8.0]])
+    assert abs(fit.factor(10.0) - 4.0) < 1e-9
 
 
 def test_the_grasp_manipulator_moves_the_patch_to_the_pointer_and_shows_its_force(tmp_path):
@@ -174,14 +191,15 @@ def test_a_grasp_population_trains_over_its_small_strain_base(grasp_run):
 @pytest.mark.dataset
 def test_the_models_force_beats_its_small_strain_base_on_the_held_out_livers(grasp_run):
     """The Ogden liver stiffens as a tool pulls it: fitted on the training livers, the force
-    model's quadratic term is positive, and on the livers held out its force is nearer the FE
-    reaction than the small-strain base's, over every pull and most on the large ones (beyond
-    20 mm, where the base is tens of % low)."""
+    model's factor is above 1 and grows with the pull, and on the livers held out its force is
+    nearer the FE reaction than the small-strain base's, over every pull and most on the
+    large ones (beyond 20 mm, where the base is tens of % low)."""
     from surrogate import load_predictor
     from surrogate.grasp import heldout_grasp_force
 
     data, run = grasp_run
-    assert load_predictor(run / "model", load="grasp").grasp_force.b > 0
+    stiffening = load_predictor(run / "model", load="grasp").grasp_force.factor([10, 20, 30])
+    assert 1.0 < stiffening[0] < stiffening[1] < stiffening[2]
     m = heldout_grasp_force(data, run)
     assert m["tools"] >= 30
     assert m["model"]["median_pct"] < m["base"]["median_pct"]
