@@ -55,19 +55,22 @@ def fold_figures(data: Path, folds: int, k: int, sims: int) -> dict:
     fields = {"model": pred, "base": np.concatenate([base.sample(ds, s) for s in held]),
               "naive": np.broadcast_to(training_mean(ds, train), true.shape)}
     err = {m: np.linalg.norm(np.asarray(f, np.float64) - true, axis=1) for m, f in fields.items()}
+    smp = np.unique(rows)   # the held-out samples (rows: each node's sample)
     d, f_lin, f_fe = np.asarray(ds.forces, np.float64), base_forces(ds), ds.reactions
     fit = GraspForce.fit(d[train], f_lin[train], f_fe[train])   # the tool's force, % off
-    force = {"model": force_error_pct(fit(d[rows], f_lin[rows]), f_fe[rows])[:, 0],
-             "base": force_error_pct(f_lin[rows], f_fe[rows])[:, 0]}   # rows: each node's sample
-    pull = np.round(np.linalg.norm(ds.forces[rows, 0], axis=-1), 1)   # the tool's, mm
-    geo = ds.sample_geo[rows]
-    out = {}
-    for p in np.unique(pull):
-        at = pull == p
-        out[f"{p:g}"] = {m: [float(e[at & (geo == g)].mean()) for g in np.unique(geo[at])]
-                         for m, e in err.items()}
-        out[f"{p:g}"]["force"] = {m: [float(e[at & (geo == g)].mean()) for g in
-                                      np.unique(geo[at])] for m, e in force.items()}
+    force = {"model": force_error_pct(fit(d[smp], f_lin[smp]), f_fe[smp])[:, 0],
+             "base": force_error_pct(f_lin[smp], f_fe[smp])[:, 0]}
+
+    def per_liver(errors: dict, at: np.ndarray) -> dict:   # {pull: {model: [per liver]}}
+        pull = np.round(np.linalg.norm(ds.forces[at, 0], axis=-1), 1)   # the tool's, mm
+        geo = ds.sample_geo[at]
+        return {f"{p:g}": {m: [float(e[(pull == p) & (geo == g)].mean())
+                               for g in np.unique(geo[pull == p])] for m, e in errors.items()}
+                for p in np.unique(pull)}
+
+    out = per_liver(err, rows)
+    for p, by in per_liver(force, smp).items():
+        out[p]["force"] = by
     RESULTS.mkdir(parents=True, exist_ok=True)
     kept.write_text(json.dumps(out))
     return out

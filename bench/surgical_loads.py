@@ -127,6 +127,7 @@ def _grasp_case(prob, mat, fixed, patch, d, green, held):
     """(record, (FE fields, base fields) at each stored pull) of one tool pulled by ``d`` mm."""
     from data_spec.green_grasp import GreenGrasp
     from fem_sim import Constraint
+    from surrogate.grasp import force_error_pct
 
     fractions = np.array(PULLS) / PULLS[-1]
     t = time.perf_counter()
@@ -141,8 +142,7 @@ def _grasp_case(prob, mat, fixed, patch, d, green, held):
         row["steps"].append({
             "pull": PULLS[s], "base": errors(truth, u), "naive": errors(truth, truth.mean(0)),
             "fe_force": fe_force.tolist(), "base_force": force[0].tolist(),
-            "force_error": float(100 * np.linalg.norm(force[0] - fe_force)
-                                 / np.linalg.norm(fe_force))})
+            "force_error": float(force_error_pct(force[0], fe_force))})
         base.append(u)
     return row, (sol.displacement[:sol.n_done], np.array(base).reshape(-1, prob.n_nodes, 3))
 

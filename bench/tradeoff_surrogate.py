@@ -268,10 +268,11 @@ def report() -> None:
                 key=lambda r: r["spec"]["n_train"])
     nets = sorted((r for r in rows if "network" in _groups(r)),
                   key=lambda r: -n_params(r["spec"]["hidden"]))
+    fractions = sorted((r for r in rows if "node fraction" in _groups(r)),
+                       key=lambda r: r["spec"]["node_fraction"])
     body = render(Path(__file__).parent / "templates" / "tradeoff_surrogate.md.j2",
                   lat=lat, lc=lc, nets=nets, ds_note=ds_note, tuple=tuple,
-                  fractions=sorted((r for r in rows if "node fraction" in _groups(r)),
-                                   key=lambda r: r["spec"]["node_fraction"]),
+                  fractions=fractions,
                   precision=sorted((r for r in rows if "all_float16" in r
                                     and r["spec"]["nodes"] == "all"),
                                    key=lambda r: (-n_params(r["spec"]["hidden"]),
@@ -286,9 +287,8 @@ def report() -> None:
     md = DOCS / "tradeoff_surrogate.md"   # the error budget's section is budget_fem.py's
     md.write_text(header("Surrogate price list and the error budget").rstrip() + "\n" + body
                   + ("\n" + sections(md) if sections(md) else ""))
-    surrogate_price_list(lc, nets, sorted((r for r in rows if "node fraction" in _groups(r)),
-                                          key=lambda r: r["spec"]["node_fraction"]),
-                         lat, NAME_OF, N_KNOB, DOCS / "tradeoff_surrogate.png")
+    surrogate_price_list(lc, nets, fractions, lat, NAME_OF, N_KNOB,
+                         DOCS / "tradeoff_surrogate.png")
     print(f"wrote {md} and {DOCS / 'tradeoff_surrogate.png'}")
 
 
