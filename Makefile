@@ -158,6 +158,7 @@ $(TEST_GRASP)/.done: data_spec/scenes/ci_grasp.toml | setup-solver
 
 # A tiny new patient end to end: a population model trained on the three livers, make patient
 # on a fourth (20 FE simulations to adapt on, 6 held out); tests/surrogate/test_patient.py.
+# One of the three meshed as make liver meshes a liver file (tests/surrogate/test_placement.py).
 TEST_PATIENT := runs/test-data/ci_patient
 $(TEST_PATIENT)/.done: $(TEST_LIVERS)/.done | setup
 	rm -rf $(TEST_PATIENT)
@@ -166,6 +167,8 @@ $(TEST_PATIENT)/.done: $(TEST_LIVERS)/.done | setup
 	$(MAKE) --no-print-directory patient LIVER=$(LIVERS)/Amos-004.obj \
 	    MODEL=$(TEST_PATIENT)/population PSCENE=$(TEST_LIVERS)/scene.toml K=20 HELD=6 \
 	    PATIENT=$(TEST_PATIENT)
+	$(SPY) -m fem_sim mesh $(LIVERS)/Amos-005.obj --scene $(TEST_LIVERS)/scene.toml \
+	    --out $(TEST_PATIENT)/member/Amos-005.h5 --no-picture
 	@touch $@
 
 test-trainer: setup-trainer $(TEST_DATA)/.done $(TEST_DATA4)/.done $(TEST_PATIENT)/.done \
@@ -199,10 +202,12 @@ LIVER ?=
 TRUTH_SIMS ?= 60
 truth: setup
 	@test -n "$(LIVER)" || { echo "make truth: LIVER=file RUN=run SCENE=population scene OUT=dir"; exit 2; }
+	$(SPY) -m fem_sim mesh $(LIVER) --scene $(SCENE) --out $(OUT)/mesh.h5 --no-picture
 	$(TPY) -m surrogate truth-scene $(RUN) $(LIVER) --scene $(SCENE) --sims $(TRUTH_SIMS) \
-	    --out $(OUT)/scene.toml
+	    --out $(OUT)/scene.toml --mesh $(OUT)/mesh.h5
 	$(MPIRUN) $(SPY) -m fem_sim generate $(OUT)/scene.toml --out $(OUT)/data
-	$(TPY) -m surrogate evaluate $(RUN) $(OUT)/data --liver $(LIVER) --out $(OUT)/evaluation.json
+	$(TPY) -m surrogate evaluate $(RUN) $(OUT)/data --liver $(LIVER) --mesh $(OUT)/mesh.h5 \
+	    --out $(OUT)/evaluation.json
 
 # A new patient (docs/patient.md): the population model MODEL (a run) placed on the liver file
 # LIVER, K FE simulations on the patient's own mesh with the model's boundary condition (solver
@@ -237,10 +242,11 @@ patient-args:
 	    HELD="$(HELD)" SYNTHETIC="$(SYNTHETIC)" ORDER="$(ORDER)" GREEN="$(GREEN)" \
 	    PSCENE="$(PSCENE)" FRAME="$(FRAME)"
 patient: patient-args setup
+	$(SPY) -m fem_sim mesh $(LIVER) --scene $(PSCENE) --out $(PATIENT)/mesh.h5 --no-picture
 	$(TPY) -m surrogate truth-scene $(MODEL) $(LIVER) --scene $(PSCENE) \
 	    --sims $$(($(K) + $(HELD) > 0 ? $(K) + $(HELD) : 1)) \
 	    $(if $(FRAME),--frame $(FRAME)) --out $(PATIENT)/scene.toml \
-	    --placement $(PATIENT)/placement.npz
+	    --placement $(PATIENT)/placement.npz --mesh $(PATIENT)/mesh.h5
 	$(MPIRUN) $(SPY) -m fem_sim generate $(PATIENT)/scene.toml --out $(PATIENT)/data
 	$(SPY) -m fem_sim linear $(PATIENT)/scene.toml --out $(PATIENT)/data --synthetic $(SYNTHETIC) \
 	    --order $(ORDER) $(if $(filter 1,$(GREEN)),--green)
@@ -265,9 +271,10 @@ liver-args:
 	@$(SYS_PY) scripts/make_args.py liver LIVER="$(LIVER)" MODEL="$(MODEL)" AT="$(AT)" \
 	    GRASP="$(GRASP)" PSCENE="$(PSCENE)" FRAME="$(FRAME)"
 liver: liver-args setup
+	$(SPY) -m fem_sim mesh $(LIVER) --scene $(PSCENE) --out $(LIVER_DIR)/mesh.h5 --no-picture
 	$(TPY) -m surrogate truth-scene $(MODEL) $(LIVER) --scene $(PSCENE) --sims 1 \
 	    $(if $(FRAME),--frame $(FRAME)) --out $(LIVER_DIR)/scene.toml \
-	    --placement $(LIVER_DIR)/placement.npz
+	    --placement $(LIVER_DIR)/placement.npz --mesh $(LIVER_DIR)/mesh.h5
 	env -u OMP_NUM_THREADS -u OPENBLAS_NUM_THREADS \
 	    $(SPY) -m fem_sim linear $(LIVER_DIR)/scene.toml --out $(LIVER_DIR)/data --green
 	$(TPY) -m surrogate predict-liver $(MODEL) $(LIVER) --base $(LIVER_DIR)/data \

@@ -22,7 +22,7 @@ import sys
 import time
 from pathlib import Path
 
-from fem_sim.batch.chunked import generate_chunks, linear_bases, liver_truth
+from fem_sim.batch.chunked import generate_chunks, linear_bases, liver_truth, meshed_liver
 from liverviz.plots import error_against_peak
 from liverviz.report import ROOT, SOFA, SOFA_FRAME, render, write_report
 from surrogate.patient import SYNTHETIC, study
@@ -85,7 +85,7 @@ def curve(liver: Path, a) -> tuple[dict, dict]:
     pred = load_predictor(model)
     t = time.perf_counter()
     frame = FRAMES.get(liver.stem)
-    placement, _ = place(pred, liver, frame)
+    placement, _ = place(pred, liver, frame, mesh=meshed_liver(liver, SCENE))
     placing = time.perf_counter() - t
     data = truth(pred, liver, a, frame)
     found = evaluate_patient(model, data, liver, a.results / liver.stem, ks=a.ks, held=HELD,

@@ -38,7 +38,7 @@ import sys
 import time
 from pathlib import Path
 
-from fem_sim.batch.chunked import generate_chunks, linear_bases, liver_truth
+from fem_sim.batch.chunked import generate_chunks, linear_bases, liver_truth, meshed_liver
 from liverviz.report import ROOT, SOFA, SOFA_FRAME, commit, render, write_report
 from surrogate.reports import REPORT_NAMES, DesignRecord
 from surrogate.small_strain import base_of
@@ -153,7 +153,7 @@ def unseen(data: Path, a) -> list[dict]:
         placed = PlacedModel(pred, points, tris, frame=frame)
         placed([[0.0, 0.0, -0.4]], placed.load_nodes(points[:1]))
         seconds = time.perf_counter() - t
-        placement, found = place(pred, liver, frame)
+        placement, found = place(pred, liver, frame, mesh=meshed_liver(liver, SCENE))
         fe = liver_truth(RESULTS / "unseen" / liver.stem,
                          truth_scene(pred, SCENE, liver, a.unseen_sims, frame), a.unseen_sims,
                          ranks=a.np)
@@ -200,8 +200,9 @@ def _over_base(pred, fe: Path, data: Path, liver: Path, frame, a) -> dict:
            "over_base": {k: m[k] for k in ("network", "skill", "naive", "sims")}}
     if pred.base.from_green:
         row["make_liver_s"] = make_liver(liver, frame, fe, a)
-        row.update(timed_over_green(pred, RESULTS / "make_liver" / liver.stem / "data",
-                                    place(pred, liver, frame)[0], LATENCY_NODES, a.calls))
+        placed = place(pred, liver, frame, mesh=meshed_liver(liver, SCENE))[0]
+        row.update(timed_over_green(pred, RESULTS / "make_liver" / liver.stem / "data", placed,
+                                    LATENCY_NODES, a.calls))
     return row
 
 
@@ -233,7 +234,7 @@ def worst_picture(rows: list[dict]) -> dict:
     pred = load_predictor(RESULTS / "run_population_basis" / "model")
     liver = next(f for f, _ in unseen_livers(_scene()) if f.stem == u["liver"])
     frame = None if u["frame"] == "scene" else u["frame"]
-    placement, _ = place(pred, liver, frame)
+    placement, _ = place(pred, liver, frame, mesh=meshed_liver(liver, SCENE))
     return {"liver": u["liver"], **worst_case_picture(
         pred, ROOT / u["truth"] / "data", placement, ROOT / "docs" / "scene4_real.png",
         title=f"unseen liver {u['liver']} (skill {u['skill']:.2f}): its worst simulation")}

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from data_spec.views import extension, first
-from fem_sim.batch.chunked import generate_chunks, liver_truth
+from fem_sim.batch.chunked import generate_chunks, liver_truth, meshed_liver
 from fem_sim.batch.knob_run import price_list_error
 from liverviz.plots import learning_curves
 from liverviz.report import ROOT, SOFA, commit, header, put_section, render
@@ -112,7 +112,7 @@ def unseen(scene_file: Path, base: Path, model_dir: Path, a) -> dict | None:
     from surrogate.predictor import load_predictor
 
     pred = load_predictor(model_dir)
-    placement, found = place(pred, liver, a.unseen_frame)
+    placement, found = place(pred, liver, a.unseen_frame, mesh=meshed_liver(liver, scene_file))
     data = liver_truth(RESULTS / f"unseen_{a.unseen_frame}",
                        truth_scene(pred, scene_file, liver, UNSEEN_SIMS, a.unseen_frame),
                        UNSEEN_SIMS, ranks=a.np, solver_python=a.solver_python, chunk=a.chunk)

@@ -79,8 +79,11 @@ def _mesh_parser(sub) -> None:
                         "holes, crossing triangles, pieces) into a data_spec geometry file, "
                         "with its repair report and a picture")
     me.add_argument("liver", help="surface file: .obj .stl .ply .vtk .vtp")
-    me.add_argument("--mesh-size", type=positive_number, required=True, metavar="H",
-                    help="mm")
+    size = me.add_mutually_exclusive_group(required=True)
+    size.add_argument("--mesh-size", type=positive_number, metavar="H", help="mm")
+    size.add_argument("--scene", help="a population scene: its mesh size and scale, so that "
+                      "the liver is meshed as that population's livers were (surrogate "
+                      "truth-scene --mesh places a model on it)")
     me.add_argument("--out", required=True, help="geometry file to write (.h5)")
     me.add_argument("--scale-to-mm", type=scale_factor, default=1.0,
                     help="multiply the file's coordinates by this (1000 for metres; > 0: a "
@@ -182,10 +185,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "linear":
         return _linear(args)
     if args.command == "mesh":
-        from fem_sim.geometry.mesh_command import run
+        from fem_sim.geometry.mesh_command import mesh_size_of, run
 
-        return run(args.liver, args.mesh_size, args.out, args.scale_to_mm,
-                   picture=not args.no_picture, keep_largest=args.keep_largest)
+        size, scale = mesh_size_of(args)
+        if size is None:
+            return 2
+        return run(args.liver, size, args.out, scale, picture=not args.no_picture,
+                   keep_largest=args.keep_largest)
     from fem_sim.batch.summary import summary
 
     return summary(args.directory, png=args.png)

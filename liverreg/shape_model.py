@@ -31,6 +31,17 @@ DEFAULT_FRAME = "LPS"  # the frame of DICOM and ITK, hence of most segmented liv
 SHAPE_RULES = ("own", "range", "radius", "hull", "outside")
 
 
+def template_fit(points, triangles, template_surface, frame: str) -> RigidFit:
+    """The rigid map of a liver surface (points (p, 3) mm, triangles (t, 3)) into the
+    population's frame, as a population of liver files turns each of its livers
+    (:class:`fem_sim.geometry.file_population.Registrar`): every vertex of the surface fitted
+    onto the template's surface nodes ``template_surface`` (:func:`liverreg.rigid.orient`
+    from ``frame``, refined by rigid ICP; ``auto``: the best of every start).
+    """
+    verts = np.asarray(points, dtype=np.float64)[np.unique(triangles)]
+    return orient(verts, np.asarray(template_surface, dtype=np.float64), frame, refine=True)
+
+
 def nearest_convex_combination(points: np.ndarray, x: np.ndarray) -> np.ndarray:
     """The point of the convex hull of ``points`` (R, K) nearest to ``x`` (K,): min |P^T w - x|
     over w >= 0, sum w = 1, solved as a non-negative least-squares problem whose extra row,
@@ -59,6 +70,8 @@ class Placement:
     rotation: np.ndarray = None  # (3, 3) orthogonal map into the population's frame (det -1:
     #                              a mirror image); x_population = rotation @ x + offset
     frame: str = "as given"   # how the liver was turned (liverreg.rigid.RigidFit.describe)
+    surface: str | None = None  # the meshed liver it was registered on, as its placing
+    #                             recorded it (None: the liver file's own surface)
 
     def __post_init__(self):
         if self.rotation is None:
@@ -144,8 +157,10 @@ class ShapeModel:
         (:func:`liverreg.rigid.orient`; ``frame``: the liver's frame, ``LPS`` (DICOM, ITK),
         ``RAS`` or ``population``, refined by a rigid fit; None: the frame of the
         population's own liver files, LPS for a population of phantoms; or ``auto``: the best
-        rigid fit onto the population's mean surface, which may turn a liver unlike the
-        population's away from its anatomy).
+        rigid fit onto the template, which may turn a liver unlike the population's away from
+        its anatomy). A liver of the population's own, meshed as the population meshed it
+        (``liverfem-sim mesh``), is told its own coefficients: the same rigid fit
+        (:func:`template_fit`), samples and registration.
         ``center=False``: as given, for livers already in that frame and place (those the
         solver's population pipeline made).
         """
@@ -155,7 +170,7 @@ class ShapeModel:
         S = self.template_points[surf]
         # Livers come in any scanner frame; the population's lie around one place, in one
         # orientation, and the PCA (of displacements) and the network's node coordinates both
-        # see position: the liver is mapped onto the population's mean surface first.
+        # see position: the liver is mapped onto the template first, as the population's were.
         if center:
             fit = self.rigid_fit(points, triangles, frame)
             rotation, offset, how = fit.Q, fit.t, fit.describe()
@@ -194,14 +209,9 @@ class ShapeModel:
         return np.asarray(out)
 
     def rigid_fit(self, points, triangles, frame: str | None = None) -> RigidFit:
-        """The map of a liver surface into the population's frame (:func:`orient` of the
-        surfaces' farthest-point samples: the liver's and the population's mean surface).
-        """
-        verts = np.asarray(points, dtype=np.float64)[np.unique(triangles)]
-        mean_surface = self.template_points[self.surface_nodes] + self.mean.reshape(-1, 3)
-        return orient(verts[farthest_points(verts, self.n_points)],
-                      mean_surface[farthest_points(mean_surface, self.n_points)],
-                      frame or self.frame or DEFAULT_FRAME, refine=True)
+        """The map of a liver surface into the population's frame (:func:`template_fit`)."""
+        return template_fit(points, triangles, self.template_points[self.surface_nodes],
+                            frame or self.frame or DEFAULT_FRAME)
 
     def outside_range(self, coefficients) -> np.ndarray:
         """Indices of shape coefficients outside the population's range (by more than 5 % of

@@ -2,8 +2,8 @@
 
     train --data DIR --run RUN [--config NAME] [--fresh] [key=value ...]
     predict-liver RUN LIVER --force X Y Z FX FY FZ [--out DIR]
-    truth-scene RUN LIVER --scene SCENE [--sims N] --out FILE [--placement NPZ]
-    evaluate RUN DATA [--liver LIVER] [--population DIR] [--out FILE]
+    truth-scene RUN LIVER --scene SCENE [--sims N] --out FILE [--placement NPZ] [--mesh H5]
+    evaluate RUN DATA [--liver LIVER [--mesh H5]] [--population DIR] [--out FILE]
     adapt RUN DATA --liver LIVER --run OUT [--sims K] [--synthetic N] [--placement NPZ] [--tune]
           [--rest RUN]
 
@@ -103,6 +103,9 @@ def _add_evaluate(sub) -> None:
     s.add_argument("--out", required=True, help="the scene file to write")
     s.add_argument("--placement", help="keep the liver's placement in this .npz file (adapt "
                    "--placement reads it instead of placing the liver again)")
+    s.add_argument("--mesh", help="the liver file meshed as the population's livers were "
+                   "(liverfem-sim mesh LIVER --scene SCENE --out FILE.h5): the template is "
+                   "registered on it as on theirs (make liver, patient and truth do this)")
     e = sub.add_parser("evaluate", help="a trained model against a dataset it never trained "
                        "on: of its own liver, or the FE truth of a liver it never saw (a "
                        "model of a base's rest over the base of the truth's mesh, and the "
@@ -112,6 +115,8 @@ def _add_evaluate(sub) -> None:
     e.add_argument("--liver", help="the liver file the dataset was solved on, for a "
                    "population model (it is placed as predict-liver places it)")
     e.add_argument("--frame", choices=FRAMES, default=None, help="as predict-liver's")
+    e.add_argument("--mesh", help="with --liver: the meshed liver truth-scene --mesh placed "
+                   "the model on")
     e.add_argument("--population", help="the population dataset whose mean displacement is "
                    "the naive model (default: the evaluated dataset's own mean)")
     e.add_argument("--out", help="write the metrics here as JSON")
@@ -272,7 +277,7 @@ def _truth_scene(args) -> int:
             return _fail("truth-scene", f"{args.run}: its model was not trained on a "
                          "population (no shape model): evaluate it on a dataset of its liver")
         text = truth_scene(pred, args.scene, args.liver, args.sims, args.frame,
-                           args.placement)
+                           args.placement, args.mesh)
     except (ValueError, OSError) as exc:
         return _fail("truth-scene", str(exc))
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -302,7 +307,7 @@ def _evaluate(args) -> int:
                          "file the dataset was solved on (its truth: truth-scene)")
         if args.liver:   # over the base of the truth's mesh for a model of a base's rest
             result = evaluate_unseen(pred, Path(args.data), args.liver, args.frame,
-                                     population_data=args.population)
+                                     population_data=args.population, mesh=args.mesh)
         else:
             result = evaluate_own(pred, Path(args.data))
     except (ValueError, OSError) as exc:

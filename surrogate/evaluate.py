@@ -25,7 +25,8 @@ from data_spec.shards import geometry_path
 from data_spec.views import shard_count
 from surrogate.metrics import mee
 
-_PLACED: dict = {}  # (liver, its mtime, frame, the shape model's digest) -> placement, warnings
+# (liver, its mtime, frame, the shape model's digest) -> placement, warnings, its meshed liver
+_PLACED: dict = {}
 
 
 def shape_model_digest(sm) -> str:
@@ -43,30 +44,45 @@ def shape_model_digest(sm) -> str:
     return h.hexdigest()
 
 
-def place(pred, liver: str | Path, frame: str = "LPS", saved: str | Path | None = None):
+def place(pred, liver: str | Path, frame: str = "LPS", saved: str | Path | None = None,
+          mesh: str | Path | None = None):
     """(placement, warnings): predict-liver's placement of the liver file by the loaded
     population model ``pred`` (``frame`` as its --frame). Registered once per liver, frame and
     shape model in a process: the designs and training seeds of one dataset share it.
     ``saved``: a file that keeps it across processes (``make patient``'s steps), read when it
     holds the placement of the same liver file, frame and shape model, written otherwise.
+    ``mesh``: the liver file as the population meshed its livers (``liverfem-sim mesh``, a
+    data_spec geometry in the file's frame): the template is registered on its surface, as on
+    the population's livers (a liver of the population is then told its own coefficients);
+    a placement made on another surface is not reused, and the one made on ``mesh`` is what
+    later calls without ``mesh`` get.
     """
     from surrogate.predict_liver import place_liver, read_liver_surface
 
     liver = Path(liver).resolve()
     key = (str(liver), liver.stat().st_mtime_ns, frame, shape_model_digest(pred.shape_model))
-    if key not in _PLACED:
-        kept = None if saved is None else read_placement(saved, key)
+    on = None if mesh is None else _mesh_id(mesh)
+    if key not in _PLACED or (on is not None and _PLACED[key][2] != on):
+        kept = None if saved is None else read_placement(saved, key, on)
         if kept is not None:
-            _PLACED[key] = (kept, pred.shape_model.warnings(kept))
+            _PLACED[key] = (kept, pred.shape_model.warnings(kept), kept.surface)
         else:
-            points, tris = read_liver_surface(liver)
+            points, tris = read_liver_surface(liver if mesh is None else mesh)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                _PLACED[key] = place_liver(pred, points, tris, frame=frame)
+                placement, found = place_liver(pred, points, tris, frame=frame)
+            placement.surface = on
+            _PLACED[key] = (placement, found, on)
             if saved is not None:
-                write_placement(saved, key, _PLACED[key][0])
-    placement, found = _PLACED[key]
+                write_placement(saved, key, placement)
+    placement, found, _ = _PLACED[key]
     return placement, list(found)
+
+
+def _mesh_id(mesh) -> str:
+    """A meshed liver file as a placement records it: its path and modification time."""
+    mesh = Path(mesh).resolve()
+    return f"{mesh} {mesh.stat().st_mtime_ns}"
 
 
 _ARRAYS = ("points", "coefficients", "offset", "rotation")
@@ -79,7 +95,8 @@ def _key_text(key: tuple) -> list[str]:
 
 def write_placement(path: str | Path, key: tuple, placement) -> None:
     """Keeps a placement in ``path`` (.npz) with the key it was made for."""
-    meta = {"key": _key_text(key), "residual": float(placement.residual),
+    meta = {"key": _key_text(key), "surface": placement.surface,
+            "residual": float(placement.residual),
             "iterations": [int(i) for i in placement.iterations],
             "inverted": int(placement.inverted), "frame": placement.frame}
     Path(path).parent.mkdir(parents=True, exist_ok=True)
@@ -87,28 +104,32 @@ def write_placement(path: str | Path, key: tuple, placement) -> None:
         np.savez(fh, meta=json.dumps(meta), **{a: getattr(placement, a) for a in _ARRAYS})
 
 
-def read_placement(path: str | Path, key: tuple):
-    """The placement kept in ``path`` if it was made for ``key``, else None."""
+def read_placement(path: str | Path, key: tuple, surface: str | None = None):
+    """The placement kept in ``path`` if it was made for ``key`` (and, given ``surface``, on
+    that meshed liver), else None.
+    """
     from liverreg.shape_model import Placement
 
     if not Path(path).is_file():
         return None
     with np.load(path) as z:
         meta = json.loads(str(z["meta"]))
-        if meta["key"] != _key_text(key):
+        if meta["key"] != _key_text(key) or surface not in (None, meta.get("surface")):
             return None
         arrays = {a: np.asarray(z[a]) for a in _ARRAYS}
     return Placement(residual=meta["residual"], iterations=meta["iterations"],
-                     inverted=meta["inverted"], frame=meta["frame"], **arrays)
+                     inverted=meta["inverted"], frame=meta["frame"],
+                     surface=meta.get("surface"), **arrays)
 
 
 def truth_scene(pred, scene_file: str | Path, liver: str | Path, n: int,
-                frame: str = "LPS", saved: str | Path | None = None) -> str:
+                frame: str = "LPS", saved: str | Path | None = None,
+                mesh: str | Path | None = None) -> str:
     """The scene text of a liver's FE truth with the population model's boundary condition:
-    fixed where its placement puts the template's fixed region, grown as the population's
-    livers were (:func:`fixed_area_min`).
+    fixed where its placement (:func:`place`, ``mesh`` its) puts the template's fixed region,
+    grown as the population's livers were (:func:`fixed_area_min`).
     """
-    placement, _ = place(pred, liver, frame, saved)
+    placement, _ = place(pred, liver, frame, saved, mesh)
     sm = pred.shape_model
     return liver_scene(scene_file, liver, n, placement.to_liver(placement.points[sm.fixed_nodes]),
                        area_min=fixed_area_min(sm, scene_file))
@@ -263,19 +284,19 @@ def evaluate_liver(pred, data: Path, placement, found: list = (), *, population_
 
 
 def evaluate_unseen(pred, truth: str | Path, liver: str | Path, frame: str | None = None, *,
-                    population_data=None) -> dict:
+                    population_data=None, mesh: str | Path | None = None) -> dict:
     """The model ``pred`` against the FE truth of a liver it never saw (``truth``: the data
     directory of ``surrogate truth-scene`` then ``fem_sim generate``; resumable by
     :func:`fem_sim.batch.chunked.liver_truth`), placed as predict-liver places it:
     :func:`evaluate_liver`'s figures; a model of the rest of a small-strain base is evaluated
     over the base of the truth's own mesh (``truth/linear.h5``, ``fem_sim linear``:
     ValueError naming the command when missing), and the base alone comes as
-    ``base_alone``.
+    ``base_alone``. ``mesh``: :func:`place`'s (the meshed liver truth-scene --mesh placed on).
     """
     from surrogate.linear_base import liver_base_metrics
 
     truth = Path(truth)
-    placement, found = place(pred, liver, frame)
+    placement, found = place(pred, liver, frame, mesh=mesh)
     out = evaluate_liver(pred, truth, placement, found, population_data=population_data)
     if not pred.base.whole:
         alone = liver_base_metrics(truth, pred.base.order)

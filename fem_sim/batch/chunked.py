@@ -51,6 +51,28 @@ def liver_truth(directory: str | Path, scene_text: str, n: int, *, ranks: int = 
     return d / "data"
 
 
+def meshed_liver(liver: str | Path, scene: str | Path,
+                 solver_python: str | Path | None = None) -> Path:
+    """The liver file meshed as the population of ``scene`` meshes its livers (``liverfem-sim
+    mesh --scene`` in the solver's environment: what ``surrogate.evaluate.place`` registers a
+    model's template on, as make liver does), made once and kept under runs/meshes/ by file
+    content and mesh size.
+    """
+    import hashlib
+
+    from data_spec import load_scene
+
+    size = float(load_scene(scene)["geometry"]["mesh_size"])
+    key = hashlib.sha256(Path(liver).read_bytes() + repr(size).encode()).hexdigest()[:12]
+    out = ROOT / "runs" / "meshes" / f"{Path(liver).stem}-{key}.h5"
+    if not out.exists():
+        subprocess.run([str(solver_python or ROOT / ".venv-solver" / "bin" / "python"), "-m",
+                        "fem_sim", "mesh", str(liver), "--scene", str(scene), "--out",
+                        str(out), "--no-picture"], check=True, cwd=ROOT,
+                       stdout=subprocess.DEVNULL)
+    return out
+
+
 def mpirun_env(oversubscribe: bool = True, **extra: str) -> dict:
     """The environment of an ``mpirun`` child: this process's, one BLAS and OpenMP thread
     per rank (the ranks take the cores), Open MPI allowed to run as root (a container's

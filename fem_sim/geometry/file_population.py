@@ -25,7 +25,7 @@ from data_spec import Geometry
 from data_spec.geometry import grown_region, region_area
 from liverreg.cpd import register, surface_points, surface_samples
 from liverreg.morph import SurfaceMorph
-from liverreg.rigid import orient
+from liverreg.shape_model import template_fit
 
 log = logging.getLogger(__name__)
 
@@ -71,9 +71,8 @@ class Registrar:
 
     def aligned(self, liver: Geometry):
         """(the liver in the template's frame, the rigid fit)."""
-        verts = liver.points[liver.surface_nodes]
-        fit = orient(verts, self.template.points[self.template.surface_nodes], self.frame,
-                     refine=True)
+        fit = template_fit(liver.points, liver.surface_triangles,
+                           self.template.points[self.template.surface_nodes], self.frame)
         moved = Geometry(points=liver.points @ fit.Q.T + fit.t, cells=liver.cells,
                          surface_triangles=liver.surface_triangles, regions=dict(liver.regions),
                          description=liver.description)

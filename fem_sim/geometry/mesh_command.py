@@ -1,5 +1,6 @@
 """``liverfem-sim mesh LIVER --mesh-size H --out FILE``: one liver surface repaired and meshed
-(:mod:`fem_sim.geometry.repair`), written as a data_spec geometry file (what a file scene, a
+(:mod:`fem_sim.geometry.repair`; ``--scene SCENE``: at its mesh size, as that population's
+livers were meshed), written as a data_spec geometry file (what a file scene, a
 population and the truth of a liver never seen read), with its repair report (FILE's stem +
 ``.repair.json``) and a picture (``.png``: input against meshed surface, mesh quality).
 """
@@ -14,6 +15,21 @@ from pathlib import Path
 def _outputs(out: Path) -> tuple[Path, Path]:
     stem = out.with_suffix("")
     return stem.with_name(stem.name + ".repair.json"), stem.with_name(stem.name + ".png")
+
+
+def mesh_size_of(args) -> tuple[float | None, float]:
+    """(mesh size mm, scale to mm) of ``liverfem-sim mesh``: its --mesh-size, or its --scene's
+    mesh size (None, with the reason printed, for a scene that cannot be read).
+    """
+    if args.scene is None:
+        return args.mesh_size, args.scale_to_mm
+    from data_spec import SceneError, load_scene
+
+    try:
+        return float(load_scene(args.scene)["geometry"]["mesh_size"]), args.scale_to_mm
+    except (SceneError, OSError) as exc:
+        print(f"liverfem-sim mesh: --scene {args.scene}: {exc}", file=sys.stderr)
+        return None, 1.0
 
 
 def run(liver: str, mesh_size: float, out: str, scale_to_mm: float = 1.0,

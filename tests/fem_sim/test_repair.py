@@ -244,3 +244,15 @@ def test_the_mesh_command_writes_the_geometry_the_report_and_the_picture(tmp_pat
     assert main(["mesh", str(obj), "--mesh-size", "16", "--out", str(out),
                  "--scale-to-mm", "1000"]) == 2
     assert "too large for millimetres" in capsys.readouterr().err
+    # --scene: the scene's mesh size (ci_grasp's 16 mm), the same mesh as --mesh-size 16
+    scenes = Path(__file__).resolve().parents[2] / "data_spec" / "scenes"
+    again = tmp_path / "scene" / "liver.h5"
+    assert main(["mesh", str(obj), "--scene", str(scenes / "ci_grasp.toml"), "--out",
+                 str(again), "--no-picture"]) == 0
+    np.testing.assert_array_equal(read_geometry(again).cells, g.cells)
+    np.testing.assert_array_equal(read_geometry(again).points, g.points)
+    capsys.readouterr()
+    assert main(["mesh", str(obj), "--scene", str(tmp_path / "none.toml"), "--out",
+                 str(again)]) == 2
+    err = capsys.readouterr().err
+    assert "--scene" in err and "none.toml" in err and "cannot read" in err, err

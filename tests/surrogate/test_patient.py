@@ -211,14 +211,17 @@ def test_a_kept_placement_is_read_back_only_for_its_own_liver_and_model(tmp_path
     turn, _ = np.linalg.qr(rng.normal(size=(3, 3)))
     p = Placement(points=rng.normal(size=(7, 3)), coefficients=rng.normal(size=4),
                   residual=1.25, iterations=[3, 5], offset=rng.normal(size=3), inverted=2,
-                  rotation=turn, frame="auto: turned")
+                  rotation=turn, frame="auto: turned", surface="/m/a.h5 7")
     key = ("/livers/a.obj", 123, "LPS", "digest")
     path = tmp_path / "placement.npz"
     write_placement(path, key, p)
     q = read_placement(path, key)
     for name in ("points", "coefficients", "offset", "rotation"):
         np.testing.assert_array_equal(getattr(q, name), getattr(p, name))
-    assert (q.residual, q.iterations, q.inverted, q.frame) == (1.25, [3, 5], 2, "auto: turned")
+    assert (q.residual, q.iterations, q.inverted, q.frame, q.surface) == (
+        1.25, [3, 5], 2, "auto: turned", "/m/a.h5 7")
+    assert read_placement(path, key, "/m/a.h5 7") is not None   # made on that meshed liver
+    assert read_placement(path, key, "/m/a.h5 8") is None       # another: placed again
     assert read_placement(path, ("/livers/a.obj", 124, "LPS", "digest")) is None
     assert read_placement(path, ("/livers/a.obj", 123, "RAS", "digest")) is None
     assert read_placement(tmp_path / "missing.npz", key) is None
