@@ -165,29 +165,33 @@ def _force_case(prob, mat, fixed, patch, weights, force, green, held):
     return row
 
 
+PLACED = b"the population's registration on the prepared mesh"
+
+
 def model_rows(run: Path, ledger, names) -> None:
     """Each solved liver's grasps answered by the model of grasps ``run`` (the trainer's
-    environment) placed on the liver as make liver places it, over the same base (its
-    network's rest added, its force stiffened): MEE and force error added to every step of
-    the liver's record, once per run."""
-    from data_spec import load_scene
-    from surrogate.evaluate import place
+    environment) registered on the liver's mesh as the population's livers were, over the
+    same base (its network's rest added, its force stiffened): MEE and force error added to
+    every step of the liver's record, once per run and placement rule."""
     from surrogate.grasp import force_error_pct, grasp_over_base
-    from surrogate.predict_liver import PlacedModel
+    from surrogate.predict_liver import PlacedModel, place_liver
     from surrogate.predictor import load_predictor
 
     pred = load_predictor(ROOT / run / "model", load="grasp")
     made = hashlib.sha256(b"".join((ROOT / run / "model" / f).read_bytes() for f in (
-        "model.json", "params.npz"))).hexdigest()[:16]   # which export of the run
-    livers = ROOT / load_scene(SCENE)["geometry"]["livers"]
+        "model.json", "params.npz")) + PLACED).hexdigest()[:16]   # which export, placed how
     for name, r in ledger.records().items():
         path = RESULTS / "fields" / f"{name}.npz"
         if name not in names or (r.get("model_run"), r.get("model_trained_on")) == (
                 str(run), made) or not path.exists():
             continue
         z = np.load(path)
-        placed = PlacedModel(pred, nodes=z["points"],
-                             placement=place(pred, livers / f"{name}.obj", None)[0])
+        # the liver as its FE solved it: meshed, turned and registered as the population's
+        # livers were (file_population.prepare), so its nodes lie in the population's frame
+        # and the template's registration onto them is the population's own
+        tris = np.load(RESULTS / f"{name}.npz")["triangles"]
+        placed = PlacedModel(pred, nodes=z["points"], placement=place_liver(
+            pred, z["points"], tris, center=False)[0])
         last = {}   # each grasp's field at its last step, for the picture
         for k, case in enumerate(r["grasps"]):
             at = placed.load_nodes(z["points"][z["centres"][k:k + 1]])
