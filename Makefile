@@ -156,6 +156,13 @@ $(TEST_GRASP)/.done: data_spec/scenes/ci_grasp.toml | setup-solver
 	$(SPY) -m fem_sim linear --population $(TEST_GRASP) --order 1
 	@touch $@
 
+# The shipped model's card measured again (tests/surrogate/test_shipped_model.py): the FE
+# truth of bench/surgical_loads.py's three grasps on the validation liver Amos-054.
+TEST_SHIPPED := runs/test-data/shipped/Amos-054.npz
+$(TEST_SHIPPED): fem_sim/batch/grasp_truth.py | setup-solver
+	$(SPY) -m fem_sim.batch.grasp_truth $(LIVERS)/Amos-054.obj \
+	    --scene data_spec/scenes/scene4_livers.toml --grasps 3 --out $@
+
 # A tiny new patient end to end: a population model trained on the three livers, make patient
 # on a fourth (20 FE simulations to adapt on, 6 held out); tests/surrogate/test_patient.py.
 # One of the three meshed as make liver meshes a liver file (tests/surrogate/test_placement.py).
@@ -172,11 +179,11 @@ $(TEST_PATIENT)/.done: $(TEST_LIVERS)/.done | setup
 	@touch $@
 
 test-trainer: setup-trainer $(TEST_DATA)/.done $(TEST_DATA4)/.done $(TEST_PATIENT)/.done \
-              $(TEST_GRASP)/.done
+              $(TEST_GRASP)/.done $(TEST_SHIPPED)
 	$(TRAIN_VENV)/bin/ruff check .
 	LIVERFEM_TEST_DATASET=$(TEST_DATA) LIVERFEM_TEST_DATASET4=$(TEST_DATA4) \
 	    LIVERFEM_TEST_PATIENT=$(TEST_PATIENT) LIVERFEM_TEST_LIVERS=$(TEST_LIVERS) \
-	    LIVERFEM_TEST_GRASP=$(TEST_GRASP) \
+	    LIVERFEM_TEST_GRASP=$(TEST_GRASP) LIVERFEM_TEST_SHIPPED=$(TEST_SHIPPED) \
 	    bash scripts/run_pytest.sh $(TPY) tests/data_spec tests/liverviz tests/liverreg \
 	    tests/surrogate tests/reliability tests/common/test_environments.py -q $(TESTS)
 
@@ -263,21 +270,24 @@ patient: patient-args setup
 # N; the liver file's frame), or a grasp GRASP = "X Y Z DX DY DZ" (the 10 mm patch nearest to
 # X Y Z moved by DX DY DZ mm: the field and the tool's force; a model of grasps adds its
 # network's rest and stiffens the force, a model of forces gives the small-strain base alone:
-# docs/surgical_loads.md). No FE simulation, no training.
+# docs/surgical_loads.md; with GRASP and no MODEL, the shipped model of grasps
+# models/scene4_grasp, its card there). No FE simulation, no training.
 AT ?=
 GRASP ?=
 LIVER_DIR ?= runs/liver/$(basename $(notdir $(LIVER)))
+SHIPPED_GRASP := models/scene4_grasp
+LIVER_MODEL = $(or $(MODEL),$(if $(GRASP),$(SHIPPED_GRASP)))
 liver-args:
-	@$(SYS_PY) scripts/make_args.py liver LIVER="$(LIVER)" MODEL="$(MODEL)" AT="$(AT)" \
+	@$(SYS_PY) scripts/make_args.py liver LIVER="$(LIVER)" MODEL="$(LIVER_MODEL)" AT="$(AT)" \
 	    GRASP="$(GRASP)" PSCENE="$(PSCENE)" FRAME="$(FRAME)"
 liver: liver-args setup
 	$(SPY) -m fem_sim mesh $(LIVER) --scene $(PSCENE) --out $(LIVER_DIR)/mesh.h5 --no-picture
-	$(TPY) -m surrogate truth-scene $(MODEL) $(LIVER) --scene $(PSCENE) --sims 1 \
+	$(TPY) -m surrogate truth-scene $(LIVER_MODEL) $(LIVER) --scene $(PSCENE) --sims 1 \
 	    $(if $(FRAME),--frame $(FRAME)) --out $(LIVER_DIR)/scene.toml \
 	    --placement $(LIVER_DIR)/placement.npz --mesh $(LIVER_DIR)/mesh.h5
 	env -u OMP_NUM_THREADS -u OPENBLAS_NUM_THREADS \
 	    $(SPY) -m fem_sim linear $(LIVER_DIR)/scene.toml --out $(LIVER_DIR)/data --green
-	$(TPY) -m surrogate predict-liver $(MODEL) $(LIVER) --base $(LIVER_DIR)/data \
+	$(TPY) -m surrogate predict-liver $(LIVER_MODEL) $(LIVER) --base $(LIVER_DIR)/data \
 	    --placement $(LIVER_DIR)/placement.npz $(if $(FRAME),--frame $(FRAME)) \
 	    $(if $(GRASP),--grasp $(GRASP),--force $(AT)) --out $(LIVER_DIR)/prediction
 

@@ -48,43 +48,21 @@ def errors(truth: np.ndarray, model: np.ndarray) -> dict:
     return {"mee": m["mee"], "p95": m["ee_p95"], "lt3": m["pct_ee_lt_3mm"], "mean_u": mee(truth)}
 
 
-def sites(g, fixed, n: int, rng) -> np.ndarray:
-    """``n`` surface nodes at least 30 mm from the fixed region, 2.5 patches apart."""
-    from data_spec.eligible_loads import eligible_load_nodes
-
-    cand = eligible_load_nodes({"eligible": "surface", "min_distance_to_fixed": 30.0},
-                               g.points, g.surface_nodes, fixed)
-    chosen: list[int] = []
-    for node in rng.permutation(cand):
-        if len(chosen) < n and all(np.linalg.norm(g.points[node] - g.points[chosen], axis=1)
-                                   > 2.5 * RADIUS):
-            chosen.append(int(node))
-    return np.array(chosen, dtype=np.int64)
-
-
 def solve_liver(name: str, n_grasps: int, n_forces: int) -> dict:
     """One validation liver's record (and the .npz of its worst 40 mm grasp)."""
-    from mpi4py import MPI
-
     from data_spec import load_scene
     from data_spec.eligible_loads import grasp_patch
-    from fem_sim import Constraint, OgdenProblem
-    from fem_sim.batch.cases import base_material, load_directions
-    from fem_sim.batch.generate import solver_settings
-    from fem_sim.geometry.file_population import prepare, registrar_of
+    from fem_sim import Constraint
+    from fem_sim.batch.cases import load_directions
+    from fem_sim.batch.grasp_truth import grasp_sites, prepared_problem
     from surrogate.grasp import patch_weights
 
     scene, t0 = load_scene(SCENE), time.perf_counter()
-    g, _, _ = prepare(ROOT / scene["geometry"]["livers"] / f"{name}.obj",
-                        registrar_of(scene), scene["geometry"]["mesh_size"])
-    fixed = g.regions["vena_cava"]
+    liver = ROOT / scene["geometry"]["livers"] / f"{name}.obj"
+    g, fixed, prob, mat = prepared_problem(scene, liver)
     rng = np.random.default_rng(zlib.crc32(name.encode()))
-    centres = sites(g, fixed, n_grasps + n_forces, rng)
+    centres = grasp_sites(g, fixed, n_grasps + n_forces, rng)
     patches = [grasp_patch(g.points, g.surface_nodes, c, RADIUS) for c in centres]
-    mat, solver = base_material(scene), scene["solver"]
-    prob = OgdenProblem(MPI.COMM_SELF, g.points, g.cells, degree=solver["degree"],
-                        quadrature_degree=solver["quadrature_degree"],
-                        settings=solver_settings(scene))
     held, t1 = np.unique(np.concatenate(patches)), time.perf_counter()
     green = prob.unit_responses(mat, [Constraint(fixed)], held)
     away = load_directions(rng, "away", g.points[centres[:n_grasps]], g.points[fixed])
@@ -125,26 +103,20 @@ def _row(sol, t: float) -> dict:
 
 def _grasp_case(prob, mat, fixed, patch, d, green, held):
     """(record, (FE fields, base fields) at each stored pull) of one tool pulled by ``d`` mm."""
-    from data_spec.green_grasp import GreenGrasp
-    from fem_sim import Constraint
+    from fem_sim.batch.grasp_truth import grasp_case
     from surrogate.grasp import force_error_pct
 
-    fractions = np.array(PULLS) / PULLS[-1]
     t = time.perf_counter()
-    sol = prob.solve(mat, [Constraint(fixed), Constraint(patch, values=d)], [], fractions,
-                     reactions=[patch])
+    sol, base, force = grasp_case(prob, mat, fixed, patch, d, green, held,
+                                  np.array(PULLS) / PULLS[-1])
     row = _row(sol, t)
-    grasp = GreenGrasp(green, held, np.arange(prob.n_nodes), [patch])
-    base = []
     for s in range(sol.n_done):
-        u, force = grasp(fractions[s] * d[None])
         truth, fe_force = sol.displacement[s], sol.reaction[s, 0]
         row["steps"].append({
-            "pull": PULLS[s], "base": errors(truth, u), "naive": errors(truth, truth.mean(0)),
-            "fe_force": fe_force.tolist(), "base_force": force[0].tolist(),
-            "force_error": float(force_error_pct(force[0], fe_force))})
-        base.append(u)
-    return row, (sol.displacement[:sol.n_done], np.array(base).reshape(-1, prob.n_nodes, 3))
+            "pull": PULLS[s], "base": errors(truth, base[s]), "naive": errors(truth, truth.mean(0)),
+            "fe_force": fe_force.tolist(), "base_force": force[s].tolist(),
+            "force_error": float(force_error_pct(force[s], fe_force))})
+    return row, (sol.displacement[:sol.n_done], base)
 
 
 def _force_case(prob, mat, fixed, patch, weights, force, green, held):
@@ -173,8 +145,7 @@ def model_rows(run: Path, ledger, names) -> None:
     environment) registered on the liver's mesh as the population's livers were, over the
     same base (its network's rest added, its force stiffened): MEE and force error added to
     every step of the liver's record, once per run and placement rule."""
-    from surrogate.grasp import force_error_pct, grasp_over_base
-    from surrogate.predict_liver import PlacedModel, place_liver
+    from surrogate.over_green import grasps_on_mesh
     from surrogate.predictor import load_predictor
 
     pred = load_predictor(ROOT / run / "model", load="grasp")
@@ -187,21 +158,19 @@ def model_rows(run: Path, ledger, names) -> None:
             continue
         z = np.load(path)
         # the liver as its FE solved it: meshed, turned and registered as the population's
-        # livers were (file_population.prepare), so its nodes lie in the population's frame
-        # and the template's registration onto them is the population's own
-        tris = np.load(RESULTS / f"{name}.npz")["triangles"]
-        placed = PlacedModel(pred, nodes=z["points"], placement=place_liver(
-            pred, z["points"], tris, center=False)[0])
+        # livers were (file_population.prepare), its nodes in the population's frame
+        rows = grasps_on_mesh(pred, z["points"], np.load(RESULTS / f"{name}.npz")["triangles"], [
+            {"centre": z["centres"][k], "pull": z["pulls"][k], "patch": z[f"patch_{k}"],
+             "fractions": np.array(PULLS) / PULLS[-1], "base": z[f"base_{k}"],
+             "truth": z[f"truth_{k}"], "base_force": [st["base_force"] for st in c["steps"]],
+             "fe_force": [st["fe_force"] for st in c["steps"]]} for k, c in enumerate(r["grasps"])])
         last = {}   # each grasp's field at its last step, for the picture
         for k, case in enumerate(r["grasps"]):
-            at = placed.load_nodes(z["points"][z["centres"][k:k + 1]])
-            for s, step in enumerate(case["steps"]):
-                d = step["pull"] / PULLS[-1] * z["pulls"][k:k + 1]
-                u, f = grasp_over_base(placed, at, d, z[f"base_{k}"][s].astype(np.float64),
-                                       np.array([step["base_force"]]), z[f"patch_{k}"])
-                step["model"] = errors(z[f"truth_{k}"][s], u)
-                step["model_force_error"] = float(force_error_pct(f[0], step["fe_force"]))
-                last[f"model_{k}"] = u.astype(np.float32)
+            for step, row in zip(case["steps"], rows[k]):
+                step["model"] = {"mee": row["mee"], "p95": row["p95"], "lt3": row["lt3"],
+                                 "mean_u": step["base"]["mean_u"]}
+                step["model_force_error"] = row["force_error"]
+            last[f"model_{k}"] = rows[k][-1]["field"].astype(np.float32)
         np.savez_compressed(path.with_stem(f"{name}_model"), **last)
         ledger.add({**r, "model_run": str(run), "model_trained_on": made})
         print(f"[model] {name}: {sum(len(c['steps']) for c in r['grasps'])} grasp steps",

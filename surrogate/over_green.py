@@ -246,3 +246,34 @@ def same_liver(data, g, liver) -> None:
                          f"): its surface lies {d:.1f} mm from the file's (median, at most "
                          f"{SAME_LIVER_MM:g} for the same liver); make liver builds the "
                          "directory of this one")
+
+
+def grasps_on_mesh(predictor, points, triangles, grasps) -> list[list[dict]]:
+    """A model of grasps on a liver meshed and turned as its population's livers (points
+    (n, 3) mm in the population's frame, surface ``triangles``: the template registered on
+    them as on theirs), over FE truths of grasps: per grasp (a dict of ``centre`` node,
+    ``pull`` (3,) mm at the last step, ``fractions`` of it, ``patch``, ``base`` and ``truth``
+    (steps, n, 3) mm, ``base_force`` and ``fe_force`` (steps, 3) N) and step, the model's
+    ``field`` and ``force`` (:func:`grasp_over_base`) with its MEE, 95th percentile and % of
+    nodes under 3 mm against the truth and its force's error (%).
+    """
+    from surrogate.grasp import force_error_pct
+    from surrogate.metrics import displacement_metrics
+    from surrogate.predict_liver import PlacedModel, place_liver
+
+    points = np.asarray(points, dtype=np.float64)
+    placed = PlacedModel(predictor, nodes=points, placement=place_liver(
+        predictor, points, triangles, center=False)[0])
+    out = []
+    for g in grasps:
+        at, rows = placed.load_nodes(points[[int(g["centre"])]]), []
+        for s, fr in enumerate(g["fractions"][:len(g["truth"])]):
+            u, f = grasp_over_base(placed, at, fr * np.asarray(g["pull"])[None],
+                                   np.asarray(g["base"][s], np.float64),
+                                   np.asarray(g["base_force"][s])[None], g["patch"])
+            m = displacement_metrics(u, np.asarray(g["truth"][s], np.float64))
+            rows.append({"field": u, "force": f[0], "mee": m["mee"], "p95": m["ee_p95"],
+                         "lt3": m["pct_ee_lt_3mm"],
+                         "force_error": float(force_error_pct(f[0], g["fe_force"][s]))})
+        out.append(rows)
+    return out
