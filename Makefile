@@ -118,11 +118,11 @@ train: setup-trainer
 test: setup test-solver test-extremes test-trainer
 
 test-solver: setup-solver
-	bash scripts/run_pytest.sh $(SPY) tests/common tests/data_spec tests/liverviz tests/fem_sim tests/reliability -q $(TESTS)
+	bash scripts/run_pytest.sh $(SPY) tests/common tests/data_spec tests/liverviz tests/fem_sim tests/reliability -q --durations=12 $(TESTS)
 
 # Stability at the extremes: every case must converge with a physically right answer.
 test-extremes: setup-solver
-	bash scripts/run_pytest.sh $(SPY) tests/extremes -q $(TESTS)
+	bash scripts/run_pytest.sh $(SPY) tests/extremes -q --durations=5 $(TESTS)
 
 extremes-doc: setup-solver
 	$(SPY) -m scripts.extremes_doc docs/extremes.md
@@ -185,7 +185,7 @@ test-trainer: setup-trainer $(TEST_DATA)/.done $(TEST_DATA4)/.done $(TEST_PATIEN
 	    LIVERFEM_TEST_PATIENT=$(TEST_PATIENT) LIVERFEM_TEST_LIVERS=$(TEST_LIVERS) \
 	    LIVERFEM_TEST_GRASP=$(TEST_GRASP) LIVERFEM_TEST_SHIPPED=$(TEST_SHIPPED) \
 	    bash scripts/run_pytest.sh $(TPY) tests/data_spec tests/liverviz tests/liverreg \
-	    tests/surrogate tests/reliability tests/common/test_environments.py -q $(TESTS)
+	    tests/surrogate tests/reliability tests/common/test_environments.py -q --durations=12 $(TESTS)
 
 # The benchmarks that fit two cores in about half an hour, each writing its report under docs/;
 # the long studies (table4, tradeoff-*, bench-realtime, bench-viewer) are targets of their own.
