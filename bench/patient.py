@@ -49,7 +49,8 @@ def truth(pred, liver: Path, a, frame: str | None = None) -> Path:
     from surrogate.evaluate import truth_scene
 
     d, n = a.results / liver.stem, HELD + max(a.ks)
-    data = liver_truth(d, truth_scene(pred, SCENE, liver, TRUTH_SIMS, frame), n,
+    data = liver_truth(d, truth_scene(pred, SCENE, liver, TRUTH_SIMS, frame,
+                                   mesh=meshed_liver(liver, SCENE)), n,
                        generate=False)   # the scene; another one's truth emptied
     if not (a.no_new_fe and (data / "sims").is_dir()):
         generate_chunks(d / "scene.toml", data, n, ranks=a.np, chunk=n)

@@ -155,7 +155,8 @@ def unseen(data: Path, a) -> list[dict]:
         seconds = time.perf_counter() - t
         placement, found = place(pred, liver, frame, mesh=meshed_liver(liver, SCENE))
         fe = liver_truth(RESULTS / "unseen" / liver.stem,
-                         truth_scene(pred, SCENE, liver, a.unseen_sims, frame), a.unseen_sims,
+                         truth_scene(pred, SCENE, liver, a.unseen_sims, frame,
+                                     mesh=meshed_liver(liver, SCENE)), a.unseen_sims,
                          ranks=a.np)
         m = evaluate_liver(pred, fe, placement, found, population_data=data)
         row = {"liver": liver.stem, "frame": frame or "scene", "file_to_predictor_s":

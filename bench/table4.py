@@ -114,7 +114,8 @@ def unseen(scene_file: Path, base: Path, model_dir: Path, a) -> dict | None:
     pred = load_predictor(model_dir)
     placement, found = place(pred, liver, a.unseen_frame, mesh=meshed_liver(liver, scene_file))
     data = liver_truth(RESULTS / f"unseen_{a.unseen_frame}",
-                       truth_scene(pred, scene_file, liver, UNSEEN_SIMS, a.unseen_frame),
+                       truth_scene(pred, scene_file, liver, UNSEEN_SIMS, a.unseen_frame,
+                                   mesh=meshed_liver(liver, scene_file)),
                        UNSEEN_SIMS, ranks=a.np, solver_python=a.solver_python, chunk=a.chunk)
     return {"liver": liver.name, "frame": a.unseen_frame, "placed_as": placement.frame,
             **evaluate_liver(pred, data, placement, found, population_data=base / "data"),

@@ -60,23 +60,27 @@ def relocated_scene(scene_file: str | Path) -> dict:
 
 
 def liver_scene(scene_file: str | Path, liver: str | Path, n: int, fixed=None,
-                seed: int = 44, area_min: float | None = None) -> str:
+                seed: int = 44, area_min: float | None = None,
+                mesh: str | Path | None = None, radius: float | None = None) -> str:
     """The scene of a liver's FE truth: ``scene_file``'s loads, material, steps and solver on
     the liver file ``liver`` (its own mesh at the scene's mesh size), ``n`` simulations.
     ``fixed`` (k, 3) mm in the liver's frame: the surface nodes within half an element of
     these points are fixed (where a model's placement puts its fixed region); None: the
     file's default region. ``area_min`` (mm^2): that region grown to it, as a file
-    population grows its livers'.
+    population grows its livers'. ``mesh``: the liver already meshed at the scene's size
+    (``fem_sim mesh --scene``), solved as it is instead of meshing the file again;
+    ``radius`` (mm): how near a fixed point a node is fixed (half an element by default).
     """
     scene_file, liver = Path(scene_file), Path(liver)
     raw = tomllib.loads(scene_file.read_text())
     raw["scene"] = {"name": "truth_" + liver.stem, "n_simulations": n, "seed": seed,
                     "description": f"{scene_file.name}'s settings on {liver.name}: the FE "
                                    "truth a model is evaluated against."}
-    raw["geometry"] = {"source": "file", "path": str(liver.resolve()),
+    raw["geometry"] = {"source": "file", "path": str(Path(mesh or liver).resolve()),
                        "mesh_size": raw["geometry"]["mesh_size"]}
     if fixed is not None:
-        raw["fixed"] = {"kind": "points", "radius": 0.5 * raw["geometry"]["mesh_size"],
+        raw["fixed"] = {"kind": "points",
+                        "radius": radius or 0.5 * raw["geometry"]["mesh_size"],
                         "points": [[round(float(v), 3) for v in p] for p in fixed]}
         if area_min:
             raw["fixed"]["area_min"] = round(float(area_min), 1)

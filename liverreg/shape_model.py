@@ -42,6 +42,20 @@ def template_fit(points, triangles, template_surface, frame: str) -> RigidFit:
     return orient(verts, np.asarray(template_surface, dtype=np.float64), frame, refine=True)
 
 
+def landed_region(moved: np.ndarray, template_surface: np.ndarray, region: np.ndarray,
+                  points: np.ndarray, surface: np.ndarray) -> np.ndarray:
+    """The liver's ``surface`` nodes (ids into ``points``) whose nearest node of the moved
+    template's ``template_surface`` (ids into ``moved``, the same frame) is in the template's
+    ``region``: where a template region lands on a liver, as a file population fixes its
+    livers and a liver it never saw is fixed for its truth and its base.
+    """
+    from scipy.spatial import cKDTree
+
+    template_surface, surface = np.asarray(template_surface), np.asarray(surface)
+    near = cKDTree(moved[template_surface]).query(points[surface])[1]
+    return surface[np.isin(template_surface[near], region)]
+
+
 def nearest_convex_combination(points: np.ndarray, x: np.ndarray) -> np.ndarray:
     """The point of the convex hull of ``points`` (R, K) nearest to ``x`` (K,): min |P^T w - x|
     over w >= 0, sum w = 1, solved as a non-negative least-squares problem whose extra row,

@@ -261,7 +261,7 @@ def _train(args) -> int:
 def _truth_scene(args) -> int:
     from data_spec.atomic import out_problem
     from surrogate.evaluate import truth_scene
-    from surrogate.predictor import load_predictor
+    from surrogate.predictor import load_predictor, model_load
     from surrogate.viewer import model_dir
 
     out = Path(args.out)
@@ -272,7 +272,8 @@ def _truth_scene(args) -> int:
     if args.sims < 1:
         return _fail("truth-scene", f"--sims {args.sims}: expected a whole number >= 1")
     try:
-        pred = load_predictor(model_dir(Path(args.run)))
+        mdir = model_dir(Path(args.run))   # its placement only: a model of any load
+        pred = load_predictor(mdir, load=model_load(mdir))
         if pred.shape_model is None:
             return _fail("truth-scene", f"{args.run}: its model was not trained on a "
                          "population (no shape model): evaluate it on a dataset of its liver")

@@ -122,17 +122,33 @@ def read_placement(path: str | Path, key: tuple, surface: str | None = None):
                      surface=meta.get("surface"), **arrays)
 
 
+NODE_RADIUS = 0.01   # mm: a scene's fixed point selects its mesh node (written to 1 micron)
+
+
 def truth_scene(pred, scene_file: str | Path, liver: str | Path, n: int,
                 frame: str = "LPS", saved: str | Path | None = None,
                 mesh: str | Path | None = None) -> str:
     """The scene text of a liver's FE truth with the population model's boundary condition:
     fixed where its placement (:func:`place`, ``mesh`` its) puts the template's fixed region,
-    grown as the population's livers were (:func:`fixed_area_min`).
+    grown as the population's livers were (:func:`fixed_area_min`). With ``mesh``, the liver
+    as it is solved: its nodes where the region lands, by the population's own rule
+    (:func:`liverreg.shape_model.landed_region`); without, the surface within half an element
+    of the moved region's nodes.
     """
     placement, _ = place(pred, liver, frame, saved, mesh)
-    sm = pred.shape_model
-    return liver_scene(scene_file, liver, n, placement.to_liver(placement.points[sm.fixed_nodes]),
-                       area_min=fixed_area_min(sm, scene_file))
+    sm, radius = pred.shape_model, None
+    fixed = placement.to_liver(placement.points[sm.fixed_nodes])
+    if mesh is not None:   # the mesh's own nodes where the region lands, as on the population
+        from data_spec.geometry import read_geometry
+        from liverreg.shape_model import landed_region
+
+        g = read_geometry(mesh)
+        fixed = g.points[landed_region(placement.points, np.unique(sm.surface_triangles),
+                                       sm.fixed_nodes, placement.to_population(g.points),
+                                       g.surface_nodes)]
+        radius = NODE_RADIUS
+    return liver_scene(scene_file, liver, n, fixed, area_min=fixed_area_min(sm, scene_file),
+                       mesh=mesh, radius=radius)
 
 
 def fixed_area_min(sm, scene_file) -> float | None:

@@ -89,12 +89,12 @@ class Registrar:
 
 def landed_region(template: Geometry, moved: np.ndarray, liver: Geometry,
                   region: np.ndarray) -> np.ndarray:
-    """The liver's surface nodes whose nearest moved template surface node is in ``region``."""
-    from scipy.spatial import cKDTree
+    """The liver's surface nodes whose nearest moved template surface node is in ``region``
+    (:func:`liverreg.shape_model.landed_region`).
+    """
+    from liverreg.shape_model import landed_region as landed
 
-    surf = template.surface_nodes
-    near = cKDTree(moved[surf]).query(liver.points[liver.surface_nodes])[1]
-    return liver.surface_nodes[np.isin(surf[near], region)]
+    return landed(moved, template.surface_nodes, region, liver.points, liver.surface_nodes)
 
 
 def grown(liver: Geometry, nodes: np.ndarray, area_min: float) -> tuple[np.ndarray, int]:

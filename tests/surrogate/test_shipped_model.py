@@ -79,3 +79,53 @@ def test_the_shipped_model_gives_its_cards_figures_and_beats_its_base_at_40_mm()
     model_mee, base_mee, model_lt3, base_lt3 = np.mean(last, axis=0)
     assert card_g["steps"][-1]["pull_mm"] == 40.0
     assert model_mee < 0.95 * base_mee and model_lt3 > base_lt3
+
+
+@pytest.mark.dataset
+def test_make_liver_with_no_model_answers_the_cards_first_grasp_as_the_card_says(tmp_path):
+    """The newcomer's command, ``make liver LIVER=<file> GRASP=...`` with no MODEL and no
+    dataset, on Amos-054 at the card's first grasp pulled 40 mm (its centre node and pull
+    carried from the population's frame into the file's by the rigid map between the two
+    meshes, which are the same nodes): the liver is fixed on the very nodes the population's
+    rule fixes, the field it writes is as near the FE truth as the card says (MEE within its
+    tolerance) and its force within the card's points."""
+    import subprocess
+
+    from liverreg.rigid import kabsch
+    from liverviz.pictures import pyvista
+    from surrogate.grasp import force_error_pct
+
+    z, card = _truth(), json.loads((SHIPPED / "card.json").read_text())
+    want, tol = card["reference_liver"]["grasps"][0]["steps"][-1], card["tolerance"]
+    root, out = SHIPPED.parents[1], tmp_path / "liver"
+    liver = root.parent / "shared" / "data" / "livers" / card["reference_liver"]["file"]
+    mesh = subprocess.run([str(root / ".venv-solver" / "bin" / "python"), "-m", "fem_sim",
+                           "mesh", str(liver), "--scene", card["reference_liver"]["scene"],
+                           "--out", str(tmp_path / "mesh.h5"), "--no-picture"],
+                          cwd=root, capture_output=True, text=True)
+    assert mesh.returncode == 0, mesh.stderr[-2000:]
+    from data_spec.geometry import read_geometry
+
+    points = read_geometry(tmp_path / "mesh.h5").points
+    R, t = kabsch(points, z["points"])   # file -> population frame, the same nodes
+    assert np.abs(points @ R.T + t - z["points"]).max() < 1e-6
+    grasp = [*points[z["centres"][0]], *(R.T @ z["pulls"][0])]
+    proc = subprocess.run(["make", "--no-print-directory", "liver", f"LIVER={liver}",
+                           f"LIVER_DIR={out}", "GRASP=" + " ".join(f"{v:.6f}" for v in grasp)],
+                          cwd=root, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "models/scene4_grasp" in proc.stdout   # no MODEL given: the shipped one
+    from data_spec.linear_fields import read_linear_fields
+
+    held = read_linear_fields(out / "data" / "linear.h5").green_nodes   # the free surface
+    surface = np.unique(z["triangles"])
+    np.testing.assert_array_equal(np.setdiff1d(surface, held), np.sort(z["fixed"]))
+    grid = pyvista().read(out / "prediction" / "liver_deformed.vtu")
+    np.testing.assert_allclose(grid.points, points, atol=1e-4)
+    u = np.asarray(grid.point_data["displacement"]) @ R.T
+    assert mee(u, z["truth_0"][-1]) == pytest.approx(want["model_mee_mm"],
+                                                     rel=tol["mee_relative"])
+    force = np.asarray(json.loads((out / "prediction" / "prediction.json").read_text())
+                       ["forces_N"][0]) @ R.T
+    assert abs(float(force_error_pct(force, z["fe_force_0"][-1]))
+               - want["model_force_error_pct"]) <= tol["force_error_points"]
