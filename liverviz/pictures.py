@@ -208,9 +208,10 @@ def view_toward(surface: Surface, nodes=()) -> np.ndarray:
 
 
 def frame_camera(plotter, surface: Surface, nodes=(), zoom: float = 1.2,
-                 everything: bool = False) -> None:
+                 everything: bool = False, margin: float = 0.0) -> None:
     """Point the active viewport's camera at the liver from :func:`view_toward`; framing the
-    liver's bounds, or ``everything`` drawn (arrows included).
+    liver's bounds grown by ``margin`` mm on every side (room for the liver to move), or
+    ``everything`` drawn (arrows included).
     """
     v = view_toward(surface, nodes)
     up = (0, 1, 0) if abs(v[2]) > 0.95 else (0, 0, 1)
@@ -218,7 +219,8 @@ def frame_camera(plotter, surface: Surface, nodes=(), zoom: float = 1.2,
     if everything:
         plotter.reset_camera()
     else:
-        plotter.reset_camera(bounds=surface.polydata().bounds)
+        b = np.asarray(surface.polydata().bounds, np.float64)
+        plotter.reset_camera(bounds=b + np.tile([-margin, margin], 3))
     plotter.camera.zoom(zoom)
 
 

@@ -248,7 +248,8 @@ class LiverScene:
         # The translucent undeformed outline took 25 of 46 ms per frame at 15k nodes: off in
         # live views (key g shows it), on in still pictures.
         self.view.ghost_actor.SetVisibility(False)
-        frame_camera(plotter, m.surface, [h.node for h in m.handles], zoom=1.3)
+        # room for the largest displacement the colours show (a grasp's pull: 40 mm)
+        frame_camera(plotter, m.surface, [h.node for h in m.handles], zoom=1.3, margin=clim)
         h = plotter.window_size[1]
         self.status = plotter.add_text(" ", position=(10, h - 34), font_size=10, color="black")
         self.status.prop.SetVerticalJustificationToTop()  # more lines grow downward

@@ -98,6 +98,7 @@ def test_the_force_fit_recovers_a_known_stiffening_and_weighs_high_and_low_alike
     assert abs(fit.factor(10.0) - 4.0) < 1e-9
 
 
+@pytest.mark.dataset
 def test_the_grasp_manipulator_moves_the_patch_to_the_pointer_and_shows_its_force(tmp_path):
     """make test's patient liver with its Green's function (make liver's kind of directory):
     a drag puts the grasped patch at the pointer (clamped at 40 mm), the field and the tool's

@@ -152,6 +152,21 @@ def test_adapting_lowers_the_patients_error_and_exports_a_one_liver_model():
 
 
 @pytest.mark.dataset
+def test_the_manipulator_opens_on_a_patient_model(tmp_path):
+    """python -m surrogate.viewer on make patient's model, off-screen: its default script
+    drawn on the patient's own liver, frames that differ as the force grows."""
+    from surrogate.viewer import main as viewer
+
+    d, out = Path(generated_dataset("LIVERFEM_TEST_PATIENT")), tmp_path / "view"
+    assert viewer([str(d / "run"), "--offscreen", "--out", str(out)]) == 0
+    timing = json.loads((out / "timings.json").read_text())
+    assert timing["frames"] > 10 and (out / "manipulator.gif").stat().st_size > 0
+    first, middle = (out / "frame_0000.png").read_bytes(), \
+        (out / f"frame_{timing['frames'] // 2:04d}.png").read_bytes()
+    assert first != middle
+
+
+@pytest.mark.dataset
 def test_fine_tuning_the_population_network_lowers_the_patients_error():
     """The same patient and population model: the network fine-tuned on the 20 simulations
     (adapt --tune) predicts the 6 held-out ones better than the placed population network,

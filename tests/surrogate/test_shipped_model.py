@@ -88,7 +88,7 @@ def test_make_liver_with_no_model_answers_the_cards_first_grasp_as_the_card_says
     carried from the population's frame into the file's by the rigid map between the two
     meshes, which are the same nodes): the liver is fixed on the very nodes the population's
     rule fixes, the field it writes is as near the FE truth as the card says (MEE within its
-    tolerance) and its force within the card's points."""
+    tolerance) and its force within the card's points; the manipulator opens on it."""
     import subprocess
 
     from liverreg.rigid import kabsch
@@ -129,3 +129,10 @@ def test_make_liver_with_no_model_answers_the_cards_first_grasp_as_the_card_says
                        ["forces_N"][0]) @ R.T
     assert abs(float(force_error_pct(force, z["fe_force_0"][-1]))
                - want["model_force_error_pct"]) <= tol["force_error_points"]
+    # the manipulator on it, off-screen: the tool pulls the patch and its force is drawn
+    from surrogate.viewer import main as viewer
+
+    view = tmp_path / "view"
+    assert viewer([str(SHIPPED), "--place", str(liver), "--base", str(out / "data"),
+                   "--grasp", "--offscreen", "--out", str(view)]) == 0
+    assert json.loads((view / "timings.json").read_text())["frames"] > 10
