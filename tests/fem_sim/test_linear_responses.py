@@ -175,3 +175,29 @@ def test_a_blocks_residual_in_chunks_is_the_whole_products(monkeypatch):
     np.testing.assert_allclose(linear.block_residual(A, B, X, rows),
                                B[rows] - (A @ X[rows].T).T, rtol=1e-14, atol=1e-13)
     assert linear.block_residual(A, B, X, rows[:0]).shape == (0, 40)
+
+
+def test_random_probes_vouch_for_a_blocks_rows_and_catch_a_single_bad_one():
+    """fem_sim.solver.linear.rows_surely_within: exact solves of 300 right-hand sides pass;
+    one row of them off by 1e-4 of its size (rtol 1e-6) fails the probes, whichever row,
+    and so goes to the row-by-row check."""
+    import scipy.sparse as sp
+
+    import fem_sim.solver.linear as linear
+
+    rng = np.random.default_rng(3)
+    n = 60
+    M = sp.random(n, n, density=0.1, random_state=2)
+    A = (M @ M.T + n * sp.eye(n)).tocsr()
+    B = rng.normal(size=(300, n))
+    X = np.linalg.solve(A.toarray(), B.T).T
+    size = linear.row_norms(B)
+    np.testing.assert_allclose(size, np.linalg.norm(B, axis=1), rtol=1e-14)
+    assert linear.rows_surely_within(A, B, X, size, 1e-6)
+    for row in (0, 137, 299):
+        bad = X.copy()
+        bad[row] += 1e-4 * size[row] / n * rng.normal(size=n)
+        rel = np.linalg.norm(B[row] - A @ bad[row]) / size[row]
+        assert rel > 1e-6
+        for seed in range(5):
+            assert not linear.rows_surely_within(A, B, bad, size, 1e-6, seed=seed)
