@@ -146,8 +146,7 @@ def block_residual(A, B: np.ndarray, X: np.ndarray, rows: np.ndarray) -> np.ndar
 
 
 def row_norms(M: np.ndarray) -> np.ndarray:
-    """|row| of each row of ``M`` without a temporary of its size (np.linalg.norm squares it
-    whole)."""
+    """|row| of each row of ``M``, without a temporary of its size."""
     return np.sqrt(np.einsum("ij,ij->i", M, M))
 
 
