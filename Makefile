@@ -36,7 +36,7 @@ MPIRUN := mpirun -n $(NP)
 .PHONY: help setup setup-system setup-solver setup-trainer demo test test-solver test-trainer \
         test-extremes extremes-doc \
         dataset train population table4 bench bench-solver bench-throughput bench-inference \
-        bench-population truth evaluate patient patient-args liver liver-args scene4-real bench-patient bench-surgical bench-grasp-rest tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
+        bench-population truth evaluate patient patient-args liver liver-args scene4-real bench-patient bench-surgical bench-ready bench-grasp-rest tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
         bench-viewer docs-manipulator viewer \
         clean lock-trainer
 
@@ -55,6 +55,7 @@ help:
 	@echo "make liver LIVER=... MODEL=... AT=\"X Y Z FX FY FZ\"   a new liver over its own Green's function, seconds"
 	@echo "           (or GRASP=\"X Y Z DX DY DZ\": a 10 mm patch moved, the field and the tool's force)"
 	@echo "make bench-surgical   grasps to 40 mm, forces to 4 N on the validation livers -> docs/surgical_loads.md"
+	@echo "make bench-ready     make liver GRASP=... timed from each validation liver's file -> the same"
 	@echo "make bench-grasp-rest   the network over the grasp's base, cross-validated; the model of grasps"
 	@echo "make tradeoff-fem   FEM speed/accuracy price list -> docs/tradeoff_fem.md (long, resumable)"
 	@echo "make tradeoff-surrogate   surrogate price list + error budget -> docs/ (long, resumable)"
@@ -309,6 +310,11 @@ GRASP_MODEL ?= bench/results/grasp_rest/run
 bench-surgical: setup-solver setup-trainer
 	$(SPY) bench/surgical_loads.py
 	$(if $(wildcard $(GRASP_MODEL)/model/model.json),$(TPY) bench/surgical_loads.py --report-only --model $(GRASP_MODEL))
+
+# make liver GRASP=... with the shipped model timed from each validation liver's file, one
+# after the other on a quiet machine -> docs/surgical_loads.md
+bench-ready: setup
+	$(TPY) bench/surgical_loads.py --ready
 
 bench-grasp-rest: setup
 	$(TPY) bench/grasp_rest.py --sims 290

@@ -1,5 +1,5 @@
 """A network over the grasp's small-strain base, cross-validated on the training livers: does
-it learn what the Ogden liver does beyond the base? A first measure of issue 83's third part.
+it learn what the Ogden liver does beyond the base?
 
     .venv-train/bin/python bench/grasp_rest.py [--sims 145] [--folds 5] [--evaluate-folds 2]
         [--report-only]
@@ -12,9 +12,8 @@ liver, ``--evaluate-folds`` of them held out in turn; on their livers, per pull,
 model, of the base alone and of the naive model (the training folds' mean displacement), and
 the tool's force error of the model and of the base, per liver then median and worst. Then the
 model of grasps trained on them all (bench/results/grasp_rest/run, one fold evaluated), which
-``bench/surgical_loads.py --model`` places on the validation livers. Resumable (generation;
-each fold's figures kept in bench/results/grasp_rest/; the run reused while the dataset is
-the same). Writes the section "grasp-network" of docs/surgical_loads.md.
+``bench/surgical_loads.py --model`` places on the validation livers. Resumable (results in
+bench/results/grasp_rest/). Writes the section "grasp-network" of docs/surgical_loads.md.
 """
 
 from __future__ import annotations

@@ -18,6 +18,7 @@ import hashlib
 import json
 import sys
 import time
+import tomllib
 import zlib
 from pathlib import Path
 
@@ -32,6 +33,7 @@ from surrogate.reports import REPORT_NAMES, surgical_curve, surgical_per_liver
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
 GRASP_SCENE = ROOT / "data_spec" / "scenes" / "scene4_grasp.toml"
 RESULTS = ROOT / "bench" / "results" / "surgical_loads"
+READY = RESULTS / "ready.json"   # make liver timed from each liver file (--ready)
 PULLS = (5.0, 10.0, 20.0, 30.0, 40.0)      # mm
 FORCES = (0.4, 1.0, 2.0, 4.0)              # N
 RADIUS = 10.0                              # mm, the tool's patch
@@ -140,6 +142,26 @@ def _force_case(prob, mat, fixed, patch, weights, force, green, held):
 PLACED = b"the population's registration on the prepared mesh"
 
 
+def ready(name: str) -> dict:
+    """Wall seconds of ``make liver GRASP=...`` with no MODEL (the shipped model of grasps)
+    from the liver file into a fresh directory, in all and per step (timed_steps): the file's
+    vertex farthest along its longest axis pulled 20 mm outward."""
+    import shutil
+
+    from fem_sim.geometry.surfaces import read_surface
+    from surrogate.latency import MAKE_LIVER_STEPS, timed_steps
+
+    liver = SCENE.parent / tomllib.loads(SCENE.read_text())["geometry"]["livers"] / f"{name}.obj"
+    x = read_surface(liver)[0]
+    c = x.mean(axis=0)
+    tip = x[np.argmax(np.abs((x - c) @ np.linalg.svd(x - c, full_matrices=False)[2][0]))]
+    shutil.rmtree(d := RESULTS / "ready" / name, ignore_errors=True)
+    grasp = " ".join(f"{v:.3f}" for v in [*tip, *(20.0 * (tip - c) / np.linalg.norm(tip - c))])
+    return {"liver": name, **timed_steps(["make", "--no-print-directory", "liver", f"LIVER={liver}",
+                                          f"LIVER_DIR={d}", f"GRASP={grasp}"],
+                                         MAKE_LIVER_STEPS, ROOT)}
+
+
 def model_rows(run: Path, ledger, names) -> None:
     """Each solved liver's grasps answered by the model of grasps ``run`` (the trainer's
     environment) registered on the liver's mesh as the population's livers were, over the
@@ -173,26 +195,29 @@ def model_rows(run: Path, ledger, names) -> None:
             last[f"model_{k}"] = rows[k][-1]["field"].astype(np.float32)
         np.savez_compressed(path.with_stem(f"{name}_model"), **last)
         ledger.add({**r, "model_run": str(run), "model_trained_on": made})
-        print(f"[model] {name}: {sum(len(c['steps']) for c in r['grasps'])} grasp steps",
-              flush=True)
+        print(f"[model] {name}", flush=True)
 
 
 def main(argv=None) -> int:
-    import tomllib
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--livers", type=int, default=15, help="the first N validation livers")
     p.add_argument("--report-only", action="store_true")
     p.add_argument("--rate", type=int, metavar="N", help="time scene4_grasp's first N")
     p.add_argument("--np", type=int, default=2)
+    p.add_argument("--ready", action="store_true", help="time make liver GRASP=... (the "
+                   "shipped model) from each liver file, then the report")
     p.add_argument("--model", metavar="RUN", help="a model of grasps (bench/grasp_rest.py's "
                    "run; the trainer's environment): its rows beside the base's")
     a = p.parse_args(argv)
+    RESULTS.mkdir(parents=True, exist_ok=True)
     if a.rate:
-        RESULTS.mkdir(parents=True, exist_ok=True)
         (RESULTS / "rate.json").write_text(json.dumps(generation_rate(
             GRASP_SCENE, RESULTS / "grasp_rate", a.rate, a.np), indent=1))
     ledger = Ledger(RESULTS / "livers.jsonl", key="liver")
     names = tomllib.loads(SCENE.read_text())["geometry"]["validation"][:a.livers]
+    if a.ready:   # one liver after the other, nothing else running
+        READY.write_text(json.dumps([ready(n) for n in names], indent=1))
+        a.report_only = True
     for i, name in enumerate(names):
         if a.report_only or name in ledger.records():
             continue
@@ -205,17 +230,20 @@ def main(argv=None) -> int:
     if a.model:
         model_rows(Path(a.model).resolve().relative_to(ROOT), ledger, names)
     records = [r for n, r in ledger.records().items() if n in names]
+    timed = json.loads(READY.read_text()) if READY.exists() else None
     saved = ROOT / "docs" / "surgical_loads.json"
     if a.report_only and not records and saved.exists():   # the results are not on this host
-        data = json.loads(saved.read_text())
+        from surrogate.latency import grasp_latency
+
+        data = {**json.loads(saved.read_text()), "timing": grasp_latency(), "ready": timed}
         write_report(saved.with_suffix(".md"), "Surgical loads on the validation livers",
                      _body(data), data)
         return 0
-    report(records)
+    report(records, timed)
     return 0
 
 
-def report(records: list[dict]) -> None:
+def report(records: list[dict], timed: list | None) -> None:
     if not records:
         return print("no liver solved yet", file=sys.stderr)
     from surrogate.latency import grasp_latency
@@ -226,7 +254,8 @@ def report(records: list[dict]) -> None:
         if (RESULTS / "rate.json").exists() else None
     surgical_curves(grasp, force, GOAL, ROOT / "docs" / "surgical_loads.png")
     data = {"livers": records, "grasp_curve": grasp, "force_curve": force,
-            "timing": grasp_latency(), "goal": GOAL, "rate": rate, "worst": _picture(records)}
+            "timing": grasp_latency(), "goal": GOAL, "rate": rate, "worst": _picture(records),
+            "ready": timed}
     write_report(ROOT / "docs" / "surgical_loads.md", "Surgical loads on the validation livers",
                  _body(data), data)
 
@@ -237,7 +266,7 @@ def _body(data: dict) -> str:
     cases = [(r["liver"], c) for r in records for c in r["grasps"] + r["forces"]]
     return render(Path(__file__).parent / "templates" / "surgical_loads.md.j2", **REPORT_NAMES,
                   records=records, grasp=data["grasp_curve"], force=data["force_curve"],
-                  timing=data["timing"], goal=data["goal"], rate=data.get("rate"),
+                  timing=data["timing"], goal=data["goal"], rate=data["rate"], ready=data["ready"],
                   worst=data.get("worst"), places=PLACES, n_cases=len(cases),
                   model_run=records[0].get("model_run") if records else None,
                   ok=[c for _, c in cases if c["status"] == "ok"],
