@@ -504,7 +504,6 @@ def main(args, over=None) -> int:
     """
     import sys
 
-
     def fail(msg):
         print(f"liverfem-surrogate predict-liver: {msg}", file=sys.stderr)
         return 2
@@ -514,8 +513,9 @@ def main(args, over=None) -> int:
         return checked
     predictor, spec, points, triangles, said = checked
     asked = spec[:, :3]
-    print(f"registering the template onto {args.liver} ({points.shape[0]:,} surface points)",
-          file=sys.stderr, flush=True)
+    if over is None or not args.placement:   # make liver's steps placed it already
+        print(f"registering the template onto {args.liver} ({points.shape[0]:,} surface "
+              "points)", file=sys.stderr, flush=True)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # reported below, once
         if over is not None:   # the liver's own mesh and Green's function (make liver)
