@@ -171,8 +171,8 @@ class ShapeModel:
         (:func:`liverreg.rigid.orient`; ``frame``: the liver's frame, ``LPS`` (DICOM, ITK),
         ``RAS`` or ``population``, refined by a rigid fit; None: the frame of the
         population's own liver files, LPS for a population of phantoms; or ``auto``: the best
-        rigid fit onto the template, which may turn a liver unlike the population's away from
-        its anatomy). A liver of the population's own, meshed as the population meshed it
+        rigid fit onto the population's mean surface, which may turn a liver unlike the
+        population's away from its anatomy). A liver of the population's own, meshed as the population meshed it
         (``liverfem-sim mesh``), is told its own coefficients: the same rigid fit
         (:func:`template_fit`), samples and registration.
         ``center=False``: as given, for livers already in that frame and place (those the
@@ -223,9 +223,20 @@ class ShapeModel:
         return np.asarray(out)
 
     def rigid_fit(self, points, triangles, frame: str | None = None) -> RigidFit:
-        """The map of a liver surface into the population's frame (:func:`template_fit`)."""
-        return template_fit(points, triangles, self.template_points[self.surface_nodes],
-                            frame or self.frame or DEFAULT_FRAME)
+        """The map of a liver surface into the population's frame: from a known frame, the
+        population's own fit onto the template (:func:`template_fit`); ``auto`` (a frame not
+        known), the best of every start onto the population's mean surface, the likeliest
+        shape, whose single best fit does not depend on the file's frame (onto the template, a
+        phantom, a liver turned in its file found another of the fits nearly as good).
+        """
+        frame = frame or self.frame or DEFAULT_FRAME
+        if frame != "auto":
+            return template_fit(points, triangles, self.template_points[self.surface_nodes],
+                                frame)
+        verts = np.asarray(points, dtype=np.float64)[np.unique(triangles)]
+        mean_surface = self.template_points[self.surface_nodes] + self.mean.reshape(-1, 3)
+        return orient(verts[farthest_points(verts, self.n_points)],
+                      mean_surface[farthest_points(mean_surface, self.n_points)], "auto")
 
     def outside_range(self, coefficients) -> np.ndarray:
         """Indices of shape coefficients outside the population's range (by more than 5 % of

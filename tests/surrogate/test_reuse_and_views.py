@@ -114,7 +114,8 @@ def test_a_liver_is_registered_once_per_shape_model(tmp_path, monkeypatch):
     monkeypatch.setattr(pl, "read_liver_surface", lambda path: (np.zeros((3, 3)), np.zeros(
         (1, 3), int)))
     monkeypatch.setattr(pl, "place_liver", lambda pred, p, t, frame: (
-        calls.append(frame) or (f"placement {len(calls)}", [f"warning {len(calls)}"])))
+        calls.append(frame) or (types.SimpleNamespace(made=len(calls)),
+                                [f"warning {len(calls)}"])))
     liver = tmp_path / "liver.stl"
     liver.write_text("a liver")
 
