@@ -172,9 +172,9 @@ class ShapeModel:
         ``RAS`` or ``population``, refined by a rigid fit; None: the frame of the
         population's own liver files, LPS for a population of phantoms; or ``auto``: the best
         rigid fit onto the population's mean surface, which may turn a liver unlike the
-        population's away from its anatomy). A liver of the population's own, meshed as the population meshed it
-        (``liverfem-sim mesh``), is told its own coefficients: the same rigid fit
-        (:func:`template_fit`), samples and registration.
+        population's away from its anatomy). A liver of the population's own, meshed as the
+        population meshed it (``liverfem-sim mesh``) and in its frame, is told its own
+        coefficients: the same rigid fit (:func:`template_fit`), samples and registration.
         ``center=False``: as given, for livers already in that frame and place (those the
         solver's population pipeline made).
         """
