@@ -136,16 +136,16 @@ def truth_scene(pred, scene_file: str | Path, liver: str | Path, n: int,
     of the moved region's nodes.
     """
     placement, _ = place(pred, liver, frame, saved, mesh)
-    sm, radius = pred.shape_model, None
-    fixed = placement.to_liver(placement.points[sm.fixed_nodes])
-    if mesh is not None:   # the mesh's own nodes where the region lands, as on the population
+    sm = pred.shape_model
+    if mesh is None:
+        fixed, radius = placement.to_liver(placement.points[sm.fixed_nodes]), None
+    else:   # the mesh's own nodes where the region lands, as on the population
         from data_spec.geometry import read_geometry
         from liverreg.shape_model import landed_region
 
         g = read_geometry(mesh)
-        fixed = g.points[landed_region(placement.points, np.unique(sm.surface_triangles),
-                                       sm.fixed_nodes, placement.to_population(g.points),
-                                       g.surface_nodes)]
+        fixed = g.points[landed_region(placement.points, sm.surface_nodes, sm.fixed_nodes,
+                                       placement.to_population(g.points), g.surface_nodes)]
         radius = NODE_RADIUS
     return liver_scene(scene_file, liver, n, fixed, area_min=fixed_area_min(sm, scene_file),
                        mesh=mesh, radius=radius)

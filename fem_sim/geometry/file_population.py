@@ -87,16 +87,6 @@ class Registrar:
                         surface_samples(liver, N_POINTS), surface_points(liver))
 
 
-def landed_region(template: Geometry, moved: np.ndarray, liver: Geometry,
-                  region: np.ndarray) -> np.ndarray:
-    """The liver's surface nodes whose nearest moved template surface node is in ``region``
-    (:func:`liverreg.shape_model.landed_region`).
-    """
-    from liverreg.shape_model import landed_region as landed
-
-    return landed(moved, template.surface_nodes, region, liver.points, liver.surface_nodes)
-
-
 def grown(liver: Geometry, nodes: np.ndarray, area_min: float) -> tuple[np.ndarray, int]:
     """(nodes, rings): ``nodes`` grown by rings of surface neighbours until their region's
     area reaches ``area_min`` (mm^2).
@@ -111,14 +101,16 @@ def prepare(path, registrar: Registrar, mesh_size: float, area_min: float | None
     import time
 
     from fem_sim.geometry.repair import mesh_liver_file
+    from liverreg.shape_model import landed_region
 
     t0 = time.perf_counter()
     raw, report = mesh_liver_file(path, mesh_size)
     liver, fit = registrar.aligned(raw)
     reg = registrar.register(liver)
     region = registrar.template.regions[registrar.region]
-    fixed, rings = grown(liver, landed_region(registrar.template, reg.points, liver, region),
-                         0.5 * registrar.area if area_min is None else area_min)
+    landed = landed_region(reg.points, registrar.template.surface_nodes, region, liver.points,
+                           liver.surface_nodes)
+    fixed, rings = grown(liver, landed, 0.5 * registrar.area if area_min is None else area_min)
     liver.regions = {registrar.region: fixed}
     liver.description = f"{Path(path).name} ({fit.describe()})"
     rec = LiverRecord(
