@@ -16,11 +16,15 @@ second_order[i]``, the Taylor expansion of the Ogden body's response to second o
     /displacement  (n, n_out, 3)     float32  mm at load fraction 1, at the output nodes
     /second_order  (n, n_out, 3)     float32  mm, the lam^2 coefficient (optional)
     /green_nodes   (n_g,)            int64    surface nodes off the fixed region (optional,
-                                              ``--green``)
+                                              ``--green``; with ``--green-near`` only those
+                                              near the given points)
     /green         (n_g, 3, n_out, 3) float32 mm/N: the response to a unit force at each of
                                               them along x, y, z (the small-strain Green's
                                               function: any nodal load's response is
                                               green[node] contracted with its force)
+    /fixed_nodes   (n_f,)            int64    the fixed region's nodes (written with the
+                                              Green's function; an older file's are the
+                                              surface nodes without a unit response)
     /tool_force    (n, n_tools, 3)   float64  N: a grasp's tools' forces at load fraction 1
                                               (optional; a grasp population's files)
     attrs: format, scene_name, scene_hash, geometry_id, synthetic_first, units_length,
@@ -59,6 +63,52 @@ class LinearFields:
     green_nodes: np.ndarray | None = None
     green: np.ndarray | None = None
     tool_force: np.ndarray | None = None
+    fixed_nodes: np.ndarray | None = None
+
+    def fixed(self, surface_nodes: np.ndarray) -> np.ndarray:
+        """The liver's fixed nodes (a file with a Green's function): its own record, or in
+        a file that does not hold them the surface nodes without a unit response.
+        """
+        if self.fixed_nodes is not None:
+            return np.asarray(self.fixed_nodes, np.int64)
+        return np.setdiff1d(surface_nodes, self.green_nodes)
+
+    def uncomputed(self, surface_nodes: np.ndarray) -> np.ndarray:
+        """The free surface nodes without a unit response (``fem_sim linear --green-near``
+        computes those near its points only).
+        """
+        return np.setdiff1d(np.setdiff1d(surface_nodes, self.fixed(surface_nodes)),
+                            self.green_nodes)
+
+    def missing_response(self, nodes, surface_nodes: np.ndarray) -> str:
+        """Why the Green's function cannot answer a load at the mesh ``nodes``, or "": a
+        node fixed or inside, or free but not computed.
+        """
+        out = np.setdiff1d(np.asarray(nodes, np.int64).ravel(), self.green_nodes)
+        if out.size == 0:
+            return ""
+        n = int(out[0])
+        if n in self.uncomputed(surface_nodes):
+            return (f"node {n} has no unit response: this Green's function holds the "
+                    f"{self.green_nodes.size} surface nodes near a known load (fem_sim linear "
+                    "--green-near); run fem_sim linear --green without --green-near for the "
+                    "whole surface")
+        return f"node {n} has no unit response (a fixed or interior node: loads act on the " \
+               "free surface)"
+
+    def whole_surface_problem(self, surface_nodes: np.ndarray, data) -> str:
+        """Why a manipulator (loads anywhere) cannot open on the Green's function of the
+        directory ``data``, or "": some free surface nodes are not computed.
+        """
+        n = self.uncomputed(surface_nodes).size
+        if n == 0:
+            return ""
+        d = Path(data)
+        return (f"{d}: its Green's function holds {self.green_nodes.size} of the liver's "
+                f"{self.green_nodes.size + n} free surface nodes, those near make liver's load "
+                "(fem_sim linear --green-near); the manipulator grasps anywhere: make manipulate "
+                f"LIVER=... computes them all first (fem_sim linear {d.parent / 'scene.toml'} "
+                f"--out {d} --green)")
 
     @property
     def order(self) -> int:
@@ -97,6 +147,8 @@ def write_linear_fields(path: str | Path, lf: LinearFields) -> Path:
             f[name] = np.asarray(getattr(lf, name))
         if lf.green is not None:
             f["green_nodes"] = np.asarray(lf.green_nodes, np.int64)
+        if lf.fixed_nodes is not None:
+            f["fixed_nodes"] = np.asarray(lf.fixed_nodes, np.int64)
         if lf.tool_force is not None:
             f["tool_force"] = np.asarray(lf.tool_force, np.float64)
         for name in ("displacement", "second_order", "green"):
@@ -121,7 +173,8 @@ def read_linear_fields(path: str | Path) -> LinearFields:
             scene_name=str(f.attrs["scene_name"]), scene_hash=str(f.attrs["scene_hash"]),
             geometry_id=str(f.attrs["geometry_id"]), seconds=float(f.attrs["seconds"]),
             **{k: f[k][()] if k in f else None for k in ("second_order", "green_nodes",
-                                                          "green", "tool_force")})
+                                                          "green", "tool_force",
+                                                          "fixed_nodes")})
 
 
 def _shape_problems(lf: LinearFields) -> list[str]:
@@ -176,7 +229,7 @@ def _dataset_problems(lf: LinearFields, directory: Path, geometry_id: str | None
             n_nodes = int(g["points"].shape[0])
     except (OSError, KeyError) as exc:
         return p + [f"its liver {lf.geometry_id} has no readable geometry file {geo} ({exc})"]
-    for name in ("load_nodes", "output_nodes", "green_nodes"):
+    for name in ("load_nodes", "output_nodes", "green_nodes", "fixed_nodes"):
         ids = getattr(lf, name)
         if ids is not None and ids.size and (ids.min() < 0 or ids.max() >= n_nodes):
             p.append(f"'{name}' has node ids outside [0, {n_nodes}) of liver {lf.geometry_id}")

@@ -6,9 +6,12 @@ python3 -m fem_sim summary DIR
 python3 -m fem_sim population SCENE.toml --out DIR   (scene 4: CPD + PCA shape coefficients)
 python3 -m fem_sim phantom SEED --out FILE.h5 [--variety V] [--spread S] [--mesh-size H]
 python3 -m fem_sim linear SCENE.toml --out DIR [--synthetic N] [--order 2] [--green]
+        [--green-near "X Y Z ..." [--green-radius MM]]
     (a one-liver scene's small-strain responses, DIR/linear.h5)
 python3 -m fem_sim linear --population DATA [--order 2]
     (every liver of a population dataset under its simulations' loads, DATA/linear/)
+python3 -m fem_sim serve
+    (these commands as JSON lines on stdin, one answer a line: fem_sim/serve.py)
 """
 
 from __future__ import annotations
@@ -141,6 +144,12 @@ def _parser() -> argparse.ArgumentParser:
     li.add_argument("--green", action="store_true",
                     help="also the response to a unit force at every surface node off the "
                     "fixed region (a patient model's exact small-strain part)")
+    li.add_argument("--green-near", metavar="'X Y Z ...'",
+                    help="with --green: only the free surface nodes within --green-radius of "
+                    "the one nearest each point (mm, one quoted list; a known grasp's patch, "
+                    "in seconds)")
+    li.add_argument("--green-radius", type=float, metavar="MM",
+                    help="--green-near's reach, mm (default 20: a 20 mm patch fits)")
     s = sub.add_parser("summary", help="print counts and statistics of a dataset")
     s.add_argument("directory")
     s.add_argument("--png", help="picture of deformed livers (default DIR/summary.png)")
@@ -171,6 +180,10 @@ def main(argv: list[str] | None = None) -> int:
     if why:
         print(why, file=sys.stderr)
         return 2
+    if argv[:1] == ["serve"]:   # commands as JSON lines from a trainer process
+        from fem_sim.serve import serve
+
+        return serve()
     if argv[:1] == ["population"]:
         from fem_sim.batch.population_cli import main as population_main
 
@@ -197,6 +210,16 @@ def main(argv: list[str] | None = None) -> int:
     return summary(args.directory, png=args.png)
 
 
+def _numbers(flag: str, text: str | None) -> list[float] | None:
+    """A quoted list of numbers, or None; ValueError naming the flag and the word."""
+    if text is None:
+        return None
+    try:
+        return [float(w) for w in text.replace(",", " ").split()]
+    except ValueError:
+        raise ValueError(f"{flag}: expected numbers (mm), got {text!r}") from None
+
+
 def _linear(args) -> int:
     from data_spec import SceneError
     from fem_sim.batch.linear import linear_fields
@@ -209,14 +232,15 @@ def _linear(args) -> int:
         if args.population is not None:
             from fem_sim.batch.linear import population_linear_fields
 
-            if args.synthetic or args.green:
+            if args.synthetic or args.green or args.green_near:
                 raise ValueError("--population takes the simulations' loads only (no "
                                  "--synthetic, no --green)")
             written = population_linear_fields(args.population, args.order)
             print(f"{args.population}/linear: {len(written)} livers written by this rank")
             return 0
-        path = linear_fields(args.scene, args.out, args.synthetic, args.order,
-                             args.green)
+        near = _numbers("--green-near", args.green_near)
+        path = linear_fields(args.scene, args.out, args.synthetic, args.order, args.green,
+                             near, args.green_radius)
     except (SceneError, GeometryError, ValueError, OSError) as exc:
         print(f"fem_sim linear: {exc}", file=sys.stderr)
         return 2

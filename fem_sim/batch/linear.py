@@ -5,6 +5,7 @@ liver linearised at u = 0 under the loads of every simulation of the scene and o
 as one block.
 
     python -m fem_sim linear SCENE --out DATA [--synthetic N] [--order 2] [--green]
+        [--green-near "X Y Z ..." [--green-radius MM]]
 
 What a patient model learns beside its few nonlinear simulations (:mod:`surrogate.patient`):
 the exact linear elasticity of the patient's own mesh, for as many loads as it likes, at the
@@ -12,7 +13,10 @@ price of back-solves; ``--order 2`` adds each load's second-order term (the Ogde
 first stiffening, :meth:`~fem_sim.solver.problem.OgdenProblem.load_expansion`: two internal
 force assemblies and one more back-solve per load); ``--green`` adds the response to a unit
 force along each axis at every surface node off the fixed region (three back-solves per node),
-from which a patient model gives the exact small-strain part of any nodal load at run time.
+from which a patient model gives the exact small-strain part of any nodal load at run time;
+``--green-near`` restricts those to the free surface nodes within ``--green-radius`` of the
+one nearest each point (a known grasp: its patch's responses, a few dozen back-solves where
+the whole surface takes thousands, the same numbers).
 Runs on one process (the factorisation's threads use the cores).
 """
 
@@ -52,13 +56,41 @@ def _cases(scene, scene_file: str, g, fixed: np.ndarray, synthetic: int) -> list
 GREEN_MAX_BYTES = 2 * 2**30   # the Green's function's float32 size at most
 
 
-def _green_nodes(g, fixed: np.ndarray) -> np.ndarray:
-    """The surface nodes off the fixed region: where a patient model's loads act."""
-    return np.setdiff1d(g.surface_nodes, fixed)
+GREEN_RADIUS = 20.0   # mm: --green-near's default reach, twice a tool's default patch
+
+
+def green_nodes(points: np.ndarray, surface_nodes: np.ndarray, fixed: np.ndarray,
+                near: np.ndarray | None = None, radius: float = GREEN_RADIUS) -> np.ndarray:
+    """The surface nodes off the fixed region (where a patient model's loads act), or with
+    ``near`` (k, 3) mm only those within ``radius`` mm of the free node nearest each point:
+    that node is then the nearest computed one, and every patch of radius at most ``radius``
+    around it (:func:`data_spec.eligible_loads.grasp_patch`) is computed whole.
+    """
+    free = np.setdiff1d(surface_nodes, fixed)
+    if near is None:
+        return free
+    x = points[free]
+    keep = np.zeros(free.size, bool)
+    for p in np.asarray(near, np.float64).reshape(-1, 3):
+        c = x[np.argmin(np.linalg.norm(x - p, axis=1))]
+        keep |= np.linalg.norm(x - c, axis=1) <= radius
+    return free[keep]
+
+
+def _check_near(green: bool, near, radius: float) -> None:
+    """--green-near and --green-radius (:func:`green_nodes`); ValueError naming the flag."""
+    if near is None:
+        return
+    near = np.asarray(near, np.float64)
+    if not green or near.size == 0 or near.size % 3 or not np.all(np.isfinite(near)):
+        raise ValueError(f"--green-near: expected X Y Z (mm, finite; a multiple of 3 numbers) "
+                         f"with --green, got {near.tolist()}{'' if green else ' without'}")
+    if not (np.isfinite(radius) and radius > 0):
+        raise ValueError(f"--green-radius: expected a positive number of mm, got {radius}")
 
 
 def _checked_request(scene_file: str, out: Path, synthetic: int, order: int,
-                     green: bool):
+                     green: bool, near=None, radius: float = GREEN_RADIUS):
     """The scene, every argument checked before any meshing: ``out`` writable and not a
     dataset of another scene (its responses are of the dataset's own scene); ValueError or
     SceneError naming the flag, the file or the key.
@@ -71,6 +103,7 @@ def _checked_request(scene_file: str, out: Path, synthetic: int, order: int,
         raise ValueError(f"--order must be 1 or 2, got {order}")
     if synthetic < 0:
         raise ValueError(f"--synthetic must be >= 0, got {synthetic}")
+    _check_near(green, near, radius)
     scene = load_scene(scene_file)
     if scene["loads"]["kind"] == "grasp":
         raise ValueError(f"{scene_file}: loads.kind = 'grasp': small-strain responses are "
@@ -113,23 +146,27 @@ def _record_scene(scene_file: str, out: Path) -> None:
 
 
 def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
-                  order: int = 1, green: bool = False) -> Path:
+                  order: int = 1, green: bool = False, near=None,
+                  radius: float | None = None) -> Path:
     """``out/linear.h5`` for the one-liver scene ``scene_file`` (its liver meshed and checked
-    as ``fem_sim generate`` does it, into the same dataset directory ``out``).
+    as ``fem_sim generate`` does it, into the same dataset directory ``out``); ``near``,
+    ``radius`` (default ``GREEN_RADIUS``): the Green's function's nodes (:func:`green_nodes`).
     """
+    radius = GREEN_RADIUS if radius is None else radius
     from mpi4py import MPI
 
     from fem_sim.solver.loads import Constraint
     from fem_sim.solver.problem import OgdenProblem
 
     scene_file, out = str(scene_file), Path(out)
-    scene = _checked_request(scene_file, out, synthetic, order, green)
+    scene = _checked_request(scene_file, out, synthetic, order, green, near, radius)
     livers = _scene_livers(scene, out, progress=False)
     ids, fixed = _write_livers(scene, scene_file, livers, out)
     g, fixed = livers[0], fixed[0]
     cases = _cases(scene, scene_file, g, fixed, synthetic)
     nodes = cs.output_nodes(scene, g)
-    gnodes, gf = (_green_nodes(g, fixed), None) if green else (None, None)
+    gnodes = green_nodes(g.points, g.surface_nodes, fixed, near, radius) if green else None
+    gf = None
     size = 0 if gnodes is None else gnodes.size * 36 * nodes.size   # float32 bytes
     if size > GREEN_MAX_BYTES:
         raise ValueError(f"{scene_file}: --green would hold {gnodes.size} x 3 unit responses "
@@ -155,7 +192,8 @@ def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
         forces=np.stack([c.forces for c in cases]), output_nodes=nodes,
         displacement=u[:, 0], scene_name=scene.name, scene_hash=scene.hash,
         geometry_id=ids[0], seconds=time.perf_counter() - t,
-        second_order=u[:, 1] if order == 2 else None, green_nodes=gnodes, green=gf))
+        second_order=u[:, 1] if order == 2 else None, green_nodes=gnodes, green=gf,
+        fixed_nodes=np.asarray(fixed, np.int64) if green else None))
 
 
 def _liver_shards(data: Path) -> dict:

@@ -547,6 +547,44 @@ def test_greens_function_gives_every_nodal_loads_response(reference, tmp_path):
                                    atol=1e-5 * np.abs(lf.displacement[row]).max())
 
 
+def test_a_greens_function_near_a_point_is_the_whole_ones_rows_there(reference, tmp_path):
+    """--green-near: the free surface nodes within --green-radius of the one nearest the
+    point, each row the whole surface's (one factorisation, the same solves), the fixed
+    region recorded; the nearest free node is computed, and so is its whole patch off the
+    fixed region."""
+    from data_spec.eligible_loads import grasp_patch
+    from data_spec.geometry import read_geometry
+    from data_spec.linear_fields import linear_fields_path, read_linear_fields
+
+    whole, near = tmp_path / "whole", tmp_path / "near"
+    for d in (whole, near):
+        shutil.copytree(reference, d)
+    g = read_geometry(next((whole / "geometry").glob("g*.h5")))
+    sh = read_shard(list_shards(whole)[0])
+    free = np.setdiff1d(g.surface_nodes, sh.fixed_nodes)
+    c = free[np.argmax(g.points[free, 2])]
+    point = g.points[c] + [0.5, 0.0, 1.0]   # off the mesh: its nearest free node is c
+    radius = 0.3 * np.ptp(g.points, axis=0).max()
+    assert linear(TINY, whole, "--green").returncode == 0
+    res = linear(TINY, near, "--green", "--green-near", " ".join(map(repr, point)),
+                 "--green-radius", str(radius))
+    assert res.returncode == 0, res.stderr
+    a, b = (read_linear_fields(linear_fields_path(d)) for d in (whole, near))
+    want = free[np.linalg.norm(g.points[free] - g.points[c], axis=1) <= radius]
+    np.testing.assert_array_equal(b.green_nodes, want)
+    assert 0 < want.size < free.size and c in want
+    patch = grasp_patch(g.points, g.surface_nodes, c, radius)
+    assert set(np.intersect1d(patch, free)) <= set(want.tolist())
+    np.testing.assert_allclose(b.green, a.green[np.searchsorted(a.green_nodes, want)],
+                               rtol=0, atol=1e-6 * np.abs(a.green).max())
+    np.testing.assert_array_equal(b.fixed_nodes, np.sort(sh.fixed_nodes))
+    np.testing.assert_array_equal(a.fixed(g.surface_nodes), b.fixed(g.surface_nodes))
+    for words in ("1 2", "1 2 x", "1 2 nan"):
+        bad = linear(TINY, tmp_path / "x", "--green", "--green-near", words)
+        assert bad.returncode == 2 and "--green-near" in bad.stderr, bad.stderr
+        assert "Traceback" not in bad.stderr and not (tmp_path / "x").exists()
+
+
 def test_a_greens_function_beyond_its_bound_is_refused_before_solving(reference, tmp_path,
                                                                      monkeypatch):
     from fem_sim.batch import linear as lin
