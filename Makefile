@@ -36,7 +36,7 @@ MPIRUN := mpirun -n $(NP)
 .PHONY: help setup setup-system setup-solver setup-trainer demo test test-solver test-trainer \
         test-extremes extremes-doc \
         dataset train population table4 bench bench-solver bench-throughput bench-inference \
-        bench-population truth evaluate patient patient-args liver liver-args scene4-real bench-patient bench-surgical bench-ready bench-grasp-rest tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
+        bench-population truth evaluate patient patient-args liver liver-args manipulate scene4-real bench-patient bench-surgical bench-ready bench-grasp-rest tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
         bench-viewer docs-manipulator viewer \
         clean lock-trainer
 
@@ -53,6 +53,7 @@ help:
 	@echo "make evaluate RUN=... DATA=... [LIVER=...]   a model against a dataset it never saw"
 	@echo "make patient LIVER=... MODEL=... [K=40]   a new patient's own model (docs/patient.md)"
 	@echo "make liver LIVER=... MODEL=... AT=\"X Y Z FX FY FZ\"   a new liver over its own Green's function, seconds"
+	@echo "make manipulate LIVER=... [MODEL=...]   the manipulator on that liver (a window)"
 	@echo "           (or GRASP=\"X Y Z DX DY DZ\": a 10 mm patch moved, the field and the tool's force)"
 	@echo "make bench-surgical   grasps to 40 mm, forces to 4 N on the validation livers -> docs/surgical_loads.md"
 	@echo "make bench-ready     make liver GRASP=... timed from each validation liver's file -> the same"
@@ -266,13 +267,15 @@ patient: patient-args setup
 # liver's linear response misses (config population_green), placed on the liver file LIVER;
 # the liver meshed as the population's livers were and fixed where the placement puts the
 # template's fixed region (truth-scene), its small-strain Green's function from one
-# factorisation (fem_sim linear --green, one process: the factorisation's threads take the
-# cores), and predict-liver --base on its own mesh with the force AT = "X Y Z FX FY FZ" (mm,
-# N; the liver file's frame), or a grasp GRASP = "X Y Z DX DY DZ" (the 10 mm patch nearest to
-# X Y Z moved by DX DY DZ mm: the field and the tool's force; a model of grasps adds its
-# network's rest and stiffens the force, a model of forces gives the small-strain base alone:
-# docs/surgical_loads.md; with GRASP and no MODEL, the shipped model of grasps
-# models/scene4_grasp, its card there). No FE simulation, no training.
+# factorisation (fem_sim linear --green --green-near: the free surface nodes within 20 mm of
+# each load's point), and predict-liver --base on its own mesh with the force
+# AT = "X Y Z FX FY FZ" (mm, N; the liver file's frame), or a grasp GRASP = "X Y Z DX DY DZ"
+# (the 10 mm patch nearest to X Y Z moved by DX DY DZ mm: the field and the tool's force; a
+# model of grasps adds its network's rest and stiffens the force, a model of forces gives
+# the small-strain base alone: docs/surgical_loads.md; with GRASP and no MODEL, the shipped
+# model of grasps models/scene4_grasp, its card there). No FE simulation, no training. One
+# trainer process drives one solver process (python -m fem_sim serve) through these
+# commands (surrogate/make_liver.py), each side working while the other does.
 AT ?=
 GRASP ?=
 LIVER_DIR ?= runs/liver/$(basename $(notdir $(LIVER)))
@@ -282,15 +285,25 @@ liver-args:
 	@$(SYS_PY) scripts/make_args.py liver LIVER="$(LIVER)" MODEL="$(LIVER_MODEL)" AT="$(AT)" \
 	    GRASP="$(GRASP)" PSCENE="$(PSCENE)" FRAME="$(FRAME)"
 liver: liver-args setup
-	$(SPY) -m fem_sim mesh $(LIVER) --scene $(PSCENE) --out $(LIVER_DIR)/mesh.h5 --no-picture
-	$(TPY) -m surrogate truth-scene $(LIVER_MODEL) $(LIVER) --scene $(PSCENE) --sims 1 \
-	    $(if $(FRAME),--frame $(FRAME)) --out $(LIVER_DIR)/scene.toml \
-	    --placement $(LIVER_DIR)/placement.npz --mesh $(LIVER_DIR)/mesh.h5
+	$(TPY) -m surrogate.make_liver $(LIVER_MODEL) $(LIVER) --scene $(PSCENE) --dir $(LIVER_DIR) \
+	    --solver $(SPY) $(if $(FRAME),--frame $(FRAME)) \
+	    $(if $(GRASP),--grasp "$(GRASP)",--force "$(AT)")
+
+# The manipulator on a liver make liver prepared (the same LIVER, LIVER_DIR and MODEL): the
+# whole free surface's unit responses first (make liver's are near its load only; again only
+# after make liver rewrote them), then the window (VIEW: more viewer flags, e.g. --offscreen
+# --out DIR): drag the liver, the model answers with the field and the tool's force.
+VIEW ?=
+$(LIVER_DIR)/data/linear.h5:
+	@echo "make manipulate: no $(LIVER_DIR)/data/linear.h5: run make liver LIVER=$(LIVER)" \
+	    "GRASP=... first" >&2; exit 2
+$(LIVER_DIR)/whole.stamp: $(LIVER_DIR)/data/linear.h5
 	env -u OMP_NUM_THREADS -u OPENBLAS_NUM_THREADS \
 	    $(SPY) -m fem_sim linear $(LIVER_DIR)/scene.toml --out $(LIVER_DIR)/data --green
-	$(TPY) -m surrogate predict-liver $(LIVER_MODEL) $(LIVER) --base $(LIVER_DIR)/data \
-	    --placement $(LIVER_DIR)/placement.npz $(if $(FRAME),--frame $(FRAME)) \
-	    $(if $(GRASP),--grasp $(GRASP),--force $(AT)) --out $(LIVER_DIR)/prediction
+	touch $@
+manipulate: setup $(LIVER_DIR)/whole.stamp
+	$(TPY) -m surrogate.viewer $(or $(MODEL),$(SHIPPED_GRASP) --grasp) --place $(LIVER) \
+	    --base $(LIVER_DIR)/data $(if $(FRAME),--frame $(FRAME)) $(VIEW)
 
 # Scene 4 on real livers (long, resumable): the designs cross-validated by liver, the livers
 # never seen against FE (and make liver timed on each) -> docs/scene4_real.md (then make

@@ -211,7 +211,7 @@ def make_liver(liver: Path, frame, fe: Path, a) -> float:
     truth's first load point), the population_green model of this study as MODEL."""
     from data_spec import read_geometry
     from data_spec.shards import geometry_path, list_shards, read_shard
-    from surrogate.latency import MAKE_LIVER_STEPS, timed_steps
+    from surrogate.make_liver import STEPS, timed_steps
 
     d = RESULTS / "make_liver" / liver.stem
     shutil.rmtree(d, ignore_errors=True)
@@ -221,7 +221,7 @@ def make_liver(liver: Path, frame, fe: Path, a) -> float:
     cmd = ["make", "--no-print-directory", "liver", f"LIVER={liver}",
            f"MODEL={RESULTS / 'run_population_green'}", f"PSCENE={SCENE}", f"AT={spec}",
            f"LIVER_DIR={d}", *([f"FRAME={frame}"] if frame else [])]
-    timed = timed_steps(cmd, MAKE_LIVER_STEPS, ROOT)
+    timed = timed_steps(cmd, STEPS, ROOT)
     if not timed["ok"]:
         raise RuntimeError(f"make liver on {liver.name}: {timed['why']}")
     return timed["seconds"]

@@ -145,21 +145,21 @@ PLACED = b"the population's registration on the prepared mesh"
 def ready(name: str) -> dict:
     """Wall seconds of ``make liver GRASP=...`` with no MODEL (the shipped model of grasps)
     from the liver file into a fresh directory, in all and per step (timed_steps): the file's
-    vertex farthest along its longest axis pulled 20 mm outward."""
+    vertex farthest along its longest axis pulled 20 mm outward; the unit responses it took."""
     import shutil
 
+    from data_spec.linear_fields import read_linear_fields as linear
     from fem_sim.geometry.surfaces import read_surface
-    from surrogate.latency import MAKE_LIVER_STEPS, timed_steps
+    from surrogate.make_liver import STEPS, timed_steps
 
     liver = SCENE.parent / tomllib.loads(SCENE.read_text())["geometry"]["livers"] / f"{name}.obj"
-    x = read_surface(liver)[0]
-    c = x.mean(axis=0)
+    c = (x := read_surface(liver)[0]).mean(axis=0)
     tip = x[np.argmax(np.abs((x - c) @ np.linalg.svd(x - c, full_matrices=False)[2][0]))]
     shutil.rmtree(d := RESULTS / "ready" / name, ignore_errors=True)
     grasp = " ".join(f"{v:.3f}" for v in [*tip, *(20.0 * (tip - c) / np.linalg.norm(tip - c))])
-    return {"liver": name, **timed_steps(["make", "--no-print-directory", "liver", f"LIVER={liver}",
-                                          f"LIVER_DIR={d}", f"GRASP={grasp}"],
-                                         MAKE_LIVER_STEPS, ROOT)}
+    r = {"liver": name, **timed_steps(["make", "--no-print-directory", "liver", f"LIVER={liver}",
+                                       f"LIVER_DIR={d}", f"GRASP={grasp}"], STEPS, ROOT)}
+    return {**r, "green_nodes": linear(d / "data/linear.h5").green_nodes.size} if r["ok"] else r
 
 
 def model_rows(run: Path, ledger, names) -> None:

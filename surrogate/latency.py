@@ -207,28 +207,3 @@ def grasp_latency(n_out: int = 15400, m: int = 20, calls: int = 200) -> dict:
     return {"nodes": n_out, "patch_nodes": m,
             "setup_s": median(lambda: GreenGrasp(green, patch, nodes, [patch])),
             "field_s": median(lambda: grasp(d)), "force_s": median(lambda: grasp.force(d))}
-
-
-MAKE_LIVER_STEPS = {"mesh": " -m fem_sim mesh", "place": " truth-scene ",
-                    "green": " -m fem_sim linear", "predict": " predict-liver "}
-
-
-def timed_steps(cmd: list[str], steps: dict[str, str], cwd=None) -> dict:
-    """Run ``cmd`` (make, which echoes each command before running it) and time it: wall
-    seconds in all and per step, a step running from the first output line holding its
-    ``steps`` text to the next step's (``checks``: before the first); ``ok`` and the output's
-    last lines (``why``) when it failed.
-    """
-    import subprocess
-
-    t0, marks, out = time.perf_counter(), {"checks": 0.0}, []
-    with subprocess.Popen(cmd, cwd=cwd, text=True, stdout=subprocess.PIPE,
-                          stderr=subprocess.STDOUT) as proc:
-        for line in proc.stdout:
-            marks.update({k: time.perf_counter() - t0 for k, v in steps.items()
-                          if v in line and k not in marks})
-            out.append(line)
-    t = [*marks.values(), time.perf_counter() - t0]
-    why = "" if proc.returncode == 0 else "".join(out[-3:])[-300:]
-    return {"ok": proc.returncode == 0, "why": why, "seconds": t[-1],
-            "steps": {k: t[i + 1] - t[i] for i, k in enumerate(marks)}}

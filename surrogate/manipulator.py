@@ -294,6 +294,9 @@ class GreenManipulator(Manipulator):
 
     def __init__(self, over, drag_length: float | None = None):
         g = over.geometry
+        why = over.whole_surface_problem()
+        if why:
+            raise ValueError(why)
         if over.output_nodes.size != g.n_nodes:
             raise ValueError(f"the liver's Green's function reaches {over.output_nodes.size} "
                              f"of its {g.n_nodes} nodes; make liver writes the whole liver")
@@ -348,12 +351,15 @@ class GraspManipulator:
             raise ValueError(f"{data}: its small-strain file holds no Green's function; run "
                              "fem_sim linear with --green (make liver does)")
         g = read_geometry(geometry_path(data, lf.geometry_id))
+        why = lf.whole_surface_problem(g.surface_nodes, data)
+        if why:
+            raise ValueError(why)
         if lf.output_nodes.size != g.n_nodes:
             raise ValueError(f"{data}: its Green's function reaches {lf.output_nodes.size} of "
                              f"the mesh's {g.n_nodes} nodes; the grasp draws the whole liver "
                              "(a scene with [output] nodes = \"all\", as make liver writes it)")
         self.points, self.radius = g.points, float(radius or GRASP_RADIUS)
-        self.fixed = np.setdiff1d(g.surface_nodes, lf.green_nodes)
+        self.fixed = lf.fixed(g.surface_nodes)
         self.surface = Surface.from_mesh(g.points, g.surface_triangles, self.fixed)
         self._lf, self._surface_nodes = lf, g.surface_nodes
         # a model of forces over the Green's function grasps with the base alone
@@ -373,9 +379,11 @@ class GraspManipulator:
 
         if self._over is not None:   # the model of grasps: its network's rest and force
             return self._over.grasp(self.points[node][None], self.radius)
-        lf = self._lf
-        return GreenGrasp(lf.green, lf.green_nodes, lf.output_nodes,
-                          [grasp_patch(self.points, self._surface_nodes, node, self.radius)])
+        lf, patch = self._lf, grasp_patch(self.points, self._surface_nodes, node, self.radius)
+        why = lf.missing_response(patch, self._surface_nodes)
+        if why:
+            raise ValueError(why)
+        return GreenGrasp(lf.green, lf.green_nodes, lf.output_nodes, [patch])
 
     nearest_surface_node = Manipulator.nearest_surface_node
     clicked_node = Manipulator.clicked_node

@@ -49,10 +49,12 @@ class OverGreen:
         from surrogate.predict_liver import PlacedModel
 
         lf, g = green or green_of(predictor, data)
-        self.geometry = g
+        self.geometry, self.data = g, Path(data)
         self.output_nodes = np.asarray(lf.output_nodes)
         self.green_nodes = np.asarray(lf.green_nodes)
-        self.fixed_nodes = np.setdiff1d(g.surface_nodes, self.green_nodes)
+        self.fixed_nodes = lf.fixed(g.surface_nodes)
+        self.free_nodes = np.setdiff1d(g.surface_nodes, self.fixed_nodes)
+        self._lf = lf
         at = g.points[self.output_nodes] if nodes is None else np.asarray(nodes, np.float64)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")   # the placement's warnings are said by place()
@@ -69,13 +71,25 @@ class OverGreen:
 
     def load_nodes(self, at) -> np.ndarray:
         """Mesh node ids under the points ``at`` (..., 3) mm: the nearest surface nodes off
-        the fixed region (where the Green's function has a unit response).
+        the fixed region (where loads act).
         """
         from scipy.spatial import cKDTree
 
         at = np.asarray(at, dtype=np.float64)
-        ids = cKDTree(self.points[self.green_nodes]).query(at.reshape(-1, 3))[1]
-        return self.green_nodes[ids].reshape(at.shape[:-1])
+        ids = cKDTree(self.points[self.free_nodes]).query(at.reshape(-1, 3))[1]
+        return self.free_nodes[ids].reshape(at.shape[:-1])
+
+    def whole_surface_problem(self) -> str:
+        """Why loads anywhere on the free surface cannot be answered (a Green's function
+        near one load only), or "".
+        """
+        return self._lf.whole_surface_problem(self.geometry.surface_nodes, self.data)
+
+    def check_responses(self, nodes) -> None:
+        """ValueError when a load at the mesh ``nodes`` has no unit response to stand on."""
+        why = self._lf.missing_response(nodes, self.geometry.surface_nodes)
+        if why:
+            raise ValueError(why)
 
     def grasp(self, at, radius: float = GRASP_RADIUS):
         """Tools grasping the liver at the points ``at`` (T, 3) mm, each the patch of radius
@@ -88,9 +102,10 @@ class OverGreen:
         ValueError when a patch reaches the fixed region.
         """
         centres = np.atleast_1d(self.load_nodes(np.asarray(at, np.float64).reshape(-1, 3)))
-        base = GreenGrasp(self.linear.green, self.green_nodes, self.output_nodes,
-                          [grasp_patch(self.points, self.geometry.surface_nodes, c, radius)
-                           for c in centres])
+        patches = [grasp_patch(self.points, self.geometry.surface_nodes, c, radius)
+                   for c in centres]
+        self.check_responses(np.concatenate(patches))
+        base = GreenGrasp(self.linear.green, self.green_nodes, self.output_nodes, patches)
         if self.placed.predictor.load != "grasp":
             return base
         if centres.size != self.placed.predictor.spec.n_loads:
@@ -123,6 +138,7 @@ class OverGreen:
                              f"{load_nodes.shape}")
         if n.size and (n.min() < 0 or n.max() >= self.points.shape[0]):
             raise ValueError(f"load_nodes: expected mesh node ids in [0, {self.points.shape[0]})")
+        self.check_responses(n)
         u = self.linear(f, n)
         if self._to_nodes is not None:   # all cases in one sparse product
             k = u.shape[0]

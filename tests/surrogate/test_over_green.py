@@ -257,6 +257,45 @@ def test_a_grasp_over_the_greens_function_holds_its_patch_and_gives_the_force_ba
     assert summary["grasp_displacements_mm"] == pull.tolist()
 
 
+def test_a_greens_function_near_the_grasp_answers_it_and_refuses_elsewhere(patient, tmp_path):
+    """make liver's Green's function near its load only (fem_sim linear --green-near): the
+    grasp there gets the whole surface's answer, its fixed region read from the file; a load
+    on the free surface beyond it is refused naming the flag, not answered from the nearest
+    computed node (a silent wrong field)."""
+    import shutil
+
+    import h5py
+
+    from surrogate.over_green import OverGreen
+
+    d, info, run = patient
+    rest = load_predictor(run / "model")
+    whole = OverGreen(rest, d / "data", _placed(rest, d, info))
+    g, free = whole.geometry, whole.green_nodes
+    far = free[np.argmax(np.linalg.norm(g.points[free][:, None] - g.points[whole.fixed_nodes]
+                                        [None], axis=2).min(axis=1))]
+    keep = np.linalg.norm(g.points[free] - g.points[far], axis=1) <= 20.0
+    part = shutil.copytree(d / "data", tmp_path / "near")
+    with h5py.File(part / "linear.h5", "r+") as f:
+        green = f["green"][()][keep]
+        for name in ("green", "green_nodes"):
+            del f[name]
+        f["green_nodes"], f["green"] = free[keep], green
+        f["fixed_nodes"] = whole.fixed_nodes
+    near = OverGreen(rest, part, _placed(rest, d, info))
+    np.testing.assert_array_equal(near.fixed_nodes, whole.fixed_nodes)
+    pull = np.array([[3.0, -4.0, 10.0]])
+    for a, b in zip(near.grasp([g.points[far]])(pull), whole.grasp([g.points[far]])(pull)):
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
+    other = free[~keep][0]
+    with pytest.raises(ValueError, match="--green-near"):
+        near.grasp([g.points[other]])
+    with pytest.raises(ValueError, match="--green-near"):
+        near([[0.0, 0.0, -0.3]], [other])
+    np.testing.assert_allclose(near([[0.0, 0.0, -0.3]], [far]),
+                               whole([[0.0, 0.0, -0.3]], [far]), atol=1e-9)
+
+
 def test_the_manipulator_opens_on_a_model_over_the_livers_greens_function(patient, tmp_path):
     """python -m surrogate.viewer RUN --place LIVER --base DATA: the handles' forces answered
     as make liver answers them (OverGreen's field at every node of the liver's own mesh),

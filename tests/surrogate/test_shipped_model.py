@@ -88,7 +88,7 @@ def test_make_liver_with_no_model_answers_the_cards_first_grasp_as_the_card_says
     carried from the population's frame into the file's by the rigid map between the two
     meshes, which are the same nodes): the liver is fixed on the very nodes the population's
     rule fixes, the field it writes is as near the FE truth as the card says (MEE within its
-    tolerance) and its force within the card's points; the manipulator opens on it."""
+    tolerance) and its force within the card's points; make manipulate opens on it."""
     import subprocess
 
     from liverreg.rigid import kabsch
@@ -117,9 +117,12 @@ def test_make_liver_with_no_model_answers_the_cards_first_grasp_as_the_card_says
     assert "models/scene4_grasp" in proc.stdout   # no MODEL given: the shipped one
     from data_spec.linear_fields import read_linear_fields
 
-    held = read_linear_fields(out / "data" / "linear.h5").green_nodes   # the free surface
+    lf = read_linear_fields(out / "data" / "linear.h5")
     surface = np.unique(z["triangles"])
-    np.testing.assert_array_equal(np.setdiff1d(surface, held), np.sort(z["fixed"]))
+    np.testing.assert_array_equal(lf.fixed_nodes, np.sort(z["fixed"]))
+    # the unit responses near the grasp only: its patch, not the whole free surface
+    assert set(z["patch_0"]) <= set(lf.green_nodes) and lf.green_nodes.size < \
+        0.2 * np.setdiff1d(surface, z["fixed"]).size
     grid = pyvista().read(out / "prediction" / "liver_deformed.vtu")
     np.testing.assert_allclose(grid.points, points, atol=1e-4)
     u = np.asarray(grid.point_data["displacement"]) @ R.T
@@ -129,10 +132,16 @@ def test_make_liver_with_no_model_answers_the_cards_first_grasp_as_the_card_says
                        ["forces_N"][0]) @ R.T
     assert abs(float(force_error_pct(force, z["fe_force_0"][-1]))
                - want["model_force_error_pct"]) <= tol["force_error_points"]
-    # the manipulator on it, off-screen: the tool pulls the patch and its force is drawn
+    # the manipulator: refused on those (it grasps anywhere), naming what computes the rest;
+    # make manipulate computes them and opens it (off-screen: the tool pulls, its force drawn)
     from surrogate.viewer import main as viewer
 
     view = tmp_path / "view"
     assert viewer([str(SHIPPED), "--place", str(liver), "--base", str(out / "data"),
-                   "--grasp", "--offscreen", "--out", str(view)]) == 0
+                   "--grasp", "--offscreen", "--out", str(view)]) == 2
+    proc = subprocess.run(["make", "--no-print-directory", "manipulate", f"LIVER={liver}",
+                           f"LIVER_DIR={out}", f"VIEW=--offscreen --out {view}"],
+                          cwd=root, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
     assert json.loads((view / "timings.json").read_text())["frames"] > 10
+    assert read_linear_fields(out / "data" / "linear.h5").uncomputed(surface).size == 0

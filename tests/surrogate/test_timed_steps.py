@@ -1,11 +1,11 @@
-"""surrogate.latency.timed_steps: a command of several steps timed as its user waits for it
+"""surrogate.make_liver.timed_steps: a command of several steps timed as its user waits for it
 (bench/surgical_loads.py --ready and bench/scene4_real.py time ``make liver`` with it)."""
 
 import shutil
 
 import pytest
 
-from surrogate.latency import timed_steps
+from surrogate.make_liver import timed_steps
 
 
 def test_each_step_runs_from_its_first_line_to_the_next_steps_and_a_failure_is_said():

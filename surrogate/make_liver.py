@@ -1,0 +1,176 @@
+"""``make liver``: a liver file to a prediction in seconds.
+
+One trainer process drives one solver process (``python -m fem_sim serve``) so that each
+side starts once and works while the other does::
+
+    python -m surrogate.make_liver MODEL LIVER --scene SCENE --dir DIR --solver PYTHON
+        (--grasp "X Y Z DX DY DZ ..." | --force "X Y Z FX FY FZ ...") [--frame F]
+
+The steps are the commands a user could type: the solver meshes the liver
+(``fem_sim mesh``) while this process imports the model; ``truth-scene`` registers the
+model on the mesh and writes the liver's scene while the solver imports its own modules;
+the solver computes the Green's function near each load's point (``fem_sim linear --green
+--green-near``, the same rows as the whole surface's); ``predict-liver`` answers on the
+liver's own mesh. Each step's start is printed (``make liver: <step>``, what
+:func:`surrogate.latency.timed_steps` times) and a failing step stops the rest with its
+command's own message and exit code.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+STEPS = {"mesh": "make liver: meshing", "place": "make liver: placing",
+         "green": "make liver: the Green's function", "predict": "make liver: predicting"}
+
+
+class SolverProcess:
+    """``python -m fem_sim serve`` under ``python`` (the solver's environment): ``run(words)``
+    sends a command and returns its exit code; its messages reach this process's standard
+    error. The factorisation's threads take the cores (no OMP / OpenBLAS limit).
+    """
+
+    def __init__(self, python: str):
+        env = {k: v for k, v in os.environ.items()
+               if k not in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
+        self.proc = subprocess.Popen([python, "-m", "fem_sim", "serve"], stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, text=True, env=env)
+
+    def send(self, words: list[str]) -> None:
+        self.proc.stdin.write(json.dumps([str(w) for w in words]) + "\n")
+        self.proc.stdin.flush()
+
+    def answer(self) -> int:
+        line = self.proc.stdout.readline()
+        if not line:
+            raise OSError(f"the solver process ended (exit code {self.proc.wait()})")
+        out = json.loads(line)
+        if "error" in out:
+            print(f"fem_sim serve: {out['error']}", file=sys.stderr)
+        return int(out["rc"])
+
+    def close(self) -> None:
+        if self.proc.stdin and not self.proc.stdin.closed:
+            self.proc.stdin.close()
+        try:
+            self.proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+
+
+def timed_steps(cmd: list[str], steps: dict[str, str], cwd=None) -> dict:
+    """Run ``cmd`` (``make liver``, whose steps print their start: :data:`STEPS`) and time
+    it as its user waits: wall seconds in all and per step, a step running from the first
+    output line holding its ``steps`` text to the next step's (``checks``: before the first);
+    ``ok`` and the output's last lines (``why``) when it failed.
+    """
+    t0, marks, out = time.perf_counter(), {"checks": 0.0}, []
+    with subprocess.Popen(cmd, cwd=cwd, text=True, stdout=subprocess.PIPE,
+                          stderr=subprocess.STDOUT) as proc:
+        for line in proc.stdout:
+            marks.update({k: time.perf_counter() - t0 for k, v in steps.items()
+                          if v in line and k not in marks})
+            out.append(line)
+    t = [*marks.values(), time.perf_counter() - t0]
+    why = "" if proc.returncode == 0 else "".join(out[-3:])[-300:]
+    return {"ok": proc.returncode == 0, "why": why, "seconds": t[-1],
+            "steps": {k: t[i + 1] - t[i] for i, k in enumerate(marks)}}
+
+
+def load_points(words: list[float]) -> list[float]:
+    """Each load's point (X Y Z) of a GRASP or AT list, six numbers a load."""
+    if not words or len(words) % 6:
+        raise ValueError(f"expected X Y Z and three more numbers per load, got {len(words)} "
+                         "numbers")
+    return [v for i in range(0, len(words), 6) for v in words[i:i + 3]]
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m surrogate.make_liver", description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("model", help="a population model's run (or its model directory)")
+    p.add_argument("liver", help="the liver's surface or mesh file")
+    p.add_argument("--scene", required=True, help="the population's scene (its mesh size, "
+                   "fixed region rule and material)")
+    p.add_argument("--dir", required=True, type=Path, help="where the steps write")
+    p.add_argument("--solver", required=True, help="the solver environment's python")
+    load = p.add_mutually_exclusive_group(required=True)
+    load.add_argument("--grasp", help="\"X Y Z DX DY DZ ...\": tools moving patches (mm)")
+    load.add_argument("--force", help="\"X Y Z FX FY FZ ...\": nodal forces (mm, N)")
+    p.add_argument("--frame", help="the liver file's frame (predict-liver's --frame)")
+    return p
+
+
+def _steps(a, d: Path) -> list[tuple[str, str, list[str]]]:
+    """(step, where it runs, its command's words) in order."""
+    words = (a.grasp or a.force).replace(",", " ").split()
+    near = " ".join(map(repr, load_points([float(w) for w in words])))
+    frame = ["--frame", a.frame] if a.frame else []
+    return [
+        ("mesh", "solver", ["mesh", a.liver, "--scene", a.scene, "--out", d / "mesh.h5",
+                            "--no-picture"]),
+        ("place", "trainer", ["truth-scene", a.model, a.liver, "--scene", a.scene, "--sims",
+                              "1", *frame, "--out", d / "scene.toml", "--placement",
+                              d / "placement.npz", "--mesh", d / "mesh.h5"]),
+        ("green", "solver", ["linear", d / "scene.toml", "--out", d / "data", "--green",
+                             "--green-near", near]),
+        ("predict", "trainer", ["predict-liver", a.model, a.liver, "--base", d / "data",
+                                "--placement", d / "placement.npz", *frame,
+                                "--grasp" if a.grasp else "--force", *words,
+                                "--out", d / "prediction"])]
+
+
+def _warm() -> None:
+    """Import what placing and predicting need (JAX, the registration, the pictures)."""
+    import surrogate.evaluate  # noqa: F401
+    import surrogate.over_green  # noqa: F401
+    import surrogate.predict_liver  # noqa: F401
+    from liverviz.pictures import pyvista
+
+    pyvista()
+
+
+def main(argv=None) -> int:
+    a = _parser().parse_args(argv)
+    try:
+        steps = _steps(a, a.dir)
+    except ValueError as exc:
+        print(f"make liver: {'GRASP' if a.grasp else 'AT'}: {exc}", file=sys.stderr)
+        return 2
+    a.dir.mkdir(parents=True, exist_ok=True)
+    solver, t0, seconds = SolverProcess(a.solver), time.perf_counter(), {}
+    try:
+        for name, where, words in steps:
+            print(STEPS[name], flush=True)
+            t = time.perf_counter()
+            if where == "solver":
+                solver.send(words)
+                if name == "mesh":   # the trainer's modules load while the solver meshes
+                    _warm()
+                rc = solver.answer()
+            else:
+                from surrogate.__main__ import main as trainer
+
+                rc = trainer([str(w) for w in words])
+            seconds[name] = time.perf_counter() - t
+            if rc:
+                print(f"make liver: {name} failed (exit code {rc})", file=sys.stderr)
+                return rc
+    except OSError as exc:
+        print(f"make liver: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        solver.close()
+    print(f"make liver: {time.perf_counter() - t0:.1f} s from the file to {a.dir / 'prediction'} "
+          f"({', '.join(f'{k} {v:.1f} s' for k, v in seconds.items())})", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
