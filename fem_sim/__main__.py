@@ -149,7 +149,8 @@ def _parser() -> argparse.ArgumentParser:
                     "the one nearest each point (mm, one quoted list; a known grasp's patch, "
                     "in seconds)")
     li.add_argument("--green-radius", type=float, metavar="MM",
-                    help="--green-near's reach, mm (default 20: a 20 mm patch fits)")
+                    help="--green-near's reach, mm (default 20: a 20 mm patch fits; 0: "
+                    "the nearest node alone)")
     s = sub.add_parser("summary", help="print counts and statistics of a dataset")
     s.add_argument("directory")
     s.add_argument("--png", help="picture of deformed livers (default DIR/summary.png)")

@@ -9,8 +9,9 @@ side starts once and works while the other does::
 The steps are the commands a user could type: the solver meshes the liver
 (``fem_sim mesh``) while this process imports the model; ``truth-scene`` registers the
 model on the mesh and writes the liver's scene while the solver imports its own modules;
-the solver computes the Green's function near each load's point (``fem_sim linear --green
---green-near``, the same rows as the whole surface's); ``predict-liver`` answers on the
+the solver computes the Green's function at the nodes each load needs (``fem_sim linear
+--green --green-near``: a grasp's patch, a force's node; the same rows as the whole
+surface's); ``predict-liver`` answers on the
 liver's own mesh. Each step's start is printed (``make liver: <step>``, what
 :func:`surrogate.latency.timed_steps` times) and a failing step stops the rest with its
 command's own message and exit code.
@@ -25,6 +26,8 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+
+from data_spec.scene import GRASP_RADIUS
 
 STEPS = {"mesh": "make liver: meshing", "place": "make liver: placing",
          "green": "make liver: the Green's function", "predict": "make liver: predicting"}
@@ -55,9 +58,13 @@ class SolverProcess:
             print(f"fem_sim serve: {out['error']}", file=sys.stderr)
         return int(out["rc"])
 
-    def close(self) -> None:
+    def end(self) -> None:
+        """No more commands: the process ends (its teardown beside this process's work)."""
         if self.proc.stdin and not self.proc.stdin.closed:
             self.proc.stdin.close()
+
+    def close(self) -> None:
+        self.end()
         try:
             self.proc.wait(timeout=30)
         except subprocess.TimeoutExpired:
@@ -118,8 +125,10 @@ def _steps(a, d: Path) -> list[tuple[str, str, list[str]]]:
         ("place", "trainer", ["truth-scene", a.model, a.liver, "--scene", a.scene, "--sims",
                               "1", *frame, "--out", d / "scene.toml", "--placement",
                               d / "placement.npz", "--mesh", d / "mesh.h5"]),
+        # a grasp's patch around the free node nearest its point; a force's node alone
         ("green", "solver", ["linear", d / "scene.toml", "--out", d / "data", "--green",
-                             "--green-near", near]),
+                             "--green-near", near, "--green-radius",
+                             str(GRASP_RADIUS if a.grasp else 0.0)]),
         ("predict", "trainer", ["predict-liver", a.model, a.liver, "--base", d / "data",
                                 "--placement", d / "placement.npz", *frame,
                                 "--grasp" if a.grasp else "--force", *words,
@@ -133,7 +142,8 @@ def _warm() -> None:
     import surrogate.predict_liver  # noqa: F401
     from liverviz.pictures import pyvista
 
-    pyvista()
+    pv = pyvista()
+    pv.Plotter, pv.PolyData, pv.UnstructuredGrid   # noqa: B018 (pyvista imports these lazily)
 
 
 def main(argv=None) -> int:
@@ -144,7 +154,8 @@ def main(argv=None) -> int:
         print(f"make liver: {'GRASP' if a.grasp else 'AT'}: {exc}", file=sys.stderr)
         return 2
     a.dir.mkdir(parents=True, exist_ok=True)
-    solver, t0, seconds = SolverProcess(a.solver), time.perf_counter(), {}
+    t0, seconds = time.perf_counter(), {}
+    solver = SolverProcess(a.solver)
     try:
         for name, where, words in steps:
             print(STEPS[name], flush=True)
@@ -154,6 +165,8 @@ def main(argv=None) -> int:
                 if name == "mesh":   # the trainer's modules load while the solver meshes
                     _warm()
                 rc = solver.answer()
+                if name == "green":
+                    solver.end()
             else:
                 from surrogate.__main__ import main as trainer
 

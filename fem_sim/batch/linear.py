@@ -85,8 +85,9 @@ def _check_near(green: bool, near, radius: float) -> None:
     if not green or near.size == 0 or near.size % 3 or not np.all(np.isfinite(near)):
         raise ValueError(f"--green-near: expected X Y Z (mm, finite; a multiple of 3 numbers) "
                          f"with --green, got {near.tolist()}{'' if green else ' without'}")
-    if not (np.isfinite(radius) and radius > 0):
-        raise ValueError(f"--green-radius: expected a positive number of mm, got {radius}")
+    if not (np.isfinite(radius) and radius >= 0):
+        raise ValueError(f"--green-radius: expected a number of mm >= 0 (0: the nearest node "
+                         f"alone), got {radius}")
 
 
 def _checked_request(scene_file: str, out: Path, synthetic: int, order: int,

@@ -17,14 +17,16 @@ pytest.importorskip("dolfinx", reason="fem_sim serve runs in the solver environm
 
 def test_serve_runs_commands_in_one_process_and_answers_each_line(tmp_path):
     """A Green's function near a point, a command of bad flags, a line that is not a list of
-    words, a blank line (no answer), then the same command again: each answered in order
-    with the command's exit code; the commands' own prints reach the standard error only."""
+    words, a blank line (no answer), then the same command at radius 0 (the nearest node's
+    responses alone): each answered in order with the command's exit code; the commands' own
+    prints reach the standard error only."""
     from data_spec.linear_fields import linear_fields_path, read_linear_fields
 
     near = ["linear", str(TINY), "--out", str(tmp_path / "d"), "--green", "--green-near",
             "0 0 60"]
     lines = [json.dumps(near), json.dumps(["linear", "--bogus"]), "not json", "",
-             json.dumps({"do": "mesh"}), json.dumps(["serve"]), json.dumps(near)]
+             json.dumps({"do": "mesh"}), json.dumps(["serve"]),
+             json.dumps(near + ["--green-radius", "0"])]
     proc = subprocess.run([sys.executable, "-m", "fem_sim", "serve"], input="\n".join(lines),
                           capture_output=True, text=True, timeout=600, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr[-2000:]
@@ -33,5 +35,5 @@ def test_serve_runs_commands_in_one_process_and_answers_each_line(tmp_path):
     assert "not JSON" in answers[2]["error"] and "list of words" in answers[3]["error"]
     assert "small-strain responses" in proc.stderr and "--bogus" in proc.stderr
     lf = read_linear_fields(linear_fields_path(tmp_path / "d"))
-    assert 0 < lf.green_nodes.size and lf.fixed_nodes.size > 0
+    assert lf.green_nodes.size == 1 and lf.fixed_nodes.size > 0
     assert np.all(np.isfinite(lf.green))

@@ -5,6 +5,7 @@ from pathlib import Path
 
 import pytest
 
+from data_spec.scene import GRASP_RADIUS
 from surrogate.make_liver import _parser, _steps, load_points, main
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -25,6 +26,10 @@ def test_each_loads_point_is_where_the_greens_function_is_computed(tmp_path):
     assert steps["green"][0] == "solver" and steps["place"][0] == "trainer"
     green = steps["green"][1]
     assert [float(v) for v in green[green.index("--green-near") + 1].split()] == [1, -2, 0.3]
+    assert float(green[green.index("--green-radius") + 1]) == GRASP_RADIUS   # the patch
+    a.grasp, a.force = None, "1 2 3 0 0 -0.4"
+    green = next(w for n, _, w in _steps(a, tmp_path) if n == "green")
+    assert float(green[green.index("--green-radius") + 1]) == 0.0   # the force's node alone
     predict = steps["predict"][1]
     assert predict[predict.index("--grasp") + 1:][:6] == ["1", "-2", "3e-1", "0", "0", "-20"]
     assert "--frame" in predict and "--frame" in steps["place"][1]
