@@ -289,21 +289,16 @@ liver: liver-args setup
 	    --solver $(SPY) $(if $(FRAME),--frame $(FRAME)) \
 	    $(if $(GRASP),--grasp "$(GRASP)",--force "$(AT)")
 
-# The manipulator on a liver make liver prepared (the same LIVER, LIVER_DIR and MODEL): the
-# whole free surface's unit responses first (make liver's are near its load only; again only
-# after make liver rewrote them), then the window (VIEW: more viewer flags, e.g. --offscreen
-# --out DIR): drag the liver, the model answers with the field and the tool's force.
+# The manipulator on a liver make liver prepared (the same LIVER, LIVER_DIR and MODEL): a
+# solver process keeps the liver factorised and solves the unit responses of each new patch
+# the tool grasps (make liver's are its load's only). VIEW: more viewer flags, e.g.
+# --offscreen --out DIR. Drag the liver, the model answers with the field and the force.
 VIEW ?=
-$(LIVER_DIR)/data/linear.h5:
-	@echo "make manipulate: no $(LIVER_DIR)/data/linear.h5: run make liver LIVER=$(LIVER)" \
-	    "GRASP=... first" >&2; exit 2
-$(LIVER_DIR)/whole.stamp: $(LIVER_DIR)/data/linear.h5
-	env -u OMP_NUM_THREADS -u OPENBLAS_NUM_THREADS \
-	    $(SPY) -m fem_sim linear $(LIVER_DIR)/scene.toml --out $(LIVER_DIR)/data --green
-	touch $@
-manipulate: setup $(LIVER_DIR)/whole.stamp
+manipulate: setup
+	@test -f $(LIVER_DIR)/data/linear.h5 || { echo "make manipulate: no" \
+	    "$(LIVER_DIR)/data/linear.h5: run make liver LIVER=$(LIVER) GRASP=... first" >&2; exit 2; }
 	$(TPY) -m surrogate.viewer $(or $(MODEL),$(SHIPPED_GRASP) --grasp) --place $(LIVER) \
-	    --base $(LIVER_DIR)/data $(if $(FRAME),--frame $(FRAME)) $(VIEW)
+	    --base $(LIVER_DIR)/data --solver $(SPY) $(if $(FRAME),--frame $(FRAME)) $(VIEW)
 
 # Scene 4 on real livers (long, resumable): the designs cross-validated by liver, the livers
 # never seen against FE (and make liver timed on each) -> docs/scene4_real.md (then make

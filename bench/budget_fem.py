@@ -22,20 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fem_sim.batch.knob_run import (
-    BUDGET_CASES,
-    BUDGET_MESHES,
-    BUDGET_REFERENCE,
-    BUDGET_RESULTS,
-    BUDGET_RUNS,
-    DEFAULTS,
-    budget_case_errors,
-    budget_npz,
-    budget_summary,
-    mesh,
-    mesh_name,
-    run_job,
-)
+from fem_sim.batch import knob_run as kr
 from liverviz.ledger import Ledger
 from liverviz.plots import error_budget
 from liverviz.report import ROOT, put_section, render
@@ -51,27 +38,27 @@ def cases() -> list[dict]:
     from data_spec import load_scene
     from fem_sim.batch import cases as cs
 
-    f = BUDGET_RESULTS / "cases.json"
+    f = kr.BUDGET_RESULTS / "cases.json"
     if f.exists():
         return json.loads(f.read_text())
     scene = load_scene(SCENE)
-    g, fixed = mesh("phantom", 16.0)
+    g, fixed = kr.mesh("phantom", 16.0)
     out = []
-    for k in range(BUDGET_CASES):
+    for k in range(kr.BUDGET_CASES):
         c = cs.make_case(scene, FIRST_INDEX + k, g, fixed)
         out.append({"index": FIRST_INDEX + k, "point": g.points[c.load_nodes[0]].tolist(),
                     "force": c.forces[0].tolist()})
-    BUDGET_RESULTS.mkdir(parents=True, exist_ok=True)
+    kr.BUDGET_RESULTS.mkdir(parents=True, exist_ok=True)
     f.write_text(json.dumps(out, indent=1))
     return out
 
 
 def run(case: dict, k: int, degree: int, h: float, timeout: float) -> dict:
-    spec = {**DEFAULTS, "liver": "phantom", "load": "nodal", "h": h, "degree": degree,
+    spec = {**kr.DEFAULTS, "liver": "phantom", "load": "nodal", "h": h, "degree": degree,
             "load_point": case["point"], "force": case["force"]}
-    job = {"spec": spec, "out": str(budget_npz(k, degree, h)),
-           "eval_meshes": (BUDGET_MESHES if (degree, h) == BUDGET_REFERENCE else [])}
-    return run_job(job, timeout)
+    job = {"spec": spec, "out": str(kr.budget_npz(k, degree, h)),
+           "eval_meshes": (kr.BUDGET_MESHES if (degree, h) == kr.BUDGET_REFERENCE else [])}
+    return kr.run_job(job, timeout)
 
 
 EXCLUDE = 32.0  # mm: errors are measured outside this ball around the load point (2 x the
@@ -92,11 +79,11 @@ def _case_errors(k, case, degree, h, ds, predict, fem) -> dict | None:
     rec = fem.get((k, degree, h))
     if rec is None or rec.get("status") != "ok":
         return None
-    e = budget_case_errors(k, case["point"], degree, h,
+    e = kr.budget_case_errors(k, case["point"], degree, h,
                            predict(np.asarray([case["force"]]), [rec["load_node"]]), fem, EXCLUDE)
     if e is not None and (e["nodes"].shape != ds.points[0].shape
                           or not np.allclose(e["nodes"], ds.points[0])):
-        raise RuntimeError(f"{mesh_name(degree, h)}: the budget's mesh is not the dataset's")
+        raise RuntimeError(f"{kr.mesh_name(degree, h)}: the budget's mesh is not the dataset's")
     return e
 
 
@@ -107,16 +94,16 @@ def budget() -> list[dict]:
     from surrogate import load_predictor
     from surrogate.data import load_dataset
 
-    fem = BUDGET_RUNS.records()
-    if not (BUDGET_RESULTS / "cases.json").exists():
+    fem = kr.BUDGET_RUNS.records()
+    if not (kr.BUDGET_RESULTS / "cases.json").exists():
         return []
-    cases = json.loads((BUDGET_RESULTS / "cases.json").read_text())
+    cases = json.loads((kr.BUDGET_RESULTS / "cases.json").read_text())
     runs = Ledger(SURROGATE / "runs.jsonl", key="id").records().values()
     trained = {r["spec"]["data"]: r for r in runs if "error budget" in
                [r["spec"]["group"], *r["spec"].get("also", [])]}
     rows = []
-    for degree, h in sorted(BUDGET_MESHES, key=lambda m: (m[0], -m[1])):  # P1 then P2, coarse first
-        name = mesh_name(degree, h)
+    for degree, h in sorted(kr.BUDGET_MESHES, key=lambda m: (m[0], -m[1])):  # P1, P2; coarse 1st
+        name = kr.mesh_name(degree, h)
         if name not in trained:
             continue
         ds = load_dataset(SURROGATE / "data" / name, stream=False)
@@ -127,7 +114,7 @@ def budget() -> list[dict]:
         if not per:
             continue
         rows.append({"mesh": name, "degree": degree, "h": h, "vertices": ds.points[0].shape[0],
-                     **budget_summary(per),
+                     **kr.budget_summary(per),
                      "sim_hours": simulation_seconds(name, n) / 3600,
                      "train_hours": trained[name]["training_seconds"] / 3600,
                      "sims": n})
@@ -139,7 +126,7 @@ def errors() -> None:
     b = budget()
     put_section(DOCS / "tradeoff_surrogate.md", "error-budget", render(
         Path(__file__).parent / "templates" / "error_budget.md.j2", b=b, exclude=EXCLUDE,
-        n_budget=b[0]["sims"] if b else "n/a", budget_cases=BUDGET_CASES))
+        n_budget=b[0]["sims"] if b else "n/a", budget_cases=kr.BUDGET_CASES))
     error_budget(b, EXCLUDE, DOCS / "error_budget.png")
     print(f"wrote the error budget into {DOCS / 'tradeoff_surrogate.md'} and "
           f"{DOCS / 'error_budget.png'}")
@@ -156,16 +143,16 @@ def main() -> int:
         return 0
     from tqdm import tqdm
 
-    BUDGET_RESULTS.mkdir(parents=True, exist_ok=True)
-    done = BUDGET_RUNS.records()
-    todo = [(k, d, h) for k in range(BUDGET_CASES)
-            for d, h in [BUDGET_REFERENCE, *BUDGET_MESHES]
+    kr.BUDGET_RESULTS.mkdir(parents=True, exist_ok=True)
+    done = kr.BUDGET_RUNS.records()
+    todo = [(k, d, h) for k in range(kr.BUDGET_CASES)
+            for d, h in [kr.BUDGET_REFERENCE, *kr.BUDGET_MESHES]
             if (k, d, h) not in done]
     cs = cases()
     bar = tqdm(todo, desc="budget-fem", unit="run")
     for k, d, h in bar:
         bar.set_postfix_str(f"case {k} P{d} h={h:g}")
-        BUDGET_RUNS.add({"case": k, "degree": d, "h": h, **run(cs[k], k, d, h, a.timeout)})
+        kr.BUDGET_RUNS.add({"case": k, "degree": d, "h": h, **run(cs[k], k, d, h, a.timeout)})
     return 0
 
 

@@ -143,14 +143,15 @@ PLACED = b"the population's registration on the prepared mesh"
 
 
 def ready(name: str) -> dict:
-    """Wall seconds of ``make liver GRASP=...`` with no MODEL (the shipped model of grasps)
-    from the liver file into a fresh directory, in all and per step (timed_steps): the file's
-    vertex farthest along its longest axis pulled 20 mm outward; the unit responses it took."""
+    """``make liver GRASP=...`` (shipped model) from the liver file to a fresh directory, timed
+    in all and per step (its vertex farthest along its longest axis pulled 20 mm out); the
+    manipulator's base on it: opening, each new patch's first frame (solved), later calls."""
     import shutil
 
     from data_spec.linear_fields import read_linear_fields as linear
     from fem_sim.geometry.surfaces import read_surface
     from surrogate.make_liver import STEPS, timed_steps
+    from surrogate.manipulator import GraspManipulator
 
     liver = SCENE.parent / tomllib.loads(SCENE.read_text())["geometry"]["livers"] / f"{name}.obj"
     c = (x := read_surface(liver)[0]).mean(axis=0)
@@ -159,7 +160,19 @@ def ready(name: str) -> dict:
     grasp = " ".join(f"{v:.3f}" for v in [*tip, *(20.0 * (tip - c) / np.linalg.norm(tip - c))])
     r = {"liver": name, **timed_steps(["make", "--no-print-directory", "liver", f"LIVER={liver}",
                                        f"LIVER_DIR={d}", f"GRASP={grasp}"], STEPS, ROOT)}
-    return {**r, "green_nodes": linear(d / "data/linear.h5").green_nodes.size} if r["ok"] else r
+    if not r["ok"]:
+        return r
+    t = time.perf_counter()
+    m = GraspManipulator(d / "data", solver=str(ROOT / ".venv-solver/bin/python"))
+    opened, new, calls = time.perf_counter() - t, [], []
+    for node in m.default_nodes(6)[1:]:   # far from the fixed region and from each other
+        t, k = time.perf_counter(), len(m.solved_seconds)
+        m.pick(m.points[node]), m.set_force([0.0, 0.0, 10.0]), m.predict()
+        new += [(time.perf_counter() - t) * 1e3] if len(m.solved_seconds) > k else []
+        calls += [m.predict().seconds * 1e3 for _ in range(20)]
+    m._grow.close()
+    v = {"open_s": opened, "new_patch_ms": new, "call_ms": np.median(calls)}
+    return {**r, "green_nodes": linear(d / "data/linear.h5").green_nodes.size, "view": v}
 
 
 def model_rows(run: Path, ledger, names) -> None:

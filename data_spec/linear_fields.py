@@ -106,9 +106,10 @@ class LinearFields:
         d = Path(data)
         return (f"{d}: its Green's function holds {self.green_nodes.size} of the liver's "
                 f"{self.green_nodes.size + n} free surface nodes, those near make liver's load "
-                "(fem_sim linear --green-near); the manipulator grasps anywhere: make manipulate "
-                f"LIVER=... computes them all first (fem_sim linear {d.parent / 'scene.toml'} "
-                f"--out {d} --green)")
+                "(fem_sim linear --green-near); the manipulator grasps anywhere: give it the "
+                "solver's python to solve the others when grasped (--solver "
+                ".venv-solver/bin/python; make manipulate LIVER=... does), or all of them "
+                f"first (fem_sim linear {d.parent / 'scene.toml'} --out {d} --green)")
 
     @property
     def order(self) -> int:

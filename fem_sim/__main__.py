@@ -184,7 +184,7 @@ def main(argv: list[str] | None = None) -> int:
     if argv[:1] == ["serve"]:   # commands as JSON lines from a trainer process
         from fem_sim.serve import serve
 
-        return serve()
+        return serve(main)
     if argv[:1] == ["population"]:
         from fem_sim.batch.population_cli import main as population_main
 

@@ -12,8 +12,10 @@ the answers only. Between two commands the process imports the solver's modules 
 PETSc, the forms) once: a trainer process that meshes a liver, registers a model on it
 while this process waits, and then asks for its Green's function (``make liver``, driven by
 :mod:`surrogate.make_liver`) pays the solver's start once and while it works on its side.
-A line that is not a list of words is answered ``{"rc": 2, "error": ...}``; the process
-ends with its standard input.
+Two words beyond fem_sim's commands keep a liver factorised between lines, for the
+manipulator (:mod:`fem_sim.batch.green_live`): ``green-open DATA`` and ``green-rows OUT.npy
+NODE ...``. A line that is not a list of words is answered ``{"rc": 2, "error": ...}``; the
+process ends with its standard input.
 """
 
 from __future__ import annotations
@@ -41,22 +43,31 @@ def _warm() -> None:
     import fem_sim.solver.problem  # noqa: F401
 
 
-def _run(words) -> dict:
-    from fem_sim.__main__ import main
+_LIVE: list = [None]   # the liver green-open keeps (fem_sim.batch.green_live)
 
+
+def _run(words, main) -> dict:
     if not (isinstance(words, list) and words and all(isinstance(w, str) for w in words)):
         return {"rc": 2, "error": f"expected a JSON list of words, got {words!r}"}
     if words[0] == "serve":
         return {"rc": 2, "error": "serve runs commands, not itself"}
     t = time.perf_counter()
     try:
-        rc = main(words)
+        if words[0] in ("green-open", "green-rows"):
+            from fem_sim.batch.green_live import serve_verb
+
+            _LIVE[0], rc = serve_verb(_LIVE[0], words)
+        else:
+            rc = main(words)
     except SystemExit as exc:   # argparse's usage errors
         rc = exc.code if isinstance(exc.code, int) else 2
     return {"rc": int(rc or 0), "seconds": round(time.perf_counter() - t, 3)}
 
 
-def serve(stdin=None) -> int:
+def serve(main, stdin=None) -> int:
+    """Answer the lines of ``stdin`` (the standard input), each a command of ``main`` (fem_sim's
+    command line, which passes itself) or a green-open / green-rows line.
+    """
     answers, warmed = _answer_stream(), False
     for line in stdin or sys.stdin:
         if not line.strip():
@@ -66,7 +77,7 @@ def serve(stdin=None) -> int:
         except json.JSONDecodeError as exc:
             out = {"rc": 2, "error": f"not JSON: {exc}"}
         else:
-            out = _run(words)
+            out = _run(words, main)
         sys.stderr.flush()
         answers.write(json.dumps(out) + "\n")
         if not warmed:

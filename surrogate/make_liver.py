@@ -20,55 +20,16 @@ command's own message and exit code.
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 from data_spec.scene import GRASP_RADIUS
+from surrogate.solver_process import SolverProcess
 
 STEPS = {"mesh": "make liver: meshing", "place": "make liver: placing",
          "green": "make liver: the Green's function", "predict": "make liver: predicting"}
-
-
-class SolverProcess:
-    """``python -m fem_sim serve`` under ``python`` (the solver's environment): ``run(words)``
-    sends a command and returns its exit code; its messages reach this process's standard
-    error. The factorisation's threads take the cores (no OMP / OpenBLAS limit).
-    """
-
-    def __init__(self, python: str):
-        env = {k: v for k, v in os.environ.items()
-               if k not in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
-        self.proc = subprocess.Popen([python, "-m", "fem_sim", "serve"], stdin=subprocess.PIPE,
-                                     stdout=subprocess.PIPE, text=True, env=env)
-
-    def send(self, words: list[str]) -> None:
-        self.proc.stdin.write(json.dumps([str(w) for w in words]) + "\n")
-        self.proc.stdin.flush()
-
-    def answer(self) -> int:
-        line = self.proc.stdout.readline()
-        if not line:
-            raise OSError(f"the solver process ended (exit code {self.proc.wait()})")
-        out = json.loads(line)
-        if "error" in out:
-            print(f"fem_sim serve: {out['error']}", file=sys.stderr)
-        return int(out["rc"])
-
-    def end(self) -> None:
-        """No more commands: the process ends (its teardown beside this process's work)."""
-        if self.proc.stdin and not self.proc.stdin.closed:
-            self.proc.stdin.close()
-
-    def close(self) -> None:
-        self.end()
-        try:
-            self.proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
 
 
 def timed_steps(cmd: list[str], steps: dict[str, str], cwd=None) -> dict:

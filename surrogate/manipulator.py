@@ -331,7 +331,10 @@ class GraspManipulator:
     :class:`data_spec.green_grasp.GreenGrasp`, the small-strain base, or with ``over`` (an
     :class:`~surrogate.over_green.OverGreen` of a model of grasps placed on this liver) from
     its :meth:`~surrogate.over_green.OverGreen.grasp`: the base plus the network's rest, the
-    force stiffened (docs/surgical_loads.md measures both). It offers what the viewer draws,
+    force stiffened (docs/surgical_loads.md measures both). ``solver`` (the solver
+    environment's python): a patch the file has no unit responses for (``make liver``
+    solves its load's only) has them solved on the spot (:mod:`surrogate.green_rows`). It
+    offers what the viewer draws,
     as :class:`Manipulator` does; a handle's ``force`` is the tool's force (N) and the load a
     script or the slider sets is the pull (mm).
     """
@@ -340,7 +343,8 @@ class GraspManipulator:
     nodes_mode = "all"
     mode = "pull"
 
-    def __init__(self, data, max_pull: float = 40.0, radius: float | None = None, over=None):
+    def __init__(self, data, max_pull: float = 40.0, radius: float | None = None, over=None,
+                 solver: str | None = None):
         from data_spec import read_geometry
         from data_spec.linear_fields import read_dataset_linear
         from data_spec.scene import GRASP_RADIUS
@@ -351,7 +355,15 @@ class GraspManipulator:
             raise ValueError(f"{data}: its small-strain file holds no Green's function; run "
                              "fem_sim linear with --green (make liver does)")
         g = read_geometry(geometry_path(data, lf.geometry_id))
-        why = lf.whole_surface_problem(g.surface_nodes, data)
+        self._grow = None
+        if over is not None and over.placed.predictor.load == "grasp":   # the model's file
+            why = over.whole_surface_problem()
+        elif solver and lf.uncomputed(g.surface_nodes).size:
+            from surrogate.green_rows import GrownGreen
+
+            self._grow, why = GrownGreen(lf, g.surface_nodes, data, solver), ""
+        else:
+            why = lf.whole_surface_problem(g.surface_nodes, data)
         if why:
             raise ValueError(why)
         if lf.output_nodes.size != g.n_nodes:
@@ -373,6 +385,12 @@ class GraspManipulator:
         # the arrows' scale: the force of the largest pull along the stiffest axis
         self.f_max = float(np.linalg.norm(self._grasp.stiffness, 2)) * self.max_pull
 
+    @property
+    def solved_seconds(self) -> list[float]:
+        """Each request for a new patch's unit responses (:mod:`surrogate.green_rows`)."""
+        grow = self._grow if self._grow is not None else getattr(self._over, "_grow", None)
+        return [] if grow is None else list(grow.seconds)
+
     def _grasp_at(self, node: int):
         from data_spec.eligible_loads import grasp_patch
         from data_spec.green_grasp import GreenGrasp
@@ -380,6 +398,8 @@ class GraspManipulator:
         if self._over is not None:   # the model of grasps: its network's rest and force
             return self._over.grasp(self.points[node][None], self.radius)
         lf, patch = self._lf, grasp_patch(self.points, self._surface_nodes, node, self.radius)
+        if self._grow is not None:
+            self._grow(patch)
         why = lf.missing_response(patch, self._surface_nodes)
         if why:
             raise ValueError(why)

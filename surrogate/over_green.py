@@ -44,8 +44,11 @@ class OverGreen:
     """
 
     def __init__(self, predictor, data, placement, shape: str | None = None, nodes=None,
-                 green=None):
-        """``green``: :func:`green_of` ``(predictor, data)`` when the caller has read it."""
+                 green=None, solver: str | None = None):
+        """``green``: :func:`green_of` ``(predictor, data)`` when the caller has read it;
+        ``solver``: the solver environment's python, to solve the unit responses a load
+        needs and the file lacks (:class:`~surrogate.green_rows.GrownGreen`).
+        """
         from surrogate.predict_liver import PlacedModel
 
         lf, g = green or green_of(predictor, data)
@@ -54,7 +57,11 @@ class OverGreen:
         self.green_nodes = np.asarray(lf.green_nodes)
         self.fixed_nodes = lf.fixed(g.surface_nodes)
         self.free_nodes = np.setdiff1d(g.surface_nodes, self.fixed_nodes)
-        self._lf = lf
+        self._lf, self._grow = lf, None
+        if solver and lf.uncomputed(g.surface_nodes).size:
+            from surrogate.green_rows import GrownGreen
+
+            self._grow = GrownGreen(lf, g.surface_nodes, data, solver)
         at = g.points[self.output_nodes] if nodes is None else np.asarray(nodes, np.float64)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")   # the placement's warnings are said by place()
@@ -83,10 +90,18 @@ class OverGreen:
         """Why loads anywhere on the free surface cannot be answered (a Green's function
         near one load only), or "".
         """
+        if self._grow is not None:
+            return ""
         return self._lf.whole_surface_problem(self.geometry.surface_nodes, self.data)
 
     def check_responses(self, nodes) -> None:
-        """ValueError when a load at the mesh ``nodes`` has no unit response to stand on."""
+        """ValueError when a load at the mesh ``nodes`` has no unit response to stand on
+        (with a solver process, those it lacks are solved first).
+        """
+        if self._grow is not None and self._grow(nodes):
+            self.green_nodes = np.asarray(self._lf.green_nodes)
+            self.linear = LinearPart(self.green_nodes, self._lf.green, self.points,
+                                     self.output_nodes)
         why = self._lf.missing_response(nodes, self.geometry.surface_nodes)
         if why:
             raise ValueError(why)

@@ -436,7 +436,9 @@ def run_offscreen(m, clim: float, script: Path | None, out: Path, window_size) -
               "nodes_predicted": m.n_predicted,
               "inference_ms_median": float(np.median(inference) * 1e3),
               "frame_ms_median": float(np.median(frame_times) * 1e3),
-              "fps_median": float(1 / np.median(frame_times)), "gif": str(gif)}
+              "fps_median": float(1 / np.median(frame_times)), "gif": str(gif),
+              # a new patch's unit responses solved on the spot (--solver), each request
+              "new_patch_ms": [t * 1e3 for t in getattr(m, "solved_seconds", [])]}
     (out / "timings.json").write_text(json.dumps(timing, indent=1))
     return timing
 
@@ -543,7 +545,7 @@ def _over_green(args):
     placement, found = place(pred, args.place, args.frame, saved if saved.exists() else None)
     for msg in found:
         print(f"{log_prefix}: warning: {msg}", file=sys.stderr)
-    return OverGreen(pred, Path(args.base), placement)
+    return OverGreen(pred, Path(args.base), placement, solver=args.solver)
 
 
 def build(args):
@@ -556,7 +558,7 @@ def build(args):
 
         over = _over_green(args)
         if args.grasp:
-            return GraspManipulator(Path(args.base), over=over), None
+            return GraspManipulator(Path(args.base), over=over, solver=args.solver), None
         return GreenManipulator(over), over.placed.predictor
     if getattr(args, "grasp", False):   # a liver's data directory with its Green's function
         from data_spec.linear_fields import linear_fields_path
@@ -565,7 +567,7 @@ def build(args):
             raise ViewerError(f"{args.run}: --grasp takes a liver's data directory with its "
                               "Green's function (make liver's runs/liver/NAME/data): no "
                               f"{linear_fields_path(args.run).name} in it")
-        return GraspManipulator(Path(args.run)), None
+        return GraspManipulator(Path(args.run), solver=args.solver), None
     mdir = model_dir(Path(args.run))
     pred = load_predictor(mdir)
     geometry = None
@@ -610,6 +612,9 @@ def _parser() -> argparse.ArgumentParser:
                     "moves it to the pointer (at most 40 mm), the field and the tool's force "
                     "from the liver's Green's function (the small-strain base); with "
                     "--base, RUN's model of grasps adds its network and force")
+    ap.add_argument("--solver", metavar="PYTHON", help="the solver environment's python "
+                    "(.venv-solver/bin/python): the unit responses a grasp needs and make "
+                    "liver's file lacks are solved when it grasps (make manipulate gives it)")
     ap.add_argument("--base", type=Path, metavar="LIVER_DATA", help="with --place (the "
                     "liver's file): RUN (a model over the small-strain base, population_green) "
                     "over that liver's own Green's function, make liver's runs/liver/NAME/data: "

@@ -161,8 +161,18 @@ class OgdenProblem:
         block (the linear solver's :meth:`solve_recurring_block`); the state is left at
         u = 0.
         """
+        return self.unit_responses_of(self._tangent_at_rest(material, constraints, []), nodes,
+                                      rtol)
+
+    def tangent_at_rest(self, material: OgdenMaterial, constraints: list[Constraint]):
+        """The tangent at u = 0 (collective), to keep for :meth:`unit_responses_of`."""
+        return self._tangent_at_rest(material, constraints, [])
+
+    def unit_responses_of(self, J, nodes: np.ndarray, rtol: float = 1e-6) -> np.ndarray | None:
+        """:meth:`unit_responses` with the tangent ``J`` of :meth:`tangent_at_rest`: its
+        factorisation made at the first call and kept for the next (back-solves only).
+        """
         eqs = self.equations
-        J = self._tangent_at_rest(material, constraints, [])
         nodes = np.asarray(nodes, dtype=np.int64)
         n = eqs.n_owned_dofs
         B = np.zeros((3 * nodes.size, n))

@@ -73,13 +73,13 @@ def test_right_variables_pass_the_check():
 
 
 def test_make_liver_takes_the_shipped_model_for_a_grasp_and_asks_one_for_a_force():
-    """No MODEL: a grasp runs every step on models/scene4_grasp (make -n: the commands, none
+    """No MODEL: a grasp runs its steps on models/scene4_grasp (make -n: the command, not
     run); a force is refused before any work, saying why."""
     grasp = _make("-n", "liver", f"LIVER={LIVER}", "GRASP=1 2 3 0 0 20")
     assert grasp.returncode == 0, grasp.stderr
-    assert "truth-scene models/scene4_grasp" in grasp.stdout
-    assert "predict-liver models/scene4_grasp" in grasp.stdout
+    assert "surrogate.make_liver models/scene4_grasp" in grasp.stdout
+    assert '--grasp "1 2 3 0 0 20"' in grasp.stdout
     force = _make("liver", f"LIVER={LIVER}", "AT=1 2 3 0 0 -0.4")
     assert force.returncode == 2
     assert "a force needs a model of forces" in force.stderr
-    assert "truth-scene" not in force.stdout + force.stderr
+    assert "make_liver" not in force.stdout + force.stderr

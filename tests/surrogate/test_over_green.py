@@ -257,20 +257,15 @@ def test_a_grasp_over_the_greens_function_holds_its_patch_and_gives_the_force_ba
     assert summary["grasp_displacements_mm"] == pull.tolist()
 
 
-def test_a_greens_function_near_the_grasp_answers_it_and_refuses_elsewhere(patient, tmp_path):
-    """make liver's Green's function near its load only (fem_sim linear --green-near): the
-    grasp there gets the whole surface's answer, its fixed region read from the file; a load
-    on the free surface beyond it is refused naming the flag, not answered from the nearest
-    computed node (a silent wrong field)."""
+def _near_copy(d: Path, whole, tmp_path: Path) -> tuple[Path, int, int]:
+    """(a copy of the liver's data directory holding the unit responses within 20 mm of the
+    free node farthest from the fixed region, as make liver solves them; that node, a free
+    node beyond them).
+    """
     import shutil
 
     import h5py
 
-    from surrogate.over_green import OverGreen
-
-    d, info, run = patient
-    rest = load_predictor(run / "model")
-    whole = OverGreen(rest, d / "data", _placed(rest, d, info))
     g, free = whole.geometry, whole.green_nodes
     far = free[np.argmax(np.linalg.norm(g.points[free][:, None] - g.points[whole.fixed_nodes]
                                         [None], axis=2).min(axis=1))]
@@ -281,19 +276,72 @@ def test_a_greens_function_near_the_grasp_answers_it_and_refuses_elsewhere(patie
         for name in ("green", "green_nodes"):
             del f[name]
         f["green_nodes"], f["green"] = free[keep], green
-        f["fixed_nodes"] = whole.fixed_nodes
+        if "fixed_nodes" not in f:   # a file of before they were recorded
+            f["fixed_nodes"] = whole.fixed_nodes
+    return part, far, free[~keep][0]
+
+
+def test_a_greens_function_near_the_grasp_answers_it_and_refuses_elsewhere(patient, tmp_path):
+    """make liver's Green's function near its load only (fem_sim linear --green-near): the
+    grasp there gets the whole surface's answer, its fixed region read from the file; a load
+    on the free surface beyond it is refused naming the flag, not answered from the nearest
+    computed node (a silent wrong field), and the manipulator without a solver says so."""
+    from surrogate.manipulator import GraspManipulator
+    from surrogate.over_green import OverGreen
+
+    d, info, run = patient
+    rest = load_predictor(run / "model")
+    whole = OverGreen(rest, d / "data", _placed(rest, d, info))
+    part, far, other = _near_copy(d, whole, tmp_path)
+    g = whole.geometry
     near = OverGreen(rest, part, _placed(rest, d, info))
     np.testing.assert_array_equal(near.fixed_nodes, whole.fixed_nodes)
     pull = np.array([[3.0, -4.0, 10.0]])
     for a, b in zip(near.grasp([g.points[far]])(pull), whole.grasp([g.points[far]])(pull)):
         np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
-    other = free[~keep][0]
     with pytest.raises(ValueError, match="--green-near"):
         near.grasp([g.points[other]])
     with pytest.raises(ValueError, match="--green-near"):
         near([[0.0, 0.0, -0.3]], [other])
     np.testing.assert_allclose(near([[0.0, 0.0, -0.3]], [far]),
                                whole([[0.0, 0.0, -0.3]], [far]), atol=1e-9)
+    with pytest.raises(ValueError, match="--solver"):
+        GraspManipulator(part)
+
+
+def test_a_patch_beyond_make_livers_responses_is_solved_when_grasped(patient, tmp_path):
+    """With the solver's python (make manipulate): the patch's unit responses are solved by
+    a solver process when grasped, once, and answer as the whole file does (the same
+    factorisation's back-solves), for the model and for the manipulator's base alone."""
+    from surrogate.manipulator import GraspManipulator
+    from surrogate.over_green import OverGreen
+
+    d, info, run = patient
+    rest = load_predictor(run / "model")
+    whole = OverGreen(rest, d / "data", _placed(rest, d, info))
+    part, _, other = _near_copy(d, whole, tmp_path)
+    at, pull = whole.geometry.points[other], np.array([[3.0, -4.0, 10.0]])
+    u, force = whole.grasp([at])(pull)   # a model of forces grasps with the base
+    solver = str(Path(__file__).resolve().parents[2] / ".venv-solver" / "bin" / "python")
+    live = OverGreen(rest, part, _placed(rest, d, info), solver=solver)
+    try:
+        assert live.whole_surface_problem() == ""
+        for a, b in zip(live.grasp([at])(pull), (u, force)):
+            np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-5 * np.abs(b).max())
+        live.grasp([at])
+        assert len(live._grow.seconds) == 1   # solved once
+    finally:
+        live._grow.close()
+    m = GraspManipulator(part, solver=solver)
+    try:
+        assert m.pick(at) == other
+        m.drag(at + pull[0])
+        frame = m.predict()
+        np.testing.assert_allclose(frame.u, u, rtol=1e-5, atol=1e-5 * np.abs(u).max())
+        np.testing.assert_allclose(m.handles[0].force, force[0], rtol=1e-5)
+        assert len(m.solved_seconds) >= 1
+    finally:
+        m._grow.close()
 
 
 def test_the_manipulator_opens_on_a_model_over_the_livers_greens_function(patient, tmp_path):

@@ -132,8 +132,8 @@ def test_make_liver_with_no_model_answers_the_cards_first_grasp_as_the_card_says
                        ["forces_N"][0]) @ R.T
     assert abs(float(force_error_pct(force, z["fe_force_0"][-1]))
                - want["model_force_error_pct"]) <= tol["force_error_points"]
-    # the manipulator: refused on those (it grasps anywhere), naming what computes the rest;
-    # make manipulate computes them and opens it (off-screen: the tool pulls, its force drawn)
+    # the manipulator: refused on those (it grasps anywhere), naming the flag that solves the
+    # rest when grasped; make manipulate gives it and opens (off screen: the tool pulls)
     from surrogate.viewer import main as viewer
 
     view = tmp_path / "view"
@@ -144,4 +144,3 @@ def test_make_liver_with_no_model_answers_the_cards_first_grasp_as_the_card_says
                           cwd=root, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert json.loads((view / "timings.json").read_text())["frames"] > 10
-    assert read_linear_fields(out / "data" / "linear.h5").uncomputed(surface).size == 0
