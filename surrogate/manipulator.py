@@ -380,7 +380,7 @@ class GraspManipulator:
         self.max_pull = self.magnitude_max = self.drag_length = float(max_pull)
         self.inputs: list[Input] = []
         self.active, self.pull = 0, np.zeros(3)
-        self.handles = [Handle(node=Manipulator.default_nodes(self, 1)[0])]
+        self.handles = [Handle(node=self.default_nodes(1)[0])]
         self._grasp = self._grasp_at(self.handles[0].node)
         # the arrows' scale: the force of the largest pull along the stiffest axis
         self.f_max = float(np.linalg.norm(self._grasp.stiffness, 2)) * self.max_pull
@@ -406,6 +406,7 @@ class GraspManipulator:
         return GreenGrasp(lf.green, lf.green_nodes, lf.output_nodes, [patch])
 
     nearest_surface_node = Manipulator.nearest_surface_node
+    default_nodes = Manipulator.default_nodes
     clicked_node = Manipulator.clicked_node
     outward_normal = Manipulator.outward_normal
 
