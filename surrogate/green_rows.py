@@ -38,7 +38,11 @@ class GrownGreen:
         self._set()
         self._dir = tempfile.TemporaryDirectory(prefix="green-rows-")
         self.seconds: list[float] = []
-        self.solver = SolverProcess(python)
+        try:
+            self.solver = SolverProcess(python)
+        except OSError as exc:
+            self._dir.cleanup()
+            raise ValueError(f"--solver {python}: cannot start it ({exc})") from None
         self.solver.send(["green-open", str(data)])
         if self.solver.answer():
             self.close()

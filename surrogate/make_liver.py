@@ -116,7 +116,11 @@ def main(argv=None) -> int:
         return 2
     a.dir.mkdir(parents=True, exist_ok=True)
     t0, seconds = time.perf_counter(), {}
-    solver = SolverProcess(a.solver)
+    try:
+        solver = SolverProcess(a.solver)
+    except OSError as exc:
+        print(f"make liver: --solver {a.solver}: cannot start it ({exc})", file=sys.stderr)
+        return 2
     try:
         for name, where, words in steps:
             print(STEPS[name], flush=True)

@@ -41,6 +41,12 @@ def test_a_load_of_the_wrong_length_is_refused_before_any_step(tmp_path, capsys)
     assert "AT" in capsys.readouterr().err and not (tmp_path / "d").exists()
 
 
+def test_a_solver_that_cannot_start_is_said_before_any_step(tmp_path, capsys):
+    assert main(["RUN", "liver.obj", "--scene", str(SCENE), "--dir", str(tmp_path / "d"),
+                 "--solver", str(tmp_path / "no-python"), "--grasp", "1 2 3 0 0 20"]) == 2
+    assert "--solver" in capsys.readouterr().err
+
+
 def test_a_failing_step_stops_the_rest_with_its_message(tmp_path, capfd):
     """A liver file that cannot be meshed: the solver's message and exit code, no scene."""
     if not SOLVER.exists():
