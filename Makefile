@@ -267,8 +267,8 @@ patient: patient-args setup
 # liver's linear response misses (config population_green), placed on the liver file LIVER;
 # the liver meshed as the population's livers were and fixed where the placement puts the
 # template's fixed region (truth-scene), its small-strain Green's function from one
-# factorisation (fem_sim linear --green --green-near: the free surface nodes within 20 mm of
-# each load's point), and predict-liver --base on its own mesh with the force
+# factorisation (fem_sim linear --green --green-near: a grasp's patch, a force's node), and
+# predict-liver --base on its own mesh with the force
 # AT = "X Y Z FX FY FZ" (mm, N; the liver file's frame), or a grasp GRASP = "X Y Z DX DY DZ"
 # (the 10 mm patch nearest to X Y Z moved by DX DY DZ mm: the field and the tool's force; a
 # model of grasps adds its network's rest and stiffens the force, a model of forces gives

@@ -170,7 +170,7 @@ def ready(name: str) -> dict:
         m.pick(m.points[node]), m.set_force([0.0, 0.0, 10.0]), m.predict()
         new += [(time.perf_counter() - t) * 1e3] if len(m.solved_seconds) > k else []
         calls += [m.predict().seconds * 1e3 for _ in range(20)]
-    m._grow.close()
+    m.close()
     v = {"open_s": opened, "new_patch_ms": new, "call_ms": np.median(calls)}
     return {**r, "green_nodes": linear(d / "data/linear.h5").green_nodes.size, "view": v}
 

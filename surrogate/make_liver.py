@@ -11,10 +11,9 @@ The steps are the commands a user could type: the solver meshes the liver
 model on the mesh and writes the liver's scene while the solver imports its own modules;
 the solver computes the Green's function at the nodes each load needs (``fem_sim linear
 --green --green-near``: a grasp's patch, a force's node; the same rows as the whole
-surface's); ``predict-liver`` answers on the
-liver's own mesh. Each step's start is printed (``make liver: <step>``, what
-:func:`surrogate.latency.timed_steps` times) and a failing step stops the rest with its
-command's own message and exit code.
+surface's); ``predict-liver`` answers on the liver's own mesh. Each step's start is printed
+(``make liver: <step>``, what :func:`timed_steps` times) and a failing step stops the rest
+with its command's own message and exit code.
 """
 
 from __future__ import annotations

@@ -385,6 +385,11 @@ class GraspManipulator:
         # the arrows' scale: the force of the largest pull along the stiffest axis
         self.f_max = float(np.linalg.norm(self._grasp.stiffness, 2)) * self.max_pull
 
+    def close(self) -> None:
+        """End the solver process of its own grown Green's function (``solver``), if any."""
+        if self._grow is not None:
+            self._grow.close()
+
     @property
     def solved_seconds(self) -> list[float]:
         """Each request for a new patch's unit responses (:mod:`surrogate.green_rows`)."""

@@ -54,7 +54,6 @@ class OverGreen:
         lf, g = green or green_of(predictor, data)
         self.geometry, self.data = g, Path(data)
         self.output_nodes = np.asarray(lf.output_nodes)
-        self.green_nodes = np.asarray(lf.green_nodes)
         self.fixed_nodes = lf.fixed(g.surface_nodes)
         self.free_nodes = np.setdiff1d(g.surface_nodes, self.fixed_nodes)
         self._lf, self._grow = lf, None
@@ -66,7 +65,7 @@ class OverGreen:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")   # the placement's warnings are said by place()
             self.placed = PlacedModel(predictor, nodes=at, placement=placement, shape=shape)
-        self.linear = LinearPart(self.green_nodes, lf.green, g.points, self.output_nodes)
+        self._index_responses()
         self._to_nodes = None if nodes is None else \
             interpolation_matrix(g.points[self.output_nodes], at).tocsr()
         self._template_of: dict[bytes, np.ndarray] = {}
@@ -94,17 +93,33 @@ class OverGreen:
             return ""
         return self._lf.whole_surface_problem(self.geometry.surface_nodes, self.data)
 
+    def _index_responses(self) -> None:
+        """The linear part over the file's unit responses as they are (grown or not), and
+        which mesh nodes have one (a frame's check is then a lookup).
+        """
+        self.green_nodes = np.asarray(self._lf.green_nodes)
+        self.linear = LinearPart(self.green_nodes, self._lf.green, self.points,
+                                 self.output_nodes)
+        self._answered = np.zeros(self.points.shape[0], bool)
+        self._answered[self.green_nodes] = True
+
     def check_responses(self, nodes) -> None:
         """ValueError when a load at the mesh ``nodes`` has no unit response to stand on
         (with a solver process, those it lacks are solved first).
         """
+        nodes = np.asarray(nodes, np.int64).ravel()
+        if self._answered[nodes].all():   # every frame of a load already answered
+            return
         if self._grow is not None and self._grow(nodes):
-            self.green_nodes = np.asarray(self._lf.green_nodes)
-            self.linear = LinearPart(self.green_nodes, self._lf.green, self.points,
-                                     self.output_nodes)
+            self._index_responses()
         why = self._lf.missing_response(nodes, self.geometry.surface_nodes)
         if why:
             raise ValueError(why)
+
+    def close(self) -> None:
+        """End the solver process of a grown Green's function (``solver``), if any."""
+        if self._grow is not None:
+            self._grow.close()
 
     def grasp(self, at, radius: float = GRASP_RADIUS):
         """Tools grasping the liver at the points ``at`` (T, 3) mm, each the patch of radius

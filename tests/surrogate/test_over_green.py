@@ -331,7 +331,7 @@ def test_a_patch_beyond_make_livers_responses_is_solved_when_grasped(patient, tm
         live.grasp([at])
         assert len(live._grow.seconds) == 1   # solved once
     finally:
-        live._grow.close()
+        live.close()
     m = GraspManipulator(part, solver=solver)
     try:
         assert m.pick(at) == other
@@ -341,7 +341,7 @@ def test_a_patch_beyond_make_livers_responses_is_solved_when_grasped(patient, tm
         np.testing.assert_allclose(m.handles[0].force, force[0], rtol=1e-5)
         assert len(m.solved_seconds) >= 1
     finally:
-        m._grow.close()
+        m.close()
 
 
 def test_the_manipulator_opens_on_a_model_over_the_livers_greens_function(patient, tmp_path):
