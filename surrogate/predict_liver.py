@@ -375,22 +375,24 @@ def surface_distances(points, triangles, at) -> np.ndarray:
     return cKDTree(points[surf]).query(np.asarray(at, dtype=np.float64))[0]
 
 
-def _force_points(spec: np.ndarray, points, triangles, file) -> tuple[list[str], str | None]:
-    """(warnings, the reason to refuse or None) for the --force points against the liver's
-    own surface, before any registration.
+def _force_points(spec: np.ndarray, points, triangles, file,
+                  flag: str = "--force") -> tuple[list[str], str | None]:
+    """(warnings, the reason to refuse or None) for the load points (``flag``'s: --force or
+    --grasp) against the liver's own surface, before any registration.
     """
     d = surface_distances(points, triangles, spec[:, :3])
 
     def said(i: int) -> str:
-        return (f"--force {i + 1}: the point {spec[i, :3].tolist()} is {d[i]:.1f} mm from the "
+        return (f"{flag} {i + 1}: the point {spec[i, :3].tolist()} is {d[i]:.1f} mm from the "
                 f"surface of {file}")
 
     if np.any(d > REFUSE_MM):
         i = int(np.argmax(d))
         return [], (f"{said(i)}: more than {REFUSE_MM:g} mm, not a point of this liver (give a "
                     "point on its surface, in mm in the file's frame)")
-    return [f"{said(i)} (more than {WARN_MM:g} mm): the force acts at the nearest surface "
-            "node" for i in np.flatnonzero(d > WARN_MM)], None
+    acts = "the tool grasps around" if flag == "--grasp" else "the force acts at"
+    return [f"{said(i)} (more than {WARN_MM:g} mm): {acts} the nearest surface node"
+            for i in np.flatnonzero(d > WARN_MM)], None
 
 
 def _summary(args, predictor, pred, asked) -> dict:
@@ -462,7 +464,8 @@ def _checked_request(args, fail):
         points, triangles = read_liver_surface(args.liver, args.scale_to_mm)
     except LiverFileError as exc:
         return fail(exc)
-    said, refused = _force_points(spec, points, triangles, args.liver)
+    said, refused = _force_points(spec, points, triangles, args.liver,
+                                  "--grasp" if grasp else "--force")
     if refused:
         return fail(refused)
     from data_spec.liver_shape import surface_volume_ml, unlike_a_liver
