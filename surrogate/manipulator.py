@@ -132,6 +132,9 @@ class Manipulator:
         return (f"F{j + 1}{mark} = {np.linalg.norm(h.force):.3f} N (max {self.f_max:.2f}) "
                 f"at node {h.node}")
 
+    def prefetch(self) -> None:
+        """Work to do while a window waits for people: none for a model of its own."""
+
     # -- picking and dragging ------------------------------------------------------------------
     def default_nodes(self, n: int) -> list[int]:
         """Surface nodes farthest from the fixed region (and from each other): where a user
@@ -310,6 +313,12 @@ class GreenManipulator(Manipulator):
     def n_predicted(self) -> int:
         return int(self.over.output_nodes.size)
 
+    def prefetch(self) -> None:
+        """:meth:`OverGreen.prefetch <surrogate.over_green.OverGreen.prefetch>` from the
+        first handle.
+        """
+        self.over.prefetch(self.handles[0].node)
+
     def set_input(self, index: int, value: float) -> float:
         raise ValueError("a model over a liver's Green's function takes no material or "
                          "shape input: the liver is its own")
@@ -389,6 +398,18 @@ class GraspManipulator:
         """End the solver process of its own grown Green's function (``solver``), if any."""
         if self._grow is not None:
             self._grow.close()
+
+    def prefetch(self) -> None:
+        """With a solver process: every free patch's unit responses solved in the
+        background, nearest the tool first (a patch grasped later finds them solved).
+        """
+        from surrogate.over_green import nearest_first
+
+        if self._over is not None:
+            self._over.prefetch(self.handles[0].node)
+        elif self._grow is not None:
+            self._grow.prefetch(nearest_first(self.points, self._grow.free,
+                                              self.handles[0].node))
 
     @property
     def solved_seconds(self) -> list[float]:

@@ -121,6 +121,14 @@ class OverGreen:
         if self._grow is not None:
             self._grow.close()
 
+    def prefetch(self, near: int) -> None:
+        """With a solver process: the free surface's unit responses solved in the
+        background, nearest the mesh node ``near`` first (:meth:`GrownGreen.prefetch
+        <surrogate.green_rows.GrownGreen.prefetch>`); a load there later finds them solved.
+        """
+        if self._grow is not None:
+            self._grow.prefetch(nearest_first(self.points, self.free_nodes, near))
+
     def grasp(self, at, radius: float = GRASP_RADIUS):
         """Tools grasping the liver at the points ``at`` (T, 3) mm, each the patch of radius
         ``radius`` around the free surface node nearest to its point: ``grasp(d)`` with the
@@ -206,6 +214,11 @@ class GraspOverGreen:
             return grasp_over_base(self.over.placed, self._at, d, self.over._to_nodes @ u,
                                    force)
         return grasp_over_base(self.over.placed, self._at, d, u, force, self._held)
+
+
+def nearest_first(points: np.ndarray, nodes: np.ndarray, near: int) -> np.ndarray:
+    """``nodes`` in order of distance from the node ``near``."""
+    return nodes[np.argsort(np.linalg.norm(points[nodes] - points[near], axis=1))]
 
 
 def green_of(predictor, data) -> tuple:

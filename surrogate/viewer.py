@@ -679,6 +679,7 @@ def main(argv=None) -> int:
                   f"{t['inference_ms_median']:.2f} ms, frame {t['frame_ms_median']:.1f} ms "
                   f"({t['fps_median']:.0f} fps) for {t['nodes_predicted']} nodes")
             return 0
+        m.prefetch()   # a window waits for people: the solver process works meanwhile
         return run_window(m, clim, args.screenshot, tuple(args.size))
     # ViewerError (bad options, script, dataset), ValueError (a model or liver that cannot be
     # used), OSError (an output that cannot be written): each message names its file.

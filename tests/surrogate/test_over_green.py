@@ -344,6 +344,49 @@ def test_a_patch_beyond_make_livers_responses_is_solved_when_grasped(patient, tm
         m.close()
 
 
+def test_the_window_solves_every_patch_in_the_background_and_a_grasp_finds_it(patient,
+                                                                             tmp_path):
+    """The window's prefetch (the solver process idle while people look): the free surface's
+    unit responses solved in the background, nearest the tool first; a grasp asked meanwhile
+    is answered (it goes before the next chunk), one afterwards needs no request of its own,
+    and every row is the whole file's (the same factorisation's back-solves)."""
+    import time
+
+    from surrogate.manipulator import GraspManipulator
+    from surrogate.over_green import OverGreen
+
+    d, info, run = patient
+    rest = load_predictor(run / "model")
+    whole = OverGreen(rest, d / "data", _placed(rest, d, info))
+    part, _, other = _near_copy(d, whole, tmp_path)
+    at, pull = whole.geometry.points[other], np.array([[3.0, -4.0, 10.0]])
+    u, force = whole.grasp([at])(pull)
+    solver = str(Path(__file__).resolve().parents[2] / ".venv-solver" / "bin" / "python")
+    m = GraspManipulator(part, solver=solver)
+    try:
+        m.prefetch()
+        assert m._grow.prefetching
+        first = m.default_nodes(3)[-1]
+        m.pick(m.points[first])   # while the background works: answered
+        assert m.handles[0].node == first
+        t = time.perf_counter()
+        while m._grow.prefetching and time.perf_counter() - t < 300:
+            time.sleep(0.05)
+        asked = len(m.solved_seconds)
+        assert m.pick(at) == other and len(m.solved_seconds) == asked   # found solved
+        m.drag(at + pull[0])
+        np.testing.assert_allclose(m.predict().u, u, rtol=1e-5, atol=1e-5 * np.abs(u).max())
+        np.testing.assert_allclose(m.handles[0].force, force[0], rtol=1e-5)
+        lf = m._lf
+        assert np.array_equal(np.sort(lf.green_nodes), np.sort(whole.green_nodes))
+        row = {int(n): i for i, n in enumerate(whole.green_nodes)}
+        order = [row[int(n)] for n in lf.green_nodes]
+        np.testing.assert_allclose(lf.green, whole._lf.green[order], rtol=1e-5,
+                                   atol=1e-5 * np.abs(whole._lf.green).max())
+    finally:
+        m.close()
+
+
 def test_the_manipulator_opens_on_a_model_over_the_livers_greens_function(patient, tmp_path):
     """python -m surrogate.viewer RUN --place LIVER --base DATA: the handles' forces answered
     as make liver answers them (OverGreen's field at every node of the liver's own mesh),
