@@ -98,9 +98,8 @@ def solve_liver(name: str, n_grasps: int, n_forces: int) -> dict:
 
 def _row(sol, t: float) -> dict:
     """A simulation's record: its status, reason, seconds since ``t`` and solver counts."""
-    return {"status": sol.status, "reason": sol.failure_reason, "steps": [], "seconds":
-            time.perf_counter() - t, "cutbacks": sum(sol.cutbacks), "factorizations":
-            sol.factorizations}
+    return {"status": sol.status, "reason": sol.failure_reason, "steps": [], "factorizations":
+            sol.factorizations, "seconds": time.perf_counter() - t, "cutbacks": sum(sol.cutbacks)}
 
 
 def _grasp_case(prob, mat, fixed, patch, d, green, held):
@@ -143,36 +142,34 @@ PLACED = b"the population's registration on the prepared mesh"
 
 
 def ready(name: str) -> dict:
-    """``make liver GRASP=...`` (shipped model) from the liver file to a fresh directory, timed
-    in all and per step (its vertex farthest along its longest axis pulled 20 mm out); the
-    manipulator's base on it: opening, each new patch's first frame (solved), later calls."""
+    """``make liver`` (no MODEL) from the liver file, timed in all and per step: GRASP= (its
+    vertex farthest along its longest axis pulled 20 mm out), AT= (0.4 N pushing there); the
+    manipulator's base on the first: opening, new patches while it solves the surface in the
+    background and after it, later calls."""
     import shutil
 
     from data_spec.linear_fields import read_linear_fields as linear
     from fem_sim.geometry.surfaces import read_surface
+    from surrogate.latency import timed_manipulator
     from surrogate.make_liver import STEPS, timed_steps
-    from surrogate.manipulator import GraspManipulator
 
     liver = SCENE.parent / tomllib.loads(SCENE.read_text())["geometry"]["livers"] / f"{name}.obj"
     c = (x := read_surface(liver)[0]).mean(axis=0)
     tip = x[np.argmax(np.abs((x - c) @ np.linalg.svd(x - c, full_matrices=False)[2][0]))]
-    shutil.rmtree(d := RESULTS / "ready" / name, ignore_errors=True)
-    grasp = " ".join(f"{v:.3f}" for v in [*tip, *(20.0 * (tip - c) / np.linalg.norm(tip - c))])
-    r = {"liver": name, **timed_steps(["make", "--no-print-directory", "liver", f"LIVER={liver}",
-                                       f"LIVER_DIR={d}", f"GRASP={grasp}"], STEPS, ROOT)}
+
+    def make_liver(d: Path, load: str, v: np.ndarray) -> dict:
+        shutil.rmtree(d, ignore_errors=True)
+        load = f"{load}={' '.join(f'{w:.4f}' for w in v)}"
+        return timed_steps(["make", "--no-print-directory", "liver", f"LIVER={liver}",
+                            f"LIVER_DIR={d}", load], STEPS, ROOT)
+
+    d, out = RESULTS / "ready" / name, (tip - c) / np.linalg.norm(tip - c)
+    r = {"liver": name, **make_liver(d, "GRASP", np.r_[tip, 20.0 * out]),
+         "force": make_liver(RESULTS / "ready_force" / name, "AT", np.r_[tip, -0.4 * out])}
     if not r["ok"]:
         return r
-    t = time.perf_counter()
-    m = GraspManipulator(d / "data", solver=str(ROOT / ".venv-solver/bin/python"))
-    opened, new, calls = time.perf_counter() - t, [], []
-    for node in m.default_nodes(6)[1:]:   # far from the fixed region and from each other
-        t, k = time.perf_counter(), len(m.solved_seconds)
-        m.pick(m.points[node]), m.set_force([0.0, 0.0, 10.0]), m.predict()
-        new += [(time.perf_counter() - t) * 1e3] if len(m.solved_seconds) > k else []
-        calls += [m.predict().seconds * 1e3 for _ in range(20)]
-    m.close()
-    v = {"open_s": opened, "new_patch_ms": new, "call_ms": np.median(calls)}
-    return {**r, "green_nodes": linear(d / "data/linear.h5").green_nodes.size, "view": v}
+    return {**r, "green_nodes": linear(d / "data/linear.h5").green_nodes.size,
+            "view": timed_manipulator(d / "data", str(ROOT / ".venv-solver/bin/python"))}
 
 
 def model_rows(run: Path, ledger, names) -> None:

@@ -207,3 +207,31 @@ def grasp_latency(n_out: int = 15400, m: int = 20, calls: int = 200) -> dict:
     return {"nodes": n_out, "patch_nodes": m,
             "setup_s": median(lambda: GreenGrasp(green, patch, nodes, [patch])),
             "field_s": median(lambda: grasp(d)), "force_s": median(lambda: grasp.force(d))}
+
+
+def timed_manipulator(data, solver: str, n: int = 5, calls: int = 20) -> dict:
+    """The grasp manipulator's base on make liver's directory ``data`` (``make manipulate``,
+    ``solver`` the solver environment's python), as a window uses it: seconds to open (the
+    solver process started, the liver factorised); then, with the free surface solved in the
+    background (:meth:`~surrogate.manipulator.GraspManipulator.prefetch`), milliseconds to
+    grasp and answer ``n`` new patches at once (``during_ms``) and ``n`` more once it is done
+    (``after_ms``), far from the fixed region and from each other; the background's seconds
+    (``prefetch_s``) and a later call's milliseconds (median of ``calls`` a patch).
+    """
+    from surrogate.manipulator import GraspManipulator
+
+    t = time.perf_counter()
+    m = GraspManipulator(data, solver=solver)
+    out, later = {"open_s": time.perf_counter() - t, "during_ms": [], "after_ms": []}, []
+    try:
+        m.prefetch()
+        for k, node in enumerate(m.default_nodes(2 * n + 1)[1:]):
+            while k == n and m.grown.prefetching:
+                time.sleep(0.01)
+            t = time.perf_counter()
+            m.pick(m.points[node]), m.set_force([0.0, 0.0, 10.0]), m.predict()
+            out["during_ms" if k < n else "after_ms"].append((time.perf_counter() - t) * 1e3)
+            later += [m.predict().seconds * 1e3 for _ in range(calls)]
+    finally:
+        m.close()
+    return {**out, "prefetch_s": m.grown.prefetch_seconds, "call_ms": float(np.median(later))}

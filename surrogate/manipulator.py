@@ -405,17 +405,21 @@ class GraspManipulator:
         """
         from surrogate.over_green import nearest_first
 
-        if self._over is not None:
-            self._over.prefetch(self.handles[0].node)
-        elif self._grow is not None:
-            self._grow.prefetch(nearest_first(self.points, self._grow.free,
+        if self.grown is not None:
+            self.grown.prefetch(nearest_first(self.points, self.grown.free,
                                               self.handles[0].node))
+
+    @property
+    def grown(self):
+        """The :class:`~surrogate.green_rows.GrownGreen` that solves new patches (its own,
+        or its model's), or None.
+        """
+        return self._grow if self._grow is not None else getattr(self._over, "_grow", None)
 
     @property
     def solved_seconds(self) -> list[float]:
         """Each request for a new patch's unit responses (:mod:`surrogate.green_rows`)."""
-        grow = self._grow if self._grow is not None else getattr(self._over, "_grow", None)
-        return [] if grow is None else list(grow.seconds)
+        return [] if self.grown is None else list(self.grown.seconds)
 
     def _grasp_at(self, node: int):
         from data_spec.eligible_loads import grasp_patch

@@ -387,6 +387,22 @@ def test_the_window_solves_every_patch_in_the_background_and_a_grasp_finds_it(pa
         m.close()
 
 
+def test_the_manipulators_timing_counts_grasps_during_and_after_the_background(patient,
+                                                                               tmp_path):
+    """surrogate.latency.timed_manipulator (bench/surgical_loads.py --ready): n grasps timed
+    while the background solves, n after it ended (its seconds kept), a later call's median."""
+    from surrogate.latency import timed_manipulator
+    from surrogate.over_green import OverGreen
+
+    d, info, run = patient
+    rest = load_predictor(run / "model")
+    part = _near_copy(d, OverGreen(rest, d / "data", _placed(rest, d, info)), tmp_path)[0]
+    solver = str(Path(__file__).resolve().parents[2] / ".venv-solver" / "bin" / "python")
+    t = timed_manipulator(part, solver, n=2, calls=3)
+    assert len(t["during_ms"]) == len(t["after_ms"]) == 2 and t["open_s"] > 0
+    assert t["prefetch_s"] > 0 and t["call_ms"] > 0
+
+
 def test_the_manipulator_opens_on_a_model_over_the_livers_greens_function(patient, tmp_path):
     """python -m surrogate.viewer RUN --place LIVER --base DATA: the handles' forces answered
     as make liver answers them (OverGreen's field at every node of the liver's own mesh),
