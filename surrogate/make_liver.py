@@ -22,6 +22,7 @@ import argparse
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 from data_spec.scene import GRASP_RADIUS
@@ -95,8 +96,24 @@ def _steps(a, d: Path) -> list[tuple[str, str, list[str]]]:
                                 "--out", d / "prediction"])]
 
 
+# where JAX keeps compiled calls across processes (make liver, then predict-liver, the viewer)
+JAX_CACHE = Path(__file__).resolve().parents[1] / "runs" / "jax-cache"
+
+
+def _compilation_cache() -> None:
+    """JAX's persistent compilation cache in :data:`JAX_CACHE`, every compiled call kept."""
+    import jax
+
+    jax.config.update("jax_compilation_cache_dir", str(JAX_CACHE))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
+
+
 def _warm() -> None:
-    """Import what placing and predicting need (JAX, the registration, the pictures)."""
+    """Import what placing and predicting need (JAX, the registration, the pictures), and
+    keep JAX's compiled calls (:func:`_compilation_cache`).
+    """
+    _compilation_cache()
     import surrogate.evaluate  # noqa: F401
     import surrogate.over_green  # noqa: F401
     import surrogate.predict_liver  # noqa: F401
@@ -104,6 +121,36 @@ def _warm() -> None:
 
     pv = pyvista()
     pv.Plotter, pv.PolyData, pv.UnstructuredGrid   # noqa: B018 (pyvista imports these lazily)
+
+
+def _warm_answer(a, d: Path) -> None:
+    """While the solver computes the Green's function: the first picture's GL context opened
+    (most of a process's first render) and the network compiled for this liver's placement
+    and mesh, the shapes predict-liver calls it with (the persistent compilation cache,
+    :data:`JAX_CACHE`, hands the compiled call to predict-liver's own predictor).
+    """
+    import numpy as np
+
+    from data_spec.geometry import read_geometry
+    from liverviz.pictures import pyvista
+    from surrogate.evaluate import place
+    from surrogate.predict_liver import PlacedModel
+    from surrogate.predictor import load_predictor, model_load
+
+    pv = pyvista()
+    plotter = pv.Plotter(off_screen=True, window_size=(64, 64))
+    plotter.add_mesh(pv.Sphere())
+    plotter.screenshot(None, return_img=True)
+    plotter.close()
+    model = Path(a.model) / "model"   # as predict-liver reads it
+    pred = load_predictor(model, load=model_load(model) if a.grasp else "nodal")
+    placement, _ = place(pred, a.liver, a.frame, d / "placement.npz")
+    points = read_geometry(d / "mesh.h5").points
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        placed = PlacedModel(pred, nodes=points, placement=placement)
+        at = placed.load_nodes(points[:pred.spec.n_loads])
+        placed(np.zeros((1, pred.spec.n_loads, 3)), at[None], rest=True)
 
 
 def main(argv=None) -> int:
@@ -128,6 +175,11 @@ def main(argv=None) -> int:
                 solver.send(words)
                 if name == "mesh":   # the trainer's modules load while the solver meshes
                     _warm()
+                elif name == "green":
+                    try:
+                        _warm_answer(a, a.dir)
+                    except Exception:  # noqa: BLE001 (a warm-up; predict-liver says what fails)
+                        pass
                 rc = solver.answer()
                 if name == "green":
                     solver.end()
