@@ -165,6 +165,19 @@ $(TEST_SHIPPED): fem_sim/batch/grasp_truth.py | setup-solver
 	$(SPY) -m fem_sim.batch.grasp_truth $(LIVERS)/Amos-054.obj \
 	    --scene data_spec/scenes/scene4_livers.toml --grasps 3 --out $@
 
+# The shipped model of forces' card measured again (the same test): the FE truth of three of
+# the scene's 0.4 N forces on Amos-054 with the model's boundary condition, and their base.
+TEST_FORCES := runs/test-data/shipped/forces-Amos-054
+$(TEST_FORCES)/.done: models/scene4_forces/model/params.npz | setup
+	rm -rf $(@D)
+	$(SPY) -m fem_sim mesh $(LIVERS)/Amos-054.obj --scene data_spec/scenes/scene4_livers.toml \
+	    --out $(@D)/mesh.h5 --no-picture
+	$(TPY) -m surrogate truth-scene models/scene4_forces $(LIVERS)/Amos-054.obj --sims 3 \
+	    --scene data_spec/scenes/scene4_livers.toml --out $(@D)/scene.toml --mesh $(@D)/mesh.h5
+	$(MPIRUN) $(SPY) -m fem_sim generate $(@D)/scene.toml --out $(@D)/data --no-progress
+	$(SPY) -m fem_sim linear $(@D)/scene.toml --out $(@D)/data --order 1
+	@touch $@
+
 # A tiny new patient end to end: a population model trained on the three livers, make patient
 # on a fourth (20 FE simulations to adapt on, 6 held out); tests/surrogate/test_patient.py.
 # One of the three meshed as make liver meshes a liver file (tests/surrogate/test_placement.py).
@@ -181,11 +194,12 @@ $(TEST_PATIENT)/.done: $(TEST_LIVERS)/.done | setup
 	@touch $@
 
 test-trainer: setup-trainer $(TEST_DATA)/.done $(TEST_DATA4)/.done $(TEST_PATIENT)/.done \
-              $(TEST_GRASP)/.done $(TEST_SHIPPED)
+              $(TEST_GRASP)/.done $(TEST_SHIPPED) $(TEST_FORCES)/.done
 	$(TRAIN_VENV)/bin/ruff check .
 	LIVERFEM_TEST_DATASET=$(TEST_DATA) LIVERFEM_TEST_DATASET4=$(TEST_DATA4) \
 	    LIVERFEM_TEST_PATIENT=$(TEST_PATIENT) LIVERFEM_TEST_LIVERS=$(TEST_LIVERS) \
 	    LIVERFEM_TEST_GRASP=$(TEST_GRASP) LIVERFEM_TEST_SHIPPED=$(TEST_SHIPPED) \
+	    LIVERFEM_TEST_FORCES=$(TEST_FORCES) \
 	    bash scripts/run_pytest.sh $(TPY) tests/data_spec tests/liverviz tests/liverreg \
 	    tests/surrogate tests/reliability tests/common/test_environments.py -q --durations=12 $(TESTS)
 
@@ -272,15 +286,16 @@ patient: patient-args setup
 # AT = "X Y Z FX FY FZ" (mm, N; the liver file's frame), or a grasp GRASP = "X Y Z DX DY DZ"
 # (the 10 mm patch nearest to X Y Z moved by DX DY DZ mm: the field and the tool's force; a
 # model of grasps adds its network's rest and stiffens the force, a model of forces gives
-# the small-strain base alone: docs/surgical_loads.md; with GRASP and no MODEL, the shipped
-# model of grasps models/scene4_grasp, its card there). No FE simulation, no training. One
-# trainer process drives one solver process (python -m fem_sim serve) through these
-# commands (surrogate/make_liver.py), each side working while the other does.
+# the small-strain base alone: docs/surgical_loads.md). No MODEL: the shipped model of forces
+# models/scene4_forces, or of grasps models/scene4_grasp (cards there). No FE simulation, no
+# training. One trainer process drives one solver process (python -m fem_sim serve) through
+# these commands (surrogate/make_liver.py), each side working while the other does.
 AT ?=
 GRASP ?=
 LIVER_DIR ?= runs/liver/$(basename $(notdir $(LIVER)))
 SHIPPED_GRASP := models/scene4_grasp
-LIVER_MODEL = $(or $(MODEL),$(if $(GRASP),$(SHIPPED_GRASP)))
+SHIPPED_FORCES := models/scene4_forces
+LIVER_MODEL = $(or $(MODEL),$(if $(GRASP),$(SHIPPED_GRASP),$(SHIPPED_FORCES)))
 liver-args:
 	@$(SYS_PY) scripts/make_args.py liver LIVER="$(LIVER)" MODEL="$(LIVER_MODEL)" AT="$(AT)" \
 	    GRASP="$(GRASP)" PSCENE="$(PSCENE)" FRAME="$(FRAME)"
@@ -291,8 +306,9 @@ liver: liver-args setup
 
 # The manipulator on a liver make liver prepared (the same LIVER, LIVER_DIR and MODEL): a
 # solver process keeps the liver factorised and solves the unit responses of each new patch
-# the tool grasps (make liver's are its load's only). VIEW: more viewer flags, e.g.
-# --offscreen --out DIR. Drag the liver, the model answers with the field and the force.
+# the tool grasps (make liver's are its load's only; the rest solved in the background while
+# the window is open). No MODEL: the shipped model of grasps; MODEL=models/scene4_forces:
+# forces (handles, push / pull). VIEW: more viewer flags, e.g. --offscreen --out DIR.
 VIEW ?=
 manipulate: setup
 	@test -f $(LIVER_DIR)/data/linear.h5 || { echo "make manipulate: no" \

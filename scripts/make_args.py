@@ -47,13 +47,6 @@ def _model(value: str) -> str | None:
         "not a trained run: no model/model.json in it (surrogate train writes one)"
 
 
-def _liver_model(value: str) -> str | None:
-    if not value:
-        return ("missing: a force needs a model of forces (a trained run: README, make liver); "
-                "a grasp (GRASP=...) takes the shipped models/scene4_grasp by default")
-    return _model(value)
-
-
 def _scene(value: str) -> str | None:
     return None if Path(value).is_file() else "no such scene file"
 
@@ -81,7 +74,7 @@ CHECKS = {
                 "SYNTHETIC": lambda v: _whole(v, "drawn small-strain loads"),
                 "ORDER": _one_of("1", "2"), "GREEN": _one_of("0", "1"),
                 "FRAME": _one_of(*FRAMES)},
-    "liver": {"LIVER": _file, "MODEL": _liver_model, "PSCENE": _scene, "AT": _at, "GRASP": _grasp,
+    "liver": {"LIVER": _file, "MODEL": _model, "PSCENE": _scene, "AT": _at, "GRASP": _grasp,
               "FRAME": _one_of(*FRAMES)},
 }
 # variables of which exactly one is given: the checks above see only the one given

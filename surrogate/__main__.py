@@ -1,7 +1,7 @@
 """The trainer's command line (``liverfem-surrogate``, or ``python -m surrogate``).
 
     train --data DIR --run RUN [--config NAME] [--fresh] [key=value ...]
-    predict-liver RUN LIVER --force X Y Z FX FY FZ [--out DIR]
+    predict-liver [RUN] LIVER --force X Y Z FX FY FZ [--out DIR]
     truth-scene RUN LIVER --scene SCENE [--sims N] --out FILE [--placement NPZ] [--mesh H5]
     evaluate RUN DATA [--liver LIVER [--mesh H5]] [--population DIR] [--out FILE]
     adapt RUN DATA --liver LIVER --run OUT [--sims K] [--synthetic N] [--placement NPZ] [--tune]
@@ -50,9 +50,12 @@ def _add_predict_liver(sub) -> None:
 
     p = sub.add_parser("predict-liver", help="place a liver never seen in the training "
                        "population and predict its displacement (models of scene 4)")
-    p.add_argument("run", help="a run directory whose model was trained on a population")
-    p.add_argument("liver", help="the liver: a surface (.vtk .vtp .stl .obj .ply) or a volume "
-                   "mesh (.vtu, .vtk, data_spec .h5), in mm")
+    p.add_argument("paths", nargs="+", metavar="[RUN] LIVER",
+                   help="a run directory whose model was trained on a population (default: "
+                   "the shipped one, models/: of grasps with --grasp, of forces over the "
+                   "liver's base with --base, else the population basis), and the liver: a "
+                   "surface (.vtk .vtp .stl .obj .ply) or a volume mesh (.vtu, .vtk, "
+                   "data_spec .h5), in mm")
     p.add_argument("--force", nargs=6, type=float, action="append", default=[],
                    metavar=("X", "Y", "Z", "FX", "FY", "FZ"),
                    help="a force FX FY FZ (N) at the liver surface point nearest to X Y Z "
@@ -184,6 +187,12 @@ def _fail(command: str, message: str) -> int:
 
 
 def _predict_liver(args) -> int:
+    from surrogate.shipped import BASIS, FORCES, GRASPS
+
+    if len(args.paths) > 2:
+        return _fail("predict-liver", f"expected [RUN] LIVER, got {len(args.paths)} paths")
+    shipped = GRASPS if args.grasp else FORCES if args.base else BASIS
+    args.run, args.liver = ([shipped] + args.paths)[-2:]
     if args.grasp and not args.base:
         return _fail("predict-liver", "--grasp needs --base (the liver's own mesh and Green's "
                      "function: make liver GRASP=...)")

@@ -72,14 +72,18 @@ def test_right_variables_pass_the_check():
                                           "ORDER": "2", "GREEN": "1", "FRAME": "auto"})[1:] == []
 
 
-def test_make_liver_takes_the_shipped_model_for_a_grasp_and_asks_one_for_a_force():
-    """No MODEL: a grasp runs its steps on models/scene4_grasp (make -n: the command, not
-    run); a force is refused before any work, saying why."""
+def test_make_liver_takes_the_shipped_models_when_no_model_is_given(tmp_path):
+    """No MODEL: a grasp runs its steps on models/scene4_grasp, a force on
+    models/scene4_forces (make -n: the commands, not run); a MODEL that is no trained run is
+    still refused before any work."""
     grasp = _make("-n", "liver", f"LIVER={LIVER}", "GRASP=1 2 3 0 0 20")
     assert grasp.returncode == 0, grasp.stderr
     assert "surrogate.make_liver models/scene4_grasp" in grasp.stdout
     assert '--grasp "1 2 3 0 0 20"' in grasp.stdout
-    force = _make("liver", f"LIVER={LIVER}", "AT=1 2 3 0 0 -0.4")
-    assert force.returncode == 2
-    assert "a force needs a model of forces" in force.stderr
-    assert "make_liver" not in force.stdout + force.stderr
+    force = _make("-n", "liver", f"LIVER={LIVER}", "AT=1 2 3 0 0 -0.4")
+    assert force.returncode == 0, force.stderr
+    assert "surrogate.make_liver models/scene4_forces" in force.stdout
+    assert '--force "1 2 3 0 0 -0.4"' in force.stdout
+    bad = _make("liver", f"LIVER={LIVER}", f"MODEL={tmp_path}", "AT=1 2 3 0 0 -0.4")
+    assert bad.returncode == 2 and "not a trained run" in bad.stderr
+    assert "make_liver" not in bad.stdout + bad.stderr

@@ -1,7 +1,8 @@
-"""The shipped model of grasps (models/scene4_grasp): whole as fingerprinted, and the figures
-of its card on a validation liver reproduced from the FE truth make test solves
-(``fem_sim.batch.grasp_truth`` on Amos-054: bench/surgical_loads.py's three grasps, pulled to
-40 mm)."""
+"""The shipped models: whole as fingerprinted, and the figures of their cards on a validation
+liver reproduced from the FE truth make test solves: the model of grasps (models/scene4_grasp;
+``fem_sim.batch.grasp_truth`` on Amos-054: bench/surgical_loads.py's three grasps, pulled to
+40 mm) and the model of forces (models/scene4_forces; three of the scene's 0.4 N forces on
+Amos-054 with the model's boundary condition, ``surrogate.shipped``)."""
 
 import json
 import os
@@ -16,21 +17,31 @@ from surrogate import load_predictor
 from surrogate.metrics import displacement_metrics, mee
 
 SHIPPED = Path(__file__).resolve().parents[2] / "models" / "scene4_grasp"
+FORCES = SHIPPED.parent / "scene4_forces"
+BASIS = SHIPPED.parent / "scene4_basis"
 
 
-def test_the_shipped_model_is_whole_and_refuses_a_changed_file(tmp_path):
-    """It loads as a model of grasps with its shape model and force fit (its fingerprint
-    checked), and a copy with one byte of its weights changed is refused, naming the file."""
-    pred = load_predictor(SHIPPED / "model", load="grasp")
-    assert pred.load == "grasp" and pred.shape_model is not None
-    assert pred.grasp_force is not None and pred.grasp_force.factor([40.0])[0] > 1.0
+@pytest.mark.parametrize("model,load", [(SHIPPED, "grasp"), (FORCES, "nodal"),
+                                        (BASIS, "nodal")])
+def test_the_shipped_models_are_whole_and_refuse_a_changed_file(tmp_path, model, load):
+    """Each loads as the model of its load with its shape model (its fingerprint checked;
+    the model of grasps with its force fit, the model of forces over the liver's Green's
+    function), and a copy with one byte of its weights changed is refused, naming the file."""
+    pred = load_predictor(model / "model", load=load)
+    assert pred.load == load and pred.shape_model is not None
+    if load == "grasp":
+        assert pred.grasp_force is not None and pred.grasp_force.factor([40.0])[0] > 1.0
+    elif model == FORCES:
+        assert pred.base.from_green and pred.base.order == 1
+    else:   # the population basis: the whole field, no FE
+        assert pred.base.whole
     copy = tmp_path / "model"
-    shutil.copytree(SHIPPED / "model", copy)
+    shutil.copytree(model / "model", copy)
     data = bytearray((copy / "params.npz").read_bytes())
     data[len(data) // 2] ^= 1
     (copy / "params.npz").write_bytes(bytes(data))
     with pytest.raises(ValueError, match="params.npz"):
-        load_predictor(copy, load="grasp")
+        load_predictor(copy, load=load)
 
 
 def _truth() -> np.lib.npyio.NpzFile:
@@ -141,6 +152,101 @@ def test_make_liver_with_no_model_answers_the_cards_first_grasp_as_the_card_says
                    "--grasp", "--offscreen", "--out", str(view)]) == 2
     proc = subprocess.run(["make", "--no-print-directory", "manipulate", f"LIVER={liver}",
                            f"LIVER_DIR={out}", f"VIEW=--offscreen --out {view}"],
+                          cwd=root, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert json.loads((view / "timings.json").read_text())["frames"] > 10
+
+
+def _forces_truth() -> Path:
+    path = os.environ.get("LIVERFEM_TEST_FORCES")
+    if not path:
+        pytest.fail("LIVERFEM_TEST_FORCES not set: make test solves the card's forces "
+                    "(Makefile, TEST_FORCES); deselect with -m 'not dataset'")
+    return Path(path)
+
+
+@pytest.mark.dataset
+@pytest.mark.parametrize("model", [FORCES, BASIS])
+def test_the_shipped_models_of_forces_give_their_cards_figures(model):
+    """On each of the card's simulations at its last step: the model's, its base's (a model
+    over the base) and the naive MEE within the card's tolerance, the share under 3 mm within
+    a point; the model is well below the naive model there (MEE under 0.6 of it)."""
+    from surrogate.shipped import reference_figures
+
+    truth, card = _forces_truth(), json.loads((model / "card.json").read_text())
+    want, tol = card["reference_liver"]["sims"], card["tolerance"]["mee_relative"]
+    liver = SHIPPED.parents[1].parent / "shared" / "data" / "livers" / \
+        card["reference_liver"]["file"]
+    got = reference_figures(load_predictor(model / "model"), truth / "data", liver,
+                            truth / "mesh.h5")
+    assert [g["sim"] for g in got] == [w["sim"] for w in want]
+    for g, w in zip(got, want):
+        np.testing.assert_allclose(g["force_n"], w["force_n"], atol=1e-6)
+        for key in ("model_mee_mm", "base_mee_mm", "naive_mee_mm"):
+            assert (g[key] is None) == (w[key] is None), key
+            assert w[key] is None or g[key] == pytest.approx(w[key], rel=tol), key
+        assert abs(g["model_lt3_pct"] - w["model_lt3_pct"]) <= 1.0
+        assert g["model_mee_mm"] < 0.6 * g["naive_mee_mm"]
+
+
+def test_predict_liver_with_no_run_places_the_shipped_population_basis(tmp_path):
+    """``predict-liver LIVER --force ...`` with no RUN: the shipped population basis (no FE
+    at all) placed on a shared liver file writes its field; with --base it would be the
+    model of forces, with --grasp the model of grasps (the defaults it names)."""
+    from surrogate.__main__ import main
+
+    card = json.loads((BASIS / "card.json").read_text())
+    liver = SHIPPED.parents[1].parent / "shared" / "data" / "livers" / \
+        card["reference_liver"]["file"]
+    out = tmp_path / "pred"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert main(["predict-liver", str(liver), "--force", "70.8", "-20.9", "-91.4", "0", "0",
+                     "0.4", "--out", str(out)]) == 0
+    said = json.loads((out / "prediction.json").read_text())
+    assert said["model"] == str(BASIS)
+    assert np.max(np.linalg.norm(said["forces_N"], axis=1)) == pytest.approx(0.4)
+    assert (out / "liver_deformed.vtu").exists()
+    assert main(["predict-liver", "a", "b", str(liver), "--force", *["0"] * 6]) == 2
+
+
+@pytest.mark.dataset
+def test_make_liver_with_no_model_answers_a_force_as_the_card_says(tmp_path):
+    """``make liver LIVER=<file> AT=...`` with no MODEL and no dataset, on Amos-054 at the
+    card's first force: the shipped model of forces, the unit response of that node alone
+    solved, the field written as near the FE truth as the card says; make manipulate opens on
+    it with that model (off screen: the handles, the drag)."""
+    import subprocess
+
+    from data_spec.geometry import read_geometry
+    from data_spec.shards import list_shards, read_shard
+    from liverviz.pictures import pyvista
+
+    truth, card = _forces_truth(), json.loads((FORCES / "card.json").read_text())
+    want, tol = card["reference_liver"]["sims"][0], card["tolerance"]["mee_relative"]
+    root, out = SHIPPED.parents[1], tmp_path / "liver"
+    liver = root.parent / "shared" / "data" / "livers" / card["reference_liver"]["file"]
+    sh = read_shard(list_shards(truth / "data")[0])
+    points = read_geometry(truth / "mesh.h5").points
+    at = [*points[sh.load_nodes[0]], *sh.forces[0]]
+    proc = subprocess.run(["make", "--no-print-directory", "liver", f"LIVER={liver}",
+                           f"LIVER_DIR={out}", "AT=" + " ".join(f"{v:.9g}" for v in at)],
+                          cwd=root, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "models/scene4_forces" in proc.stdout
+    from data_spec.linear_fields import read_linear_fields
+
+    lf = read_linear_fields(out / "data" / "linear.h5")
+    assert list(lf.green_nodes) == [sh.load_nodes[0]]   # the force's node alone
+    grid = pyvista().read(out / "prediction" / "liver_deformed.vtu")
+    np.testing.assert_allclose(grid.points, points, atol=1e-4)
+    u = np.asarray(grid.point_data["displacement"])
+    assert mee(u, sh.displacement[sh.n_done - 1]) == pytest.approx(want["model_mee_mm"],
+                                                                   rel=tol)
+    view = tmp_path / "view"
+    proc = subprocess.run(["make", "--no-print-directory", "manipulate", f"LIVER={liver}",
+                           f"LIVER_DIR={out}", "MODEL=models/scene4_forces",
+                           f"VIEW=--offscreen --out {view}"],
                           cwd=root, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert json.loads((view / "timings.json").read_text())["frames"] > 10
