@@ -96,7 +96,8 @@ def _steps(a, d: Path) -> list[tuple[str, str, list[str]]]:
                                 "--out", d / "prediction"])]
 
 
-# where JAX keeps compiled calls across processes (make liver, then predict-liver, the viewer)
+# where JAX keeps compiled calls: the warm-up and predict-liver load the model as two objects,
+# and the second compile of the same call is then a lookup
 JAX_CACHE = Path(__file__).resolve().parents[1] / "runs" / "jax-cache"
 
 
