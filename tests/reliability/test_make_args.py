@@ -86,4 +86,4 @@ def test_make_liver_takes_the_shipped_models_when_no_model_is_given(tmp_path):
     assert '--force "1 2 3 0 0 -0.4"' in force.stdout
     bad = _make("liver", f"LIVER={LIVER}", f"MODEL={tmp_path}", "AT=1 2 3 0 0 -0.4")
     assert bad.returncode == 2 and "not a trained run" in bad.stderr
-    assert "make_liver" not in bad.stdout + bad.stderr
+    assert "surrogate.make_liver" not in bad.stdout + bad.stderr   # refused before any work
