@@ -457,15 +457,15 @@ def _checked_request(args, fail):
         return fail(f"--force: the model takes {L} force(s), got {len(args.force)} (each "
                     "--force X Y Z FX FY FZ: a point near the liver surface in mm and a force "
                     "in N)")
-    spec = np.asarray(grasp or args.force, dtype=np.float64)
+    spec, flag = np.asarray(grasp or args.force, dtype=np.float64), \
+        "--grasp" if grasp else "--force"
     if not np.all(np.isfinite(spec)):
-        return fail(f"--{'grasp' if grasp else 'force'}: contains NaN or inf")
+        return fail(f"{flag}: contains NaN or inf")
     try:
         points, triangles = read_liver_surface(args.liver, args.scale_to_mm)
     except LiverFileError as exc:
         return fail(exc)
-    said, refused = _force_points(spec, points, triangles, args.liver,
-                                  "--grasp" if grasp else "--force")
+    said, refused = _force_points(spec, points, triangles, args.liver, flag)
     if refused:
         return fail(refused)
     from data_spec.liver_shape import surface_volume_ml, unlike_a_liver

@@ -47,16 +47,15 @@ def reference_figures(pred, truth: str | Path, liver: str | Path, mesh: str | Pa
     points = read_geometry(geometry_path(truth, shards[0].geometry_id)).points
     placement, _ = place(pred, liver, None, mesh=mesh)
     base = _base_of(pred, truth)
-    true_all = np.concatenate([np.asarray(sh.displacement[:sh.n_done]).reshape(-1, 3)
-                               for sh in shards])
-    naive = true_all.mean(axis=0)
-    rows = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")   # every step of every simulation, placed once
+        got, true, _ = _placed_fields(pred, placement, None, points, shards, base)
+    naive = true.mean(axis=0)
+    rows, end = [], 0
     for sh in shards:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            got, true, _ = _placed_fields(pred, placement, None, points, [sh], base)
         n = sh.output_nodes.size
-        last_got, last_true = got[-n:], true[-n:]
+        end += sh.n_done * n   # this simulation's last step: the n rows before ``end``
+        last_got, last_true = got[end - n:end], true[end - n:end]
         m = displacement_metrics(last_got, last_true)
         row = {"sim": int(sh.sim_index), "steps": int(sh.n_done),
                "force_n": np.round(np.asarray(sh.forces, dtype=float), 6).tolist(),

@@ -15,10 +15,20 @@ import pytest
 
 from surrogate import load_predictor
 from surrogate.metrics import displacement_metrics, mee
+from surrogate.shipped import BASIS, FORCES, ROOT
+from surrogate.shipped import GRASPS as SHIPPED
 
-SHIPPED = Path(__file__).resolve().parents[2] / "models" / "scene4_grasp"
-FORCES = SHIPPED.parent / "scene4_forces"
-BASIS = SHIPPED.parent / "scene4_basis"
+
+def _card_liver(card: dict) -> Path:
+    """The shared liver file a card measures (``../shared`` beside the clone)."""
+    return ROOT.parent / "shared" / "data" / "livers" / card["reference_liver"]["file"]
+
+
+def _env_path(var: str, what: str) -> Path:
+    path = os.environ.get(var)
+    if not path:
+        pytest.fail(f"{var} not set: make test solves {what}; deselect with -m 'not dataset'")
+    return Path(path)
 
 
 @pytest.mark.parametrize("model,load", [(SHIPPED, "grasp"), (FORCES, "nodal"),
@@ -45,11 +55,8 @@ def test_the_shipped_models_are_whole_and_refuse_a_changed_file(tmp_path, model,
 
 
 def _truth() -> np.lib.npyio.NpzFile:
-    path = os.environ.get("LIVERFEM_TEST_SHIPPED")
-    if not path:
-        pytest.fail("LIVERFEM_TEST_SHIPPED not set: make test solves the card's grasps "
-                    "(fem_sim.batch.grasp_truth); deselect with -m 'not dataset'")
-    return np.load(path)
+    return np.load(_env_path("LIVERFEM_TEST_SHIPPED",
+                             "the card's grasps (fem_sim.batch.grasp_truth)"))
 
 
 @pytest.mark.dataset
@@ -108,8 +115,7 @@ def test_make_liver_with_no_model_answers_the_cards_first_grasp_as_the_card_says
 
     z, card = _truth(), json.loads((SHIPPED / "card.json").read_text())
     want, tol = card["reference_liver"]["grasps"][0]["steps"][-1], card["tolerance"]
-    root, out = SHIPPED.parents[1], tmp_path / "liver"
-    liver = root.parent / "shared" / "data" / "livers" / card["reference_liver"]["file"]
+    root, out, liver = ROOT, tmp_path / "liver", _card_liver(card)
     mesh = subprocess.run([str(root / ".venv-solver" / "bin" / "python"), "-m", "fem_sim",
                            "mesh", str(liver), "--scene", card["reference_liver"]["scene"],
                            "--out", str(tmp_path / "mesh.h5"), "--no-picture"],
@@ -158,11 +164,7 @@ def test_make_liver_with_no_model_answers_the_cards_first_grasp_as_the_card_says
 
 
 def _forces_truth() -> Path:
-    path = os.environ.get("LIVERFEM_TEST_FORCES")
-    if not path:
-        pytest.fail("LIVERFEM_TEST_FORCES not set: make test solves the card's forces "
-                    "(Makefile, TEST_FORCES); deselect with -m 'not dataset'")
-    return Path(path)
+    return _env_path("LIVERFEM_TEST_FORCES", "the card's forces (Makefile, TEST_FORCES)")
 
 
 @pytest.mark.dataset
@@ -175,8 +177,7 @@ def test_the_shipped_models_of_forces_give_their_cards_figures(model):
 
     truth, card = _forces_truth(), json.loads((model / "card.json").read_text())
     want, tol = card["reference_liver"]["sims"], card["tolerance"]["mee_relative"]
-    liver = SHIPPED.parents[1].parent / "shared" / "data" / "livers" / \
-        card["reference_liver"]["file"]
+    liver = _card_liver(card)
     got = reference_figures(load_predictor(model / "model"), truth / "data", liver,
                             truth / "mesh.h5")
     assert [g["sim"] for g in got] == [w["sim"] for w in want]
@@ -196,8 +197,7 @@ def test_predict_liver_with_no_run_places_the_shipped_population_basis(tmp_path)
     from surrogate.__main__ import main
 
     card = json.loads((BASIS / "card.json").read_text())
-    liver = SHIPPED.parents[1].parent / "shared" / "data" / "livers" / \
-        card["reference_liver"]["file"]
+    liver = _card_liver(card)
     out = tmp_path / "pred"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -224,8 +224,7 @@ def test_make_liver_with_no_model_answers_a_force_as_the_card_says(tmp_path):
 
     truth, card = _forces_truth(), json.loads((FORCES / "card.json").read_text())
     want, tol = card["reference_liver"]["sims"][0], card["tolerance"]["mee_relative"]
-    root, out = SHIPPED.parents[1], tmp_path / "liver"
-    liver = root.parent / "shared" / "data" / "livers" / card["reference_liver"]["file"]
+    root, out, liver = ROOT, tmp_path / "liver", _card_liver(card)
     sh = read_shard(list_shards(truth / "data")[0])
     points = read_geometry(truth / "mesh.h5").points
     at = [*points[sh.load_nodes[0]], *sh.forces[0]]
