@@ -92,7 +92,9 @@ def cpd_nonrigid(X: np.ndarray, Y: np.ndarray, schedule=STAGED, w: float = 0.0,
         for _ in range(max_iterations):
             its += 1
             # E-step: posterior of template point m for target point n
-            P = np.exp(-_sqdist(T, x) / (2.0 * sigma2))
+            P = _sqdist(T, x)
+            P *= -0.5 / sigma2
+            np.exp(P, out=P)
             c = (2.0 * math.pi * sigma2) ** (d / 2) * w / (1.0 - w) * m / n if w > 0 else 0.0
             den = P.sum(0) + c
             den[den == 0] = np.finfo(float).tiny
@@ -100,10 +102,7 @@ def cpd_nonrigid(X: np.ndarray, Y: np.ndarray, schedule=STAGED, w: float = 0.0,
             P1, Pt1 = P.sum(1), P.sum(0)
             Np = P1.sum()
             PX = P @ x
-            # M-step: (diag(P1) G + lam sigma2 I) W = PX - diag(P1) Ys
-            A = P1[:, None] * G
-            A[np.diag_indices(m)] += lam * sigma2
-            W = np.linalg.solve(A, PX - P1[:, None] * Ys)
+            W = _m_step(G, P1, PX, Ys, lam * sigma2)
             T = Ys + G @ W
             s_old = sigma2
             sigma2 = ((Pt1 * xx).sum() - 2.0 * (PX * T).sum() + (P1 * (T * T).sum(1)).sum()) \
@@ -116,6 +115,24 @@ def cpd_nonrigid(X: np.ndarray, Y: np.ndarray, schedule=STAGED, w: float = 0.0,
         Ys = T
     res.sigma2 = sigma2
     return res
+
+
+def _m_step(G: np.ndarray, P1: np.ndarray, PX: np.ndarray, Ys: np.ndarray, c: float):
+    """W of CPD's M-step, (diag(P1) G + c I) W = PX - diag(P1) Ys, solved in its symmetric
+    form: with D = diag(P1) and W = D^(1/2) Z, (D^(1/2) G D^(1/2) + c I) Z = D^(-1/2) PX -
+    D^(1/2) Ys (the first equation's rows multiplied by D^(-1/2)), whose matrix is symmetric
+    positive definite (G is a Gaussian kernel, c > 0): a Cholesky factorisation, half an LU's
+    work, the same W to round-off. A template point no target claims (P1 = 0) has PX = 0 and
+    W = 0 in both forms.
+    """
+    from scipy.linalg import cho_factor, cho_solve
+
+    s = np.sqrt(P1)[:, None]
+    A = s * G * s.T
+    A[np.diag_indices_from(A)] += c
+    rhs = np.divide(PX, s, out=np.zeros_like(PX), where=s > 0) - s * Ys
+    return s * cho_solve(cho_factor(A, lower=True, overwrite_a=True, check_finite=False), rhs,
+                         check_finite=False)
 
 
 def chamfer(A: np.ndarray, B: np.ndarray) -> float:
