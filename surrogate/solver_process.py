@@ -15,12 +15,16 @@ import sys
 class SolverProcess:
     """``python -m fem_sim serve`` under ``python`` (the solver's environment): ``run(words)``
     sends a command and returns its exit code; its messages reach this process's standard
-    error. The factorisation's threads take the cores (no OMP / OpenBLAS limit).
+    error. The factorisation's threads take the cores (no OMP / OpenBLAS limit), or
+    ``threads``.
     """
 
-    def __init__(self, python: str):
+    def __init__(self, python: str, threads: int | None = None):
         env = {k: v for k, v in os.environ.items()
-               if k not in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
+               if k not in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+        if threads:   # a process beside another's work: its solves on that many threads
+            env.update({k: str(threads) for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+                                                  "MKL_NUM_THREADS")})
         self.proc = subprocess.Popen([python, "-m", "fem_sim", "serve"], stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, text=True, env=env)
 

@@ -346,10 +346,10 @@ def test_a_patch_beyond_make_livers_responses_is_solved_when_grasped(patient, tm
 
 def test_the_window_solves_every_patch_in_the_background_and_a_grasp_finds_it(patient,
                                                                              tmp_path):
-    """The window's prefetch (the solver process idle while people look): the free surface's
+    """The window's prefetch (a second solver process while people look): the free surface's
     unit responses solved in the background, nearest the tool first; a grasp asked meanwhile
-    is answered (it goes before the next chunk), one afterwards needs no request of its own,
-    and every row is the whole file's (the same factorisation's back-solves)."""
+    is answered by the first process, one afterwards needs no request of its own, and every
+    row is the whole file's (the same factorisation's back-solves), none twice."""
     import time
 
     from surrogate.manipulator import GraspManipulator
@@ -378,11 +378,44 @@ def test_the_window_solves_every_patch_in_the_background_and_a_grasp_finds_it(pa
         np.testing.assert_allclose(m.predict().u, u, rtol=1e-5, atol=1e-5 * np.abs(u).max())
         np.testing.assert_allclose(m.handles[0].force, force[0], rtol=1e-5)
         lf = m._lf
+        assert m._grow.prefetch_error is None and m._grow.prefetch_seconds > 0
         assert np.array_equal(np.sort(lf.green_nodes), np.sort(whole.green_nodes))
         row = {int(n): i for i, n in enumerate(whole.green_nodes)}
         order = [row[int(n)] for n in lf.green_nodes]
         np.testing.assert_allclose(lf.green, whole._lf.green[order], rtol=1e-5,
                                    atol=1e-5 * np.abs(whole._lf.green).max())
+    finally:
+        m.close()
+
+
+def test_a_background_that_cannot_open_leaves_the_grasps_answered(patient, tmp_path,
+                                                                  monkeypatch):
+    """The prefetch's own solver process failing to open the liver stops the background with
+    its reason (prefetch_error); the window's grasps are still solved on request."""
+    from surrogate.green_rows import GrownGreen
+    from surrogate.manipulator import GraspManipulator
+    from surrogate.over_green import OverGreen
+
+    d, info, run = patient
+    rest = load_predictor(run / "model")
+    part, _, other = _near_copy(d, OverGreen(rest, d / "data", _placed(rest, d, info)),
+                                tmp_path)
+    opened = GrownGreen._open
+
+    def second_fails(self, threads):
+        if threads == 1:
+            raise ValueError("no second process here")
+        return opened(self, threads)
+
+    monkeypatch.setattr(GrownGreen, "_open", second_fails)
+    solver = str(Path(__file__).resolve().parents[2] / ".venv-solver" / "bin" / "python")
+    m = GraspManipulator(part, solver=solver)
+    try:
+        m.prefetch()
+        m._grow._thread.join(timeout=60)
+        assert not m._grow.prefetching and m._grow.prefetch_seconds is None
+        assert m._grow.prefetch_error == "no second process here"
+        assert m.pick(m.points[other]) == other and len(m.solved_seconds) == 1
     finally:
         m.close()
 
