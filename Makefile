@@ -328,12 +328,14 @@ bench-patient: setup
 
 # Surgical loads (resumable): grasps pulled 5-40 mm and 0.4-4 N on a patch, FE against the
 # small-strain base over each validation liver's Green's function -> docs/surgical_loads.md;
-# with a model of grasps (make bench-grasp-rest trains one on scene4_grasp), its rows beside
-# the base's, placed on each liver in the trainer's environment
-GRASP_MODEL ?= bench/results/grasp_rest/run
+# then the rows of the model of grasps (GRASP_MODEL: the shipped one, or make
+# bench-grasp-rest's) and of the model of forces (FORCE_MODEL) beside the base's, placed on
+# each liver in the trainer's environment
+GRASP_MODEL ?= $(SHIPPED_GRASP)
+FORCE_MODEL ?= $(SHIPPED_FORCES)
 bench-surgical: setup-solver setup-trainer
 	$(SPY) bench/surgical_loads.py
-	$(if $(wildcard $(GRASP_MODEL)/model/model.json),$(TPY) bench/surgical_loads.py --report-only --model $(GRASP_MODEL))
+	$(TPY) bench/surgical_loads.py --report-only --model $(GRASP_MODEL) --force-model $(FORCE_MODEL)
 
 # make liver GRASP=... with the shipped model timed from each validation liver's file, one
 # after the other on a quiet machine -> docs/surgical_loads.md

@@ -28,7 +28,12 @@ from fem_sim.batch.chunked import generation_rate
 from liverviz.ledger import Ledger
 from liverviz.plots import surgical_curves
 from liverviz.report import ROOT, render, write_report
-from surrogate.reports import REPORT_NAMES, surgical_curve, surgical_per_liver
+from surrogate.reports import (
+    REPORT_NAMES,
+    surgical_curve,
+    surgical_per_liver,
+    surgical_worst_picture,
+)
 
 SCENE = ROOT / "data_spec" / "scenes" / "scene4_livers.toml"
 GRASP_SCENE = ROOT / "data_spec" / "scenes" / "scene4_grasp.toml"
@@ -70,7 +75,7 @@ def solve_liver(name: str, n_grasps: int, n_forces: int) -> dict:
     away = load_directions(rng, "away", g.points[centres[:n_grasps]], g.points[fixed])
     out = {"liver": name, "nodes": int(g.n_nodes), "prepare_s": t1 - t0, "grasps": [],
            "green_rows_s": time.perf_counter() - t1, "forces": []}
-    worst, kept = (-1.0,), {}   # every grasp's fields, for a model's rows (--model)
+    worst, kept = (-1.0,), {}   # every case's fields, for a model's rows (--model)
     for k in range(n_grasps):
         row, fields = _grasp_case(prob, mat, fixed, patches[k], 40.0 * away[k], green, held)
         out["grasps"].append(row)
@@ -79,14 +84,20 @@ def solve_liver(name: str, n_grasps: int, n_forces: int) -> dict:
         if row["status"] == "ok" and row["steps"][-1]["base"]["mee"] > worst[0]:
             worst = (row["steps"][-1]["base"]["mee"], (fields[0][-1], fields[1][-1]),
                      patches[k], 40.0 * away[k])
-    (RESULTS / "fields").mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(RESULTS / "fields" / f"{name}.npz", points=g.points, **kept,
-                        centres=centres[:n_grasps], pulls=40.0 * away)
+    forces = []
     for k in range(n_grasps, n_grasps + n_forces):
         direction = load_directions(rng, "uniform", g.points[centres[k:k + 1]], None)[0]
         w = patch_weights(g.points, g.surface_triangles, patches[k], centres[k], RADIUS)
-        out["forces"].append(_force_case(prob, mat, fixed, patches[k], w,
-                                         FORCES[-1] * direction, green, held))
+        row, fields = _force_case(prob, mat, fixed, patches[k], w, FORCES[-1] * direction,
+                                  green, held)
+        out["forces"].append(row)
+        forces.append(FORCES[-1] * direction)
+        kept.update({f"ftruth_{k - n_grasps}": fields[0].astype(np.float32),
+                     f"funit_{k - n_grasps}": fields[1].astype(np.float32)})
+    (RESULTS / "fields").mkdir(parents=True, exist_ok=True)   # for a model's rows (--model)
+    np.savez_compressed(RESULTS / "fields" / f"{name}.npz", points=g.points, **kept,
+                        centres=centres[:n_grasps], pulls=40.0 * away,
+                        fcentres=centres[n_grasps:], forces=np.array(forces))
     if len(worst) > 1:
         RESULTS.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(RESULTS / f"{name}.npz", points=g.points,
@@ -121,7 +132,8 @@ def _grasp_case(prob, mat, fixed, patch, d, green, held):
 
 
 def _force_case(prob, mat, fixed, patch, weights, force, green, held):
-    """The record of ``force`` (N) spread over ``patch`` by ``weights``, stored at FORCES."""
+    """(record, (FE fields at FORCES, the base's at the last)) of ``force`` (N) spread over
+    ``patch`` by ``weights``."""
     from fem_sim import Constraint, NodalLoad
     from surrogate.small_strain import green_product
 
@@ -135,7 +147,7 @@ def _force_case(prob, mat, fixed, patch, weights, force, green, held):
         truth = sol.displacement[s]
         row["steps"].append({"force": FORCES[s], "base": errors(truth, fractions[s] * unit),
                              "naive": errors(truth, truth.mean(0))})
-    return row
+    return row, (sol.displacement[:sol.n_done], unit)
 
 
 PLACED = b"the population's registration on the prepared mesh"
@@ -172,40 +184,54 @@ def ready(name: str) -> dict:
             "view": timed_manipulator(d / "data", str(ROOT / ".venv-solver/bin/python"))}
 
 
-def model_rows(run: Path, ledger, names) -> None:
+def _cases(z, r: dict, kind: str) -> list[dict]:
+    """A liver's FE cases of ``kind`` (its fields file ``z``, its record ``r``) as
+    surrogate.over_green's grasps_on_mesh / forces_on_mesh take them."""
+    if kind == "forces":
+        return [{"centre": z["fcentres"][k], "force": z["forces"][k], "unit": z[f"funit_{k}"],
+                 "fractions": np.array(FORCES) / FORCES[-1], "truth": z[f"ftruth_{k}"]}
+                for k in range(len(r["forces"]))]
+    return [{"centre": z["centres"][k], "pull": z["pulls"][k], "patch": z[f"patch_{k}"],
+             "fractions": np.array(PULLS) / PULLS[-1], "base": z[f"base_{k}"],
+             "truth": z[f"truth_{k}"], "base_force": [st["base_force"] for st in c["steps"]],
+             "fe_force": [st["fe_force"] for st in c["steps"]]} for k, c in enumerate(r["grasps"])]
+
+
+def model_rows(run: Path, ledger, names, kind: str = "grasps") -> None:
     """Each solved liver's grasps answered by the model of grasps ``run`` (the trainer's
-    environment) registered on the liver's mesh as the population's livers were, over the
-    same base (its network's rest added, its force stiffened): MEE and force error added to
-    every step of the liver's record, once per run and placement rule."""
-    from surrogate.over_green import grasps_on_mesh
+    environment), or its pressed forces (``kind`` "forces") by a model of forces, registered
+    on the liver's mesh as the population's livers were, over the same base (its network's
+    rest added, a grasp's force stiffened): MEE (and force error) added to every step of the
+    liver's record, once per run and placement rule."""
+    from surrogate import over_green
     from surrogate.predictor import load_predictor
 
-    pred = load_predictor(ROOT / run / "model", load="grasp")
+    pred = load_predictor(ROOT / run / "model", load="grasp" if kind == "grasps" else "nodal")
     made = hashlib.sha256(b"".join((ROOT / run / "model" / f).read_bytes() for f in (
         "model.json", "params.npz")) + PLACED).hexdigest()[:16]   # which export, placed how
+    mark = "model" if kind == "grasps" else "force_model"
     for name, r in ledger.records().items():
         path = RESULTS / "fields" / f"{name}.npz"
-        if name not in names or (r.get("model_run"), r.get("model_trained_on")) == (
+        if name not in names or (r.get(f"{mark}_run"), r.get(f"{mark}_trained_on")) == (
                 str(run), made) or not path.exists():
             continue
         z = np.load(path)
+        if kind == "forces" and "fcentres" not in z.files:   # solved before forces were kept
+            continue
         # the liver as its FE solved it: meshed, turned and registered as the population's
         # livers were (file_population.prepare), its nodes in the population's frame
-        rows = grasps_on_mesh(pred, z["points"], np.load(RESULTS / f"{name}.npz")["triangles"], [
-            {"centre": z["centres"][k], "pull": z["pulls"][k], "patch": z[f"patch_{k}"],
-             "fractions": np.array(PULLS) / PULLS[-1], "base": z[f"base_{k}"],
-             "truth": z[f"truth_{k}"], "base_force": [st["base_force"] for st in c["steps"]],
-             "fe_force": [st["fe_force"] for st in c["steps"]]} for k, c in enumerate(r["grasps"])])
-        last = {}   # each grasp's field at its last step, for the picture
-        for k, case in enumerate(r["grasps"]):
+        rows = getattr(over_green, f"{kind}_on_mesh")(
+            pred, z["points"], np.load(RESULTS / f"{name}.npz")["triangles"], _cases(z, r, kind))
+        last = {}   # each case's field at its last step (a grasp's: the picture)
+        for k, case in enumerate(r[kind]):
             for step, row in zip(case["steps"], rows[k]):
                 step["model"] = {"mee": row["mee"], "p95": row["p95"], "lt3": row["lt3"],
                                  "mean_u": step["base"]["mean_u"]}
-                step["model_force_error"] = row["force_error"]
+                step.update({"model_force_error": row["force_error"]} if "force" in row else {})
             last[f"model_{k}"] = rows[k][-1]["field"].astype(np.float32)
-        np.savez_compressed(path.with_stem(f"{name}_model"), **last)
-        ledger.add({**r, "model_run": str(run), "model_trained_on": made})
-        print(f"[model] {name}", flush=True)
+        np.savez_compressed(path.with_stem(f"{name}_{mark}"), **last)
+        ledger.add({**r, f"{mark}_run": str(run), f"{mark}_trained_on": made})
+        print(f"[{mark}] {name}", flush=True)
 
 
 def main(argv=None) -> int:
@@ -218,6 +244,8 @@ def main(argv=None) -> int:
                    "shipped model) from each liver file, then the report")
     p.add_argument("--model", metavar="RUN", help="a model of grasps (bench/grasp_rest.py's "
                    "run; the trainer's environment): its rows beside the base's")
+    p.add_argument("--force-model", metavar="RUN", help="a model of forces over the base "
+                   "(population_green): its rows against the pressed force")
     a = p.parse_args(argv)
     RESULTS.mkdir(parents=True, exist_ok=True)
     if a.rate:
@@ -237,8 +265,9 @@ def main(argv=None) -> int:
         from subprocess import run
 
         return run([sys.executable, __file__, "--report-only", f"--livers={a.livers}"]).returncode
-    if a.model:
-        model_rows(Path(a.model).resolve().relative_to(ROOT), ledger, names)
+    for run, kind in ((a.model, "grasps"), (a.force_model, "forces")):
+        if run:
+            model_rows(Path(run).resolve().relative_to(ROOT), ledger, names, kind)
     records = [r for n, r in ledger.records().items() if n in names]
     timed = json.loads(READY.read_text()) if READY.exists() else None
     saved = ROOT / "docs" / "surgical_loads.json"
@@ -264,7 +293,8 @@ def report(records: list[dict], timed: list | None) -> None:
         if (RESULTS / "rate.json").exists() else None
     surgical_curves(grasp, force, GOAL, ROOT / "docs" / "surgical_loads.png")
     data = {"livers": records, "grasp_curve": grasp, "force_curve": force,
-            "timing": grasp_latency(), "goal": GOAL, "rate": rate, "worst": _picture(records),
+            "timing": grasp_latency(), "goal": GOAL, "rate": rate, "worst": surgical_worst_picture(
+                records, RESULTS, ROOT / "docs" / "surgical_loads_worst.png"),
             "ready": timed}
     write_report(ROOT / "docs" / "surgical_loads.md", "Surgical loads on the validation livers",
                  _body(data), data)
@@ -279,41 +309,11 @@ def _body(data: dict) -> str:
                   timing=data["timing"], goal=data["goal"], rate=data["rate"], ready=data["ready"],
                   worst=data.get("worst"), places=PLACES, n_cases=len(cases),
                   model_run=records[0].get("model_run") if records else None,
+                  force_model_run=records[0].get("force_model_run") if records else None,
                   ok=[c for _, c in cases if c["status"] == "ok"],
                   failed=[f"{n}: {c['reason']}" for n, c in cases if c["status"] != "ok"],
                   g40=surgical_per_liver(records, "grasps", "pull", 40.0),
                   f4=surgical_per_liver(records, "forces", "force", 4.0)).rstrip("\n")
-
-
-def _picture(records) -> str | None:
-    """docs/surgical_loads_worst.png: the worst liver's worst 40 mm grasp, FE beside the model
-    of grasps (when measured), the small-strain base and the error of the first."""
-    from liverviz.pictures import Panel, Surface, render_panels
-
-    g40 = surgical_per_liver(records, "grasps", "pull", 40.0)
-    m = "model" if g40 and all("model" in v for v in g40.values()) else "base"
-    name = max((n for n in g40 if (RESULTS / f"{n}.npz").exists()),
-               key=lambda n: g40[n][m]["mee"], default=None)
-    if name is None:
-        return None
-    z = dict(np.load(RESULTS / f"{name}.npz"))   # the mesh, and the base's worst grasp
-    shown = {"small-strain base": z["base"]}
-    if m == "model":   # the model's worst grasp of the liver, every field from its files
-        cases = next(r for r in records if r["liver"] == name)["grasps"]
-        k = max((k for k, c in enumerate(cases) if c["status"] == "ok"),
-                key=lambda k: cases[k]["steps"][-1]["model"]["mee"])
-        f, fm = (np.load(RESULTS / "fields" / f"{name}{x}.npz") for x in ("", "_model"))
-        z.update(truth=f[f"truth_{k}"][-1], patch=f[f"patch_{k}"])
-        shown = {"model of grasps": fm[f"model_{k}"], "small-strain base": f[f"base_{k}"][-1]}
-    s, centre = Surface.from_mesh(z["points"], z["triangles"], z["fixed"]), z["patch"][:1]
-    err = np.linalg.norm(z["truth"] - next(iter(shown.values())), axis=1)[s.nodes]
-    panels = [Panel(s, u[s.nodes], label=label, load_nodes=centre)
-              for label, u in {"FE (Ogden)": z["truth"], **shown}.items()]
-    panels.append(Panel(s, z["truth"][s.nodes], scalars=err, title=f"{m} error (mm)",
-                        label=f"|FE - {m}|", load_nodes=centre))
-    render_panels(panels, ROOT / "docs" / "surgical_loads_worst.png",
-                  title=f"{name}: a 10 mm grasp pulled 40 mm")
-    return f"{name} ({m} MEE {g40[name][m]['mee']:.2f} mm at 40 mm)"
 
 
 if __name__ == "__main__":

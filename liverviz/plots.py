@@ -210,14 +210,17 @@ def error_against_peak(curves: list[dict], kmax: int, goal_mm: float, big_peak_m
 
 def surgical_curves(grasp: list[dict], force: list[dict], goal: dict, png: str | Path) -> Path:
     """MEE against the grasp's pull and against the pressed force (median and worst liver,
-    the small-strain base and the naive model) and the base's reaction-force error against
-    the pull, with the goals (``grasp``, ``force``: bench/surgical_loads.py's curves).
+    the model where the rows have one, the small-strain base and the naive model) and the
+    reaction-force error against the pull (model, base), with the goals (``grasp``,
+    ``force``: bench/surgical_loads.py's curves).
     """
     fig, ax = _pyplot().subplots(1, 3, figsize=(13, 3.8))
     for rows, key, a, unit in ((grasp, "pull", ax[0], "grasp pull (mm)"),
                                (force, "force", ax[2], "force on the patch (N)")):
         x = [r[key] for r in rows]
-        for m, colour in (("base", "C0"), ("naive", "C3")):
+        for m, colour in (("model", "C2"), ("base", "C0"), ("naive", "C3")):
+            if rows and m not in rows[0]:
+                continue
             a.plot(x, [r[m]["mee_median"] for r in rows], "o-", color=colour,
                    label=f"{m}, median liver")
             a.plot(x, [r[m]["mee_worst"] for r in rows], "--", color=colour,
@@ -227,7 +230,10 @@ def surgical_curves(grasp: list[dict], force: list[dict], goal: dict, png: str |
         a.legend(fontsize=7)
     for k, style in (("median", "o-"), ("worst", "--")):
         ax[1].plot([r["pull"] for r in grasp], [r[f"force_error_{k}"] for r in grasp], style,
-                   label=f"base, {k} liver")
+                   color="C0", label=f"base, {k} liver")
+        if grasp and "model" in grasp[0]:
+            ax[1].plot([r["pull"] for r in grasp], [r["model"][f"force_{k}"] for r in grasp],
+                       style, color="C2", label=f"model, {k} liver")
     ax[1].axhline(goal["force"], color="k", lw=0.8, ls=":", label="goal")
     ax[1].set(xlabel="grasp pull (mm)", ylabel="reaction force error (%)")
     ax[1].legend(fontsize=7)

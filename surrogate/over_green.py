@@ -307,22 +307,36 @@ def same_liver(data, g, liver) -> None:
                          "directory of this one")
 
 
-def grasps_on_mesh(predictor, points, triangles, grasps) -> list[list[dict]]:
-    """A model of grasps on a liver meshed and turned as its population's livers (points
-    (n, 3) mm in the population's frame, surface ``triangles``: the template registered on
-    them as on theirs), over FE truths of grasps: per grasp (a dict of ``centre`` node,
-    ``pull`` (3,) mm at the last step, ``fractions`` of it, ``patch``, ``base`` and ``truth``
-    (steps, n, 3) mm, ``base_force`` and ``fe_force`` (steps, 3) N) and step, the model's
-    ``field`` and ``force`` (:func:`grasp_over_base`) with its MEE, 95th percentile and % of
-    nodes under 3 mm against the truth and its force's error (%).
+def _placed_on_mesh(predictor, points, triangles):
+    """The model placed on a liver meshed and turned as its population's livers (points
+    (n, 3) mm in the population's frame, surface ``triangles``): the template registered on
+    them as on theirs, its field at the mesh's nodes.
     """
-    from surrogate.grasp import force_error_pct
-    from surrogate.metrics import displacement_metrics
     from surrogate.predict_liver import PlacedModel, place_liver
 
     points = np.asarray(points, dtype=np.float64)
-    placed = PlacedModel(predictor, nodes=points, placement=place_liver(
+    return points, PlacedModel(predictor, nodes=points, placement=place_liver(
         predictor, points, triangles, center=False)[0])
+
+
+def _case_row(u, truth, **more) -> dict:
+    from surrogate.metrics import displacement_metrics
+
+    m = displacement_metrics(u, np.asarray(truth, np.float64))
+    return {"field": u, "mee": m["mee"], "p95": m["ee_p95"], "lt3": m["pct_ee_lt_3mm"], **more}
+
+
+def grasps_on_mesh(predictor, points, triangles, grasps) -> list[list[dict]]:
+    """A model of grasps on a liver meshed and turned as its population's livers
+    (:func:`_placed_on_mesh`), over FE truths of grasps: per grasp (a dict of ``centre``
+    node, ``pull`` (3,) mm at the last step, ``fractions`` of it, ``patch``, ``base`` and
+    ``truth`` (steps, n, 3) mm, ``base_force`` and ``fe_force`` (steps, 3) N) and step, the
+    model's ``field`` and ``force`` (:func:`grasp_over_base`) with its MEE, 95th percentile
+    and % of nodes under 3 mm against the truth and its force's error (%).
+    """
+    from surrogate.grasp import force_error_pct
+
+    points, placed = _placed_on_mesh(predictor, points, triangles)
     out = []
     for g in grasps:
         at, rows = placed.load_nodes(points[[int(g["centre"])]]), []
@@ -330,9 +344,27 @@ def grasps_on_mesh(predictor, points, triangles, grasps) -> list[list[dict]]:
             u, f = grasp_over_base(placed, at, fr * np.asarray(g["pull"])[None],
                                    np.asarray(g["base"][s], np.float64),
                                    np.asarray(g["base_force"][s])[None], g["patch"])
-            m = displacement_metrics(u, np.asarray(g["truth"][s], np.float64))
-            rows.append({"field": u, "force": f[0], "mee": m["mee"], "p95": m["ee_p95"],
-                         "lt3": m["pct_ee_lt_3mm"],
-                         "force_error": float(force_error_pct(f[0], g["fe_force"][s]))})
+            rows.append(_case_row(u, g["truth"][s], force=f[0], force_error=float(
+                force_error_pct(f[0], g["fe_force"][s]))))
         out.append(rows)
+    return out
+
+
+def forces_on_mesh(predictor, points, triangles, forces) -> list[list[dict]]:
+    """A model of forces over each liver's small-strain base (a population model of its rest,
+    ``make liver AT=...``'s) on a liver meshed as :func:`grasps_on_mesh`'s, over FE truths of
+    pressed forces: per case (a dict of ``centre`` node, ``force`` (3,) N at the last step,
+    ``fractions`` of it, ``unit``: the base's field (n, 3) mm at the last step, ``truth``
+    (steps, n, 3) mm) and step, the base scaled plus the network's rest for the whole force
+    at the centre node, with its MEE, 95th percentile and % of nodes under 3 mm.
+    """
+    points, placed = _placed_on_mesh(predictor, points, triangles)
+    out = []
+    for c in forces:
+        at, unit = placed.load_nodes(points[[int(c["centre"])]]), np.asarray(c["unit"], float)
+        f = np.asarray(c["fractions"][:len(c["truth"])])[:, None, None] * np.asarray(
+            c["force"], np.float64)[None, None]
+        rest = placed(f, np.broadcast_to(at, f.shape[:2]), rest=True)
+        out.append([_case_row(fr * unit + r, c["truth"][s]) for s, (fr, r) in enumerate(
+            zip(c["fractions"], rest))])
     return out

@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -124,6 +125,39 @@ def surgical_curve(records: list[dict], kind: str, key: str, values) -> list[dic
                 "base"]["force_worst"], fe_force=of(np.median, None, "fe_force"))
         rows.append(row)
     return rows
+
+
+def surgical_worst_picture(records: list[dict], results: Path, png: Path) -> str | None:
+    """``png`` (docs/surgical_loads_worst.png): bench/surgical_loads.py's worst liver's worst
+    40 mm grasp (its fields in ``results``), FE beside the model of grasps (when measured), the
+    small-strain base and the error of the first; what it shows, or None.
+    """
+    from liverviz.pictures import Panel, Surface, render_panels
+
+    g40 = surgical_per_liver(records, "grasps", "pull", 40.0)
+    m = "model" if g40 and all("model" in v for v in g40.values()) else "base"
+    name = max((n for n in g40 if (results / f"{n}.npz").exists()),
+               key=lambda n: g40[n][m]["mee"], default=None)
+    if name is None:
+        return None
+    z = dict(np.load(results / f"{name}.npz"))   # the mesh, and the base's worst grasp
+    shown = {"small-strain base": z["base"]}
+    if m == "model":   # the model's worst grasp of the liver, every field from its files
+        cases = next(r for r in records if r["liver"] == name)["grasps"]
+        k = max((k for k, c in enumerate(cases) if c["status"] == "ok"),
+                key=lambda k: cases[k]["steps"][-1]["model"]["mee"])
+        f, fm = (np.load(results / "fields" / f"{name}{x}.npz") for x in ("", "_model"))
+        z.update(truth=f[f"truth_{k}"][-1], patch=f[f"patch_{k}"])
+        shown = {"model of grasps": fm[f"model_{k}"], "small-strain base": f[f"base_{k}"][-1]}
+    s, centre = Surface.from_mesh(z["points"], z["triangles"], z["fixed"]), z["patch"][:1]
+    err = np.linalg.norm(z["truth"] - next(iter(shown.values())), axis=1)[s.nodes]
+    panels = [Panel(s, u[s.nodes], label=label, load_nodes=centre)
+              for label, u in {"FE (Ogden)": z["truth"], **shown}.items()]
+    panels.append(Panel(s, z["truth"][s.nodes], scalars=err, title=f"{m} error (mm)",
+                        label=f"|FE - {m}|", load_nodes=centre))
+    render_panels(panels, png,
+                  title=f"{name}: a 10 mm grasp pulled 40 mm")
+    return f"{name} ({m} MEE {g40[name][m]['mee']:.2f} mm at 40 mm)"
 
 
 def xyz(m: dict, key: str, fmt: str = "{:.3f}") -> str:

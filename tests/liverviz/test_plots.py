@@ -47,6 +47,12 @@ def test_every_chart_draws_from_its_benchs_records(tmp_path):
     force = [{"force": f, "base": m, "naive": m} for f in (0.4, 4.0)]
     assert _png(plots.surgical_curves(grasp, force, {"median": 0.5, "force": 5.0},
                                       tmp_path / "g.png"))
+    modelled = [{**r, "model": {**m, "force_median": 5.0, "force_worst": 9.0}} for r in grasp]
+    assert _png(plots.surgical_curves(modelled, [{**r, "model": m} for r in force],
+                                      {"median": 0.5, "force": 5.0}, tmp_path / "g2.png"))
+    with pytest.raises(KeyError):   # a model row without its force error
+        plots.surgical_curves([{**r, "model": m} for r in grasp], force,
+                              {"median": 0.5, "force": 5.0}, tmp_path / "g3.png")
     with pytest.raises(KeyError):   # a record without the figure the chart draws
         plots.surgical_curves([{"pull": 5.0}], force, {"median": 0.5, "force": 5.0},
                               tmp_path / "h.png")

@@ -249,3 +249,40 @@ def test_make_liver_with_no_model_answers_a_force_as_the_card_says(tmp_path):
                           cwd=root, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert json.loads((view / "timings.json").read_text())["frames"] > 10
+
+
+@pytest.mark.dataset
+def test_forces_on_a_prepared_mesh_give_the_model_of_forces_cards_figures():
+    """surrogate.over_green.forces_on_mesh (bench/surgical_loads.py's model rows against the
+    pressed force) on Amos-054 as the population prepared it (the grasp truth's mesh, the same
+    nodes turned into the population's frame): the card's three forces, their small-strain
+    base and FE fields turned with them, give the model's MEE of the card (make liver AT=...'s
+    answer), and 10 times the force another field than 10 times the answer (the rest)."""
+    from data_spec.geometry import read_geometry
+    from data_spec.shards import list_shards, read_shard
+    from liverreg.rigid import kabsch
+    from surrogate.evaluate import _base_of
+    from surrogate.linear_base import case_base
+    from surrogate.over_green import forces_on_mesh
+
+    truth, card = _forces_truth(), json.loads((FORCES / "card.json").read_text())
+    want, tol = card["reference_liver"]["sims"], card["tolerance"]["mee_relative"]
+    z, pred = _truth(), load_predictor(FORCES / "model")
+    R, t = kabsch(read_geometry(truth / "mesh.h5").points, z["points"])   # file -> population
+    base = _base_of(pred, truth / "data")
+    cases = []
+    for sh in (read_shard(p) for p in list_shards(truth / "data")):
+        fr = np.asarray(sh.load_fractions[:sh.n_done])
+        cases.append({"centre": sh.load_nodes[0], "force": R @ sh.forces[0], "fractions": fr,
+                      "unit": case_base(base, 1, sh.sim_index, [1.0])[0] @ R.T,
+                      "truth": np.asarray(sh.displacement[:sh.n_done]) @ R.T})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rows = forces_on_mesh(pred, z["points"], z["triangles"], cases)
+        ten = forces_on_mesh(pred, z["points"], z["triangles"], [
+            {**c, "fractions": 10.0 * c["fractions"]} for c in cases[:1]])
+    for w, r in zip(want, rows):
+        assert r[-1]["mee"] == pytest.approx(w["model_mee_mm"], rel=tol)
+    linear = 10.0 * (rows[0][-1]["field"] - cases[0]["unit"] * cases[0]["fractions"][-1])
+    rest10 = ten[0][-1]["field"] - 10.0 * cases[0]["unit"] * cases[0]["fractions"][-1]
+    assert np.abs(rest10 - linear).max() > 0.01 * np.abs(rest10).max()
