@@ -19,6 +19,7 @@ with its command's own message and exit code.
 from __future__ import annotations
 
 import argparse
+import os
 import subprocess
 import sys
 import time
@@ -203,4 +204,9 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    code = main()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    # every file is written and closed and the solver process has ended: the interpreter's
+    # teardown (JAX's and VTK's, most of a second) is skipped, nobody waits for it
+    os._exit(code)
