@@ -14,8 +14,9 @@ while this process waits, and then asks for its Green's function (``make liver``
 :mod:`surrogate.make_liver`) pays the solver's start once and while it works on its side.
 Two words beyond fem_sim's commands keep a liver factorised between lines, for the
 manipulator (:mod:`fem_sim.batch.green_live`): ``green-open DATA`` and ``green-rows OUT.npy
-NODE ...``. A line that is not a list of words is answered ``{"rc": 2, "error": ...}``; the
-process ends with its standard input.
+NODE ...``; ``prepare MESH SCENE`` builds a meshed liver's problem for a later ``linear`` on
+it (make liver has it built while the model is registered). A line that is not a list of
+words is answered ``{"rc": 2, "error": ...}``; the process ends with its standard input.
 """
 
 from __future__ import annotations
@@ -46,6 +47,23 @@ def _warm() -> None:
 _LIVE: list = [None]   # the liver green-open keeps (fem_sim.batch.green_live)
 
 
+def _prepare(words: list[str]) -> int:
+    """``prepare MESH SCENE``: the liver problem of a meshed liver built now, for a later
+    ``linear`` of a scene on that mesh (:func:`fem_sim.batch.linear.prepare`).
+    """
+    if len(words) != 3:
+        print(f"fem_sim serve: expected prepare MESH SCENE, got {words}", file=sys.stderr)
+        return 2
+    from fem_sim.batch.linear import prepare
+
+    try:
+        prepare(words[1], words[2])
+    except (ValueError, OSError, KeyError) as exc:
+        print(f"fem_sim serve: prepare: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
 def _run(words, main) -> dict:
     if not (isinstance(words, list) and words and all(isinstance(w, str) for w in words)):
         return {"rc": 2, "error": f"expected a JSON list of words, got {words!r}"}
@@ -57,6 +75,8 @@ def _run(words, main) -> dict:
             from fem_sim.batch.green_live import serve_verb
 
             _LIVE[0], rc = serve_verb(_LIVE[0], words)
+        elif words[0] == "prepare":
+            rc = _prepare(words)
         else:
             rc = main(words)
     except SystemExit as exc:   # argparse's usage errors

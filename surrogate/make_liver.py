@@ -9,9 +9,10 @@ side starts once and works while the other does::
 The steps are the commands a user could type: the solver meshes the liver
 (``fem_sim mesh``) while this process imports the model; ``truth-scene`` registers the
 model on the mesh and writes the liver's scene while the solver imports its own modules;
-the solver computes the Green's function at the nodes each load needs (``fem_sim linear
---green --green-near``: a grasp's patch, a force's node; the same rows as the whole
-surface's); ``predict-liver`` answers on the liver's own mesh. Each step's start is printed
+the solver builds the liver's problem meanwhile (``fem_sim serve``'s ``prepare``), then
+computes the Green's function at the nodes each load needs (``fem_sim linear --green
+--green-near``: a grasp's patch, a force's node; the same rows as the whole surface's);
+``predict-liver`` answers on the liver's own mesh. Each step's start is printed
 (``make liver: <step>``, what :func:`timed_steps` times) and a failing step stops the rest
 with its command's own message and exit code.
 """
@@ -155,6 +156,28 @@ def _warm_answer(a, d: Path) -> None:
         placed(np.zeros((1, pred.spec.n_loads, 3)), at[None], rest=True)
 
 
+def _on_solver(solver, name: str, words: list, a) -> int:
+    """A solver step (``name``'s command ``words``) and this process's work meanwhile: its
+    exit code. After meshing the solver builds the liver's problem while the model is
+    placed; after the Green's function it ends.
+    """
+    solver.send(words)
+    if name == "mesh":   # the trainer's modules load while the solver meshes
+        _warm()
+    elif name == "green":
+        try:
+            _warm_answer(a, a.dir)
+        except Exception:  # noqa: BLE001 (a warm-up; predict-liver says what fails)
+            pass
+        solver.answer()   # prepare's: when it failed, linear builds the problem itself
+    rc = solver.answer()
+    if name == "mesh" and not rc:
+        solver.send(["prepare", a.dir / "mesh.h5", a.scene])
+    elif name == "green":
+        solver.end()
+    return rc
+
+
 def main(argv=None) -> int:
     a = _parser().parse_args(argv)
     try:
@@ -174,17 +197,7 @@ def main(argv=None) -> int:
             print(STEPS[name], flush=True)
             t = time.perf_counter()
             if where == "solver":
-                solver.send(words)
-                if name == "mesh":   # the trainer's modules load while the solver meshes
-                    _warm()
-                elif name == "green":
-                    try:
-                        _warm_answer(a, a.dir)
-                    except Exception:  # noqa: BLE001 (a warm-up; predict-liver says what fails)
-                        pass
-                rc = solver.answer()
-                if name == "green":
-                    solver.end()
+                rc = _on_solver(solver, name, words, a)
             else:
                 from surrogate.__main__ import main as trainer
 

@@ -146,6 +146,41 @@ def _record_scene(scene_file: str, out: Path) -> None:
         write_text_atomic(copy, dataset_copy_text(scene_file))
 
 
+# The one liver problem a process built last (``fem_sim serve``'s ``prepare``: make liver has
+# it built while the trainer registers the model), by its mesh's bytes and solver settings.
+_PREPARED: dict = {}
+
+
+def liver_problem(scene, points: np.ndarray, cells: np.ndarray):
+    """The OgdenProblem (one rank) of a liver mesh with the scene's solver settings: the
+    one :func:`prepare` built for the same mesh and settings, or a new one. Its
+    factorisations depend on the material and the fixed nodes each use gives it.
+    """
+    from mpi4py import MPI
+
+    from fem_sim.solver.problem import OgdenProblem
+
+    solver = scene["solver"]
+    kw = {"degree": solver["degree"], "quadrature_degree": solver["quadrature_degree"],
+          "element": solver.get("element", "lagrange"), "settings": solver_settings(scene)}
+    key = (np.asarray(points).tobytes(), np.asarray(cells).tobytes(), repr(sorted(
+        (k, repr(v)) for k, v in kw.items())))
+    if _PREPARED.get("key") != key:
+        _PREPARED.clear()
+        _PREPARED.update(key=key, problem=OgdenProblem(MPI.COMM_SELF, points, cells, **kw))
+    return _PREPARED["problem"]
+
+
+def prepare(mesh: str | Path, scene_file: str | Path) -> None:
+    """Build the liver problem of a meshed liver (``fem_sim mesh``'s file) with the scene's
+    solver settings (:func:`liver_problem`), for a later ``linear`` in the same process.
+    """
+    from data_spec.geometry import read_geometry
+
+    g = read_geometry(mesh)
+    liver_problem(load_scene(scene_file), g.points, g.cells)
+
+
 def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
                   order: int = 1, green: bool = False, near=None,
                   radius: float | None = None) -> Path:
@@ -154,10 +189,7 @@ def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
     ``radius`` (default ``GREEN_RADIUS``): the Green's function's nodes (:func:`green_nodes`).
     """
     radius = GREEN_RADIUS if radius is None else radius
-    from mpi4py import MPI
-
     from fem_sim.solver.loads import Constraint
-    from fem_sim.solver.problem import OgdenProblem
 
     scene_file, out = str(scene_file), Path(out)
     scene = _checked_request(scene_file, out, synthetic, order, green, near, radius)
@@ -174,12 +206,8 @@ def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
                          f"at {nodes.size} output nodes ({size / 2**30:.1f} GiB), beyond "
                          f"{GREEN_MAX_BYTES / 2**30:.0f} GiB: a coarser mesh ([geometry] "
                          "mesh_size), or no --green")
-    solver = scene["solver"]
     t = time.perf_counter()
-    problem = OgdenProblem(MPI.COMM_SELF, g.points, g.cells, degree=solver["degree"],
-                           quadrature_degree=solver["quadrature_degree"],
-                           element=solver.get("element", "lagrange"),
-                           settings=solver_settings(scene))
+    problem = liver_problem(scene, g.points, g.cells)
     loads = [case_loads(c, g) for c in cases]
     u = problem.load_expansion(cases[0].material, [Constraint(fixed)], loads,
                                order=order)[:, :, nodes]
