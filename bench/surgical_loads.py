@@ -150,7 +150,7 @@ def _force_case(prob, mat, fixed, patch, weights, force, green, held):
     return row, (sol.displacement[:sol.n_done], unit)
 
 
-PLACED = b"the population's registration on the prepared mesh"
+PLACED = b"the population's registration on the prepared mesh; the rest held at its range's edge"
 
 
 def ready(name: str) -> dict:

@@ -151,7 +151,9 @@ class Predictor:
     def __call__(self, forces, load_nodes, nodes=None, material=None, geometry=None,
                  rest: bool = False):
         """The displacement field, mm; ``rest``: what the small-strain base misses, of a model
-        trained on it (``self.base``, :mod:`surrogate.small_strain`), which gives nothing else.
+        trained on it (``self.base``, :mod:`surrogate.small_strain`), which gives nothing else,
+        each load held at the training range's edge (its magnitude at most
+        ``force_norm_max``: beyond it the base alone grows with the load).
         """
         if not (self.base.whole or rest):
             raise ValueError(self.base.rest_only())
@@ -168,11 +170,18 @@ class Predictor:
         extra = self.varied_inputs(forces.shape[0], material, geometry)
         if geometry is None and self.loadable is not None:
             check_load_nodes(load_nodes, self.loadable)
-        fmax = np.linalg.norm(forces, axis=-1).max()
+        norms = np.linalg.norm(forces, axis=-1)
+        fmax = norms.max()
         if fmax > 1.05 * self.force_norm_max:
             what, unit = ("pull", "mm") if self.load == "grasp" else ("force magnitude", "N")
             warnings.warn(f"{what} {fmax:.3g} {unit} exceeds the training range "
-                          f"({self.force_norm_max:.3g} {unit}): extrapolating", stacklevel=2)
+                          f"({self.force_norm_max:.3g} {unit}): " + (
+                              "the network's rest is held at that range's edge, the "
+                              "small-strain base carries the rest of the load" if rest else
+                              "extrapolating"), stacklevel=2)
+        if rest:   # an extrapolated rest is far worse than none (docs/surgical_loads.md)
+            forces = forces * np.minimum(1.0, self.force_norm_max / np.maximum(
+                norms, 1e-300))[..., None]
         # numpy in: the jitted call takes host arrays on its fast path (jnp.asarray here would
         # dispatch one eager conversion per argument, most of a small model's call)
         args = (np.asarray(forces, dtype=np.float32),

@@ -257,7 +257,8 @@ def test_forces_on_a_prepared_mesh_give_the_model_of_forces_cards_figures():
     pressed force) on Amos-054 as the population prepared it (the grasp truth's mesh, the same
     nodes turned into the population's frame): the card's three forces, their small-strain
     base and FE fields turned with them, give the model's MEE of the card (make liver AT=...'s
-    answer), and 10 times the force another field than 10 times the answer (the rest)."""
+    answer); at 10 times the force the network's rest stays the one at its training range's
+    edge."""
     from data_spec.geometry import read_geometry
     from data_spec.shards import list_shards, read_shard
     from liverreg.rigid import kabsch
@@ -283,6 +284,9 @@ def test_forces_on_a_prepared_mesh_give_the_model_of_forces_cards_figures():
             {**c, "fractions": 10.0 * c["fractions"]} for c in cases[:1]])
     for w, r in zip(want, rows):
         assert r[-1]["mee"] == pytest.approx(w["model_mee_mm"], rel=tol)
-    linear = 10.0 * (rows[0][-1]["field"] - cases[0]["unit"] * cases[0]["fractions"][-1])
+    # at ten times the trained force the network's rest is the one at the range's edge (the
+    # card's force, 0.4 N): never extrapolated; the base alone grows with the force
+    rest = rows[0][-1]["field"] - cases[0]["unit"] * cases[0]["fractions"][-1]
     rest10 = ten[0][-1]["field"] - 10.0 * cases[0]["unit"] * cases[0]["fractions"][-1]
-    assert np.abs(rest10 - linear).max() > 0.01 * np.abs(rest10).max()
+    assert np.abs(rest).max() > 0.01
+    np.testing.assert_allclose(rest10, rest, atol=1e-4 * np.abs(rest).max())
