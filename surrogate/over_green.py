@@ -361,6 +361,9 @@ def forces_on_mesh(predictor, points, triangles, forces) -> list[list[dict]]:
     points, placed = _placed_on_mesh(predictor, points, triangles)
     out = []
     for c in forces:
+        if not len(c["truth"]):   # no converged step: nothing to answer
+            out.append([])
+            continue
         at, unit = placed.load_nodes(points[[int(c["centre"])]]), np.asarray(c["unit"], float)
         f = np.asarray(c["fractions"][:len(c["truth"])])[:, None, None] * np.asarray(
             c["force"], np.float64)[None, None]

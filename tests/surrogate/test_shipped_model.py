@@ -281,7 +281,9 @@ def test_forces_on_a_prepared_mesh_give_the_model_of_forces_cards_figures():
         warnings.simplefilter("ignore")
         rows = forces_on_mesh(pred, z["points"], z["triangles"], cases)
         ten = forces_on_mesh(pred, z["points"], z["triangles"], [
-            {**c, "fractions": 10.0 * c["fractions"]} for c in cases[:1]])
+            {**c, "fractions": 10.0 * c["fractions"]} for c in cases[:1]] + [
+            {**cases[0], "truth": cases[0]["truth"][:0]}])   # a force with no converged step
+    assert ten[1] == []
     for w, r in zip(want, rows):
         assert r[-1]["mee"] == pytest.approx(w["model_mee_mm"], rel=tol)
     # at ten times the trained force the network's rest is the one at the range's edge (the
