@@ -228,7 +228,7 @@ def model_rows(run: Path, ledger, names, kind: str = "grasps") -> None:
                 step["model"] = {"mee": row["mee"], "p95": row["p95"], "lt3": row["lt3"],
                                  "mean_u": step["base"]["mean_u"]}
                 step.update({"model_force_error": row["force_error"]} if "force" in row else {})
-            last[f"model_{k}"] = rows[k][-1]["field"].astype(np.float32)
+            last.update({f"model_{k}": rows[k][-1]["field"].astype(np.float32)} if rows[k] else {})
         np.savez_compressed(path.with_stem(f"{name}_{mark}"), **last)
         ledger.add({**r, f"{mark}_run": str(run), f"{mark}_trained_on": made})
         print(f"[{mark}] {name}", flush=True)

@@ -155,8 +155,7 @@ def surgical_worst_picture(records: list[dict], results: Path, png: Path) -> str
               for label, u in {"FE (Ogden)": z["truth"], **shown}.items()]
     panels.append(Panel(s, z["truth"][s.nodes], scalars=err, title=f"{m} error (mm)",
                         label=f"|FE - {m}|", load_nodes=centre))
-    render_panels(panels, png,
-                  title=f"{name}: a 10 mm grasp pulled 40 mm")
+    render_panels(panels, png, title=f"{name}: a 10 mm grasp pulled 40 mm")
     return f"{name} ({m} MEE {g40[name][m]['mee']:.2f} mm at 40 mm)"
 
 

@@ -11,6 +11,9 @@ import os
 import subprocess
 import sys
 
+# the variables that bound a process's BLAS / OpenMP threads
+THREAD_LIMITS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
 
 class SolverProcess:
     """``python -m fem_sim serve`` under ``python`` (the solver's environment): ``run(words)``
@@ -20,11 +23,9 @@ class SolverProcess:
     """
 
     def __init__(self, python: str, threads: int | None = None):
-        env = {k: v for k, v in os.environ.items()
-               if k not in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+        env = {k: v for k, v in os.environ.items() if k not in THREAD_LIMITS}
         if threads:   # a process beside another's work: its solves on that many threads
-            env.update({k: str(threads) for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
-                                                  "MKL_NUM_THREADS")})
+            env.update(dict.fromkeys(THREAD_LIMITS, str(threads)))
         self.proc = subprocess.Popen([python, "-m", "fem_sim", "serve"], stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, text=True, env=env)
 
