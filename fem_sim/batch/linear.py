@@ -106,13 +106,14 @@ def _checked_request(scene_file: str, out: Path, synthetic: int, order: int,
         raise ValueError(f"--synthetic must be >= 0, got {synthetic}")
     _check_near(green, near, radius)
     scene = load_scene(scene_file)
-    if scene["loads"]["kind"] == "grasp":
-        raise ValueError(f"{scene_file}: loads.kind = 'grasp': small-strain responses are "
-                         "computed for forces; a grasp's (its patch's Green's function, "
-                         "G_PP f = d) is not built yet")
-    if green and scene["loads"]["kind"] != "nodal":
-        raise ValueError(f"{scene_file}: loads.kind = {scene['loads']['kind']!r}; --green gives "
-                         "the responses to unit nodal forces, of a scene of nodal loads")
+    kind = scene["loads"]["kind"]
+    if kind == "grasp" and not (green and order == 1 and not synthetic and near is None):
+        raise ValueError(f"{scene_file}: loads.kind = 'grasp': a grasp's small-strain response "
+                         "comes from the Green's function of the free surface (G_PP f = d): "
+                         "--green with --order 1, no --synthetic and no --green-near")
+    if green and kind not in ("nodal", "grasp"):
+        raise ValueError(f"{scene_file}: loads.kind = {kind!r}; --green gives the responses to "
+                         "unit nodal forces, of a scene of nodal loads or grasps")
     if n_geometries(scene) != 1:
         raise ValueError(f"{scene_file}: [geometry] has {n_geometries(scene)} livers; small-"
                          "strain responses are of one liver (a patient's scene)")
@@ -208,12 +209,18 @@ def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
                          "mesh_size), or no --green")
     t = time.perf_counter()
     problem = liver_problem(scene, g.points, g.cells)
-    loads = [case_loads(c, g) for c in cases]
-    u = problem.load_expansion(cases[0].material, [Constraint(fixed)], loads,
-                               order=order)[:, :, nodes]
-    if green:   # the same factorisation (kept by solve_recurring)
+    tool_force = None
+    if scene["loads"]["kind"] == "grasp":   # each case's response from the Green's function
         gf = problem.unit_responses(cases[0].material, [Constraint(fixed)],
                                     gnodes)[:, :, nodes]
+        u, tool_force = _grasps_over_green(cases, g, fixed, gf, gnodes, nodes)
+    else:
+        loads = [case_loads(c, g) for c in cases]
+        u = problem.load_expansion(cases[0].material, [Constraint(fixed)], loads,
+                                   order=order)[:, :, nodes]
+        if green:   # the same factorisation (kept by solve_recurring)
+            gf = problem.unit_responses(cases[0].material, [Constraint(fixed)],
+                                        gnodes)[:, :, nodes]
     _record_scene(scene_file, out)
     return write_linear_fields(linear_fields_path(out), LinearFields(
         case_index=np.array([c.index for c in cases], np.int64),
@@ -222,7 +229,19 @@ def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
         displacement=u[:, 0], scene_name=scene.name, scene_hash=scene.hash,
         geometry_id=ids[0], seconds=time.perf_counter() - t,
         second_order=u[:, 1] if order == 2 else None, green_nodes=gnodes, green=gf,
-        fixed_nodes=np.asarray(fixed, np.int64) if green else None))
+        fixed_nodes=np.asarray(fixed, np.int64) if green else None, tool_force=tool_force))
+
+
+def _grasps_over_green(cases: list, g, fixed, gf, gnodes, nodes) -> tuple:
+    """((cases, 1, n_out, 3) mm, (cases, n_tools, 3) N): each grasp case's small-strain
+    field and tools' forces at load fraction 1 from the free surface's Green's function ``gf``
+    (:class:`data_spec.green_grasp.GreenGrasp`, the patches the solver holds).
+    """
+    from data_spec.green_grasp import GreenGrasp
+
+    both = [GreenGrasp(gf, gnodes, nodes, cs.grasp_patches(c, g, fixed))(c.displacements)
+            for c in cases]
+    return np.stack([u for u, _ in both])[:, None], np.stack([f for _, f in both])
 
 
 def _liver_shards(data: Path) -> dict:
