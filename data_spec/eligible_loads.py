@@ -7,14 +7,21 @@ from __future__ import annotations
 
 import numpy as np
 
+NEAR_RADIUS = 20.0   # mm: a site's reach (loads.near) when loads.near_radius is not given
+
 
 def eligible_load_nodes(loads: dict, points: np.ndarray, surface_nodes: np.ndarray,
                         fixed: np.ndarray) -> np.ndarray:
     """Node ids a random load may act on: surface (or all) nodes, not fixed, at least
-    ``loads["min_distance_to_fixed"]`` mm from every fixed node.
+    ``loads["min_distance_to_fixed"]`` mm from every fixed node, and with ``loads["near"]``
+    within ``loads["near_radius"]`` (default :data:`NEAR_RADIUS`) mm of that site.
     """
     cand = surface_nodes if loads["eligible"] == "surface" else np.arange(points.shape[0])
     cand = np.setdiff1d(cand, fixed)
+    if loads.get("near") is not None:
+        reach = loads.get("near_radius") or NEAR_RADIUS
+        cand = cand[np.linalg.norm(points[cand] - np.asarray(loads["near"], float),
+                                   axis=1) <= reach]
     dmin = loads["min_distance_to_fixed"]
     if dmin > 0 and cand.size and np.size(fixed):
         cand = cand[min_distance(points[cand], points[fixed]) >= dmin]

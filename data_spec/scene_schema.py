@@ -247,6 +247,9 @@ _SCHEMA: dict[str, dict[str, Key]] = {
                                      "eligible nodes are at least this far from fixed nodes, mm"),
         "min_separation": Key(_num(0.0, strict=False), 0.0,
                               "minimum distance between simultaneous load nodes, mm"),
+        "near": Key(_vec3, OPTIONAL, "a site [x, y, z] mm (one liver's frame): eligible "
+                    "nodes are within near_radius of it (a patient's planned grasp)"),
+        "near_radius": Key(_num(0.0), OPTIONAL, "mm, with near (default 20)"),
         "patch_radius": Key(_num(0.0), OPTIONAL, "patch radius, mm (kind = patch; grasp: "
                             "default 10)"),
     },

@@ -61,7 +61,8 @@ def relocated_scene(scene_file: str | Path) -> dict:
 
 def liver_scene(scene_file: str | Path, liver: str | Path, n: int, fixed=None,
                 seed: int = 44, area_min: float | None = None,
-                mesh: str | Path | None = None, radius: float | None = None) -> str:
+                mesh: str | Path | None = None, radius: float | None = None,
+                near=None, near_radius: float | None = None) -> str:
     """The scene of a liver's FE truth: ``scene_file``'s loads, material, steps and solver on
     the liver file ``liver`` (its own mesh at the scene's mesh size), ``n`` simulations.
     ``fixed`` (k, 3) mm in the liver's frame: the surface nodes within half an element of
@@ -69,7 +70,9 @@ def liver_scene(scene_file: str | Path, liver: str | Path, n: int, fixed=None,
     file's default region. ``area_min`` (mm^2): that region grown to it, as a file
     population grows its livers'. ``mesh``: the liver already meshed at the scene's size
     (``fem_sim mesh --scene``), solved as it is instead of meshing the file again;
-    ``radius`` (mm): how near a fixed point a node is fixed (half an element by default).
+    ``radius`` (mm): how near a fixed point a node is fixed (half an element by default);
+    ``near`` (3,) mm, ``near_radius``: the loads drawn within that reach of the site
+    (``[loads] near``).
     """
     scene_file, liver = Path(scene_file), Path(liver)
     raw = tomllib.loads(scene_file.read_text())
@@ -84,6 +87,10 @@ def liver_scene(scene_file: str | Path, liver: str | Path, n: int, fixed=None,
                         "points": [[round(float(v), 3) for v in p] for p in fixed]}
         if area_min:
             raw["fixed"]["area_min"] = round(float(area_min), 1)
+    if near is not None:
+        raw["loads"]["near"] = [round(float(v), 3) for v in near]
+        if near_radius:
+            raw["loads"]["near_radius"] = float(near_radius)
     raw.pop("cases", None)
     raw["surrogate"] = {"config": "small"}
     return scene_toml(raw)

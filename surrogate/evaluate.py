@@ -127,13 +127,15 @@ NODE_RADIUS = 0.01   # mm: a scene's fixed point selects its mesh node (written 
 
 def truth_scene(pred, scene_file: str | Path, liver: str | Path, n: int,
                 frame: str = "LPS", saved: str | Path | None = None,
-                mesh: str | Path | None = None) -> str:
+                mesh: str | Path | None = None, near=None,
+                near_radius: float | None = None) -> str:
     """The scene text of a liver's FE truth with the population model's boundary condition:
     fixed where its placement (:func:`place`, ``mesh`` its) puts the template's fixed region,
     grown as the population's livers were (:func:`fixed_area_min`). With ``mesh``, the liver
     as it is solved: its nodes where the region lands, by the population's own rule
     (:func:`liverreg.shape_model.landed_region`); without, the surface within half an element
-    of the moved region's nodes.
+    of the moved region's nodes. ``near``, ``near_radius``: the loads drawn around that site
+    (:func:`~data_spec.scene_writer.liver_scene`).
     """
     placement, _ = place(pred, liver, frame, saved, mesh)
     sm = pred.shape_model
@@ -148,7 +150,7 @@ def truth_scene(pred, scene_file: str | Path, liver: str | Path, n: int,
                                        placement.to_population(g.points), g.surface_nodes)]
         radius = NODE_RADIUS
     return liver_scene(scene_file, liver, n, fixed, area_min=fixed_area_min(sm, scene_file),
-                       mesh=mesh, radius=radius)
+                       mesh=mesh, radius=radius, near=near, near_radius=near_radius)
 
 
 def fixed_area_min(sm, scene_file) -> float | None:

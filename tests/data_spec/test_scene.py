@@ -307,3 +307,28 @@ def test_solver_combinations_come_from_one_table():
         solver_rules.linear_path("direct", "pardiso", {}, 2)
     assert solver_rules.problems("anp", 1, 1, "direct", "auto", {}, ranks=2)
     assert not solver_rules.problems("anp", 1, 1, "direct", "auto", {}, ranks=1)
+
+
+def test_loads_near_a_site_are_drawn_within_its_reach_only():
+    """[loads] near: the eligible nodes are the rule's own within near_radius (default 20 mm)
+    of the site, the fixed ones and those too near the fixed region still left out; a site
+    off the liver leaves none; a bad site is refused by the schema, naming the key."""
+    from data_spec.eligible_loads import eligible_load_nodes
+    from data_spec.geometry import box_mesh as box
+
+    g = box(10, (100.0, 100.0, 10.0))
+    fixed = g.surface_nodes[g.points[g.surface_nodes, 0] == 0.0]
+    rule = {"eligible": "surface", "min_distance_to_fixed": 30.0}
+    every = eligible_load_nodes(rule, g.points, g.surface_nodes, fixed)
+    site = [50.0, 50.0, 10.0]
+    for reach, near in ((20.0, {"near": site}), (35.0, {"near": site, "near_radius": 35.0})):
+        got = eligible_load_nodes({**rule, **near}, g.points, g.surface_nodes, fixed)
+        d = np.linalg.norm(g.points[every] - site, axis=1)
+        assert np.array_equal(got, every[d <= reach]) and 0 < got.size < every.size
+    far = eligible_load_nodes({**rule, "near": [500.0, 0, 0]}, g.points, g.surface_nodes, fixed)
+    assert far.size == 0
+    raw = tomllib.loads((Path(__file__).parents[2] / "data_spec" / "scenes" /
+                         "tiny_scene1.toml").read_text())
+    raw["loads"]["near"] = [1.0, 2.0]
+    with pytest.raises(SceneError, match=r"loads.near: expected a list of 3 finite numbers"):
+        parse_scene(raw)
