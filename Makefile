@@ -193,13 +193,22 @@ $(TEST_PATIENT)/.done: $(TEST_LIVERS)/.done | setup
 	    --out $(TEST_PATIENT)/member/Amos-005.h5 --no-picture
 	@touch $@
 
+# A patient's model of grasps end to end (tests/surrogate/test_patient_grasp.py): make patient
+# LOAD=grasp with the shipped model of grasps on Amos-054, 6 grasps to adapt on, 3 held out.
+TEST_PGRASP := runs/test-data/ci_patient_grasp
+$(TEST_PGRASP)/.done: models/scene4_grasp/model/params.npz | setup
+	rm -rf $(@D)
+	$(MAKE) --no-print-directory patient LOAD=grasp LIVER=$(LIVERS)/Amos-054.obj K=6 HELD=3 \
+	    PATIENT=$(@D)
+	@touch $@
+
 test-trainer: setup-trainer $(TEST_DATA)/.done $(TEST_DATA4)/.done $(TEST_PATIENT)/.done \
-              $(TEST_GRASP)/.done $(TEST_SHIPPED) $(TEST_FORCES)/.done
+              $(TEST_GRASP)/.done $(TEST_SHIPPED) $(TEST_FORCES)/.done $(TEST_PGRASP)/.done
 	$(TRAIN_VENV)/bin/ruff check .
 	LIVERFEM_TEST_DATASET=$(TEST_DATA) LIVERFEM_TEST_DATASET4=$(TEST_DATA4) \
 	    LIVERFEM_TEST_PATIENT=$(TEST_PATIENT) LIVERFEM_TEST_LIVERS=$(TEST_LIVERS) \
 	    LIVERFEM_TEST_GRASP=$(TEST_GRASP) LIVERFEM_TEST_SHIPPED=$(TEST_SHIPPED) \
-	    LIVERFEM_TEST_FORCES=$(TEST_FORCES) \
+	    LIVERFEM_TEST_FORCES=$(TEST_FORCES) LIVERFEM_TEST_PATIENT_GRASP=$(TEST_PGRASP) \
 	    bash scripts/run_pytest.sh $(TPY) tests/data_spec tests/liverviz tests/liverreg \
 	    tests/surrogate tests/reliability tests/common/test_environments.py -q --durations=12 $(TESTS)
 
@@ -248,8 +257,16 @@ truth: setup
 # population_linear, docs/scene4_real.md), added to the patient's base (a MODEL of that config
 # is its own REST). K=0: the patient's small-strain responses (and REST) alone; one FE
 # simulation is still solved (the scene needs one: it names the mesh and the dataset), none
-# adapts the model.
+# adapts the model. LOAD=grasp: a patient's model of grasps (surrogate/patient/grasps.py):
+# MODEL a model of grasps (default: the shipped one), K grasps of GSCENE on the patient's
+# mesh, its Green's function, and the model's force law and field corrected with them
+# ($(PATIENT)/run/grasp_patient.npz; predict-liver and the manipulator take --patient).
+# SITE="X Y Z": the K grasps (and HELD) drawn within 20 mm of that point (mm, the liver
+# file's frame): a patient's planned grasp, where the corrections are measured to help.
 K ?= 40
+SITE ?=
+LOAD ?= force
+GSCENE ?= data_spec/scenes/scene4_grasp.toml
 HELD ?= 0
 FRAME ?=
 ADAPT ?=
@@ -260,20 +277,23 @@ SYNTHETIC ?= 600
 ORDER ?= 2
 GREEN ?= 1
 PATIENT ?= runs/patient/$(basename $(notdir $(LIVER)))
+P_GRASP = $(filter grasp,$(LOAD))
+P_MODEL = $(or $(MODEL),$(if $(P_GRASP),$(SHIPPED_GRASP)))
+P_SCENE = $(if $(P_GRASP),$(GSCENE),$(PSCENE))
 patient-args:
-	@$(SYS_PY) scripts/make_args.py patient LIVER="$(LIVER)" MODEL="$(MODEL)" K="$(K)" \
+	@$(SYS_PY) scripts/make_args.py patient LIVER="$(LIVER)" MODEL="$(P_MODEL)" K="$(K)" \
 	    HELD="$(HELD)" SYNTHETIC="$(SYNTHETIC)" ORDER="$(ORDER)" GREEN="$(GREEN)" \
-	    PSCENE="$(PSCENE)" FRAME="$(FRAME)"
+	    PSCENE="$(P_SCENE)" FRAME="$(FRAME)" LOAD="$(LOAD)" SITE="$(SITE)"
 patient: patient-args setup
-	$(SPY) -m fem_sim mesh $(LIVER) --scene $(PSCENE) --out $(PATIENT)/mesh.h5 --no-picture
-	$(TPY) -m surrogate truth-scene $(MODEL) $(LIVER) --scene $(PSCENE) \
+	$(SPY) -m fem_sim mesh $(LIVER) --scene $(P_SCENE) --out $(PATIENT)/mesh.h5 --no-picture
+	$(TPY) -m surrogate truth-scene $(P_MODEL) $(LIVER) --scene $(P_SCENE) \
 	    --sims $$(($(K) + $(HELD) > 0 ? $(K) + $(HELD) : 1)) \
-	    $(if $(FRAME),--frame $(FRAME)) --out $(PATIENT)/scene.toml \
+	    $(if $(FRAME),--frame $(FRAME)) --out $(PATIENT)/scene.toml $(if $(SITE),--near $(SITE)) \
 	    --placement $(PATIENT)/placement.npz --mesh $(PATIENT)/mesh.h5
 	$(MPIRUN) $(SPY) -m fem_sim generate $(PATIENT)/scene.toml --out $(PATIENT)/data
-	$(SPY) -m fem_sim linear $(PATIENT)/scene.toml --out $(PATIENT)/data --synthetic $(SYNTHETIC) \
-	    --order $(ORDER) $(if $(filter 1,$(GREEN)),--green)
-	$(TPY) -m surrogate adapt $(MODEL) $(PATIENT)/data --liver $(LIVER) --run $(PATIENT)/run \
+	$(SPY) -m fem_sim linear $(PATIENT)/scene.toml --out $(PATIENT)/data $(if $(P_GRASP),--green \
+	    --order 1,--synthetic $(SYNTHETIC) --order $(ORDER) $(if $(filter 1,$(GREEN)),--green))
+	$(TPY) -m surrogate adapt $(P_MODEL) $(PATIENT)/data --liver $(LIVER) --run $(PATIENT)/run \
 	    --sims $(K) --synthetic $(SYNTHETIC) $(if $(FRAME),--frame $(FRAME)) \
 	    --placement $(PATIENT)/placement.npz $(if $(REST),--rest $(REST)) $(ADAPT)
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 USAGE = {
     "patient": 'make patient LIVER=file MODEL=run [K=40] [HELD=0] [PSCENE=scene] '
-               '[PATIENT=dir]',
+               '[LOAD=grasp] [PATIENT=dir]',
     "liver": 'make liver LIVER=file [MODEL=run] (AT="X Y Z FX FY FZ" | GRASP="X Y Z DX DY DZ") '
              '[PSCENE=scene] [FRAME=...] [LIVER_DIR=dir]',
 }
@@ -63,6 +63,15 @@ def _at(value: str, unit: str = "a force in N (FX FY FZ)") -> str | None:
     return None
 
 
+def _site(value: str) -> str | None:
+    words = value.split()
+    try:
+        ok = not words or (len(words) == 3 and all(math.isfinite(float(w)) for w in words))
+    except ValueError:
+        ok = False
+    return None if ok else "expected three finite numbers: a point near the liver (X Y Z, mm)"
+
+
 def _grasp(value: str) -> str | None:
     return _at(value, "the grasped patch's displacement in mm (DX DY DZ)")
 
@@ -73,7 +82,7 @@ CHECKS = {
                 "HELD": lambda v: _whole(v, "FE simulations kept out, to measure on"),
                 "SYNTHETIC": lambda v: _whole(v, "drawn small-strain loads"),
                 "ORDER": _one_of("1", "2"), "GREEN": _one_of("0", "1"),
-                "FRAME": _one_of(*FRAMES)},
+                "FRAME": _one_of(*FRAMES), "LOAD": _one_of("", "force", "grasp"), "SITE": _site},
     "liver": {"LIVER": _file, "MODEL": _model, "PSCENE": _scene, "AT": _at, "GRASP": _grasp,
               "FRAME": _one_of(*FRAMES)},
 }

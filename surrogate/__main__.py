@@ -87,9 +87,13 @@ def _add_predict_liver(sub) -> None:
                    metavar=("X", "Y", "Z", "DX", "DY", "DZ"),
                    help="with --base, instead of --force: a tool grasping the 10 mm patch "
                    "around the liver surface point nearest to X Y Z (mm) and moving it by DX "
-                   "DY DZ (mm); once or twice. The field and each tool's force are the "
-                   "small-strain base over the liver's Green's function (the network has "
-                   "learned nodal forces, not grasps: docs/surgical_loads.md)")
+                   "DY DZ (mm); once or twice. The field and each tool's force: the "
+                   "small-strain base over the liver's Green's function, a model of grasps' "
+                   "rest added and its force stiffened (docs/surgical_loads.md)")
+    p.add_argument("--patient", metavar="RUN",
+                   help="with --base and --grasp: a patient's corrections of the model of "
+                   "grasps (make patient LOAD=grasp's run: its force law, its field's "
+                   "correction), on that patient's DATA")
     p.add_argument("--placement", help="with --base: the placement file truth-scene "
                    "--placement wrote (read when it holds this liver, frame and model)")
 
@@ -104,6 +108,11 @@ def _add_evaluate(sub) -> None:
     s.add_argument("--sims", type=int, default=60, help="simulations of the truth")
     s.add_argument("--frame", choices=FRAMES, default=None, help="as predict-liver's")
     s.add_argument("--out", required=True, help="the scene file to write")
+    s.add_argument("--near", nargs=3, type=float, metavar=("X", "Y", "Z"),
+                   help="draw the loads around this site (mm, the liver file's frame): a "
+                   "patient's planned grasp ([loads] near)")
+    s.add_argument("--near-radius", type=float, metavar="MM",
+                   help="with --near: the reach (default 20 mm)")
     s.add_argument("--placement", help="keep the liver's placement in this .npz file (adapt "
                    "--placement reads it instead of placing the liver again)")
     s.add_argument("--mesh", help="the liver file meshed as the population's livers were "
@@ -196,6 +205,9 @@ def _predict_liver(args) -> int:
     if args.grasp and not args.base:
         return _fail("predict-liver", "--grasp needs --base (the liver's own mesh and Green's "
                      "function: make liver GRASP=...)")
+    if args.patient and not (args.base and args.grasp):
+        return _fail("predict-liver", "--patient corrects a model of grasps: it needs --base "
+                     "(the patient's data) and --grasp")
     if args.base and args.no_center:
         return _fail("predict-liver", "--base takes a centred placement (no --no-center: the "
                      "liver's mesh is placed as truth-scene placed it)")
@@ -215,11 +227,18 @@ def _predict_liver(args) -> int:
     over = None
     if args.base:   # the liver's own mesh and Green's function (make liver)
         from surrogate.over_green import predict_over_green
+        from surrogate.patient.grasps import PatientGrasp
+
+        try:
+            patient = args.patient and PatientGrasp.load(args.patient)
+        except ValueError as exc:
+            return _fail("predict-liver", str(exc))
 
         def over(predictor, forces, at):
             return predict_over_green(predictor, args.base, args.liver, forces, at,
                                       frame=args.frame, saved=args.placement,
-                                      shape=args.shape, grasp=bool(args.grasp))[0]
+                                      shape=args.shape, grasp=bool(args.grasp),
+                                      patient=patient or None)[0]
     return predict_liver(args, over)
 
 
@@ -267,6 +286,34 @@ def _train(args) -> int:
     return 0
 
 
+def _check_site(args) -> None:
+    """ValueError naming --near when the site is not finite or no surface node of the liver
+    (its --mesh, or its file) lies within the reach.
+    """
+    import numpy as np
+
+    from data_spec.eligible_loads import NEAR_RADIUS
+    from surrogate.predict_liver import read_liver_surface
+
+    if args.near is None:
+        return
+    reach = args.near_radius or NEAR_RADIUS
+    if not (np.all(np.isfinite(args.near)) and np.isfinite(reach) and reach > 0):
+        raise ValueError(f"--near {args.near} --near-radius {args.near_radius}: expected a "
+                         "finite point (mm) and a reach > 0 mm")
+    if args.mesh:
+        from data_spec.geometry import read_geometry
+
+        g = read_geometry(args.mesh)
+        surface = g.points[g.surface_nodes]
+    else:
+        surface = read_liver_surface(args.liver)[0]
+    gap = float(np.linalg.norm(surface - np.asarray(args.near), axis=1).min())
+    if gap > reach:
+        raise ValueError(f"--near {args.near}: the liver's surface is {gap:.1f} mm away, "
+                         f"beyond the reach of {reach:g} mm (a point in the liver file's frame)")
+
+
 def _truth_scene(args) -> int:
     from data_spec.atomic import out_problem
     from surrogate.evaluate import truth_scene
@@ -286,8 +333,9 @@ def _truth_scene(args) -> int:
         if pred.shape_model is None:
             return _fail("truth-scene", f"{args.run}: its model was not trained on a "
                          "population (no shape model): evaluate it on a dataset of its liver")
+        _check_site(args)
         text = truth_scene(pred, args.scene, args.liver, args.sims, args.frame,
-                           args.placement, args.mesh)
+                           args.placement, args.mesh, args.near, args.near_radius)
     except (ValueError, OSError) as exc:
         return _fail("truth-scene", str(exc))
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -350,7 +398,8 @@ def _adapt(args) -> int:
                      log_fn=lambda m: print(m, file=sys.stderr, flush=True))
     except (DataError, ValueError, OSError) as exc:
         return _fail("adapt", str(exc))
-    print(f"patient model written to {Path(args.run) / 'model'} from "
+    where = Path(args.run) / ("grasp_patient.npz" if info.get("load") == "grasp" else "model")
+    print(f"patient model written to {where} from "
           f"{len(info['fe_simulations'])} FE simulations in {info['seconds']['total']:.0f} s")
     return 0
 

@@ -44,12 +44,19 @@ class OverGreen:
     """
 
     def __init__(self, predictor, data, placement, shape: str | None = None, nodes=None,
-                 green=None, solver: str | None = None):
+                 green=None, solver: str | None = None, patient=None):
         """``green``: :func:`green_of` ``(predictor, data)`` when the caller has read it;
         ``solver``: the solver environment's python, to solve the unit responses a load
-        needs and the file lacks (:class:`~surrogate.green_rows.GrownGreen`).
+        needs and the file lacks (:class:`~surrogate.green_rows.GrownGreen`); ``patient``:
+        a patient's corrections of a model of grasps on this liver
+        (:class:`~surrogate.patient.grasps.PatientGrasp`), at the mesh's nodes only.
         """
         from surrogate.predict_liver import PlacedModel
+
+        if patient is not None and (nodes is not None or predictor.load != "grasp"):
+            raise ValueError("a patient's model of grasps corrects a model of grasps at its "
+                             "liver mesh's nodes")
+        self.patient = patient
 
         lf, g = green or green_of(predictor, data)
         self.geometry, self.data = g, Path(data)
@@ -198,7 +205,10 @@ class GraspOverGreen:
         self.base, self.over = base, over
         self.patches, self.stiffness = base.patches, base.stiffness
         self._at = over._template_nodes(np.asarray(centres, dtype=np.int64))
+        self._centres = over.points[np.asarray(centres, dtype=np.int64)]
         self._force = over.placed.predictor.grasp_force
+        if over.patient is not None and over.patient.force is not None:
+            self._force = over.patient.force   # the patient's own law over the same base
         # the grasped nodes move with their tool: the network's rest is not added there
         where = {int(n): i for i, n in enumerate(over.output_nodes)}
         self._held = np.array([where[int(n)] for p in base.patches for n in p if int(n) in where],
@@ -213,7 +223,12 @@ class GraspOverGreen:
         if self.over._to_nodes is not None:   # at OverGreen's own points: interpolated
             return grasp_over_base(self.over.placed, self._at, d, self.over._to_nodes @ u,
                                    force)
-        return grasp_over_base(self.over.placed, self._at, d, u, force, self._held)
+        u, _ = grasp_over_base(self.over.placed, self._at, d, u, force, self._held)
+        if self.over.patient is not None:
+            du = self.over.patient.field(self._centres, d, u)
+            du[self._held] = 0.0   # the grasped nodes move with their tool
+            u = u + du
+        return u, self.force(d)
 
 
 def nearest_first(points: np.ndarray, nodes: np.ndarray, near: int) -> np.ndarray:
@@ -245,7 +260,8 @@ def green_of(predictor, data) -> tuple:
 
 
 def predict_over_green(predictor, data, liver, forces, at, *, frame: str | None = None,
-                       saved=None, shape: str | None = None, grasp: bool = False):
+                       saved=None, shape: str | None = None, grasp: bool = False,
+                       patient=None):
     """predict-liver over the liver's own Green's function: (the
     :class:`~surrogate.predict_liver.LiverPrediction` on the liver's own mesh, the model).
     ``forces`` (n_loads, 3) N act at the mesh's surface nodes nearest to ``at`` (n_loads, 3)
@@ -253,6 +269,8 @@ def predict_over_green(predictor, data, liver, forces, at, *, frame: str | None 
     (``saved``: the file truth-scene --placement wrote, read when it holds this liver).
     ``grasp``: ``forces`` are the displacements (mm) of tools grasping the liver at ``at``
     (:meth:`OverGreen.grasp`); the prediction's forces are then each tool's force on it.
+    ``patient``: a patient's corrections of a model of grasps on this liver
+    (:class:`~surrogate.patient.grasps.PatientGrasp`, ``surrogate adapt``'s).
     """
     from surrogate.evaluate import place
     from surrogate.predict_liver import LiverPrediction
@@ -260,7 +278,7 @@ def predict_over_green(predictor, data, liver, forces, at, *, frame: str | None 
     green = green_of(predictor, data)   # read once, checked before the registration
     same_liver(data, green[1], liver)
     placement, found = place(predictor, liver, frame, saved)
-    model = OverGreen(predictor, data, placement, shape, green=green)
+    model = OverGreen(predictor, data, placement, shape, green=green, patient=patient)
     g = model.geometry
     if model.output_nodes.size != g.n_nodes:
         raise ValueError(f"{data}: its scene predicts {model.output_nodes.size} of the mesh's "

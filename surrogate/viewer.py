@@ -541,11 +541,18 @@ def _over_green(args):
                           "liver's file with --place (make liver's LIVER)")
     mdir = model_dir(Path(args.run))
     pred = load_predictor(mdir, load=model_load(mdir) if args.grasp else "nodal")
+    patient = None
+    if getattr(args, "patient", None):
+        from surrogate.patient.grasps import PatientGrasp
+
+        if not args.grasp:
+            raise ViewerError("--patient corrects a model of grasps: give --grasp")
+        patient = PatientGrasp.load(args.patient)
     saved = Path(args.base).parent / "placement.npz"
     placement, found = place(pred, args.place, args.frame, saved if saved.exists() else None)
     for msg in found:
         print(f"{log_prefix}: warning: {msg}", file=sys.stderr)
-    return OverGreen(pred, Path(args.base), placement, solver=args.solver)
+    return OverGreen(pred, Path(args.base), placement, solver=args.solver, patient=patient)
 
 
 def build(args):
@@ -620,6 +627,9 @@ def _parser() -> argparse.ArgumentParser:
                     "over that liver's own Green's function, make liver's runs/liver/NAME/data: "
                     "the whole field of the liver's own mesh, forces (or --grasp) as make "
                     "liver answers them")
+    ap.add_argument("--patient", type=Path, metavar="RUN", help="with --base and --grasp: a "
+                    "patient's corrections of the model of grasps (make patient LOAD=grasp's "
+                    "run), --base being that patient's data")
     ap.add_argument("--nodes", choices=("surface", "all"), default="surface",
                     help="predict the surface only (default) or every node of the liver")
     ap.add_argument("--offscreen", action="store_true", help="render to files, no window")

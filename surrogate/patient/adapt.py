@@ -31,16 +31,20 @@ def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | 
     """
     from surrogate.data import load_dataset
     from surrogate.evaluate import place
-    from surrogate.predictor import load_predictor
+    from surrogate.predictor import load_predictor, model_load
 
     t = time.perf_counter()
     ds = load_dataset(data)
-    linear = None if tune else LinearBase.of(ds)
-    used = used_simulations(ds, sims, data, linear is not None)
-    pred = load_predictor(model_dir)
+    kind = model_load(model_dir)
+    pred = load_predictor(model_dir, load=kind)
     if pred.shape_model is None:
         raise ValueError(f"{model_dir}: not a population model (no shape model): a patient "
                          "model adapts a model trained on a population of livers")
+    if "grasp" in (ds.load_kind, kind):
+        return _grasps(pred, kind, model_dir, ds, data, liver, run, sims=sims, frame=frame,
+                       saved=saved, tune=tune, rest=rest, log_fn=log_fn)
+    linear = None if tune else LinearBase.of(ds)
+    used = used_simulations(ds, sims, data, linear is not None)
     # a population model of the bases' rest is its own rest (and places the liver as well)
     rest_pred = pred if rest is None and not pred.base.whole else \
         None if rest is None else _rest_model(rest, pred, model_dir)
@@ -64,6 +68,25 @@ def adapt(model_dir, data, liver, run, *, sims: int | None = None, frame: str | 
     fitting = "tuning_and_correction" if tune else "correction"
     info["seconds"] = {"place": placed - t, fitting: corrected - placed,
                        **info["seconds"], "total": time.perf_counter() - t}
+    (Path(run) / "adaptation.json").write_text(json.dumps(info, indent=1))
+    return info
+
+
+def _grasps(pred, kind, model_dir, ds, data, liver, run, *, sims, tune, rest, **kw) -> dict:
+    """A patient's model of grasps (:mod:`surrogate.patient.grasps`); ValueError naming the
+    mismatch when the model or the data is not of grasps, or for --tune or --rest.
+    """
+    from surrogate.patient.grasps import adapt_grasps
+
+    if ds.load_kind != kind:
+        raise ValueError(f"{data}: {ds.load_kind} loads, {model_dir}: a model of {kind} loads: a "
+                         "patient's model of grasps adapts a model of grasps to the patient's "
+                         "grasps (make patient LOAD=grasp)")
+    if tune or rest is not None:
+        raise ValueError("--tune and --rest adapt a model of forces; a model of grasps is "
+                         "corrected over its own rest (make patient LOAD=grasp)")
+    info = adapt_grasps(pred, model_dir, ds, data, liver, run,
+                        used_simulations(ds, sims, data), **kw)
     (Path(run) / "adaptation.json").write_text(json.dumps(info, indent=1))
     return info
 

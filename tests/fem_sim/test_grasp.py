@@ -139,10 +139,38 @@ def test_a_grasp_scene_end_to_end_records_each_tools_displacement_and_force(tmp_
         work = np.einsum("std,td->s", s.reaction, case.displacements)
         assert np.all(np.isfinite(s.reaction)) and np.all(work > 0)
         assert np.all(np.diff(work) > 0)
-    _small_strain_responses(out, root, scene, g, shards)
+    lf = _small_strain_responses(out, root, scene, g, shards)
+    _one_liver_responses(out, root, scene_file, shards, lf)
 
 
-def _small_strain_responses(out, root, scene, g, shards) -> None:
+def _one_liver_responses(out, root, scene_file, shards, lf) -> None:
+    """fem_sim linear on the one-liver grasp scene itself (make patient LOAD=grasp's step:
+    the free surface's Green's function, each case's grasp over it) gives every simulation
+    the population path's field and tools' forces; another order or drawn cases refused."""
+    import subprocess
+    import sys
+
+    from data_spec.linear_fields import read_dataset_linear
+    from fem_sim.batch.chunked import mpirun_env
+
+    lin = [sys.executable, "-m", "fem_sim", "linear", str(scene_file), "--out", str(out),
+           "--green", "--order"]
+    env = mpirun_env(PYTHONPATH=str(root))
+    for bad in (["2"], ["1", "--synthetic", "3"]):
+        res = subprocess.run(lin + bad, env=env, capture_output=True, text=True, timeout=600)
+        assert res.returncode != 0 and "--green with --order 1, no --synthetic" in res.stderr
+    res = subprocess.run(lin + ["1"], env=env, capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
+    one = read_dataset_linear(out)
+    assert one.green is not None and one.green_nodes.size > 0
+    for s in shards:
+        a, b = one.rows([s.sim_index])[0], lf.rows([s.sim_index])[0]
+        scale = np.abs(lf.displacement[b]).max()
+        np.testing.assert_allclose(one.displacement[a], lf.displacement[b], atol=1e-6 * scale)
+        np.testing.assert_allclose(one.tool_force[a], lf.tool_force[b], rtol=1e-6)
+
+
+def _small_strain_responses(out, root, scene, g, shards):
     """The grasp dataset's small-strain responses checked against its shards."""
     import subprocess
     import sys
@@ -175,6 +203,7 @@ def _small_strain_responses(out, root, scene, g, shards) -> None:
         ratio = (np.linalg.norm(s.reaction, axis=2)
                  / np.linalg.norm(s.load_fractions[:, None, None] * f1, axis=2))
         assert np.all(np.abs(ratio[0] - 1.0) < 0.1) and np.all(ratio[-1] > ratio[0])
+    return lf
 
 
 

@@ -87,3 +87,19 @@ def test_make_liver_takes_the_shipped_models_when_no_model_is_given(tmp_path):
     bad = _make("liver", f"LIVER={LIVER}", f"MODEL={tmp_path}", "AT=1 2 3 0 0 -0.4")
     assert bad.returncode == 2 and "not a trained run" in bad.stderr
     assert "surrogate.make_liver" not in bad.stdout + bad.stderr   # refused before any work
+
+
+def test_make_patient_of_grasps_takes_the_shipped_model_and_the_site():
+    """LOAD=grasp with no MODEL: the shipped model of grasps on scene4_grasp's rule, its
+    grasps drawn around SITE, the liver's Green's function for grasps (make -n: the commands,
+    not run); a SITE that is not a point, or another LOAD, is refused before any work."""
+    proc = _make("-n", "patient", "LOAD=grasp", f"LIVER={LIVER}", "K=6", "SITE=1 2 3")
+    assert proc.returncode == 0, proc.stderr
+    for said in ("truth-scene models/scene4_grasp", "scene4_grasp.toml", "--near 1 2 3",
+                 "--green --order 1", "surrogate adapt models/scene4_grasp"):
+        assert said in " ".join(proc.stdout.split()), said
+    for bad, why in (("SITE=1 2", "SITE='1 2': expected three finite numbers"),
+                     ("LOAD=pull", "LOAD='pull': expected one of")):
+        proc = _make("patient", "LOAD=grasp", f"LIVER={LIVER}", bad)
+        assert proc.returncode == 2 and why in proc.stderr, proc.stderr
+        assert "truth-scene" not in proc.stdout + proc.stderr
