@@ -1,23 +1,17 @@
 """Hard cases beside the easy one: what a liver and a load that make Newton work cost.
 
-The easy case: the real liver (``shared/data/livers/sofa_liver.vtk``), 0.4 N along -z on the
-surface node farthest from the fixed region. The hard ones change one thing: the phantom liver, a
-thin-lobe phantom (the seed with the thinnest left lobe among 0..99), 2x and 5x the force, the
-softest material of scene 3 (c1 = 2e-3 MPa, m1 = 6). Each row gives the Newton iterations per
-load step, factorisations, back-solves, chord steps, cut-backs, fallbacks (matrices the
-first factorisation could not take: not positive definite for PARDISO's Cholesky, or float32
-factors too poor) and seconds, and the
-factorisations relative to the easy case (the issue's bar: <= 1.5x at 1x force).
+The easy case: the SOFA liver, 0.4 N along -z on the surface node farthest from the fixed
+region. The hard ones change one thing: the phantom, a thin-lobe phantom, 2x and 5x the force,
+scene 3's softest material. Per row: Newton iterations per step, factorisations, back-solves,
+chord steps, cut-backs, fallbacks, seconds, and factorisations relative to the easy case.
 
     .venv-solver/bin/python bench/bench_hard.py [--h 5] [--runs 1] [--settings '{"k": v}']
         [--md docs/solver.md]   # the report (header: machine, date, commit, command)
         [--textbook]   # also the textbook dolfinx solver on the easy case, side by side
         [--elements 16 12]   # also P2 against P1 on the same meshes (easy load)
-        [--batch 3]   # also 3 more easy-case simulations on the first one's problem, as a
-                      # dataset runs them (the small-strain factorisation is kept)
+        [--batch 3]   # also 3 more easy-case simulations on the first one's problem
 
-``--settings`` runs a solver variant (any OgdenProblem setting) against the defaults, both in
-the same run, so that the ratio between them is measured under the same machine load.
+``--settings`` runs a solver variant against the defaults in the same run (the same load).
 """
 
 from __future__ import annotations

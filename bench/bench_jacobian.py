@@ -1,17 +1,11 @@
 """One Newton step's linear algebra on the real liver (or the phantom): the Jacobian assembled
-by dolfinx and by fem_sim's C assembly for P1 (fem_sim/solver/tet.py), then factorised by PETSc's
-MUMPS LDL^T (PORD ordering, what Debian's MUMPS offers), by fem_sim's serial LDL^T (MUMPS'
-C interface, METIS ordering) in float64 (pivoting) and float32 (none, as the solver runs it), and
-by MKL PARDISO's float32 Cholesky with its own METIS ordering (the serial default when MKL is
-installed). Threads: OMP_NUM_THREADS (PARDISO) and OPENBLAS_NUM_THREADS (MUMPS' fronts).
+by dolfinx and by fem_sim's C assembly (P1), factorised by PETSc's MUMPS LDL^T (PORD), fem_sim's
+serial LDL^T (METIS) in float64 and float32, and MKL PARDISO's float32 Cholesky; at the
+converged state of bench_hard.py's easy case. Prints assembly and factorisation seconds
+(medians of --runs), GFlop, back-solve seconds and one solve's relative residual. Threads:
+OMP_NUM_THREADS (PARDISO), OPENBLAS_NUM_THREADS (MUMPS' fronts).
 
     OPENBLAS_NUM_THREADS=1 .venv-solver/bin/python bench/bench_jacobian.py [--mesh sofa] [--h 5.0]
-
-The matrix is the constrained Jacobian at the converged state of bench_hard.py's easy case
-(0.4 N at the node farthest from the fixed region). Prints the assembly times (medians of
---runs, with the constraint rows/columns set) and their largest difference, then GFlop (MUMPS'
-estimate), seconds per numerical factorisation and per back-solve (medians of --runs), and the
-relative residual of one solve with a random right-hand side.
 """
 
 from __future__ import annotations

@@ -1,7 +1,6 @@
-"""Ogden point kernel: the compiled C kernel (fem_sim.material.ogden_c) against the numpy reference
-(fem_sim.material.ogden.ogden_point_kernel), stress only and stress + tangent, at 75k points (about
-the quadrature points of the 15k-node liver at P1). Median of --runs calls each; prints a table
-and the ratios, and the largest relative difference of the two kernels' outputs.
+"""Ogden point kernel: the compiled C kernel (fem_sim.material.ogden_c) against the numpy
+reference, stress and stress + tangent, at 75k points (the 15k-node liver's at P1): medians of
+--runs calls, their ratios and the kernels' largest relative difference.
 
     OPENBLAS_NUM_THREADS=1 .venv-solver/bin/python bench/bench_kernel.py [--points 75000]
 """

@@ -1,15 +1,11 @@
-"""Scene 4's shape parametrisation, for the anatomical phantom population beside the narrow
-one it replaces: staged CPD of the template onto every liver, PCA, the paper's Figure 9
-(cumulative explained variance, IoU and Dice of each liver against its reconstruction from
-n = 1..40 components), the number of components each needs for a mean IoU of 0.95, and a
-picture of the most different livers (the extremes of the first two components, the smallest
-and the largest). Writes bench/results/population/<variety>/population.{md,json,png} and the
-report docs/population.md with docs/population.png and docs/population_livers.png.
+"""Scene 4's shape parametrisation, the anatomical phantom population beside the narrow one:
+staged CPD of the template onto every liver, PCA, the paper's Figure 9 (explained variance,
+IoU and Dice against the reconstruction from n = 1..40 components), the components for a mean
+IoU of 0.95, the most different livers. Resumable; writes docs/population.{md,png} and
+docs/population_livers.png.
 
     .venv-solver/bin/python bench/bench_population.py [--livers 40] [--mesh-size 16] \
         [--varieties anatomical narrow] [--compare-plain 10]
-
-Resumable: a variety whose population.json exists is not registered again.
 """
 
 from __future__ import annotations

@@ -4,18 +4,11 @@
     make bench-realtime            # generates scene 1 at the paper's size if missing, then this
     .venv-train/bin/python bench/bench_realtime.py --data DIR [--folds 5] [--calls 500]
 
-Resumable: each design is trained into ``bench/results/realtime/runs/<design>`` by make
-table4's ``train`` (skipped when the run holds metrics of the same config and dataset size; a
-killed training resumes from its checkpoint): the same folds and seed for every design, so the
-validation errors come from the same held-out simulations.
-
-Latency: the trained network of each design, moved onto a liver-sized cloud of ~15k nodes
-(``--nodes``; the node-wise design evaluates its features there; the reduced basis gets
-orthonormal modes of that size, since its own modes live on the scene's mesh): so accuracy is
-measured on the scene's mesh and latency at ~15k nodes with the same design (the table says
-so). Median and 99th percentile of ``--calls`` calls after warm-up, whole liver and a third of
-the nodes ("surface"), float32 and bfloat16. Writes docs/realtime.md; its last line (also
-printed) is ``realtime: <design> <ms> ms median at <N> nodes, MEE <x> mm vs paper net <y> mm``.
+Resumable: each design trained into ``bench/results/realtime/runs/<design>`` on the same folds
+and seed. Latency: each trained network moved onto a liver-sized cloud of ``--nodes`` (the
+reduced basis with orthonormal modes of that size), median and 99th percentile of ``--calls``
+calls, whole liver and a third of the nodes, float32 and bfloat16. Writes docs/realtime.md;
+its last line: ``realtime: <design> <ms> ms median at <N> nodes, MEE <x> mm vs paper net <y> mm``.
 """
 
 from __future__ import annotations

@@ -1,13 +1,8 @@
-"""The error budget: scene-1 load cases solved on every budget mesh and on the reference (FE,
-solver environment), then, with ``--errors`` (trainer environment, after
-``bench/tradeoff_surrogate.py`` trained a network on each mesh's dataset), the FE error of each
-mesh, the network's error against its own mesh and the total a user gets: the section
-``error-budget`` of docs/tradeoff_surrogate.md (prose: bench/templates/error_budget.md.j2) and
-docs/error_budget.png.
-
-A few load cases are drawn exactly as scene 1 draws them (``make_case`` at indices no dataset
-uses) on the coarsest mesh; every other mesh loads the eligible node nearest to the same point.
-The reference (P2 at 6 mm, the price list's) is evaluated at the vertices of every budget mesh.
+"""The error budget: scene-1 load cases (drawn as scene 1 draws them, on every budget mesh at
+the node nearest the same point) solved on each budget mesh and the reference (P2 at 6 mm);
+with ``--errors``, after ``bench/tradeoff_surrogate.py`` trained a network on each mesh's
+dataset, the FE error, the network's and the total a user gets: the section ``error-budget``
+of docs/tradeoff_surrogate.md and docs/error_budget.png.
 
     .venv-solver/bin/python bench/budget_fem.py            # resumable: bench/results/budget_fem
     .venv-train/bin/python bench/budget_fem.py --errors    # make tradeoff-surrogate runs both

@@ -4,16 +4,12 @@ it learn what the Ogden liver does beyond the base?
     .venv-train/bin/python bench/grasp_rest.py [--sims 145] [--folds 5] [--evaluate-folds 2]
         [--report-only]
 
-scene4_grasp's first ``--sims`` simulations (one a liver: the validation livers are not in the
-scene), each liver's small-strain responses (fem_sim linear --population --order 1: each
-patch held at its pull over the liver's Green's function), the population model of what the
-base misses (config population_green, its shipped settings) trained with ``--folds`` folds by
-liver, ``--evaluate-folds`` of them held out in turn; on their livers, per pull, the MEE of the
-model, of the base alone and of the naive model (the training folds' mean displacement), and
-the tool's force error of the model and of the base, per liver then median and worst. Then the
-model of grasps trained on them all (bench/results/grasp_rest/run, one fold evaluated), which
-``bench/surgical_loads.py --model`` places on the validation livers. Resumable (results in
-bench/results/grasp_rest/). Writes the section "grasp-network" of docs/surgical_loads.md.
+scene4_grasp's first ``--sims`` simulations with each liver's grasp base (fem_sim linear
+--population --order 1), ``population_green`` trained by liver folds: per pull on the held-out
+livers the MEE of the model, the base and the naive model, and the tool's force error; then
+the model of grasps on them all (bench/results/grasp_rest/run), which ``bench/surgical_loads.py
+--model`` places on the validation livers. Resumable. Writes the section "grasp-network" of
+docs/surgical_loads.md.
 """
 
 from __future__ import annotations

@@ -4,12 +4,10 @@
     .venv-train/bin/python bench/patient.py [--model RUN] [--livers Amos-054 LiTS-100 LiTS-67]
         [--ks 0 5 10 20 40 80] [--design] [--order 1] [--no-green] [--no-tune]
 
-For each validation liver: its FE truth with the population model's boundary condition
-(HELD + K_MAX simulations, resumable under bench/results/patient/), then for every K the MEE
-on the same first HELD simulations of every model the report's table names
-(:func:`surrogate.patient.curve.evaluate_patient`), and ``make patient``'s wall time end to
-end on the first liver. ``--design``: the same on training livers with a population model
-trained without them (docs/patient_design.md, where the adaptation's settings are chosen).
+Per validation liver: its FE truth with the model's boundary condition (resumable under
+bench/results/patient/), every K's MEE on the same first HELD simulations of every model the
+table names (:func:`surrogate.patient.curve.evaluate_patient`), ``make patient`` timed on the
+first liver. ``--design``: training livers, a population model trained without them.
 """
 
 from __future__ import annotations

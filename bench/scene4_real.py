@@ -2,30 +2,15 @@
 
     .venv-train/bin/python bench/scene4_real.py [--data runs/data/scene4_livers] [--np 2]
 
-1. The scene's simulations (data_spec/scenes/scene4_livers.toml), generated where missing.
-2. The designs cross-validated by liver on the same folds (the first of the scene's 10): the
-   population basis (``population_basis``, also trained on every liver and exported: the model
-   a user gets), the population basis over each liver's own small-strain base to second
-   order (``population_linear``) and to first order (``population_green``, the model ``make
-   liver`` uses), after ``fem_sim linear --population``, each beside its base alone, and the
-   paper's node-wise network (``paper_scene4``, with table4's node-wise budget: 30
-   epochs on a tenth of the nodes).
-3. The livers never seen (the scene's 15 validation livers and the SOFA liver), each placed as
-   predict-liver places it, with an FE truth on its own mesh fixed where the placement puts the
-   template's fixed region; the exported population basis against it per liver (MEE, skill
-   against the population's mean displacement, % under 3 mm), a picture of the worst; each
-   exported model of a base's rest over the base of the truth's own mesh, and the base alone;
-   ``make liver`` timed from the liver file. A liver whose file is not on this machine keeps
-   its row of the previous report (marked) while the population basis is unchanged.
-4. Latency at 15.4k nodes, and the time from a liver file to a ready predictor.
-5. ``--every-fold``: the population designs (``--designs``) cross-validated over all 10
-   folds (each liver held out once), merged into the report's JSON. Designs left out of
-   ``--designs`` keep their rows of the previous report, marked with its commit.
-
-Resumable: generation skips what is there, a finished training is reused
-(``train_or_reuse``), each unseen liver's truth is kept under bench/results/scene4_real/.
-Writes docs/scene4_real.md, docs/scene4_real.png and docs/scene4_real.json (the rows
-bench/table4.py puts into docs/table4.md).
+The scene's simulations generated where missing; the designs (``population_basis``, the one a
+user gets, trained on every liver too; ``population_linear`` and ``population_green`` over
+each liver's small-strain base, each beside its base alone; ``paper_scene4`` with table4's
+node-wise budget) cross-validated by liver on the scene's first fold (``--every-fold``: all 10,
+for ``--designs``); the 15 validation livers and the SOFA liver placed as predict-liver places
+them, against an FE truth on their own mesh (a liver whose file is missing keeps its previous
+row, marked), ``make liver`` timed on each; latency at 15.4k nodes. Resumable (results under
+bench/results/scene4_real/). Writes docs/scene4_real.{md,png,json} (the rows bench/table4.py
+puts into docs/table4.md); the report's template says what each row means.
 """
 
 from __future__ import annotations

@@ -5,21 +5,14 @@ settings and with others, side by side (docs/solver_stalls.md, docs/guess_guard.
         [--all] [--baseline '{"stall_iterations": 0}'] [--settings '{}'] [--variants '[...]']
         [--out REPORT] [--title TITLE] [--report-only]
 
-By default the solver's defaults (``settings``, where ``stall_iterations`` gives up an attempt
-still far from converging after 10 Newton iterations) against the same without that rule
-(``baseline``: every attempt runs to ``max_iterations``). From each dataset (default: the
-patient truths bench/patient.py writes, bench/results/patient/<liver>/data), the ``--worst``
-simulations with the most factorisations in their own records (a load step where Newton
-wandered: an indefinite tangent near the point load) and ``--typical`` of the median ones, or
-with ``--all`` every simulation (what a whole dataset costs); each solved with both on one
-rank, in alternating order, from the shard's own load, fixed nodes and material. Reported:
-factorisations, Newton iterations, cut-backs, seconds, the status, and the largest nodal
-difference between the two solutions (the same equilibrium must come out).
-
-The guard on the predictor's guess (docs/guess_guard.md, whose header has the whole command):
-the training livers of bench/stalls_lits.toml and bench/stalls_amos.toml, generated first
-(their headers say how), ``--all --baseline '{"guess_guard": 0}'`` with ``--variants`` (a JSON
-list of more settings, each solved on the same simulations and reported as totals).
+By default the solver's defaults (``stall_iterations`` gives up an attempt still far from
+converging after 10 Newton iterations) against the same without that rule, on the ``--worst``
+simulations of each dataset (most factorisations; default: bench/patient.py's truths) and
+``--typical`` median ones, or ``--all``; each solved with both on one rank, in alternating
+order, from the shard's own load, fixed nodes and material: factorisations, iterations,
+cut-backs, seconds, status and the largest nodal difference of the two solutions. The guess
+guard (docs/guess_guard.md, its header has the command): bench/stalls_*.toml's livers, ``--all
+--baseline '{"guess_guard": 0}'`` with ``--variants``.
 """
 
 from __future__ import annotations

@@ -5,16 +5,11 @@ bench/templates/table4.md.j2).
     make table4                                      # scenes 1-4 at the default budget
     .venv-train/bin/python bench/table4.py --scenes 1 2 [--sims 2=600] [--budget-minutes 90]
 
-Each scene is generated in chunks (``--budget-minutes`` caps generation at half the scene's
-budget; ``--sims`` caps the count), trained with its ``[surrogate]`` configuration and the
-budget's overrides, and its exported model timed. A learning curve (all simulations, then the
-first half and quarter with 3 folds) says where the paper's size would land; ``--beyond K=N``
-measures scene K at N simulations too (past the budget: the row stays the budget's).
-
-Resumable: generation skips the shards that exist, a finished training is reused and a killed
-one resumes from its checkpoint. Results land under ``bench/results/table4/`` (not committed);
-the report is rewritten after every step, and its rows are kept in ``docs/table4.json`` so that
-a run keeps the other scenes' rows where their results are not on this host.
+Each scene generated in chunks (at most half its budget; ``--sims`` caps the count), trained
+with its ``[surrogate]`` configuration and the budget's overrides, its model timed; a learning
+curve (all, half, a quarter, 3 folds) says where the paper's size lands; ``--beyond K=N``
+measures scene K at N simulations too. Resumable (bench/results/table4/); the rows are kept in
+docs/table4.json, so a run keeps the other scenes' rows.
 """
 
 from __future__ import annotations

@@ -1,17 +1,13 @@
 """FEM price list: what each speed knob costs in accuracy, measured on this software.
 
-On the embedded phantom and the SOFA liver (when present), a 0.4 N load far from the fixed
-region as a patch load (a bump traction on a 15 mm disc: it has a converged limit) and as the
-paper's nodal load (its error measured outside a ball of 2 h around the load point, inside
-apart), each run changes one knob from the defaults: mesh size and element (P1, P2, ANP), load
-steps, Newton tolerance, linear solver, predictor, K/mu. Each records seconds, Newton
-iterations, factorisations, peak memory and its displacement at the reference mesh's vertices
-(the finest P2 that fits); the summary gives each element's seconds to come within 2 %.
-
     .venv-solver/bin/python bench/tradeoff_fem.py [--threads 2] [--report]   # make tradeoff-fem
 
-Resumable: each run is a subprocess appended to bench/results/tradeoff_fem/runs.jsonl as it
-ends (runs there are skipped); writes docs/tradeoff_fem.md and docs/tradeoff_fem.png.
+The phantom and the SOFA liver (when present), 0.4 N far from the fixed region as a patch load
+(a 15 mm bump traction, with a converged limit) and as the paper's nodal load (its error
+measured outside a ball of 2 h around it); each run changes one knob (mesh size and element,
+load steps, Newton tolerance, linear solver, predictor, K/mu): seconds, iterations,
+factorisations, peak memory and the error against the finest P2 that fits. Resumable
+(bench/results/tradeoff_fem/runs.jsonl); writes docs/tradeoff_fem.{md,png}.
 """
 
 from __future__ import annotations

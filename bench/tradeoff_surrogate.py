@@ -1,17 +1,13 @@
 """Surrogate price list, measured on this software (docs/tradeoff_surrogate.md; its prose:
-bench/templates/tradeoff_surrogate.md.j2).
-
-On scene 1 the node-wise MLP is trained with one knob changed at a time (training simulations,
-network size, sampled node fraction, inference precision, all nodes against the surface only)
-and measured on the same held-out simulations: MEE, its 95th percentile, % under 1 mm, training
-seconds and latency. It also trains the error budget's network on each budget mesh's dataset
-(``bench/budget_fem.py --errors`` then writes the budget's section of the report).
+bench/templates/tradeoff_surrogate.md.j2): on scene 1 the node-wise MLP trained with one knob
+changed at a time (training simulations, network size, node fraction, precision, all nodes or
+the surface), on the same held-out simulations: MEE, p95, % under 1 mm, training seconds and
+latency; and the error budget's network on each budget mesh (``bench/budget_fem.py``).
 
     make tradeoff-surrogate       # budget_fem.py (solver env), then this script (trainer env)
     .venv-train/bin/python bench/tradeoff_surrogate.py --report   # report only
 
-Resumable: datasets are generated with ``fem_sim generate`` (finished shards skipped); every
-training appends one line to bench/results/tradeoff_surrogate/runs.jsonl, done ones skipped.
+Resumable: bench/results/tradeoff_surrogate/runs.jsonl, done trainings skipped.
 """
 
 from __future__ import annotations

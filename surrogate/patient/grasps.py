@@ -229,3 +229,37 @@ def adapt_grasps(pred, model_dir, ds, data, liver, run, used, *, frame: str | No
             "held_out": held_out(pg, every.take(rest)) if rest.any() else None,
             "seconds": {"place": placed - t, "correction": time.perf_counter() - placed,
                         "total": time.perf_counter() - t}}
+
+
+def grasp_site(pred, liver, clear: float = 50.0) -> list[float]:
+    """A vertex of the liver file at least ``clear`` mm from where ``pred``'s placement puts
+    the template's fixed region (the liver file's frame), drawn from the file's name: a site
+    for ``make patient LOAD=grasp SITE=...`` whose 20 mm reach keeps the scene's 30 mm from it.
+    """
+    import zlib
+
+    from data_spec.eligible_loads import min_distance
+    from surrogate.evaluate import place
+    from surrogate.predict_liver import read_liver_surface
+
+    pl = place(pred, liver, None)[0]
+    vertices = read_liver_surface(liver)[0]
+    far = vertices[min_distance(vertices, pl.to_liver(pl.points[pred.shape_model.fixed_nodes]))
+                   >= clear]
+    if not far.size:
+        raise ValueError(f"{liver}: no surface vertex {clear:g} mm from the fixed region")
+    rng = np.random.default_rng(zlib.crc32(Path(liver).stem.encode()))
+    return [round(float(v), 2) for v in far[rng.integers(far.shape[0])]]
+
+
+def against_k(c: GraspCases, ks, held: int, large_mm: float = 35.0) -> list[dict]:
+    """Per K of ``ks``: the corrections fitted on the first K simulations of ``c`` (the last
+    ``held`` left out), what was kept, and :func:`held_out` on those last ``held``.
+    """
+    sims = np.unique(c.sims)
+    test, rows = c.take(np.isin(c.sims, sims[-held:])), []
+    for k in ks:
+        pg, info = fit_patient_grasp(c.take(np.isin(c.sims, sims[:-held][:k])))
+        rows.append({"k": int(k), "force_law": info["force"]["kept"],
+                     "field": info["field"] is not None, **held_out(pg, test, large_mm)})
+    return rows

@@ -113,6 +113,34 @@ def test_truth_scene_draws_the_grasps_around_a_site_on_the_liver(tmp_path, capsy
     err = capsys.readouterr().err
     assert "--near" in err and "30.0 mm away, beyond the reach of 20 mm" in err
     assert not (tmp_path / "no.toml").exists()
+    # bench/patient_grasps.py's site: a vertex 50 mm or more from the placed fixed region,
+    # the same one each time (drawn from the name), within the file's surface
+    from data_spec.eligible_loads import min_distance
+    from surrogate.evaluate import place
+    from surrogate.patient.grasps import grasp_site
+    from surrogate.predictor import load_predictor
+
+    pred = load_predictor(ROOT / "models" / "scene4_grasp" / "model", load="grasp")
+    site = grasp_site(pred, liver)
+    assert site == grasp_site(pred, liver)
+    pl = place(pred, liver, None)[0]
+    fixed = pl.to_liver(pl.points[pred.shape_model.fixed_nodes])
+    assert min_distance(np.array([site]), fixed)[0] >= 50.0
+    assert min_distance(np.array([site]), v)[0] < 0.01
+
+
+def test_the_corrections_against_k_are_measured_on_the_same_held_out_grasps():
+    """against_k: each K fitted on the first K simulations only, every K measured on the
+    same last ones (the population model's errors equal in every row), the patient's error
+    at 40 mm falling as K grows on a residual it can learn."""
+    from surrogate.patient.grasps import against_k
+
+    c = _cases(np.random.default_rng(2), GraspForce(0.045, 0.0), residual=2.0, sims=14)
+    rows = against_k(c, [2, 4, 8], held=6)
+    assert [r["k"] for r in rows] == [2, 4, 8] and rows[0]["simulations"] == 6
+    assert all(r["population"] == rows[0]["population"] for r in rows)
+    big = [r["patient"]["large_mee_mm"] for r in rows]
+    assert big[-1] < 0.5 * rows[0]["population"]["large_mee_mm"] and big[-1] <= big[0]
 
 
 @pytest.mark.dataset

@@ -1,0 +1,73 @@
+"""A patient's model of grasps against FE on the validation livers: docs/patient_grasps.md.
+
+    .venv-train/bin/python bench/patient_grasps.py [--livers ...] [--ks 4 8 16] [--report-only]
+
+Per liver, ``make patient LOAD=grasp SITE=...`` at its ``grasp_site`` (resumable, under
+bench/results/patient_grasps/), each K's corrections measured on the same last HELD grasps.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+
+from liverviz.report import ROOT, render, write_report
+
+RESULTS = ROOT / "bench" / "results" / "patient_grasps"
+KS, HELD, CLEAR, LARGE = (4, 8, 16), 8, 50.0, 35.0   # -, -, mm from the fixed region, mm
+
+
+def measured(pred, liver: Path, ks) -> dict:
+    """make patient LOAD=grasp on the liver (once), every K's corrections on the held out."""
+    from surrogate.data import load_dataset
+    from surrogate.evaluate import place
+    from surrogate.over_green import OverGreen
+    from surrogate.patient.grasps import against_k, grasp_cases, grasp_site
+
+    d, where = RESULTS / liver.stem, grasp_site(pred, liver, CLEAR)
+    if not (d / "wall.json").exists():
+        t = time.perf_counter()
+        subprocess.run(["make", "--no-print-directory", "patient", "LOAD=grasp",
+                        f"LIVER={liver}", f"K={max(ks)}", f"HELD={HELD}", f"PATIENT={d}",
+                        "SITE=" + " ".join(map(str, where))], cwd=ROOT, check=True,
+                       stdout=subprocess.DEVNULL)
+        (d / "wall.json").write_text(json.dumps({"seconds": time.perf_counter() - t}))
+    ds = load_dataset(d / "data")
+    over = OverGreen(pred, d / "data", place(pred, liver, None, d / "placement.npz")[0])
+    cases = grasp_cases(over, ds, np.unique(ds.sample_sim))
+    return {"liver": liver.stem, "site": where, "nodes": int(ds.points[0].shape[0]),
+            "solved": int(np.unique(cases.sims).size), "rows": against_k(cases, ks, HELD, LARGE),
+            "wall_seconds": json.loads((d / "wall.json").read_text())["seconds"]}
+
+
+def main() -> int:
+    from data_spec import load_scene
+    from data_spec.livers import validation_files
+    from surrogate.predictor import load_predictor
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--livers", nargs="+", help="validation livers (default: all 15)")
+    ap.add_argument("--ks", nargs="+", type=int, default=list(KS))
+    ap.add_argument("--report-only", action="store_true", help="from docs/patient_grasps.json")
+    a = ap.parse_args()
+    md = ROOT / "docs" / "patient_grasps.md"
+    if a.report_only:
+        livers = json.loads(md.with_suffix(".json").read_text())["livers"]
+    else:
+        files = {f.stem: f for f in validation_files(
+            load_scene(ROOT / "data_spec" / "scenes" / "scene4_grasp.toml")["geometry"])}
+        pred = load_predictor(ROOT / "models" / "scene4_grasp" / "model", load="grasp")
+        livers = [measured(pred, files[n], sorted(a.ks)) for n in a.livers or sorted(files)]
+    body = render(Path(__file__).parent / "templates" / "patient_grasps.md.j2", livers=livers,
+                  ks=[r["k"] for r in livers[0]["rows"]], held=HELD, clear=CLEAR, median=np.median)
+    write_report(md, "A patient's model of grasps", body, {"livers": livers})
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
