@@ -36,7 +36,7 @@ MPIRUN := mpirun -n $(NP)
 .PHONY: help setup setup-system setup-solver setup-trainer demo test test-solver test-trainer \
         test-extremes extremes-doc \
         dataset train population table4 bench bench-solver bench-throughput bench-inference \
-        bench-population truth evaluate patient patient-args liver liver-args manipulate scene4-real bench-patient bench-surgical bench-ready bench-grasp-rest tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
+        bench-population truth evaluate patient patient-args liver liver-args manipulate scene4-real bench-patient bench-patient-grasps bench-surgical bench-ready bench-grasp-rest tradeoff-fem tradeoff-surrogate bench-realtime docs lint \
         bench-viewer docs-manipulator viewer \
         clean lock-trainer
 
@@ -58,6 +58,7 @@ help:
 	@echo "make bench-surgical   grasps to 40 mm, forces to 4 N on the validation livers -> docs/surgical_loads.md"
 	@echo "make bench-ready     make liver GRASP=... timed from each validation liver's file -> the same"
 	@echo "make bench-grasp-rest   the network over the grasp's base, cross-validated; the model of grasps"
+	@echo "make bench-patient-grasps   make patient LOAD=grasp on the validation livers -> docs/patient_grasps.md"
 	@echo "make tradeoff-fem   FEM speed/accuracy price list -> docs/tradeoff_fem.md (long, resumable)"
 	@echo "make tradeoff-surrogate   surrogate price list + error budget -> docs/ (long, resumable)"
 	@echo "make table4   the paper's Table 4, scenes 1-4 -> docs/table4.md (long, resumable)"
@@ -194,12 +195,13 @@ $(TEST_PATIENT)/.done: $(TEST_LIVERS)/.done | setup
 	@touch $@
 
 # A patient's model of grasps end to end (tests/surrogate/test_patient_grasp.py): make patient
-# LOAD=grasp with the shipped model of grasps on Amos-054, 6 grasps to adapt on, 3 held out.
+# LOAD=grasp with the shipped model of grasps on Amos-054, 8 grasps to adapt on and 3 held
+# out around the site bench/patient_grasps.py grasps it at (grasp_site).
 TEST_PGRASP := runs/test-data/ci_patient_grasp
 $(TEST_PGRASP)/.done: models/scene4_grasp/model/params.npz | setup
 	rm -rf $(@D)
-	$(MAKE) --no-print-directory patient LOAD=grasp LIVER=$(LIVERS)/Amos-054.obj K=6 HELD=3 \
-	    PATIENT=$(@D)
+	$(MAKE) --no-print-directory patient LOAD=grasp LIVER=$(LIVERS)/Amos-054.obj K=8 HELD=3 \
+	    SITE="22.51 -7.86 -25.35" PATIENT=$(@D)
 	@touch $@
 
 test-trainer: setup-trainer $(TEST_DATA)/.done $(TEST_DATA4)/.done $(TEST_PATIENT)/.done \
@@ -259,7 +261,7 @@ truth: setup
 # simulation is still solved (the scene needs one: it names the mesh and the dataset), none
 # adapts the model. LOAD=grasp: a patient's model of grasps (surrogate/patient/grasps.py):
 # MODEL a model of grasps (default: the shipped one), K grasps of GSCENE on the patient's
-# mesh, its Green's function, and the model's force law and field corrected with them
+# mesh, its Green's function, and the model's force and field corrected with them
 # ($(PATIENT)/run/grasp_patient.npz; predict-liver and the manipulator take --patient).
 # SITE="X Y Z": the K grasps (and HELD) drawn within 20 mm of that point (mm, the liver
 # file's frame): a patient's planned grasp, where the corrections are measured to help.
@@ -345,6 +347,11 @@ scene4-real: setup
 
 bench-patient: setup
 	$(TPY) bench/patient.py --np $(NP)
+
+# A patient's model of grasps on the 15 validation livers (resumable, about 45 minutes):
+# make patient LOAD=grasp at a site of each, its corrections against K -> docs/patient_grasps.md
+bench-patient-grasps: setup
+	$(TPY) bench/patient_grasps.py
 
 # Surgical loads (resumable): grasps pulled 5-40 mm and 0.4-4 N on a patch, FE against the
 # small-strain base over each validation liver's Green's function -> docs/surgical_loads.md;

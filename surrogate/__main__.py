@@ -92,7 +92,7 @@ def _add_predict_liver(sub) -> None:
                    "rest added and its force stiffened (docs/surgical_loads.md)")
     p.add_argument("--patient", metavar="RUN",
                    help="with --base and --grasp: a patient's corrections of the model of "
-                   "grasps (make patient LOAD=grasp's run: its force law, its field's "
+                   "grasps (make patient LOAD=grasp's run: its force's and its field's "
                    "correction), on that patient's DATA")
     p.add_argument("--placement", help="with --base: the placement file truth-scene "
                    "--placement wrote (read when it holds this liver, frame and model)")

@@ -53,37 +53,27 @@ class GraspForce:
 
     a: float = 0.0
     b: float = 0.0
-    # 1/N: a term c |F_lin| in the exponent (a patient's law, :mod:`surrogate.patient.grasps`:
-    # a pull along a stiffer direction of the patch stiffens more; 0 in a population's)
-    c: float = 0.0
 
     @classmethod
-    def fit(cls, d, f_lin, f_fe, with_force: bool = False) -> GraspForce:
-        """From the tools' pulls ``d`` (..., 3) mm, the base's forces and the FE's (..., 3) N;
-        ``with_force``: the term c |F_lin| fitted too.
-        """
+    def fit(cls, d, f_lin, f_fe) -> GraspForce:
+        """From the tools' pulls ``d`` (..., 3) mm, the base's forces and the FE's (..., 3) N."""
         p = np.linalg.norm(np.asarray(d, np.float64).reshape(-1, 3), axis=1)
         f_lin, f_fe = (np.asarray(f, np.float64).reshape(-1, 3) for f in (f_lin, f_fe))
-        size = np.linalg.norm(f_lin, axis=1)
-        ratio = np.linalg.norm(f_fe, axis=1) / size
+        ratio = np.linalg.norm(f_fe, axis=1) / np.linalg.norm(f_lin, axis=1)
         ok = (p > 0) & np.isfinite(ratio) & (ratio > 0)
-        x = np.stack([p, p * p, *([size] if with_force else [])], axis=1)[ok]
-        w, *_ = np.linalg.lstsq(x, np.log(ratio[ok]), rcond=None)
-        return cls(*map(float, w))
+        (a, b), *_ = np.linalg.lstsq(np.stack([p[ok], p[ok] ** 2], axis=1), np.log(ratio[ok]),
+                                     rcond=None)
+        return cls(float(a), float(b))
 
-    def factor(self, p, size=0.0) -> np.ndarray:
-        """The stiffening exp(a p + b p^2 + c |F_lin|) at pulls ``p`` mm and small-strain
-        forces of magnitude ``size`` N.
-        """
+    def factor(self, p) -> np.ndarray:
+        """The stiffening exp(a p + b p^2) at pulls ``p`` mm."""
         p = np.asarray(p, dtype=np.float64)
-        return np.exp(self.a * p + self.b * p * p + self.c * np.asarray(size, np.float64))
+        return np.exp(self.a * p + self.b * p * p)
 
     def __call__(self, d, f_lin) -> np.ndarray:
         """The tools' forces (..., 3) N for their pulls ``d`` (..., 3) mm and base forces."""
-        f_lin = np.asarray(f_lin)
-        return f_lin * self.factor(
-            np.linalg.norm(np.asarray(d, np.float64), axis=-1, keepdims=True),
-            np.linalg.norm(f_lin, axis=-1, keepdims=True) if self.c else 0.0)
+        return np.asarray(f_lin) * self.factor(
+            np.linalg.norm(np.asarray(d, np.float64), axis=-1, keepdims=True))
 
 
 def grasp_over_base(placed, at, d, u_base, f_base, held=None) -> tuple[np.ndarray, np.ndarray]:

@@ -207,8 +207,6 @@ class GraspOverGreen:
         self._at = over._template_nodes(np.asarray(centres, dtype=np.int64))
         self._centres = over.points[np.asarray(centres, dtype=np.int64)]
         self._force = over.placed.predictor.grasp_force
-        if over.patient is not None and over.patient.force is not None:
-            self._force = over.patient.force   # the patient's own law over the same base
         # the grasped nodes move with their tool: the network's rest is not added there
         where = {int(n): i for i, n in enumerate(over.output_nodes)}
         self._held = np.array([where[int(n)] for p in base.patches for n in p if int(n) in where],
@@ -216,7 +214,10 @@ class GraspOverGreen:
 
     def force(self, d) -> np.ndarray:
         f = self.base.force(d)
-        return f if self._force is None else self._force(d, f)
+        f = f if self._force is None else self._force(d, f)
+        if self.over.patient is not None:   # the patient's correction of it
+            f = f + self.over.patient.force_added(self._centres, d, f)
+        return f
 
     def __call__(self, d) -> tuple[np.ndarray, np.ndarray]:
         u, force = self.base(d)
@@ -225,7 +226,7 @@ class GraspOverGreen:
                                    force)
         u, _ = grasp_over_base(self.over.placed, self._at, d, u, force, self._held)
         if self.over.patient is not None:
-            du = self.over.patient.field(self._centres, d, u)
+            du = self.over.patient.field_added(self._centres, d, u)
             du[self._held] = 0.0   # the grasped nodes move with their tool
             u = u + du
         return u, self.force(d)

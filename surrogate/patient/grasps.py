@@ -3,18 +3,18 @@ placed on the patient's liver over its own Green's function (what ``make liver G
 answers: :class:`~surrogate.over_green.GraspOverGreen`), corrected with K FE grasps of the
 patient, solved on its own mesh with the model's boundary condition.
 
-Two corrections, each kept only when it beats the population model on the patient's
-simulations held out in turn:
+Two corrections of one tool's grasp, each the residual of the patient's FE against the model
+regressed on the grasp by kernel ridge regression
+(:func:`~surrogate.patient.correction.fit_correction`: a decay in the distance between the
+grasps' centres times a polynomial of their pulls, plus the product of the model's answers;
+its setting, and whether to keep it at all, chosen by nested cross-validation over whole
+simulations):
 
-- the tool's force: the stiffening of the small-strain force refitted on the patient's
-  grasps (:class:`~surrogate.grasp.GraspForce`: the population's law is one fit over every
-  liver, and a liver's own ratio of FE to small-strain force differs by a factor of up to
-  two; docs/surgical_loads.md); chosen by leave-one-simulation-out error of the log-ratio;
-- the field: the residual of the FE fields against the model regressed on the grasp by
-  kernel ridge regression (:func:`~surrogate.patient.correction.fit_correction`: a decay in
-  the distance between the grasps' centres times a polynomial of their pulls, plus the
-  model fields' product; its setting and whether to keep it chosen by nested
-  cross-validation over whole simulations), for one tool at a time.
+- the tool's force, its residual against the model's force (the population's stiffening of
+  the small-strain force is one law over every liver and direction, while the FE's ratio to
+  the small-strain force ranges from 2 to 11 between grasps at 40 mm, with the pull's
+  direction as much as with the liver: docs/surgical_loads.md, docs/patient_grasps.md);
+- the field, its residual against the model's field.
 
     python -m surrogate adapt MODEL DATA --liver FILE --run OUT [--sims K] [--placement P]
 
@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from surrogate.grasp import GraspForce, force_error_pct
+from surrogate.grasp import force_error_pct
 from surrogate.patient.correction import Correction, fit_correction
 
 FILE = "grasp_patient.npz"
@@ -41,29 +41,41 @@ FILE = "grasp_patient.npz"
 
 @dataclasses.dataclass
 class PatientGrasp:
-    """What a patient's K grasps add to the placed population model of grasps."""
+    """What a patient's K grasps add to the placed population model of grasps: corrections
+    of one tool's force and field (None: none kept). Several tools get none.
+    """
 
-    force: GraspForce | None          # the patient's force law (None: the population's)
-    correction: Correction | None     # the field's residual on one tool's grasp (None: none)
+    force: Correction | None
+    field: Correction | None
 
-    def field(self, centre, d, u) -> np.ndarray:
-        """(n_out, 3) mm to add to the model's field ``u`` (n_out, 3) of one tool at the
-        point ``centre`` (3,) mm pulled by ``d`` (1, 3) mm; zero for several tools.
+    @staticmethod
+    def _added(c: Correction | None, centre, d, answer) -> np.ndarray:
+        answer = np.asarray(answer, np.float64)
+        if c is None or np.asarray(d).shape != (1, 3):
+            return np.zeros_like(answer)
+        return c(np.reshape(centre, (1, 3)), np.reshape(d, (1, 3)),
+                 answer.reshape(1, -1))[0].reshape(answer.shape)
+
+    def field_added(self, centre, d, u) -> np.ndarray:
+        """(n_out, 3) mm to add to the model's field ``u`` (n_out, 3) of one tool at the point
+        ``centre`` (3,) mm pulled by ``d`` (1, 3) mm.
         """
-        u = np.asarray(u, np.float64)
-        if self.correction is None or np.asarray(d).shape != (1, 3):
-            return np.zeros_like(u)
-        return self.correction(np.reshape(centre, (1, 3)), np.reshape(d, (1, 3)),
-                               u.reshape(1, -1))[0].reshape(u.shape)
+        return self._added(self.field, centre, d, u)
+
+    def force_added(self, centre, d, f) -> np.ndarray:
+        """(1, 3) N to add to the model's force ``f`` (1, 3) of the same tool."""
+        return self._added(self.force, centre, d, f)
 
     def save(self, run) -> Path:
-        c, path = self.correction, Path(run) / FILE
-        arrays = {} if c is None else {
-            **{f"case_{i}": a for i, a in enumerate(c.cases)}, "weights": c.weights,
-            "scales": np.asarray(c.scales), "cv_mee": np.float64(c.cv_mee),
-            "setting": np.asarray(json.dumps(list(c.setting)))}
-        if self.force is not None:
-            arrays["force_abc"] = np.array([self.force.a, self.force.b, self.force.c])
+        path = Path(run) / FILE
+        arrays = {}
+        for name, c in (("force", self.force), ("field", self.field)):
+            if c is not None:
+                arrays.update({f"{name}_case_{i}": a for i, a in enumerate(c.cases)},
+                              **{f"{name}_weights": c.weights,
+                                 f"{name}_scales": np.asarray(c.scales),
+                                 f"{name}_cv": np.float64(c.cv_mee),
+                                 f"{name}_setting": np.asarray(json.dumps(list(c.setting)))})
         path.parent.mkdir(parents=True, exist_ok=True)
         np.savez(path, **arrays)
         return path
@@ -79,14 +91,15 @@ class PatientGrasp:
             raise ValueError(f"{path}: missing: not a patient's model of grasps (make patient "
                              "LOAD=grasp writes it)")
         with np.load(path) as f:
-            force = GraspForce(*map(float, f["force_abc"])) if "force_abc" in f else None
-            correction = None
-            if "weights" in f:
-                correction = Correction(tuple(f[f"case_{i}"] for i in range(4)), f["weights"],
-                                        tuple(json.loads(str(f["setting"]))),
-                                        tuple(map(float, f["scales"])),
-                                        cv_mee=float(f["cv_mee"]))
-        return cls(force, correction)
+            def read(name):
+                if f"{name}_weights" not in f:
+                    return None
+                return Correction(tuple(f[f"{name}_case_{i}"] for i in range(4)),
+                                  f[f"{name}_weights"],
+                                  tuple(json.loads(str(f[f"{name}_setting"]))),
+                                  tuple(map(float, f[f"{name}_scales"])),
+                                  cv_mee=float(f[f"{name}_cv"]))
+            return cls(read("force"), read("field"))
 
 
 @dataclasses.dataclass
@@ -133,53 +146,25 @@ def grasp_cases(over, ds, sims) -> GraspCases:
     return GraspCases(**{k: np.asarray(v, np.float64) for k, v in rows.items()})
 
 
-def _log_ratio_error(law: GraspForce | None, c: GraspCases) -> float:
-    """Mean squared log of the FE to the predicted force's magnitude over the cases ``c``
-    (``law`` None: the population model's force).
-    """
-    f = c.model_force if law is None else law(c.pulls, c.base_force)
-    return float(np.mean(np.log(np.linalg.norm(c.fe_force, axis=1)
-                                / np.linalg.norm(f, axis=1)) ** 2))
-
-
-def fit_force(c: GraspCases) -> tuple[GraspForce | None, dict]:
-    """The patient's force law, exp(a p + b p^2) or with c |F_lin| (:class:`GraspForce`),
-    whichever has the least error of the log-ratio on each of its simulations held out in
-    turn (at least two), when that beats the population's; with the errors of each.
-    """
-    sims = np.unique(c.sims)
-    if sims.size < 2:
-        return None, {"kept": None, "why": "fewer than two simulations"}
-    cv = dict.fromkeys(("population", "patient", "patient_with_force"), 0.0)
-    for s in sims:
-        held, train = c.take(c.sims == s), c.take(c.sims != s)
-        cv["population"] += _log_ratio_error(None, held) / sims.size
-        for key, with_force in (("patient", False), ("patient_with_force", True)):
-            law = GraspForce.fit(train.pulls, train.base_force, train.fe_force, with_force)
-            cv[key] += _log_ratio_error(law, held) / sims.size
-    best = min(cv, key=cv.get)
-    law = None if best == "population" else GraspForce.fit(
-        c.pulls, c.base_force, c.fe_force, best == "patient_with_force")
-    return law, {"kept": best, **({} if law is None else dataclasses.asdict(law)),
-                 "cv_rms_log_ratio": {k: float(np.sqrt(v)) for k, v in cv.items()}}
-
-
 def fit_patient_grasp(c: GraspCases) -> tuple[PatientGrasp, dict]:
     """The patient's corrections fitted on its grasp cases ``c`` (:func:`grasp_cases`)."""
-    force, finfo = fit_force(c)
     n = len(c.sims)
-    r = (c.truth - c.model).reshape(n, -1)
-    corr = fit_correction(c.centres, c.pulls, c.model.reshape(n, -1), r, c.sims)
-    return PatientGrasp(force, corr), {
-        "force": finfo, "field": None if corr is None else {
-            **dict(zip(("length_mm", "beta", "mix", "decay", "gamma", "ridge"), corr.setting)),
-            "cv_mee_mm": corr.cv_mee}}
+    force = fit_correction(c.centres, c.pulls, c.model_force, c.fe_force - c.model_force,
+                           c.sims)
+    field = fit_correction(c.centres, c.pulls, c.model.reshape(n, -1),
+                           (c.truth - c.model).reshape(n, -1), c.sims)
+    keys = ("length_mm", "beta", "mix", "decay", "gamma", "ridge")
+    return PatientGrasp(force, field), {
+        name: None if k is None else {**dict(zip(keys, k.setting)), f"cv_{unit}": k.cv_mee}
+        for name, k, unit in (("force", force, "error_n"), ("field", field, "mee_mm"))}
 
 
 def answered(pg: PatientGrasp, c: GraspCases) -> tuple[np.ndarray, np.ndarray]:
     """(fields (n, n_out, 3) mm, forces (n, 3) N) of the patient's model for the cases ``c``."""
-    u = np.array([m + pg.field(x, d[None], m) for x, d, m in zip(c.centres, c.pulls, c.model)])
-    f = c.model_force if pg.force is None else pg.force(c.pulls, c.base_force)
+    u = np.array([m + pg.field_added(x, d[None], m)
+                  for x, d, m in zip(c.centres, c.pulls, c.model)])
+    f = np.array([m + pg.force_added(x, d[None], m[None])[0]
+                  for x, d, m in zip(c.centres, c.pulls, c.model_force)])
     return u, f
 
 
@@ -217,9 +202,9 @@ def adapt_grasps(pred, model_dir, ds, data, liver, run, used, *, frame: str | No
     placed = time.perf_counter()
     pg, fitted = fit_patient_grasp(every.take(np.isin(every.sims, used)))
     pg.save(run)
-    law = "the patient's" if pg.force else "the population's"
-    log_fn(f"adapt: {len(used)} simulations: {law} force law; the field's correction "
-           f"{'kept' if pg.correction else 'not kept (no better held out)'}")
+    said = {True: "kept", False: "not kept (no better held out)"}
+    log_fn(f"adapt: {len(used)} simulations: the force's correction {said[pg.force is not None]}"
+           f", the field's {said[pg.field is not None]}")
     rest = ~np.isin(every.sims, used)
     return {"population_model": str(Path(model_dir).resolve()), "load": "grasp",
             "liver": str(Path(liver).resolve()), "data": str(Path(data).resolve()),
@@ -260,6 +245,6 @@ def against_k(c: GraspCases, ks, held: int, large_mm: float = 35.0) -> list[dict
     test, rows = c.take(np.isin(c.sims, sims[-held:])), []
     for k in ks:
         pg, info = fit_patient_grasp(c.take(np.isin(c.sims, sims[:-held][:k])))
-        rows.append({"k": int(k), "force_law": info["force"]["kept"],
+        rows.append({"k": int(k), "force": info["force"] is not None,
                      "field": info["field"] is not None, **held_out(pg, test, large_mm)})
     return rows

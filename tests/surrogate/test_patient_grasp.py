@@ -12,7 +12,6 @@ from surrogate.patient.grasps import (
     GraspCases,
     PatientGrasp,
     answered,
-    fit_force,
     fit_patient_grasp,
     held_out,
 )
@@ -42,23 +41,20 @@ def _cases(rng, law: GraspForce, residual: float = 0.0, sims: int = 8, n_out: in
     return GraspCases(**{k: np.asarray(v, np.float64) for k, v in rows.items()})
 
 
-def test_a_patients_force_law_is_kept_where_it_beats_the_populations():
-    """A patient stiffer than the population (exp(0.045 p) against exp(0.02 p)): its law is
-    kept, about its own (a, b), and its force error on new grasps is a tenth of the
-    population's; a patient the population's law describes keeps the population's."""
+def test_a_patients_force_correction_is_kept_where_it_beats_the_populations():
+    """A patient stiffer than the population (exp(0.045 p) against exp(0.02 p)): the force's
+    correction is kept and its error on new grasps at 40 mm is under a fifth of the
+    population's; a patient the population's law describes (2 % noise) keeps none; one
+    simulation is nothing to check a correction on."""
     rng = np.random.default_rng(0)
     stiff = GraspForce(0.045, 0.0)
-    law, info = fit_force(_cases(rng, stiff))
-    assert info["kept"].startswith("patient") and abs(law.a - 0.045) < 5e-3
-    new = _cases(rng, stiff, sims=4)
-    m = held_out(PatientGrasp(law, None), new)
-    assert m["patient"]["force_error_pct"] < 0.1 * m["population"]["force_error_pct"]
-    law, info = fit_force(_cases(rng, GraspForce(0.02, 0.0)))
-    assert law is None and info["kept"] == "population"
-    assert fit_force(_cases(rng, stiff, sims=1))[0] is None   # nothing to check it on
-    # stiffening with the small-strain force too (c = 0.5 / N): that law is chosen, c found
-    law, info = fit_force(_cases(rng, GraspForce(0.02, 0.0, 0.5), sims=12))
-    assert info["kept"] == "patient_with_force" and abs(law.c - 0.5) < 0.05
+    pg, info = fit_patient_grasp(_cases(rng, stiff, sims=10))
+    assert pg.force is not None and info["force"]["cv_error_n"] > 0
+    m = held_out(pg, _cases(rng, stiff, sims=4))
+    assert m["patient"]["large_force_error_pct"] < 0.2 * m["population"]["large_force_error_pct"]
+    pg, info = fit_patient_grasp(_cases(rng, GraspForce(0.02, 0.0), sims=10))
+    assert pg.force is None and info["force"] is None
+    assert fit_patient_grasp(_cases(rng, stiff, sims=1))[0].force is None
 
 
 def test_a_patients_field_correction_learns_its_residual_and_reads_back(tmp_path):
@@ -69,7 +65,7 @@ def test_a_patients_field_correction_learns_its_residual_and_reads_back(tmp_path
     rng = np.random.default_rng(1)
     c = _cases(rng, GraspForce(0.02, 0.0), residual=2.0, sims=10)
     pg, info = fit_patient_grasp(c)
-    assert pg.correction is not None and info["field"]["cv_mee_mm"] < 0.5
+    assert pg.field is not None and info["field"]["cv_mee_mm"] < 0.5
     new = _cases(np.random.default_rng(1), GraspForce(0.02, 0.0), residual=2.0, sims=10)
     m = held_out(pg, new.take(new.sims >= 7))
     assert m["patient"]["large_mee_mm"] < 0.3 * m["population"]["large_mee_mm"]
@@ -79,7 +75,7 @@ def test_a_patients_field_correction_learns_its_residual_and_reads_back(tmp_path
     u2, f2 = answered(back, new)
     np.testing.assert_allclose(u2, u, atol=1e-12)
     np.testing.assert_allclose(f2, f, atol=1e-12)
-    assert not pg.field(c.centres[0], np.ones((2, 3)), c.model[0]).any()
+    assert not pg.field_added(c.centres[0], np.ones((2, 3)), c.model[0]).any()
     none = PatientGrasp(None, None)
     u0, f0 = answered(none, new)
     assert np.array_equal(u0, new.model) and np.array_equal(f0, new.model_force)
@@ -172,7 +168,7 @@ def test_a_patients_grasp_data_holds_its_small_strain_base():
 @pytest.mark.dataset
 def test_make_patient_grasps_a_real_liver_end_to_end(tmp_path):
     """make patient LOAD=grasp on Amos-054 with the shipped model of grasps: the adaptation
-    says what it kept and measures it on the held-out grasps; predict-liver --patient and
+    says what it kept and measures it on the held-out grasps, the field better at 40 mm; predict-liver --patient and
     the manipulator's --patient answer a held-out grasp with the patient's corrections, as
     the model corrected in process does; --patient without a grasp is refused."""
     import warnings
@@ -187,13 +183,12 @@ def test_make_patient_grasps_a_real_liver_end_to_end(tmp_path):
 
     d = generated_dataset("LIVERFEM_TEST_PATIENT_GRASP")
     info = json.loads((d / "run" / "adaptation.json").read_text())
-    assert info["load"] == "grasp" and len(info["fe_simulations"]) == 6
-    assert info["held_out"]["simulations"] == 3
-    for who in ("population", "patient"):
-        assert np.isfinite(info["held_out"][who]["mee_mm"])
-    # six grasps pulled 40 mm: the population's force law is tens of % off on this liver,
-    # so something is kept (the answers below then differ from the population model's)
-    assert info["force"]["kept"] != "population" or info["field"] is not None
+    assert info["load"] == "grasp" and len(info["fe_simulations"]) == 8
+    # eight grasps around the site correct the field, which beats the population model's
+    # on the three held out at their largest pulls (docs/patient_grasps.md: by a fifth)
+    m = info["held_out"]
+    assert m["simulations"] == 3 and info["field"] is not None
+    assert m["patient"]["large_mee_mm"] < m["population"]["large_mee_mm"]
     ds, liver, model = load_dataset(d / "data"), info["liver"], ROOT / "models" / "scene4_grasp"
     held = np.flatnonzero(ds.sample_sim == info["held_out_simulations"][0])[-1]
     at, pull = ds.load_points[held, 0], ds.forces[held, 0]
