@@ -168,9 +168,10 @@ def test_a_patients_grasp_data_holds_its_small_strain_base():
 @pytest.mark.dataset
 def test_make_patient_grasps_a_real_liver_end_to_end(tmp_path):
     """make patient LOAD=grasp on Amos-054 with the shipped model of grasps: the adaptation
-    says what it kept and measures it on the held-out grasps, the field better at 40 mm; predict-liver --patient and
-    the manipulator's --patient answer a held-out grasp with the patient's corrections, as
-    the model corrected in process does; --patient without a grasp is refused."""
+    says what it kept and measures it on the held-out grasps, the field better at 40 mm;
+    predict-liver --patient and the manipulator's --patient answer a held-out grasp with the
+    patient's corrections, as the model corrected in process does; --patient without a
+    grasp is refused."""
     import warnings
 
     from surrogate.__main__ import main
