@@ -1,6 +1,6 @@
 """A patient's model of grasps against FE on the validation livers: docs/patient_grasps.md.
 
-    .venv-train/bin/python bench/patient_grasps.py [--livers ...] [--ks 4 8 16] [--report-only]
+    .venv-train/bin/python bench/patient_grasps.py [--livers ...] [--report-only]
 
 Per liver, ``make patient LOAD=grasp SITE=...`` at its ``grasp_site`` (resumable, under
 bench/results/patient_grasps/), each K's corrections measured on the same last HELD grasps.
@@ -19,17 +19,18 @@ import numpy as np
 from liverviz.report import ROOT, render, write_report
 
 RESULTS = ROOT / "bench" / "results" / "patient_grasps"
+SCENE = ROOT / "data_spec" / "scenes" / "scene4_grasp.toml"
 KS, HELD, CLEAR, LARGE = (4, 8, 16), 8, 50.0, 35.0   # -, -, mm from the fixed region, mm
 
 
 def measured(pred, liver: Path, ks) -> dict:
-    """make patient LOAD=grasp on the liver (once), every K's corrections on the held out."""
+    """make patient LOAD=grasp (once), each K on the held out, the largest K's frame timed."""
     from surrogate.data import load_dataset
     from surrogate.evaluate import place
     from surrogate.over_green import OverGreen
-    from surrogate.patient.grasps import against_k, grasp_cases, grasp_site
+    from surrogate.patient import grasps as pg
 
-    d, where = RESULTS / liver.stem, grasp_site(pred, liver, CLEAR)
+    d, where = RESULTS / liver.stem, pg.grasp_site(pred, liver, CLEAR)
     if not (d / "wall.json").exists():
         t = time.perf_counter()
         subprocess.run(["make", "--no-print-directory", "patient", "LOAD=grasp",
@@ -37,35 +38,34 @@ def measured(pred, liver: Path, ks) -> dict:
                         "SITE=" + " ".join(map(str, where))], cwd=ROOT, check=True,
                        stdout=subprocess.DEVNULL)
         (d / "wall.json").write_text(json.dumps({"seconds": time.perf_counter() - t}))
-    ds = load_dataset(d / "data")
-    over = OverGreen(pred, d / "data", place(pred, liver, None, d / "placement.npz")[0])
-    cases = grasp_cases(over, ds, np.unique(ds.sample_sim))
+    ds, placed = load_dataset(d / "data"), place(pred, liver, None, d / "placement.npz")[0]
+    c = pg.grasp_cases(OverGreen(pred, d / "data", placed), ds, sims := np.unique(ds.sample_sim))
+    fit = pg.fit_patient_grasp(c.take(np.isin(c.sims, sims[:-HELD][:max(ks)])))[0]
+    at = (c.centres[0], [0.0, 0.0, 20.0])
     return {"liver": liver.stem, "site": where, "nodes": int(ds.points[0].shape[0]),
-            "solved": int(np.unique(cases.sims).size), "rows": against_k(cases, ks, HELD, LARGE),
+            "rows": pg.against_k(c, ks, HELD, LARGE), "timed": {k: pg.timed(OverGreen(
+                pred, d / "data", placed, patient=p), *at) for k, p in (("population", None),
+                                                                       ("patient", fit))},
             "wall_seconds": json.loads((d / "wall.json").read_text())["seconds"]}
 
 
 def main() -> int:
-    from data_spec import load_scene
-    from data_spec.livers import validation_files
+    from data_spec import livers, load_scene
     from surrogate.predictor import load_predictor
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--livers", nargs="+", help="validation livers (default: all 15)")
-    ap.add_argument("--ks", nargs="+", type=int, default=list(KS))
     ap.add_argument("--report-only", action="store_true", help="from docs/patient_grasps.json")
     a = ap.parse_args()
-    md = ROOT / "docs" / "patient_grasps.md"
-    if a.report_only:
-        livers = json.loads(md.with_suffix(".json").read_text())["livers"]
+    if (md := ROOT / "docs" / "patient_grasps.md") and a.report_only:
+        found = json.loads(md.with_suffix(".json").read_text())["livers"]
     else:
-        files = {f.stem: f for f in validation_files(
-            load_scene(ROOT / "data_spec" / "scenes" / "scene4_grasp.toml")["geometry"])}
+        files = {f.stem: f for f in livers.validation_files(load_scene(SCENE)["geometry"])}
         pred = load_predictor(ROOT / "models" / "scene4_grasp" / "model", load="grasp")
-        livers = [measured(pred, files[n], sorted(a.ks)) for n in a.livers or sorted(files)]
-    body = render(Path(__file__).parent / "templates" / "patient_grasps.md.j2", livers=livers,
-                  ks=[r["k"] for r in livers[0]["rows"]], held=HELD, clear=CLEAR, median=np.median)
-    write_report(md, "A patient's model of grasps", body, {"livers": livers})
+        found = [measured(pred, files[n], KS) for n in a.livers or sorted(files)]
+    body = render(Path(__file__).parent / "templates" / "patient_grasps.md.j2", livers=found,
+                  ks=[r["k"] for r in found[0]["rows"]], held=HELD, clear=CLEAR, median=np.median)
+    write_report(md, "A patient's model of grasps", body, {"livers": found})
     return 0
 
 

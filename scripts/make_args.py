@@ -105,7 +105,21 @@ def problems(target: str, values: dict[str, str]) -> list[str]:
         why = check(value)
         if why:
             out.append(f"make {target}: {name}={value!r}: {why}")
+    if target == "patient" and not any("MODEL=" in line for line in out):
+        out += _model_load(values.get("MODEL", ""), values.get("LOAD", "").strip() or "force")
     return out
+
+
+def _model_load(model: str, load: str) -> list[str]:
+    """A model of the other load than LOAD (its model.json says which it learned)."""
+    import json
+
+    learned = json.loads((Path(model) / "model" / "model.json").read_text()).get("load", "nodal")
+    if (load == "grasp") == (learned == "grasp"):
+        return []
+    return [f"make patient: MODEL={model!r} learned {'grasps' if learned == 'grasp' else 'forces'}"
+            f", LOAD={load!r} adapts a model of {'grasps' if load == 'grasp' else 'forces'}: "
+            "give LOAD=grasp with a model of grasps (the default, models/scene4_grasp)"]
 
 
 def main(argv: list[str]) -> int:

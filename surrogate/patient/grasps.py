@@ -248,3 +248,22 @@ def against_k(c: GraspCases, ks, held: int, large_mm: float = 35.0) -> list[dict
         rows.append({"k": int(k), "force": info["force"] is not None,
                      "field": info["field"] is not None, **held_out(pg, test, large_mm)})
     return rows
+
+
+def timed(over, at, d, calls: int = 200) -> dict:
+    """Median seconds of one grasp's frame (field and force) and of its force alone (a haptic
+    loop's call) at the point ``at`` (3,) mm pulled by ``d`` (3,) mm, over ``calls`` calls
+    after a warm-up, with ``over``'s model (and its patient's corrections, if any).
+    """
+    grasp, d = over.grasp(np.reshape(at, (1, 3))), np.reshape(d, (1, 3))
+    out = {}
+    for key, call in (("frame_s", grasp), ("force_s", grasp.force)):
+        for _ in range(10):
+            call(d)
+        t = []
+        for _ in range(calls):
+            t0 = time.perf_counter()
+            call(d)
+            t.append(time.perf_counter() - t0)
+        out[key] = float(np.median(t))
+    return out

@@ -99,7 +99,9 @@ def test_make_patient_of_grasps_takes_the_shipped_model_and_the_site():
                  "--green --order 1", "surrogate adapt models/scene4_grasp"):
         assert said in " ".join(proc.stdout.split()), said
     for bad, why in (("SITE=1 2", "SITE='1 2': expected three finite numbers"),
-                     ("LOAD=pull", "LOAD='pull': expected one of")):
+                     ("LOAD=pull", "LOAD='pull': expected one of"),
+                     ("MODEL=models/scene4_forces", "learned forces, LOAD='grasp' adapts a "
+                                                    "model of grasps")):
         proc = _make("patient", "LOAD=grasp", f"LIVER={LIVER}", bad)
         assert proc.returncode == 2 and why in proc.stderr, proc.stderr
         assert "truth-scene" not in proc.stdout + proc.stderr
