@@ -12,8 +12,8 @@ simulations):
 
 - the tool's force, its residual against the model's force (the population's stiffening of
   the small-strain force is one law over every liver and direction, while the FE's ratio to
-  the small-strain force ranges from 2 to 11 between grasps at 40 mm, with the pull's
-  direction as much as with the liver: docs/surgical_loads.md, docs/patient_grasps.md);
+  the small-strain force varies several-fold between grasps of one liver, with the pull's
+  direction: docs/surgical_loads.md, docs/patient_grasps.md);
 - the field, its residual against the model's field.
 
     python -m surrogate adapt MODEL DATA --liver FILE --run OUT [--sims K] [--placement P]
