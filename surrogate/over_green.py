@@ -206,6 +206,10 @@ class GraspOverGreen:
         self.patches, self.stiffness = base.patches, base.stiffness
         self._at = over._template_nodes(np.asarray(centres, dtype=np.int64))
         self._centres = over.points[np.asarray(centres, dtype=np.int64)]
+        # a patient's corrections hold near the grasps they were fitted on: said when not
+        self.uncorrected = "" if over.patient is None else over.patient.beyond(self._centres)
+        if self.uncorrected:
+            warnings.warn(self.uncorrected, stacklevel=3)
         self._force = over.placed.predictor.grasp_force
         # the grasped nodes move with their tool: the network's rest is not added there
         where = {int(n): i for i, n in enumerate(over.output_nodes)}

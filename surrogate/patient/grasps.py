@@ -37,21 +37,47 @@ from surrogate.grasp import force_error_pct
 from surrogate.patient.correction import Correction, fit_correction
 
 FILE = "grasp_patient.npz"
+REACH = 20.0   # mm: a grasp this near one the corrections were fitted on is corrected
 
 
 @dataclasses.dataclass
 class PatientGrasp:
     """What a patient's K grasps add to the placed population model of grasps: corrections
-    of one tool's force and field (None: none kept). Several tools get none.
+    of one tool's force and field (None: none kept). A grasp whose centre lies beyond REACH
+    of every grasp they were fitted on (the patient's grasps were drawn around a site), or
+    several tools, get none: the population model's answer there.
     """
 
     force: Correction | None
     field: Correction | None
 
-    @staticmethod
-    def _added(c: Correction | None, centre, d, answer) -> np.ndarray:
+    def distance(self, centre) -> float:
+        """The distance (mm) from ``centre`` (3,) to the nearest grasp the corrections were
+        fitted on (inf with none kept).
+        """
+        seen = [c.cases[0] for c in (self.force, self.field) if c is not None]
+        if not seen:
+            return float("inf")
+        return float(np.linalg.norm(np.concatenate(seen) - np.reshape(centre, (1, 3)),
+                                    axis=1).min())
+
+    def beyond(self, centres) -> str:
+        """Why a grasp of tools at ``centres`` (T, 3) mm gets no correction, or ""."""
+        centres = np.reshape(centres, (-1, 3))
+        if self.force is None and self.field is None:
+            return ""
+        if len(centres) != 1:
+            return f"{len(centres)} tools: the patient's corrections are of one tool's grasp"
+        far = self.distance(centres[0])
+        if far > REACH:
+            return (f"the grasp at {np.round(centres[0], 1).tolist()} mm lies {far:.0f} mm from "
+                    f"the patient's grasps (beyond {REACH:g} mm): the population model's "
+                    "answer there, with no patient correction")
+        return ""
+
+    def _added(self, c: Correction | None, centre, d, answer) -> np.ndarray:
         answer = np.asarray(answer, np.float64)
-        if c is None or np.asarray(d).shape != (1, 3):
+        if c is None or np.asarray(d).shape != (1, 3) or self.distance(centre) > REACH:
             return np.zeros_like(answer)
         return c(np.reshape(centre, (1, 3)), np.reshape(d, (1, 3)),
                  answer.reshape(1, -1))[0].reshape(answer.shape)

@@ -18,8 +18,8 @@ from surrogate.patient.grasps import (
 
 
 def _cases(rng, law: GraspForce, residual: float = 0.0, sims: int = 8, n_out: int = 30):
-    """One-tool grasps: ``sims`` simulations of 8 steps to 40 mm at random centres and
-    directions; the population model's force is the base's stiffened by exp(0.02 p), the FE's
+    """One-tool grasps: ``sims`` simulations of 8 steps to 40 mm at random centres within
+    10 mm of a site and random directions; the population model's force is the base's stiffened by exp(0.02 p), the FE's
     by ``law`` (x 1 +- 2 % noise); the FE field is the model's plus ``residual`` x (p / 40)^2
     x a fixed pattern (a residual quadratic in the pull, the same shape everywhere).
     """
@@ -27,7 +27,7 @@ def _cases(rng, law: GraspForce, residual: float = 0.0, sims: int = 8, n_out: in
     rows = {k: [] for k in ("sims", "centres", "pulls", "model", "truth", "base_force",
                             "model_force", "fe_force")}
     for s in range(sims):
-        x, e = rng.uniform(0, 100, 3), rng.normal(size=3)
+        x, e = rng.uniform(40, 60, 3), rng.normal(size=3)   # around a site
         e /= np.linalg.norm(e)
         k_lin = rng.uniform(0.02, 0.06)
         for p in np.arange(1, 9) * 5.0:
@@ -76,6 +76,13 @@ def test_a_patients_field_correction_learns_its_residual_and_reads_back(tmp_path
     np.testing.assert_allclose(u2, u, atol=1e-12)
     np.testing.assert_allclose(f2, f, atol=1e-12)
     assert not pg.field_added(c.centres[0], np.ones((2, 3)), c.model[0]).any()
+    # a grasp beyond 20 mm of every grasp it was fitted on: none, and said so
+    far, d = np.array([300.0, 300.0, 300.0]), np.array([[0.0, 0.0, 40.0]])
+    assert not pg.field_added(far, d, c.model[0]).any() and pg.distance(far) > 300
+    assert "from the patient's grasps (beyond 20 mm)" in pg.beyond(far[None])
+    near = c.centres[0] + [0.0, 0.0, 5.0]
+    assert pg.beyond(near[None]) == "" and pg.field_added(near, d, c.model[0]).any()
+    assert "2 tools" in pg.beyond(np.stack([near, near]))
     none = PatientGrasp(None, None)
     u0, f0 = answered(none, new)
     assert np.array_equal(u0, new.model) and np.array_equal(f0, new.model_force)
@@ -214,6 +221,16 @@ def test_make_patient_grasps_a_real_liver_end_to_end(tmp_path):
     np.testing.assert_allclose(tool.handles[0].force, force[0], rtol=1e-5)
     assert main(["predict-liver", str(model), liver, "--base", str(d / "data"), "--force",
                  *map(str, at), "0", "0", "1", "--patient", str(d / "run")]) == 2
+    # far from the site the patient's grasps were drawn around: the population model's
+    # answer, with a warning that says so
+    free = over.free_nodes[np.argmax(np.linalg.norm(over.points[over.free_nodes] - at, axis=1))]
+    with pytest.warns(UserWarning, match="from the patient's grasps"):
+        far = over.grasp(over.points[[free]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        plain = OverGreen(pred, d / "data", placement).grasp(over.points[[free]])
+    np.testing.assert_allclose(far(pull[None])[0], plain(pull[None])[0], atol=1e-9)
+    np.testing.assert_allclose(far.force(pull[None]), plain.force(pull[None]), atol=1e-12)
 
 
 def _patch(ds, s: int) -> np.ndarray:
