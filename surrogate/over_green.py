@@ -219,8 +219,8 @@ class GraspOverGreen:
     def force(self, d) -> np.ndarray:
         f = self.base.force(d)
         f = f if self._force is None else self._force(d, f)
-        if self.over.patient is not None:   # the patient's correction of it
-            f = f + self.over.patient.force_added(self._centres, d, f)
+        if self.over.patient is not None and not self.uncorrected:   # the patient's
+            f = f + self.over.patient.force_added(self._centres, d, f, near=True)
         return f
 
     def __call__(self, d) -> tuple[np.ndarray, np.ndarray]:
@@ -229,8 +229,8 @@ class GraspOverGreen:
             return grasp_over_base(self.over.placed, self._at, d, self.over._to_nodes @ u,
                                    force)
         u, _ = grasp_over_base(self.over.placed, self._at, d, u, force, self._held)
-        if self.over.patient is not None:
-            du = self.over.patient.field_added(self._centres, d, u)
+        if self.over.patient is not None and not self.uncorrected:
+            du = self.over.patient.field_added(self._centres, d, u, near=True)
             du[self._held] = 0.0   # the grasped nodes move with their tool
             u = u + du
         return u, self.force(d)

@@ -75,22 +75,24 @@ class PatientGrasp:
                     "answer there, with no patient correction")
         return ""
 
-    def _added(self, c: Correction | None, centre, d, answer) -> np.ndarray:
+    def _added(self, c: Correction | None, centre, d, answer, near: bool | None) -> np.ndarray:
         answer = np.asarray(answer, np.float64)
-        if c is None or np.asarray(d).shape != (1, 3) or self.distance(centre) > REACH:
+        near = self.beyond(centre) == "" if near is None else near
+        if c is None or not near or np.asarray(d).shape != (1, 3):
             return np.zeros_like(answer)
         return c(np.reshape(centre, (1, 3)), np.reshape(d, (1, 3)),
                  answer.reshape(1, -1))[0].reshape(answer.shape)
 
-    def field_added(self, centre, d, u) -> np.ndarray:
+    def field_added(self, centre, d, u, near: bool | None = None) -> np.ndarray:
         """(n_out, 3) mm to add to the model's field ``u`` (n_out, 3) of one tool at the point
-        ``centre`` (3,) mm pulled by ``d`` (1, 3) mm.
+        ``centre`` (3,) mm pulled by ``d`` (1, 3) mm; ``near``: :meth:`beyond` said "" (the
+        caller checked once per grasp; None: checked here).
         """
-        return self._added(self.field, centre, d, u)
+        return self._added(self.field, centre, d, u, near)
 
-    def force_added(self, centre, d, f) -> np.ndarray:
+    def force_added(self, centre, d, f, near: bool | None = None) -> np.ndarray:
         """(1, 3) N to add to the model's force ``f`` (1, 3) of the same tool."""
-        return self._added(self.force, centre, d, f)
+        return self._added(self.force, centre, d, f, near)
 
     def save(self, run) -> Path:
         path = Path(run) / FILE
