@@ -19,9 +19,10 @@ from surrogate.patient.grasps import (
 
 def _cases(rng, law: GraspForce, residual: float = 0.0, sims: int = 8, n_out: int = 30):
     """One-tool grasps: ``sims`` simulations of 8 steps to 40 mm at random centres within
-    10 mm of a site and random directions; the population model's force is the base's stiffened by exp(0.02 p), the FE's
-    by ``law`` (x 1 +- 2 % noise); the FE field is the model's plus ``residual`` x (p / 40)^2
-    x a fixed pattern (a residual quadratic in the pull, the same shape everywhere).
+    10 mm of a site and random directions; the population model's force is the base's
+    stiffened by exp(0.02 p), the FE's by ``law`` (x 1 +- 2 % noise); the FE field is the
+    model's plus ``residual`` x (p / 40)^2 x a fixed pattern (a residual quadratic in the
+    pull, the same shape everywhere).
     """
     pattern = rng.normal(size=(n_out, 3))
     rows = {k: [] for k in ("sims", "centres", "pulls", "model", "truth", "base_force",
