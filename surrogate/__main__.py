@@ -230,7 +230,7 @@ def _predict_liver(args) -> int:
         from surrogate.patient.grasps import PatientGrasp
 
         try:
-            patient = args.patient and PatientGrasp.load(args.patient)
+            patient = PatientGrasp.load(args.patient) if args.patient else None
         except ValueError as exc:
             return _fail("predict-liver", str(exc))
 
@@ -238,7 +238,7 @@ def _predict_liver(args) -> int:
             return predict_over_green(predictor, args.base, args.liver, forces, at,
                                       frame=args.frame, saved=args.placement,
                                       shape=args.shape, grasp=bool(args.grasp),
-                                      patient=patient or None)[0]
+                                      patient=patient)[0]
     return predict_liver(args, over)
 
 

@@ -218,22 +218,25 @@ class GraspOverGreen:
 
     def force(self, d) -> np.ndarray:
         f = self.base.force(d)
-        f = f if self._force is None else self._force(d, f)
-        if self.over.patient is not None and not self.uncorrected:   # the patient's
-            f = f + self.over.patient.force_added(self._centres, d, f, near=True)
-        return f
+        return self._patient_force(d, f if self._force is None else self._force(d, f))
+
+    def _patient_force(self, d, f) -> np.ndarray:
+        """The model's force ``f`` plus the patient's correction of it, if any."""
+        if self.over.patient is None or self.uncorrected:
+            return f
+        return f + self.over.patient.force_added(self._centres, d, f, near=True)
 
     def __call__(self, d) -> tuple[np.ndarray, np.ndarray]:
         u, force = self.base(d)
         if self.over._to_nodes is not None:   # at OverGreen's own points: interpolated
             return grasp_over_base(self.over.placed, self._at, d, self.over._to_nodes @ u,
                                    force)
-        u, _ = grasp_over_base(self.over.placed, self._at, d, u, force, self._held)
+        u, force = grasp_over_base(self.over.placed, self._at, d, u, force, self._held)
         if self.over.patient is not None and not self.uncorrected:
             du = self.over.patient.field_added(self._centres, d, u, near=True)
             du[self._held] = 0.0   # the grasped nodes move with their tool
             u = u + du
-        return u, self.force(d)
+        return u, self._patient_force(d, force)
 
 
 def nearest_first(points: np.ndarray, nodes: np.ndarray, near: int) -> np.ndarray:

@@ -213,7 +213,10 @@ def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
     if scene["loads"]["kind"] == "grasp":   # each case's response from the Green's function
         gf = problem.unit_responses(cases[0].material, [Constraint(fixed)],
                                     gnodes)[:, :, nodes]
-        u, tool_force = _grasps_over_green(cases, g, fixed, gf, gnodes, nodes)
+        u, tool_force = _grasps_over(gf, gnodes, nodes,
+                                     [cs.grasp_patches(c, g, fixed) for c in cases],
+                                     [c.displacements for c in cases])
+        u = u[:, None]
     else:
         loads = [case_loads(c, g) for c in cases]
         u = problem.load_expansion(cases[0].material, [Constraint(fixed)], loads,
@@ -232,16 +235,16 @@ def linear_fields(scene_file: str | Path, out: str | Path, synthetic: int = 0,
         fixed_nodes=np.asarray(fixed, np.int64) if green else None, tool_force=tool_force))
 
 
-def _grasps_over_green(cases: list, g, fixed, gf, gnodes, nodes) -> tuple:
-    """((cases, 1, n_out, 3) mm, (cases, n_tools, 3) N): each grasp case's small-strain
-    field and tools' forces at load fraction 1 from the free surface's Green's function ``gf``
-    (:class:`data_spec.green_grasp.GreenGrasp`, the patches the solver holds).
+def _grasps_over(green, rows, nodes, patches: list, pulls: list) -> tuple:
+    """((cases, n_out, 3) mm, (cases, n_tools, 3) N): each grasp's small-strain field at the
+    output ``nodes`` and its tools' forces, its tools holding ``patches`` (per case, a list of
+    node sets) moved by ``pulls`` (per case, (n_tools, 3) mm), over the Green's function
+    ``green`` with rows at the mesh nodes ``rows`` (:class:`data_spec.green_grasp.GreenGrasp`).
     """
     from data_spec.green_grasp import GreenGrasp
 
-    both = [GreenGrasp(gf, gnodes, nodes, cs.grasp_patches(c, g, fixed))(c.displacements)
-            for c in cases]
-    return np.stack([u for u, _ in both])[:, None], np.stack([f for _, f in both])
+    both = [GreenGrasp(green, rows, nodes, ps)(d) for ps, d in zip(patches, pulls)]
+    return np.stack([u for u, _ in both]), np.stack([f for _, f in both])
 
 
 def _liver_shards(data: Path) -> dict:
@@ -325,7 +328,6 @@ def _grasp_responses(problem, first, shards: list, g, radius: float) -> tuple:
     patch is held exactly as the solver holds it).
     """
     from data_spec.eligible_loads import grasp_patch
-    from data_spec.green_grasp import GreenGrasp
     from fem_sim.solver.loads import Constraint
 
     patches = [[grasp_patch(g.points, g.surface_nodes, n, radius) for n in s.load_nodes]
@@ -334,9 +336,8 @@ def _grasp_responses(problem, first, shards: list, g, radius: float) -> tuple:
     nodes = first.output_nodes
     green = problem.unit_responses(first.material, [Constraint(first.fixed_nodes)],
                                    held)[:, :, nodes]
-    both = [GreenGrasp(green, held, nodes, ps)(s.tool_displacement[-1] / s.load_fractions[-1])
-            for s, ps in zip(shards, patches)]
-    return np.stack([u for u, _ in both]), np.stack([f for _, f in both])
+    return _grasps_over(green, held, nodes, patches,
+                        [s.tool_displacement[-1] / s.load_fractions[-1] for s in shards])
 
 
 def population_linear_fields(data: str | Path, order: int = 2, progress: bool = True) -> list:
