@@ -198,7 +198,8 @@ $(TEST_PATIENT)/.done: $(TEST_LIVERS)/.done | setup
 # LOAD=grasp with the shipped model of grasps on Amos-054, 8 grasps to adapt on and 3 held
 # out around the site bench/patient_grasps.py grasps it at (grasp_site).
 TEST_PGRASP := runs/test-data/ci_patient_grasp
-$(TEST_PGRASP)/.done: models/scene4_grasp/model/params.npz | setup
+$(TEST_PGRASP)/.done: models/scene4_grasp/model/params.npz models/scene4_grasp/model/model.json \
+                      | setup
 	rm -rf $(@D)
 	$(MAKE) --no-print-directory patient LOAD=grasp LIVER=$(LIVERS)/Amos-054.obj K=8 HELD=3 \
 	    SITE="22.51 -7.86 -25.35" PATIENT=$(@D)

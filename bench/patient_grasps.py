@@ -27,6 +27,7 @@ def measured(pred, liver: Path, ks) -> dict:
     """make patient LOAD=grasp (once), each K on the held out, the largest K's frame timed."""
     from surrogate.data import load_dataset
     from surrogate.evaluate import place
+    from surrogate.model_files import model_digest
     from surrogate.over_green import OverGreen
     from surrogate.patient import grasps as pg
 
@@ -41,6 +42,7 @@ def measured(pred, liver: Path, ks) -> dict:
     ds, placed = load_dataset(d / "data"), place(pred, liver, None, d / "placement.npz")[0]
     c = pg.grasp_cases(OverGreen(pred, d / "data", placed), ds, sims := np.unique(ds.sample_sim))
     fit = pg.fit_patient_grasp(c.take(np.isin(c.sims, sims[:-HELD][:max(ks)])))[0]
+    fit.model = model_digest(pred.directory)   # what OverGreen checks it corrects
     at = (c.centres[0], [0.0, 0.0, 20.0])
     return {"liver": liver.stem, "site": where, "nodes": int(ds.points[0].shape[0]),
             "rows": pg.against_k(c, ks, HELD, LARGE), "timed": {k: pg.timed(OverGreen(

@@ -41,6 +41,18 @@ def write_fingerprint(directory: str | Path) -> Path:
     return d / FINGERPRINT
 
 
+def model_digest(directory: str | Path) -> str:
+    """16 hex digits of the SHA-256 of every file of the model directory (its fingerprint
+    aside): what a result fitted against the model (a patient's corrections) records of it.
+    """
+    import hashlib
+
+    d = Path(directory)
+    return hashlib.sha256("".join(f"{f.name} {_sha256(f)}\n" for f in sorted(d.iterdir())
+                                  if f.is_file() and f.name != FINGERPRINT).encode()
+                          ).hexdigest()[:16]
+
+
 def check_fingerprint(directory: str | Path) -> None:
     """ValueError naming the file when a model directory with a ``fingerprint.json`` holds
     a file changed, lost or added since it was written; nothing for a directory without one

@@ -56,6 +56,8 @@ class OverGreen:
         if patient is not None and (nodes is not None or predictor.load != "grasp"):
             raise ValueError("a patient's model of grasps corrects a model of grasps at its "
                              "liver mesh's nodes")
+        if patient is not None:
+            patient.check_model(predictor.directory)
         self.patient = patient
 
         lf, g = green or green_of(predictor, data)

@@ -81,7 +81,7 @@ class Predictor:
         if load not in LOADS:
             raise ValueError(f"load: expected one of {sorted(LOADS)}, got {load!r}")
         self.dtype = dtype
-        d = Path(directory)
+        self.directory = d = Path(directory)
         self.meta = meta = read_meta(d / "model.json", DESIGNS)
         check_fingerprint(d)   # a shipped model: its files as its card measured them
         self.load = meta.get("load", "nodal")   # "grasp": its loads are tools' pulls, mm

@@ -45,11 +45,24 @@ class PatientGrasp:
     """What a patient's K grasps add to the placed population model of grasps: corrections
     of one tool's force and field (None: none kept). A grasp whose centre lies beyond REACH
     of every grasp they were fitted on (the patient's grasps were drawn around a site), or
-    several tools, get none: the population model's answer there.
+    several tools, get none: the population model's answer there. ``model``: the digest of
+    the population model they correct (:func:`surrogate.model_files.model_digest`).
     """
 
     force: Correction | None
     field: Correction | None
+    model: str = ""
+
+    def check_model(self, directory) -> None:
+        """ValueError when the corrections were fitted on another model than ``directory``'s
+        (a residual of one model's answers added to another's is a wrong answer).
+        """
+        from surrogate.model_files import model_digest
+
+        if self.model != (now := model_digest(directory)):
+            raise ValueError(f"the patient's corrections were fitted on another population "
+                             f"model (digest {self.model or 'not recorded'}) than {directory} "
+                             f"({now}): run make patient LOAD=grasp again with this model")
 
     def distance(self, centre) -> float:
         """The distance (mm) from ``centre`` (3,) to the nearest grasp the corrections were
@@ -105,7 +118,7 @@ class PatientGrasp:
                                  f"{name}_cv": np.float64(c.cv_mee),
                                  f"{name}_setting": np.asarray(json.dumps(list(c.setting)))})
         path.parent.mkdir(parents=True, exist_ok=True)
-        np.savez(path, **arrays)
+        np.savez(path, model=np.asarray(self.model), **arrays)
         return path
 
     @classmethod
@@ -127,7 +140,7 @@ class PatientGrasp:
                                   tuple(json.loads(str(f[f"{name}_setting"]))),
                                   tuple(map(float, f[f"{name}_scales"])),
                                   cv_mee=float(f[f"{name}_cv"]))
-            return cls(read("force"), read("field"))
+            return cls(read("force"), read("field"), str(f["model"]) if "model" in f else "")
 
 
 @dataclasses.dataclass
@@ -221,6 +234,7 @@ def adapt_grasps(pred, model_dir, ds, data, liver, run, used, *, frame: str | No
     ``run/grasp_patient.npz`` and returns what ``run/adaptation.json`` holds.
     """
     from surrogate.evaluate import place
+    from surrogate.model_files import model_digest
     from surrogate.over_green import OverGreen
 
     t = time.perf_counter()
@@ -229,6 +243,7 @@ def adapt_grasps(pred, model_dir, ds, data, liver, run, used, *, frame: str | No
     every = grasp_cases(OverGreen(pred, data, placement), ds, np.unique(ds.sample_sim))
     answered_at = time.perf_counter()
     pg, fitted = fit_patient_grasp(every.take(np.isin(every.sims, used)))
+    pg.model = model_digest(model_dir)
     pg.save(run)
     said = {True: "kept", False: "not kept (no better held out)"}
     log_fn(f"adapt: {len(used)} simulations: the force's correction {said[pg.force is not None]}"

@@ -3,6 +3,7 @@ kept only where they beat the population model on held-out simulations, written 
 back; make patient LOAD=grasp end to end on a real liver with the shipped model of grasps."""
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -232,6 +233,17 @@ def test_make_patient_grasps_a_real_liver_end_to_end(tmp_path):
         plain = OverGreen(pred, d / "data", placement).grasp(over.points[[free]])
     np.testing.assert_allclose(far(pull[None])[0], plain(pull[None])[0], atol=1e-9)
     np.testing.assert_allclose(far.force(pull[None]), plain.force(pull[None]), atol=1e-12)
+    # the corrections are residuals of this model's answers: another model (the same one
+    # with its force law changed) refuses them, naming what to run
+    other = tmp_path / "other"
+    shutil.copytree(model / "model", other)
+    (other / "fingerprint.json").unlink()
+    meta = json.loads((other / "model.json").read_text())
+    meta["grasp_force"]["a"] *= 1.01
+    (other / "model.json").write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match="fitted on another population model"):
+        OverGreen(load_predictor(other, load="grasp"), d / "data", placement,
+                  patient=PatientGrasp.load(d / "run"))
 
 
 def _patch(ds, s: int) -> np.ndarray:
