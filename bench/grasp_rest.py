@@ -6,10 +6,10 @@ it learn what the Ogden liver does beyond the base?
 
 scene4_grasp's first ``--sims`` simulations with each liver's grasp base (fem_sim linear
 --population --order 1), ``population_green`` trained by liver folds: per pull on the held-out
-livers the MEE of the model, the base and the naive model, and the tool's force error; then
-the model of grasps on them all (bench/results/grasp_rest/run), which ``bench/surgical_loads.py
---model`` places on the validation livers. Resumable. Writes the section "grasp-network" of
-docs/surgical_loads.md.
+livers the MEE of the model, the base and the naive model; then the model of grasps on them
+all (bench/results/grasp_rest/run), which ``bench/surgical_loads.py --model`` places on the
+validation livers; the tool's force laws on every fold (no network). Resumable. Writes the
+sections "grasp-network" and "grasp-force" of docs/surgical_loads.md.
 """
 
 from __future__ import annotations
@@ -30,8 +30,8 @@ def fold_figures(data: Path, folds: int, k: int, sims: int) -> dict:
     """Fold ``k``'s held-out livers: {pull: {model: [per liver MEE]}} (its own file kept)."""
     from surrogate.config import get_config
     from surrogate.data import kfold_groups, load_dataset
-    from surrogate.grasp import GraspForce, base_forces, force_error_pct
     from surrogate.linear_base import PopulationLinearBase
+    from surrogate.reports import per_liver_at
     from surrogate.train import fit_design, predict_design, training_mean, training_samples
 
     kept = RESULTS / f"fold{k}_of_{folds}_{sims}_sims.json"
@@ -50,22 +50,7 @@ def fold_figures(data: Path, folds: int, k: int, sims: int) -> dict:
     fields = {"model": pred, "base": np.concatenate([base.sample(ds, s) for s in held]),
               "naive": np.broadcast_to(training_mean(ds, train), true.shape)}
     err = {m: np.linalg.norm(np.asarray(f, np.float64) - true, axis=1) for m, f in fields.items()}
-    smp = np.unique(rows)   # the held-out samples (rows: each node's sample)
-    d, f_lin, f_fe = np.asarray(ds.forces, np.float64), base_forces(ds), ds.reactions
-    fit = GraspForce.fit(d[train], f_lin[train], f_fe[train])   # the tool's force, % off
-    force = {"model": force_error_pct(fit(d[smp], f_lin[smp]), f_fe[smp])[:, 0],
-             "base": force_error_pct(f_lin[smp], f_fe[smp])[:, 0]}
-
-    def per_liver(errors: dict, at: np.ndarray) -> dict:   # {pull: {model: [per liver]}}
-        pull = np.round(np.linalg.norm(ds.forces[at, 0], axis=-1), 1)   # the tool's, mm
-        geo = ds.sample_geo[at]
-        return {f"{p:g}": {m: [float(e[(pull == p) & (geo == g)].mean())
-                               for g in np.unique(geo[pull == p])] for m, e in errors.items()}
-                for p in np.unique(pull)}
-
-    out = per_liver(err, rows)
-    for p, by in per_liver(force, smp).items():
-        out[p]["force"] = by
+    out = per_liver_at(err, np.linalg.norm(ds.forces[rows, 0], axis=-1), ds.sample_geo[rows])
     RESULTS.mkdir(parents=True, exist_ok=True)
     kept.write_text(json.dumps(out))
     return out
@@ -85,25 +70,21 @@ def section(a) -> str:
         figures = [json.loads(f.read_text()) for k in range(a.evaluate_folds)
                    if (f := RESULTS / f"fold{k}_of_{a.folds}_{n}_sims.json").exists()]
         pulls = sorted({p for f in figures for p in f}, key=float)
-        lines += ["", f"{n} simulations ({n // 145} a liver):", "", "| pull mm | livers | "
-                  "model | base alone | naive | force error %, model | base |", "|---" * 7 + "|"]
+        lines += ["", f"{n} simulations ({n // 145} a liver):", "",
+                  "| pull mm | livers | model | base alone | naive |", "|---" * 5 + "|"]
         for p in pulls:
-            per = {m: sum((f[p][m] for f in figures if p in f), [])
-                   for m in ("model", "base", "naive")}
-            per_f = {m: sum((f[p]["force"][m] for f in figures if p in f), [])
-                     for m in ("model", "base")}
-            lines.append(f"| {p} | {len(per['model'])} | " + " | ".join(
-                [f"{np.median(v):.2f} / {np.max(v):.2f}" for v in per.values()]
-                + [f"{np.median(v):.1f} / {np.max(v):.1f}" for v in per_f.values()]) + " |")
-    lines += ["", "Force error: |F - F_FE| / |F_FE| of the tool's force, per liver the mean over "
-              "its held-out grasps at that pull, median / worst liver; the model's is the base's "
-              "force stiffened by `surrogate.grasp.GraspForce` fitted on the training folds. "
-              "The model placed on the validation livers: the model rows of the tables above."]
+            per = [sum((f[p][m] for f in figures if p in f), []) for m in ("model", "base",
+                                                                           "naive")]
+            lines.append(f"| {p} | {len(per[0])} | " + " | ".join(
+                f"{np.median(v):.2f} / {np.max(v):.2f}" for v in per) + " |")
+    lines += ["", "The model placed on the validation livers: the model rows of the tables above; "
+              "the tool's force: the next section."]
     return "\n".join(lines)
 
 
 def main(argv=None) -> int:
     from fem_sim.batch.chunked import generate_chunks, linear_bases
+    from surrogate.reports import grasp_force_section
     from surrogate.train import train_or_reuse
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -120,8 +101,11 @@ def main(argv=None) -> int:
             fold_figures(data, a.folds, k, a.sims)
         train_or_reuse(data, RESULTS / "run", "population_green",
                        {"folds": a.folds, "evaluate_folds": 1})
-    put_section(ROOT / "docs" / "surgical_loads.md", "grasp-network", section(a))
-    print(section(a))
+    if any(RESULTS.glob(f"fold*_of_{a.folds}_*")):   # else the section stays as it was
+        put_section(ROOT / "docs" / "surgical_loads.md", "grasp-network", section(a))
+    if (data / "linear").exists():
+        put_section(ROOT / "docs" / "surgical_loads.md", "grasp-force",
+                    grasp_force_section(data, a.folds, commit()))
     return 0
 
 

@@ -220,8 +220,10 @@ def model_rows(run: Path, ledger, names, kind: str = "grasps") -> None:
             continue
         # the liver as its FE solved it: meshed, turned and registered as the population's
         # livers were (file_population.prepare), its nodes in the population's frame
+        mesh = np.load(RESULTS / f"{name}.npz")
         rows = getattr(over_green, f"{kind}_on_mesh")(
-            pred, z["points"], np.load(RESULTS / f"{name}.npz")["triangles"], _cases(z, r, kind))
+            pred, z["points"], mesh["triangles"], _cases(z, r, kind),
+            *([mesh["fixed"]] if kind == "grasps" else []))
         last = {}   # each case's field at its last step (a grasp's: the picture)
         for k, case in enumerate(r[kind]):
             for step, row in zip(case["steps"], rows[k]):

@@ -63,10 +63,10 @@ def _grasp_force(ds):
     fitted on every sample of the grasp dataset ``ds``; None without its small-strain files'
     tools' forces (the model then gives the base's force).
     """
-    from surrogate.grasp import GraspForce, base_forces
+    from surrogate.grasp import GraspForce, base_forces, tool_distances
 
     try:
-        return GraspForce.fit(ds.forces, base_forces(ds), ds.reactions)
+        return GraspForce.fit(ds.forces, base_forces(ds), ds.reactions, tool_distances(ds))
     except (ValueError, OSError):
         return None
 

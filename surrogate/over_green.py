@@ -27,7 +27,7 @@ from data_spec.eligible_loads import grasp_patch
 from data_spec.green_grasp import GreenGrasp
 from data_spec.scene import GRASP_RADIUS
 from liverreg.morph import interpolation_matrix
-from surrogate.grasp import grasp_over_base
+from surrogate.grasp import fixed_distance, grasp_over_base
 from surrogate.predictor import LinearPart
 
 
@@ -213,6 +213,7 @@ class GraspOverGreen:
         if self.uncorrected:
             warnings.warn(self.uncorrected, stacklevel=3)
         self._force = over.placed.predictor.grasp_force
+        self._dist = fixed_distance(over.points, over.fixed_nodes, centres)   # mm, per tool
         # the grasped nodes move with their tool: the network's rest is not added there
         where = {int(n): i for i, n in enumerate(over.output_nodes)}
         self._held = np.array([where[int(n)] for p in base.patches for n in p if int(n) in where],
@@ -220,7 +221,8 @@ class GraspOverGreen:
 
     def force(self, d) -> np.ndarray:
         f = self.base.force(d)
-        return self._patient_force(d, f if self._force is None else self._force(d, f))
+        return self._patient_force(d, f if self._force is None else
+                                   self._force(d, f, self._dist))
 
     def _patient_force(self, d, f) -> np.ndarray:
         """The model's force ``f`` plus the patient's correction of it, if any."""
@@ -232,8 +234,9 @@ class GraspOverGreen:
         u, force = self.base(d)
         if self.over._to_nodes is not None:   # at OverGreen's own points: interpolated
             return grasp_over_base(self.over.placed, self._at, d, self.over._to_nodes @ u,
-                                   force)
-        u, force = grasp_over_base(self.over.placed, self._at, d, u, force, self._held)
+                                   force, dist=self._dist)
+        u, force = grasp_over_base(self.over.placed, self._at, d, u, force, self._held,
+                                   self._dist)
         if self.over.patient is not None and not self.uncorrected:
             du = self.over.patient.field_added(self._centres, d, u, near=True)
             du[self._held] = 0.0   # the grasped nodes move with their tool
@@ -354,13 +357,14 @@ def _case_row(u, truth, **more) -> dict:
     return {"field": u, "mee": m["mee"], "p95": m["ee_p95"], "lt3": m["pct_ee_lt_3mm"], **more}
 
 
-def grasps_on_mesh(predictor, points, triangles, grasps) -> list[list[dict]]:
+def grasps_on_mesh(predictor, points, triangles, grasps, fixed) -> list[list[dict]]:
     """A model of grasps on a liver meshed and turned as its population's livers
-    (:func:`_placed_on_mesh`), over FE truths of grasps: per grasp (a dict of ``centre``
-    node, ``pull`` (3,) mm at the last step, ``fractions`` of it, ``patch``, ``base`` and
-    ``truth`` (steps, n, 3) mm, ``base_force`` and ``fe_force`` (steps, 3) N) and step, the
-    model's ``field`` and ``force`` (:func:`grasp_over_base`) with its MEE, 95th percentile
-    and % of nodes under 3 mm against the truth and its force's error (%).
+    (:func:`_placed_on_mesh`), fixed at the nodes ``fixed``, over FE truths of grasps: per
+    grasp (a dict of ``centre`` node, ``pull`` (3,) mm at the last step, ``fractions`` of it,
+    ``patch``, ``base`` and ``truth`` (steps, n, 3) mm, ``base_force`` and ``fe_force``
+    (steps, 3) N) and step, the model's ``field`` and ``force`` (:func:`grasp_over_base`)
+    with its MEE, 95th percentile and % of nodes under 3 mm against the truth and its
+    force's error (%).
     """
     from surrogate.grasp import force_error_pct
 
@@ -368,10 +372,11 @@ def grasps_on_mesh(predictor, points, triangles, grasps) -> list[list[dict]]:
     out = []
     for g in grasps:
         at, rows = placed.load_nodes(points[[int(g["centre"])]]), []
+        dist = fixed_distance(points, fixed, [g["centre"]])
         for s, fr in enumerate(g["fractions"][:len(g["truth"])]):
             u, f = grasp_over_base(placed, at, fr * np.asarray(g["pull"])[None],
                                    np.asarray(g["base"][s], np.float64),
-                                   np.asarray(g["base_force"][s])[None], g["patch"])
+                                   np.asarray(g["base_force"][s])[None], g["patch"], dist)
             rows.append(_case_row(u, g["truth"][s], force=f[0], force_error=float(
                 force_error_pct(f[0], g["fe_force"][s]))))
         out.append(rows)

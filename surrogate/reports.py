@@ -97,6 +97,44 @@ def surgical_per_liver(records: list[dict], kind: str, key: str, at) -> dict:
     return out
 
 
+def per_liver_at(values: dict, pull, liver) -> dict:
+    """{pull (mm, as text): {name: [each liver's mean of ``values[name]`` at that pull]}},
+    the arrays of ``values`` aligned with the pulls ``pull`` (to 0.1 mm) and ``liver``.
+    """
+    pull, liver = np.round(np.asarray(pull, np.float64), 1), np.asarray(liver)
+    return {f"{p:g}": {m: [float(np.mean(np.asarray(v)[(pull == p) & (liver == g)]))
+                           for g in np.unique(liver[pull == p])] for m, v in values.items()}
+            for p in np.unique(pull)}
+
+
+def grasp_force_section(data, folds: int, commit: str) -> str:
+    """The tool's force on the held-out livers of every liver fold of the grasp dataset
+    ``data`` (no network), the laws side by side (:func:`surrogate.grasp.heldout_forces`):
+    a report's section, per pull the median / worst liver.
+    """
+    from surrogate.config import get_config
+    from surrogate.data import kfold_groups, load_dataset
+    from surrogate.grasp import heldout_forces
+
+    cfg, ds = get_config("population_green", folds=folds), load_dataset(data)
+    got = heldout_forces(ds, kfold_groups(ds, folds, cfg["seed"]), cfg)
+    lines = [f"The tool's force on the held-out livers of all {folds} folds by liver "
+             f"({np.unique(got['liver']).size} livers, {got['pull'].size} samples; commit "
+             f"{commit}; no network: `surrogate.grasp.heldout_forces`), error % per liver (the "
+             "mean over its grasps at that pull), median / worst: the small-strain base; the "
+             "law of the pull alone, exp(a p + b p^2); the shipped law "
+             "(`surrogate.grasp.GraspForce`: the pull, the grasp's small-strain stiffness along "
+             "it, its distance to the fixed region and the cosine between the pull and the "
+             "small-strain force); the floor of any law that scales the base's force (the FE "
+             "force's part across it).", "", "| pull mm | base | pull alone | law | floor |",
+             "|---" * 5 + "|"]
+    laws = {c: got[c] for c in ("base", "law_pull", "law", "floor")}
+    for p, per in per_liver_at(laws, got["pull"], got["liver"]).items():
+        lines.append(f"| {p} | " + " | ".join(f"{np.median(v):.1f} / {np.max(v):.1f}"
+                                              for v in per.values()) + " |")
+    return "\n".join(lines)
+
+
 def surgical_curve(records: list[dict], kind: str, key: str, values) -> list[dict]:
     """Per value of ``key`` in ``values``: the median and worst liver of each model's
     figures (:func:`surgical_per_liver`) over the livers that reached it, and for grasps each

@@ -1,13 +1,16 @@
 """The models of forces the project ships (``models/``), and the figures of their cards.
 
     python -m surrogate.shipped card MODEL TRUTH LIVER --out MODEL/card.json
+    python -m surrogate.shipped grasp-card MODEL TRUTH.npz --out MODEL/card.json
 
 A card's figures are measured on the FE truth of one validation liver no training saw
 (``make truth``'s steps with a few simulations: the liver meshed as the population's livers,
 the model's boundary condition, the scene's 0.4 N forces; a model over the small-strain base
 also needs that truth's base, ``fem_sim linear``): per simulation, at its last load step, the
 model's MEE and share of nodes under 3 mm, its base's MEE alone (a model over a base), and the
-naive model's (the truth's own mean displacement). make test measures them again
+naive model's (the truth's own mean displacement). A model of grasps's card is measured on
+``fem_sim.batch.grasp_truth``'s grasps of that liver: at every pull, the model's and its base's
+MEE, share under 3 mm and force error. make test measures them again
 (tests/surrogate/test_shipped_model.py) and holds them to the card's tolerance.
 """
 
@@ -27,6 +30,7 @@ FORCES = SHIPPED / "scene4_forces"   # population_green: make liver AT=... with 
 GRASPS = SHIPPED / "scene4_grasp"    # a model of grasps: make liver GRASP=... with no MODEL
 BASIS = SHIPPED / "scene4_basis"     # population_basis: predict-liver with no RUN (no FE)
 TOLERANCE = {"mee_relative": 0.02}
+GRASP_TOLERANCE = {"mee_relative": 0.02, "force_error_points": 2.0}
 
 
 def reference_figures(pred, truth: str | Path, liver: str | Path, mesh: str | Path) -> list:
@@ -70,6 +74,41 @@ def reference_figures(pred, truth: str | Path, liver: str | Path, mesh: str | Pa
     return rows
 
 
+def grasp_figures(pred, truth: str | Path) -> list:
+    """Per grasp of the truth file ``truth`` (``fem_sim.batch.grasp_truth``'s .npz) and per
+    stored pull: the FE force, the model's and the small-strain base's MEE, % of nodes under
+    3 mm and force error (%).
+    """
+    from surrogate.grasp import force_error_pct
+    from surrogate.metrics import displacement_metrics
+    from surrogate.over_green import grasps_on_mesh
+
+    z = np.load(truth)
+    n = sum(k.startswith("truth_") for k in z.files)
+    grasps = [{"centre": z["centres"][k], "pull": z["pulls"][k], "fractions": z["fractions"],
+               **{key: z[f"{key}_{k}"] for key in ("patch", "base", "truth", "base_force",
+                                                   "fe_force")}} for k in range(n)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rows = grasps_on_mesh(pred, z["points"], z["triangles"], grasps, z["fixed"])
+    out = []
+    for g, got in zip(grasps, rows):
+        steps = []
+        for s, row in enumerate(got):
+            base = displacement_metrics(np.asarray(g["base"][s], np.float64), g["truth"][s])
+            steps.append({
+                "pull_mm": round(float(g["fractions"][s] * np.linalg.norm(g["pull"])), 3),
+                "fe_force_n": np.round(np.asarray(g["fe_force"][s], float), 4).tolist(),
+                "model_mee_mm": round(row["mee"], 4), "base_mee_mm": round(base["mee"], 4),
+                "model_lt3_pct": round(row["lt3"], 2),
+                "base_lt3_pct": round(base["pct_ee_lt_3mm"], 2),
+                "model_force_error_pct": round(row["force_error"], 2),
+                "base_force_error_pct": round(float(force_error_pct(g["base_force"][s],
+                                                                    g["fe_force"][s])), 2)})
+        out.append({"status": "ok", "steps": steps})
+    return out
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m surrogate.shipped", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -79,13 +118,37 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("truth", help="the truth's folder: mesh.h5, scene.toml and data/")
     c.add_argument("liver", help="the liver file the truth was made from")
     c.add_argument("--out", help="write card.json here (default: print it)")
+    g = sub.add_parser("grasp-card", help="measure a shipped model of grasps' card figures")
+    g.add_argument("model", help="the shipped model's folder (models/NAME)")
+    g.add_argument("truth", help="fem_sim.batch.grasp_truth's .npz of the card's liver")
+    g.add_argument("--out", help="write card.json here (default: print it); the card's "
+                   "other keys there (training, validation livers, the liver's file) are kept")
     return p
+
+
+def _grasp_card(a) -> dict:
+    """A model of grasps' card: the kept card's keys with the figures measured again."""
+    from surrogate.predictor import load_predictor
+
+    model = Path(a.model)
+    pred = load_predictor(model / "model", load="grasp")
+    kept = Path(a.out) if a.out else model / "card.json"
+    card = json.loads(kept.read_text()) if kept.exists() else {}
+    card.update({"model": model.name, "load": "grasp", "tolerance": GRASP_TOLERANCE})
+    card.setdefault("reference_liver", {})["grasps"] = grasp_figures(pred, a.truth)
+    return card
 
 
 def main(argv=None) -> int:
     from surrogate.predictor import load_predictor
 
     a = _parser().parse_args(argv)
+    if a.command == "grasp-card":
+        text = json.dumps(_grasp_card(a), indent=1)
+        if a.out:
+            Path(a.out).write_text(text + "\n")
+        print(text)
+        return 0
     model, truth = Path(a.model), Path(a.truth)
     pred = load_predictor(model / "model")
     rows = reference_figures(pred, truth / "data", a.liver, truth / "mesh.h5")

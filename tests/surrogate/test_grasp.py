@@ -2,6 +2,7 @@
 grasp over a Green's function known in closed form; a model of grasps trained, answering a
 grasp with its rest and its force."""
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -77,25 +78,57 @@ def test_a_model_of_grasps_adds_its_rest_off_the_patch_and_stiffens_the_force():
     assert calls == [((1, 1, 3), [[7]], True)]
     assert np.array_equal(u, [[1, 1, 1], [0, 0, 0], [0, 0, 0], [1, 1, 1]])
     np.testing.assert_allclose(f, np.exp(0.2) * f_lin)
+    # a law of the tool's distance to the fixed region: exp(0.2 + p r 0.001) at r = 10 mm
+    Placed.predictor = SimpleNamespace(grasp_force=GraspForce(a=0.02, b=0.004, dist=0.001))
+    f = grasp_over_base(Placed(), [7], [[3.0, 4.0, 0.0]], base, f_lin, dist=[10.0])[1]
+    np.testing.assert_allclose(f, np.exp(0.25) * f_lin)
+    with pytest.raises(ValueError, match="distance to the fixed region"):
+        grasp_over_base(Placed(), [7], [[3.0, 4.0, 0.0]], base, f_lin)
     Placed.predictor = SimpleNamespace(grasp_force=None)   # a model without a force fit
     assert grasp_over_base(Placed(), [7], [[3.0, 4.0, 0.0]], base, f_lin)[1] is f_lin
 
 
 def test_the_force_fit_recovers_a_known_stiffening_and_weighs_high_and_low_alike():
-    """GraspForce.fit on forces made by exp(0.03 p + 0.0005 p^2) (any direction, any base
-    size) gives those (a, b) back; two samples at one pull, 2x and 8x the base, fit 4x (the
-    geometric mean: a relative fit would pick a factor nearer 2)."""
+    """GraspForce.fit on forces made by a known law (any direction, any base size, any
+    distance) gives its five coefficients back; two samples at one pull, 2x and 8x the base,
+    fit 4x (the geometric mean: a relative fit would pick a factor nearer 2)."""
     from surrogate.grasp import GraspForce
 
     rng = np.random.default_rng(3)
     d = rng.normal(size=(40, 3)) * rng.uniform(1, 40, size=(40, 1))
-    f_lin = rng.normal(size=(40, 3))
-    true = GraspForce(0.03, 0.0005)
-    fit = GraspForce.fit(d, f_lin, true(d, f_lin))
-    assert abs(fit.a - 0.03) < 1e-9 and abs(fit.b - 0.0005) < 1e-10
+    f_lin, r = rng.normal(size=(40, 3)), rng.uniform(20, 90, size=40)
+    true = GraspForce(0.03, 0.0005, k=0.01, dist=-0.0002, cos=-0.02)
+    fit = GraspForce.fit(d, f_lin, true(d, f_lin, r), r)
+    np.testing.assert_allclose(dataclasses.astuple(fit), dataclasses.astuple(true), atol=1e-9)
+    # without the distances: the law of the other four, its distance's coefficient 0
+    assert GraspForce.fit(d, f_lin, GraspForce(0.03, 0.0005, k=0.01)(d, f_lin)).dist == 0.0
     d2, f2 = np.array([[10.0, 0, 0], [10.0, 0, 0]]), np.array([[1.0, 0, 0], [1.0, 0, 0]])
     fit = GraspForce.fit(d2, f2, f2 * [[2.0], [8.0]])
-    assert abs(fit.factor(10.0) - 4.0) < 1e-9
+    assert abs(fit.factor(d2[0], f2[0]) - 4.0) < 1e-9
+
+
+def test_the_force_law_turns_with_the_frame_and_is_the_base_at_small_pulls():
+    """The law's inputs are the pull's length, the small-strain stiffness along it, the
+    cosine between pull and force and a distance: turning the pull and the base's force by
+    a rotation turns the force by it, whatever the coefficients; a pull of a micrometre gets
+    the small-strain force (the factor within 5e-4 of 1, its gap shrinking with the pull at
+    first order), as the FE does in that limit."""
+    from scipy.spatial.transform import Rotation
+
+    from surrogate.grasp import GraspForce
+
+    rng = np.random.default_rng(5)
+    law = GraspForce(0.1, 4e-5, k=0.009, dist=-0.0002, cos=-0.02)
+    d, f_lin, r = rng.normal(size=(6, 3)) * 20.0, rng.normal(size=(6, 3)), np.full(6, 40.0)
+    q = Rotation.random(random_state=7).as_matrix()
+    np.testing.assert_allclose(law(d @ q.T, f_lin @ q.T, r), law(d, f_lin, r) @ q.T,
+                               rtol=1e-12, atol=1e-12)
+    tiny = 1e-3 * d / np.linalg.norm(d, axis=1, keepdims=True)
+    gap = law.factor(tiny, 1e-3 * f_lin, r) - 1.0
+    np.testing.assert_allclose(gap, 0.0, atol=5e-4)
+    np.testing.assert_allclose(law.factor(0.1 * tiny, 1e-4 * f_lin, r) - 1.0, 0.1 * gap,
+                               rtol=1e-2)
+    assert np.all(law.factor(np.zeros((2, 3)), np.zeros((2, 3)), r[:2]) == 1.0)
 
 
 @pytest.mark.dataset
@@ -196,10 +229,15 @@ def test_the_models_force_beats_its_small_strain_base_on_the_held_out_livers(gra
     nearer the FE reaction than the small-strain base's, over every pull and most on the
     large ones (beyond 20 mm, where the base is tens of % low)."""
     from surrogate import load_predictor
-    from surrogate.grasp import heldout_grasp_force
+    from surrogate.data import load_dataset
+    from surrogate.grasp import base_forces, heldout_grasp_force, tool_distances
 
     data, run = grasp_run
-    stiffening = load_predictor(run / "model", load="grasp").grasp_force.factor([10, 20, 30])
+    law = load_predictor(run / "model", load="grasp").grasp_force
+    ds = load_dataset(data)   # the first grasp's pull and force, scaled to 10, 20 and 30 mm
+    d, f_lin = ds.forces[0, 0], base_forces(ds)[0, 0]
+    scale = np.array([10.0, 20.0, 30.0])[:, None] / np.linalg.norm(d)
+    stiffening = law.factor(scale * d, scale * f_lin, tool_distances(ds)[0, 0])
     assert 1.0 < stiffening[0] < stiffening[1] < stiffening[2]
     m = heldout_grasp_force(data, run)
     assert m["tools"] >= 30

@@ -40,7 +40,8 @@ def test_the_shipped_models_are_whole_and_refuse_a_changed_file(tmp_path, model,
     pred = load_predictor(model / "model", load=load)
     assert pred.load == load and pred.shape_model is not None
     if load == "grasp":
-        assert pred.grasp_force is not None and pred.grasp_force.factor([40.0])[0] > 1.0
+        assert pred.grasp_force is not None and pred.grasp_force.factor(
+            [[40.0, 0.0, 0.0]], [[2.0, 0.0, 0.0]], [50.0])[0] > 1.0
     elif model == FORCES:
         assert pred.base.from_green and pred.base.order == 1
     else:   # the population basis: the whole field, no FE
@@ -78,7 +79,7 @@ def test_the_shipped_model_gives_its_cards_figures_and_beats_its_base_at_40_mm()
               for k in range(len(ref))]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        rows = grasps_on_mesh(pred, z["points"], z["triangles"], grasps)
+        rows = grasps_on_mesh(pred, z["points"], z["triangles"], grasps, z["fixed"])
     last = []
     for g, card_g, got in zip(grasps, ref, rows):
         assert len(got) == len(card_g["steps"])
