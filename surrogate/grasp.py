@@ -122,6 +122,36 @@ class GraspForce:
         return (p * (self.a + self.b * p + self.k * np.log(fl / p) + self.dist * r)
                 + self.cos * dot / fl)
 
+    def pull_for(self, stiffness, force, dist=None) -> np.ndarray:
+        """(3,) mm: the pull of one tool whose force by this law is ``force`` (3,) N, the
+        tool's small-strain stiffness ``stiffness`` (3, 3) N/mm (F_lin = K d) and distance
+        ``dist`` mm to the fixed region: a force held by the tool (a haptic device's
+        admittance). The law scales K d, so the pull lies along K^-1 F and its length p
+        solves ln p + ln factor(p) = ln |K^-1 F| (Newton in ln p); K^-1 F itself when the
+        law is the base's (all zero), as in the small-strain limit. ValueError when the
+        equation has no root (a law that softens faster than the pull grows).
+        """
+        q = np.linalg.solve(np.asarray(stiffness, np.float64), np.asarray(force, np.float64))
+        size = float(np.linalg.norm(q))
+        if size == 0.0:
+            return q
+        e = q / size
+        ke = np.asarray(stiffness, np.float64) @ e
+        fl = float(np.linalg.norm(ke))
+        # ln factor(p e) = alpha p + b p^2, the stiffness along e and the cosine fixed
+        alpha = self._exponent(1.0, fl, float(e @ ke), 0.0 if dist is None else float(dist)) \
+            - self.b
+        p = size
+        for _ in range(100):
+            slope = 1.0 + alpha * p + 2.0 * self.b * p * p   # d g / d ln p
+            if slope <= 0.0:
+                raise ValueError("the force law softens: no pull gives this force")
+            step = -(math.log(p) + alpha * p + self.b * p * p - math.log(size)) / slope
+            p *= math.exp(step)
+            if abs(step) < 1e-13:
+                return p * e
+        raise ValueError("the pull for this force did not converge")
+
     def __call__(self, d, f_lin, dist=None) -> np.ndarray:
         """The tools' forces (..., 3) N for their pulls ``d`` (..., 3) mm, base forces and
         distances to the fixed region (mm).

@@ -224,6 +224,25 @@ class GraspOverGreen:
         return self._patient_force(d, f if self._force is None else
                                    self._force(d, f, self._dist))
 
+    def pull_for(self, force) -> np.ndarray:
+        """(1, 3) mm: the pull of the one tool whose force is ``force`` (1, 3) N, a force
+        held by the tool (:meth:`surrogate.grasp.GraspForce.pull_for`; the small-strain
+        K^-1 F for a model without a law); ``self(pull)`` then gives the field. ValueError
+        for several tools or with a patient's corrections (their force is not inverted).
+        """
+        from surrogate.grasp import GraspForce
+
+        if len(self.patches) != 1:
+            raise ValueError(f"a force held by {len(self.patches)} tools: one tool's only")
+        if self.over.patient is not None and not self.uncorrected:
+            raise ValueError("a force held by the tool with a patient's corrections: not "
+                             "built (the population model's answers it without them)")
+        force = np.asarray(force, np.float64).reshape(3)
+        if not np.all(np.isfinite(force)):
+            raise ValueError(f"the tool's force: expected finite N, got {force.tolist()}")
+        law = self._force or GraspForce()
+        return law.pull_for(self.stiffness, force, float(self._dist[0]))[None]
+
     def _patient_force(self, d, f) -> np.ndarray:
         """The model's force ``f`` plus the patient's correction of it, if any."""
         if self.over.patient is None or self.uncorrected:

@@ -107,6 +107,27 @@ def test_the_force_fit_recovers_a_known_stiffening_and_weighs_high_and_low_alike
     assert abs(fit.factor(d2[0], f2[0]) - 4.0) < 1e-9
 
 
+def test_a_force_held_by_the_tool_gives_the_pull_whose_force_it_is():
+    """GraspForce.pull_for: for a random stiffness and forces from 0.01 to 4 N the law gives
+    the force back at the pull found (to 1e-12 N); the base's law (all zero) gives K^-1 F
+    exactly; no force, no pull; a law that softens beyond any pull is refused."""
+    from surrogate.grasp import GraspForce
+
+    rng = np.random.default_rng(11)
+    a = rng.normal(size=(3, 3))
+    k = 0.01 * a @ a.T + 0.02 * np.eye(3)   # N/mm, symmetric positive definite
+    law = GraspForce(0.1, 4e-5, k=0.009, dist=-0.0002, cos=-0.02)
+    for f in (np.array([0.01, 0.0, 0.0]), np.array([1.0, 2.0, -1.0]), np.array([3.0, -2.0, 1.0])):
+        d = law.pull_for(k, f, 50.0)
+        np.testing.assert_allclose(law(d, k @ d, 50.0), f, atol=1e-12)
+        assert np.linalg.norm(d) < np.linalg.norm(np.linalg.solve(k, f))   # it stiffens
+        np.testing.assert_allclose(GraspForce().pull_for(k, f), np.linalg.solve(k, f),
+                                   rtol=1e-12)
+    assert not np.any(law.pull_for(k, np.zeros(3), 50.0))
+    with pytest.raises(ValueError, match="softens"):
+        GraspForce(-1.0).pull_for(k, np.array([50.0, 0.0, 0.0]))
+
+
 def test_the_force_law_turns_with_the_frame_and_is_the_base_at_small_pulls():
     """The law's inputs are the pull's length, the small-strain stiffness along it, the
     cosine between pull and force and a distance: turning the pull and the base's force by

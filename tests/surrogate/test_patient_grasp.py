@@ -233,8 +233,44 @@ def test_make_patient_grasps_a_real_liver_end_to_end(tmp_path):
         plain = OverGreen(pred, d / "data", placement).grasp(over.points[[free]])
     np.testing.assert_allclose(far(pull[None])[0], plain(pull[None])[0], atol=1e-9)
     np.testing.assert_allclose(far.force(pull[None]), plain.force(pull[None]), atol=1e-12)
-    # the corrections are residuals of this model's answers: another model (the same one
-    # with its force law changed) refuses them, naming what to run
+
+
+def _patient_liver():
+    """make test's patient of grasps (Amos-054): its directory, dataset, the shipped model's
+    folder and predictor, its placement, and the sample of the first held-out grasp at its
+    largest pull."""
+    import warnings
+
+    from surrogate.data import load_dataset
+    from surrogate.evaluate import place
+    from surrogate.predictor import load_predictor
+    from tests.surrogate.conftest import ROOT, generated_dataset
+
+    d = generated_dataset("LIVERFEM_TEST_PATIENT_GRASP")
+    info = json.loads((d / "run" / "adaptation.json").read_text())
+    ds, model = load_dataset(d / "data"), ROOT / "models" / "scene4_grasp"
+    held = np.flatnonzero(ds.sample_sim == info["held_out_simulations"][0])[-1]
+    pred = load_predictor(model / "model", load="grasp")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        placement = place(pred, info["liver"], None, d / "placement.npz")[0]
+    return d, ds, model, pred, placement, held
+
+
+@pytest.mark.dataset
+def test_a_patients_corrections_are_refused_on_another_model_and_a_force_is_held(tmp_path):
+    """The corrections are residuals of the shipped model's answers: the same model with its
+    force law changed refuses them, naming what to run. A force held by the tool: the
+    held-out grasp's FE reaction at its largest pull given to the population model, whose
+    pull and field are nearer the FE's than the small-strain inverse's (K^-1 F); with the
+    patient's corrections it is refused (they are not inverted)."""
+    from surrogate.metrics import mee
+    from surrogate.over_green import OverGreen
+    from surrogate.patient.grasps import PatientGrasp
+    from surrogate.predictor import load_predictor
+
+    d, ds, model, pred, placement, held = _patient_liver()
+    at, pull = ds.load_points[held, 0], ds.forces[held, 0]
     other = tmp_path / "other"
     shutil.copytree(model / "model", other)
     (other / "fingerprint.json").unlink()
@@ -244,6 +280,16 @@ def test_make_patient_grasps_a_real_liver_end_to_end(tmp_path):
     with pytest.raises(ValueError, match="fitted on another population model"):
         OverGreen(load_predictor(other, load="grasp"), d / "data", placement,
                   patient=PatientGrasp.load(d / "run"))
+    grasp = OverGreen(pred, d / "data", placement).grasp(at[None])
+    fe = ds.reactions[held]
+    truth = ds.targets[ds.sample_offset[held]:ds.sample_offset[held + 1]]
+    pulled, linear = grasp.pull_for(fe), np.linalg.solve(grasp.stiffness, fe[0])[None]
+    np.testing.assert_allclose(grasp.force(pulled), fe, atol=1e-9)
+    assert np.linalg.norm(pulled - pull) < 0.5 * np.linalg.norm(linear - pull)
+    assert mee(grasp(pulled)[0], truth) < mee(grasp.base(linear)[0], truth)
+    over = OverGreen(pred, d / "data", placement, patient=PatientGrasp.load(d / "run"))
+    with pytest.raises(ValueError, match="patient's corrections"):
+        over.grasp(at[None]).pull_for(fe)
 
 
 def _patch(ds, s: int) -> np.ndarray:
