@@ -30,6 +30,7 @@ def measured(pred, liver: Path, ks) -> dict:
     from surrogate.model_files import model_digest
     from surrogate.over_green import OverGreen
     from surrogate.patient import grasps as pg
+    from surrogate.reports import held_force_rows
 
     d, where = RESULTS / liver.stem, pg.grasp_site(pred, liver, CLEAR)
     if not (d / "wall.json").exists():
@@ -43,17 +44,19 @@ def measured(pred, liver: Path, ks) -> dict:
     c = pg.grasp_cases(OverGreen(pred, d / "data", placed), ds, sims := np.unique(ds.sample_sim))
     fit = pg.fit_patient_grasp(c.take(np.isin(c.sims, sims[:-HELD][:max(ks)])))[0]
     fit.model = model_digest(pred.directory)   # what OverGreen checks it corrects
-    at = (c.centres[0], [0.0, 0.0, 20.0])
+    at, over = (c.centres[0], [0.0, 0.0, 20.0]), OverGreen(pred, d / "data", placed)
     return {"liver": liver.stem, "site": where, "nodes": int(ds.points[0].shape[0]),
             "rows": pg.against_k(c, ks, HELD, LARGE), "timed": {k: pg.timed(OverGreen(
                 pred, d / "data", placed, patient=p), *at) for k, p in (("population", None),
                                                                        ("patient", fit))},
-            "wall_seconds": json.loads((d / "wall.json").read_text())["seconds"]}
+            "wall_seconds": json.loads((d / "wall.json").read_text())["seconds"],
+            "held": held_force_rows(over, ds)}
 
 
 def main() -> int:
     from data_spec import livers, load_scene
     from surrogate.predictor import load_predictor
+    from surrogate.reports import held_force_table
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--livers", nargs="+", help="validation livers (default: all 15)")
@@ -66,7 +69,8 @@ def main() -> int:
         pred = load_predictor(ROOT / "models" / "scene4_grasp" / "model", load="grasp")
         found = [measured(pred, files[n], KS) for n in a.livers or sorted(files)]
     body = render(Path(__file__).parent / "templates" / "patient_grasps.md.j2", livers=found,
-                  ks=[r["k"] for r in found[0]["rows"]], held=HELD, clear=CLEAR, median=np.median)
+                  ks=[r["k"] for r in found[0]["rows"]], held=HELD, clear=CLEAR, median=np.median,
+                  held_rows=held_force_table(found), inf=float("inf"))
     write_report(md, "A patient's model of grasps", body, {"livers": found})
     return 0
 
