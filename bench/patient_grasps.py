@@ -41,16 +41,17 @@ def measured(pred, liver: Path, ks) -> dict:
                        stdout=subprocess.DEVNULL)
         (d / "wall.json").write_text(json.dumps({"seconds": time.perf_counter() - t}))
     ds, placed = load_dataset(d / "data"), place(pred, liver, None, d / "placement.npz")[0]
-    c = pg.grasp_cases(OverGreen(pred, d / "data", placed), ds, sims := np.unique(ds.sample_sim))
+    over = OverGreen(pred, d / "data", placed)
+    c = pg.grasp_cases(over, ds, sims := np.unique(ds.sample_sim))
     fit = pg.fit_patient_grasp(c.take(np.isin(c.sims, sims[:-HELD][:max(ks)])))[0]
     fit.model = model_digest(pred.directory)   # what OverGreen checks it corrects
-    at, over = (c.centres[0], [0.0, 0.0, 20.0]), OverGreen(pred, d / "data", placed)
+    at, patient = (c.centres[0], [0.0, 0.0, 20.0]), OverGreen(pred, d / "data", placed,
+                                                              patient=fit)
     return {"liver": liver.stem, "site": where, "nodes": int(ds.points[0].shape[0]),
-            "rows": pg.against_k(c, ks, HELD, LARGE), "timed": {k: pg.timed(OverGreen(
-                pred, d / "data", placed, patient=p), *at) for k, p in (("population", None),
-                                                                       ("patient", fit))},
+            "rows": pg.against_k(c, ks, HELD, LARGE), "timed": {
+                k: pg.timed(o, *at) for k, o in (("population", over), ("patient", patient))},
             "wall_seconds": json.loads((d / "wall.json").read_text())["seconds"],
-            "held": held_force_rows(over, ds)}
+            "held": held_force_rows(over, c)}
 
 
 def main() -> int:

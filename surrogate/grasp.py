@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 
+from data_spec.eligible_loads import min_distance
+
 # mm: beyond this pull a grasp's small-strain base is off by millimetres and its force far too
 # low, the Ogden liver stiffening (docs/surgical_loads.md): predict-liver and the manipulator
 # say so
@@ -161,16 +163,17 @@ class GraspForce:
 
 def fixed_distance(points, fixed, at) -> np.ndarray:
     """(len(at),) mm: each node ``at``'s distance to the nearest of the ``fixed`` nodes."""
-    x, f = np.asarray(points, np.float64), np.asarray(points, np.float64)[np.asarray(fixed)]
-    return np.array([np.min(np.linalg.norm(f - x[int(n)], axis=1)) for n in np.atleast_1d(at)])
+    x = np.asarray(points, np.float64)
+    return min_distance(x[np.atleast_1d(np.asarray(at, np.int64))], x[np.asarray(fixed)])
 
 
 def tool_distances(ds) -> np.ndarray:
     """(S, n_tools) mm: each grasp sample's tools' distance to its liver's fixed region."""
     out = np.empty(ds.load_points.shape[:2])
     for g in np.unique(ds.sample_geo):
-        at, f = np.flatnonzero(ds.sample_geo == g), ds.points[g][ds.fixed[g]]
-        out[at] = np.min(np.linalg.norm(ds.load_points[at][:, :, None] - f, axis=-1), axis=-1)
+        at = np.flatnonzero(ds.sample_geo == g)
+        out[at] = min_distance(ds.load_points[at].reshape(-1, 3),
+                               ds.points[g][ds.fixed[g]]).reshape(at.size, -1)
     return out
 
 

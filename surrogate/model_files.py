@@ -35,10 +35,14 @@ def write_fingerprint(directory: str | Path) -> Path:
     refuses a file changed or lost since it was measured.
     """
     d = Path(directory)
-    files = {f.name: _sha256(f) for f in sorted(d.iterdir())
-             if f.is_file() and f.name != FINGERPRINT}
-    (d / FINGERPRINT).write_text(json.dumps({"sha256": files}, indent=1) + "\n")
+    (d / FINGERPRINT).write_text(json.dumps({"sha256": _hashes(d)}, indent=1) + "\n")
     return d / FINGERPRINT
+
+
+def _hashes(d: Path) -> dict:
+    """{name: SHA-256} of every file of the model directory ``d`` but its fingerprint."""
+    return {f.name: _sha256(f) for f in sorted(d.iterdir())
+            if f.is_file() and f.name != FINGERPRINT}
 
 
 def model_digest(directory: str | Path) -> str:
@@ -47,10 +51,8 @@ def model_digest(directory: str | Path) -> str:
     """
     import hashlib
 
-    d = Path(directory)
-    return hashlib.sha256("".join(f"{f.name} {_sha256(f)}\n" for f in sorted(d.iterdir())
-                                  if f.is_file() and f.name != FINGERPRINT).encode()
-                          ).hexdigest()[:16]
+    text = "".join(f"{name} {h}\n" for name, h in _hashes(Path(directory)).items())
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 def check_fingerprint(directory: str | Path) -> None:

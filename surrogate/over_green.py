@@ -27,7 +27,7 @@ from data_spec.eligible_loads import grasp_patch
 from data_spec.green_grasp import GreenGrasp
 from data_spec.scene import GRASP_RADIUS
 from liverreg.morph import interpolation_matrix
-from surrogate.grasp import fixed_distance, grasp_over_base
+from surrogate.grasp import GraspForce, fixed_distance, grasp_over_base
 from surrogate.predictor import LinearPart
 
 
@@ -230,8 +230,6 @@ class GraspOverGreen:
         K^-1 F for a model without a law); ``self(pull)`` then gives the field. ValueError
         for several tools or with a patient's corrections (their force is not inverted).
         """
-        from surrogate.grasp import GraspForce
-
         if len(self.patches) != 1:
             raise ValueError(f"a force held by {len(self.patches)} tools: one tool's only")
         if self.over.patient is not None and not self.uncorrected:

@@ -138,29 +138,29 @@ def grasp_force_section(data, folds: int, commit: str) -> str:
 HELD_BINS = (0.0, 0.6, 1.5, 3.0, 5.0, np.inf)   # N: the held forces' bins
 
 
-def held_force_rows(over, ds) -> list[dict]:
-    """Each converged step of the one-tool grasp dataset ``ds`` (its liver's
-    :class:`~surrogate.over_green.OverGreen` ``over``) answered as a force held by the tool:
-    its FE reaction given to the model's :meth:`~surrogate.over_green.GraspOverGreen.pull_for`.
-    Per bin of :data:`HELD_BINS` with samples, the means over them of the force (N); the
-    pull's error (mm) of the model and of the small-strain inverse K^-1 F; the MEE (mm) of
-    their fields against the FE, and of the model's at the FE's own pull.
+def held_force_rows(over, c) -> list[dict]:
+    """The grasp cases ``c`` (:func:`surrogate.patient.grasps.grasp_cases`, one tool each,
+    answered by ``over``, their liver's :class:`~surrogate.over_green.OverGreen`) answered as
+    forces held by the tool: each FE reaction given to the model's
+    :meth:`~surrogate.over_green.GraspOverGreen.pull_for`. Per bin of :data:`HELD_BINS` with
+    samples, the means over them of the force (N); the pull's error (mm) of the model and of
+    the small-strain inverse K^-1 F; the MEE (mm) of their fields against the FE, and of the
+    model's at the FE's own pull (the cases' answer).
     """
     from surrogate.metrics import mee
 
     out = {k: [] for k in ("force", "pull_model", "pull_base", "model", "base", "at_pull")}
-    for sim in np.unique(ds.sample_sim):
-        smp = np.flatnonzero(ds.sample_sim == sim)
-        grasp = over.grasp(ds.load_points[smp[0]])
-        for s in smp:
-            f, d = ds.reactions[s], np.asarray(ds.forces[s], np.float64)
-            truth = ds.targets[ds.sample_offset[s]:ds.sample_offset[s + 1]]
+    for sim in np.unique(c.sims):
+        rows = np.flatnonzero(c.sims == sim)
+        grasp = over.grasp(c.centres[rows[0]][None])
+        for i in rows:
+            f, d, truth = c.fe_force[i][None], c.pulls[i][None], c.truth[i]
             dm, dl = grasp.pull_for(f), np.linalg.solve(grasp.stiffness, f[0])[None]
             for k, v in (("force", np.linalg.norm(f)), ("pull_model", np.linalg.norm(dm - d)),
                          ("pull_base", np.linalg.norm(dl - d)),
                          ("model", mee(grasp(dm)[0], truth)),
                          ("base", mee(grasp.base(dl)[0], truth)),
-                         ("at_pull", mee(grasp(d)[0], truth))):
+                         ("at_pull", mee(c.model[i], truth))):
                 out[k].append(float(v))
     v = {k: np.asarray(x) for k, x in out.items()}
     return [{"lo": lo, "hi": hi, "n": int(at.sum()), **{k: float(x[at].mean())

@@ -74,6 +74,16 @@ def reference_figures(pred, truth: str | Path, liver: str | Path, mesh: str | Pa
     return rows
 
 
+def truth_grasps(z) -> list[dict]:
+    """The grasps of a ``fem_sim.batch.grasp_truth`` file ``z`` (its loaded .npz), as
+    :func:`surrogate.over_green.grasps_on_mesh` takes them.
+    """
+    return [{"centre": z["centres"][k], "pull": z["pulls"][k], "fractions": z["fractions"],
+             **{key: z[f"{key}_{k}"] for key in ("patch", "base", "truth", "base_force",
+                                                 "fe_force")}}
+            for k in range(sum(name.startswith("truth_") for name in z.files))]
+
+
 def grasp_figures(pred, truth: str | Path) -> list:
     """Per grasp of the truth file ``truth`` (``fem_sim.batch.grasp_truth``'s .npz) and per
     stored pull: the FE force, the model's and the small-strain base's MEE, % of nodes under
@@ -84,10 +94,7 @@ def grasp_figures(pred, truth: str | Path) -> list:
     from surrogate.over_green import grasps_on_mesh
 
     z = np.load(truth)
-    n = sum(k.startswith("truth_") for k in z.files)
-    grasps = [{"centre": z["centres"][k], "pull": z["pulls"][k], "fractions": z["fractions"],
-               **{key: z[f"{key}_{k}"] for key in ("patch", "base", "truth", "base_force",
-                                                   "fe_force")}} for k in range(n)]
+    grasps = truth_grasps(z)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         rows = grasps_on_mesh(pred, z["points"], z["triangles"], grasps, z["fixed"])
@@ -139,25 +146,23 @@ def _grasp_card(a) -> dict:
     return card
 
 
-def main(argv=None) -> int:
+def _card(a) -> dict:
+    """A model of forces' card: its figures on the truth's simulations."""
     from surrogate.predictor import load_predictor
 
-    a = _parser().parse_args(argv)
-    if a.command == "grasp-card":
-        text = json.dumps(_grasp_card(a), indent=1)
-        if a.out:
-            Path(a.out).write_text(text + "\n")
-        print(text)
-        return 0
     model, truth = Path(a.model), Path(a.truth)
     pred = load_predictor(model / "model")
     rows = reference_figures(pred, truth / "data", a.liver, truth / "mesh.h5")
     liver = Path(a.liver).resolve()
-    card = {"model": model.name, "load": "nodal", "tolerance": TOLERANCE,
+    return {"model": model.name, "load": "nodal", "tolerance": TOLERANCE,
             "reference_liver": {"file": str(liver.relative_to(ROOT.parent / "shared" / "data"
                                                               / "livers")),
                                 "sims": rows}}
-    text = json.dumps(card, indent=1)
+
+
+def main(argv=None) -> int:
+    a = _parser().parse_args(argv)
+    text = json.dumps(_grasp_card(a) if a.command == "grasp-card" else _card(a), indent=1)
     if a.out:
         Path(a.out).write_text(text + "\n")
     print(text)
